@@ -1,0 +1,17 @@
+"""Wave-optics PSFs of a camera behind a display (udc-render's physics core).
+
+    from psf import Lens, compute_kernels, layouts
+    ks = compute_kernels(layouts.toled(), Lens(), wavelengths_nm=[450, 520, 640])
+    ks.kernels  # [3, 255, 255], unit sum, centred at 127
+
+numpy and scipy only; see README.md and PHYSICS.md (in ../shared) for the model.
+"""
+from . import layouts
+from .engine import (AliasingWarning, KernelSet, PSFError, UnderSamplingWarning, compute_kernels,
+                     auto_pupil_samples)
+from .lens import Lens, LensError
+from .layouts import LayoutError
+from .micrograph import MicrographLayout
+
+__all__ = ["layouts", "Lens", "LensError", "LayoutError", "MicrographLayout", "KernelSet", "PSFError",
+           "AliasingWarning", "UnderSamplingWarning", "compute_kernels", "auto_pupil_samples"]

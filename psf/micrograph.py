@@ -1,0 +1,142 @@
+"""A user's measured transmission micrograph as a display layout (PNG, TIFF or EXR).
+
+The image is one tile of the display; it repeats over the plane (optionally each tile randomly
+rotated by a multiple of 90°, or 180° for non-square tiles, to break the exact periodicity of a
+small crop). Grey values are amplitude or intensity transmittance in [0, 1]: integers are divided
+by their type's maximum, floats are taken as they are; colour images are averaged over channels.
+Each micrograph pixel is a constant-transmittance square of pixel_um; resampling onto the pupil
+grid is exact area weighting of that piecewise-constant picture.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .layouts import LayoutError
+
+SUFFIXES = {".png", ".tif", ".tiff", ".exr"}
+
+
+def _read_exr(path: Path) -> np.ndarray:
+    import OpenEXR
+    with OpenEXR.File(str(path)) as f:
+        channels = f.channels()
+        if "RGB" in channels:
+            return np.asarray(channels["RGB"].pixels, dtype=np.float64)
+        if "RGBA" in channels:
+            return np.asarray(channels["RGBA"].pixels, dtype=np.float64)[..., :3]
+        arrays = [np.asarray(c.pixels, dtype=np.float64) for name, c in sorted(channels.items()) if name != "A"]
+        return np.stack(arrays, axis=-1)
+
+
+def read_transmission_image(path: str | Path) -> np.ndarray:
+    """Read a micrograph as a float64 grey image [H, W] with values scaled as described above."""
+    path = Path(path)
+    if path.suffix.lower() not in SUFFIXES:
+        raise LayoutError(f"micrograph {path}: unsupported suffix '{path.suffix}', allowed: "
+                          f"{', '.join(sorted(SUFFIXES))}")
+    if not path.is_file():
+        raise LayoutError(f"micrograph {path}: no such file")
+    try:
+        if path.suffix.lower() == ".exr":
+            img = _read_exr(path)
+        else:
+            from skimage.io import imread
+            raw = imread(str(path))
+            img = raw.astype(np.float64)
+            if np.issubdtype(raw.dtype, np.integer):
+                img /= np.iinfo(raw.dtype).max
+            elif raw.dtype == bool:
+                img = raw.astype(np.float64)
+    except Exception as exc:  # any decoder failure is a user-facing 'cannot read'
+        raise LayoutError(f"micrograph {path}: cannot be read as an image ({type(exc).__name__}: "
+                          f"{str(exc).splitlines()[0] if str(exc) else 'no detail'})") from None
+    if img.ndim == 3:
+        img = img[..., :3].mean(axis=-1) if img.shape[-1] >= 3 else img[..., 0]
+    if img.ndim != 2 or min(img.shape) < 2:
+        raise LayoutError(f"micrograph {path}: expected a 2-D image of at least 2×2 pixels, got shape {img.shape}")
+    if not np.all(np.isfinite(img)):
+        raise LayoutError(f"micrograph {path}: contains non-finite values")
+    lo, hi = float(img.min()), float(img.max())
+    if lo < 0 or hi > 1 + 1e-6:
+        raise LayoutError(f"micrograph {path}: values must lie in [0, 1] after scaling, got [{lo:.4g}, {hi:.4g}]")
+    return np.clip(img, 0.0, 1.0)
+
+
+def _area_resample_matrix(n_out: int, n_in: int) -> np.ndarray:
+    """[n_out, n_in] weights: fraction of output cell i covered by input cell j (same total span)."""
+    out_edges = np.linspace(0.0, 1.0, n_out + 1)
+    in_edges = np.linspace(0.0, 1.0, n_in + 1)
+    lo = np.maximum(out_edges[:-1, None], in_edges[None, :-1])
+    hi = np.minimum(out_edges[1:, None], in_edges[None, 1:])
+    return np.clip(hi - lo, 0.0, None) * n_out
+
+
+@dataclass(frozen=True)
+class MicrographLayout:
+    """A measured display tile; period = image size × pixel_um."""
+    path: str
+    pixel_um: float
+    values: str = "amplitude"
+    random_rotation: bool = False
+    seed: int = 0
+    image: np.ndarray = field(repr=False, compare=False, default=None)
+
+    @classmethod
+    def load(cls, path, pixel_um: float, values: str = "amplitude", random_rotation: bool = False,
+             seed: int = 0) -> "MicrographLayout":
+        if not pixel_um > 0:
+            raise LayoutError(f"micrograph {path}: pixel_um must be > 0, got {pixel_um}")
+        if values not in ("amplitude", "intensity"):
+            raise LayoutError(f"micrograph {path}: values must be 'amplitude' or 'intensity', got '{values}'")
+        img = read_transmission_image(path)
+        amp = np.sqrt(img) if values == "intensity" else img
+        if not amp.any():
+            raise LayoutError(f"micrograph {path}: fully opaque (every value is 0); nothing is transmitted")
+        return cls(str(path), float(pixel_um), values, bool(random_rotation), int(seed), amp)
+
+    @property
+    def name(self) -> str:
+        return Path(self.path).stem
+
+    @property
+    def period_um(self) -> tuple[float, float]:
+        h, w = self.image.shape
+        return (w * self.pixel_um, h * self.pixel_um)
+
+    @property
+    def open_fraction(self) -> float:
+        """Mean intensity transmittance |a|² of the tile (equals the open area for binary masks)."""
+        return float(np.mean(self.image ** 2))
+
+    @property
+    def power_transmittance(self) -> float:
+        return self.open_fraction
+
+    @property
+    def periodic(self) -> bool:
+        return not self.random_rotation
+
+    def cell_raster(self, nx: int, ny: int) -> tuple[np.ndarray, np.ndarray]:
+        """Area-weighted (amplitude, intensity) of one tile on an nx × ny grid."""
+        h, w = self.image.shape
+        my, mx = _area_resample_matrix(ny, h), _area_resample_matrix(nx, w)
+        return my @ self.image @ mx.T, my @ (self.image ** 2) @ mx.T
+
+    def tile_rotations(self, tiles_x: int, tiles_y: int) -> np.ndarray:
+        """Quarter turns (0..3) for every tile, from the recorded seed (all 0 without rotation)."""
+        if not self.random_rotation:
+            return np.zeros((tiles_y, tiles_x), dtype=int)
+        rng = np.random.default_rng(self.seed)
+        h, w = self.image.shape
+        choices = np.array([0, 1, 2, 3]) if h == w else np.array([0, 2])
+        return rng.choice(choices, size=(tiles_y, tiles_x))
+
+    def describe(self) -> dict:
+        digest = hashlib.sha256(np.ascontiguousarray(self.image).tobytes()).hexdigest()[:16]
+        return {"kind": "micrograph", "path": self.path, "pixel_um": self.pixel_um, "values": self.values,
+                "random_rotation": self.random_rotation, "seed": self.seed,
+                "shape": list(self.image.shape), "sha256_16": digest}
