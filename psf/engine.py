@@ -19,7 +19,7 @@ import scipy.fft as sfft
 from . import fourier
 from .lens import Lens
 from .propagation import angular_spectrum_tf, frequencies, shift_ramp
-from .pupil import PupilGrid, aperture_slices, display_grid, lens_grid, tile_mask
+from .pupil import MASK_RASTERS, aperture_slices, display_grid, lens_grid, tile_mask
 
 METHODS = ("mft", "czt", "paper")
 PRECISIONS = {"float32": np.complex64, "float64": np.complex128}
@@ -68,7 +68,8 @@ class KernelSet:
         return self.kernels.shape[-1]
 
 
-def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples):
+def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples,
+              mask_raster):
     wl = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
     if wl.ndim != 1 or wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
         raise PSFError(f"wavelengths_nm must be positive finite numbers, got {list(np.ravel(wavelengths_nm))}")
@@ -84,6 +85,8 @@ def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, meth
         raise PSFError(f"method must be one of {', '.join(METHODS)}, got '{method}'")
     if precision not in PRECISIONS:
         raise PSFError(f"precision must be one of {', '.join(PRECISIONS)}, got '{precision}'")
+    if mask_raster not in MASK_RASTERS:
+        raise PSFError(f"mask_raster must be one of {', '.join(MASK_RASTERS)}, got '{mask_raster}'")
     if pupil_samples is not None and not (isinstance(pupil_samples, (int, np.integer)) and pupil_samples >= 16):
         raise PSFError(f"pupil_samples must be an integer ≥ 16, got {pupil_samples}")
     return wl
@@ -106,7 +109,7 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                     pixel_um: float = 3.1, size_px: int = 255, distance_mm: float = 0.0,
                     field_phases: int = 4, method: str = "mft", pupil_samples: int | None = None,
                     precision: str = "float32", pixel_integration: bool = True,
-                    progress=None) -> KernelSet:
+                    mask_raster: str = "band_limited", progress=None) -> KernelSet:
     """PSF kernels at the sensor for a display (None: bare lens) in front of a lens.
 
     display: a layout with period_um and cell_raster (psf.layouts, psf.micrograph) or None.
@@ -114,13 +117,18 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     field_phases: P mask shifts per axis over one display period (d > 0 only).
     pupil_samples: samples across the aperture (None: auto, see auto_pupil_samples).
     precision: 'float32' (complex64 FFTs and products) or 'float64'.
+    mask_raster: 'band_limited' (exact Fourier series, default) or 'area' (area-weighted, then
+        de-apodised); see pupil.cell_raster. The aperture is always area-weighted.
     progress: optional callable(n) called after each kernel (for progress bars).
     """
     lens = lens or Lens()
-    wl = _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples)
+    wl = _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples,
+                   mask_raster)
     cdtype = PRECISIONS[precision]
     n_pupil = pupil_samples or auto_pupil_samples(lens, float(wl.min()), pixel_um, size_px)
     z = lens.image_distance_um
+    # De-apodise where the pupil's spectrum is box-filtered: an area-weighted mask or a bare aperture.
+    deapodize = display is None or mask_raster == "area"
     d_um = distance_mm * 1000.0
     notes = []
 
@@ -140,7 +148,7 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                                f"(use a periodic display or a smaller distance)")
         grid, cell_n, tiles = display_grid(period, lens, n_pupil, margin)
         try:
-            mask, _, kappa = tile_mask(display, cell_n, tiles)
+            mask, kappa = tile_mask(display, cell_n, tiles, mask_raster)
         except ValueError as exc:
             raise PSFError(str(exc)) from None
 
@@ -217,7 +225,7 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                         if reuse:
                             cache_R = R
                     kern = fourier.pixel_kernel(R, pgrid.dx_um, pgrid.dy_um, lam, z, pixel_um, S, method,
-                                                pixel_integration, cdtype)
+                                                pixel_integration, cdtype, deapodize)
                 window = float(kern.sum())
                 if not (np.all(np.isfinite(kern)) and window > 0):
                     raise PSFError(f"kernel at {lam_nm:g} nm is not finite or carries no energy "
@@ -241,7 +249,8 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
               "lens": lens.describe(), "wavelengths_nm": wl.tolist(), "pixel_um": pixel_um,
               "size_px": int(size_px), "distance_mm": distance_mm, "field_phases": int(phases),
               "method": method, "pupil_samples": int(n_pupil), "precision": precision,
-              "pixel_integration": bool(pixel_integration),
+              "pixel_integration": bool(pixel_integration), "mask_raster": mask_raster,
+              "deapodize": bool(deapodize),
               "pupil_pitch_um": [pgrid.dx_um, pgrid.dy_um], "pupil_shape": [pgrid.ny, pgrid.nx],
               "image_distance_um": z, "model": "finite-distance" if use_field else "principal-plane"}
     return KernelSet(kernels.astype(out_dtype), wl, float(pixel_um), outside, trans, ratio, params,

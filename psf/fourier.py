@@ -38,10 +38,13 @@ def _phase_matrix(coords_um: np.ndarray, lags: np.ndarray, step_um: float, scale
 
 def pixel_kernel(R_half: np.ndarray, dx_um: float, dy_um: float, wavelength_um: float, distance_um: float,
                  pixel_um: float, size_px: int, method: str = "mft", pixel_integration: bool = True,
-                 dtype=np.complex128) -> np.ndarray:
+                 dtype=np.complex128, deapodize: bool = True) -> np.ndarray:
     """Energy on each sensor pixel (size_px², centred at size_px//2) from the half autocorrelation.
 
     With pixel_integration False, returns ρ² · I(u_j) (point samples, as peer codes compute).
+    deapodize divides by sinc²(δx u/λz) sinc²(δy v/λz): an area-weighted raster is the box-filtered
+    mask sampled at δ, whose spectrum is the true one times sinc(δν); this restores the high
+    diffraction orders to first order (evaluated at the pixel centre, error ~ (ρδ/λz)²).
     """
     nyl, nx = R_half.shape
     ny = (nyl + 1) // 2
@@ -62,7 +65,10 @@ def pixel_kernel(R_half: np.ndarray, dx_um: float, dy_um: float, wavelength_um: 
         k = _czt_lags(k, lag_x, dx_um, u, scale, axis=1)
     else:
         raise ValueError(f"method must be 'mft' or 'czt', got '{method}'")
-    return 2.0 * k.real.astype(np.float64) * (pixel_um / scale) ** 2 * dx_um * dy_um
+    k = 2.0 * k.real.astype(np.float64) * (pixel_um / scale) ** 2 * dx_um * dy_um
+    if deapodize:
+        k /= np.outer(np.sinc(dy_um * u / scale) ** 2, np.sinc(dx_um * u / scale) ** 2)
+    return k
 
 
 def _czt_lags(c: np.ndarray, lags: np.ndarray, step_um: float, u_um: np.ndarray, scale_um: float, axis: int):

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scipy.special import j1
+
 from .geometry import ellipse_areas, rect_areas
 
 
@@ -39,6 +41,11 @@ class Rect:
         return rect_areas(x_edges, y_edges, self.cx_um + dx_um, self.cy_um + dy_um,
                           self.width_um, self.height_um)
 
+    def spectrum(self, nu_x, nu_y):
+        """∫ rect · exp(−2πi ν·x) dx (µm²) at frequencies nu_y[:, None], nu_x[None, :] (1/µm)."""
+        return (self.area_um2 * np.outer(np.sinc(nu_y * self.height_um), np.sinc(nu_x * self.width_um))
+                * np.exp(-2j * np.pi * (nu_y[:, None] * self.cy_um + nu_x[None, :] * self.cx_um)))
+
 
 @dataclass(frozen=True)
 class Ellipse:
@@ -55,6 +62,13 @@ class Ellipse:
     def areas(self, x_edges, y_edges, dx_um=0.0, dy_um=0.0):
         return ellipse_areas(x_edges, y_edges, self.cx_um + dx_um, self.cy_um + dy_um,
                              self.rx_um, self.ry_um)
+
+    def spectrum(self, nu_x, nu_y):
+        """∫ ellipse · exp(−2πi ν·x) dx = π rx ry · 2 J1(2πq)/(2πq), q = |(rx νx, ry νy)|."""
+        q = 2 * np.pi * np.hypot(nu_y[:, None] * self.ry_um, nu_x[None, :] * self.rx_um)
+        jinc = np.where(q > 0, 2 * j1(q) / np.where(q > 0, q, 1.0), 1.0)
+        return (self.area_um2 * jinc
+                * np.exp(-2j * np.pi * (nu_y[:, None] * self.cy_um + nu_x[None, :] * self.cx_um)))
 
 
 @dataclass(frozen=True)
@@ -101,6 +115,12 @@ class PeriodicLayout:
                     area += o.areas(xe, ye, kx * self.pitch_x_um, ky * self.pitch_y_um)
         frac = np.clip(area / ((xe[1] - xe[0]) * (ye[1] - ye[0])), 0.0, 1.0)
         return self.amplitude * frac, self.amplitude ** 2 * frac
+
+    def fourier_coefficients(self, kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
+        """Fourier-series coefficients c[ky, kx] of the amplitude over one cell (exact, any order)."""
+        nu_x, nu_y = np.asarray(kx) / self.pitch_x_um, np.asarray(ky) / self.pitch_y_um
+        c = sum(o.spectrum(nu_x, nu_y) for o in self.openings)
+        return self.amplitude * c / (self.pitch_x_um * self.pitch_y_um)
 
     def describe(self) -> dict:
         """Every parameter, for cache keys and output metadata."""

@@ -126,6 +126,16 @@ class MicrographLayout:
         my, mx = _area_resample_matrix(ny, h), _area_resample_matrix(nx, w)
         return my @ self.image @ mx.T, my @ (self.image ** 2) @ mx.T
 
+    def fourier_coefficients(self, kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
+        """Exact Fourier-series coefficients c[ky, kx] of the piecewise-constant tile, any order.
+
+        Pixel j covers [j s, (j+1) s]: c_k = DFT_k(a) / (h w) · sinc(kx/w) sinc(ky/h) · e^{−iπ(kx/w + ky/h)}.
+        """
+        h, w = self.image.shape
+        kx, ky = np.asarray(kx), np.asarray(ky)
+        dft = np.fft.fft2(self.image)[np.ix_(ky % h, kx % w)] / (h * w)
+        return dft * np.outer(np.sinc(ky / h), np.sinc(kx / w)) * np.exp(-1j * np.pi * (ky[:, None] / h + kx[None, :] / w))
+
     def tile_rotations(self, tiles_x: int, tiles_y: int) -> np.ndarray:
         """Quarter turns (0..3) for every tile, from the recorded seed (all 0 without rotation)."""
         if not self.random_rotation:

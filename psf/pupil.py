@@ -67,32 +67,59 @@ def display_grid(period_um: tuple[float, float], lens: Lens, pupil_samples: int,
     """Window of whole display periods covering the aperture (+ margin) on each side of the axis.
 
     Returns the grid, the samples per period (nx, ny) and the number of tiles (tx, ty).
-    δ is the largest pitch / n not above D / pupil_samples, so the aperture gets ≥ pupil_samples.
+    δ = pitch / n with n the smallest odd integer giving δ ≤ D / pupil_samples (odd n: the
+    band-limited raster has no ambiguous Nyquist order and stays real).
     """
     px, py = period_um
     target = lens.aperture_um / pupil_samples
-    nx, ny = max(2, math.ceil(px / target)), max(2, math.ceil(py / target))
+    odd = lambda v: v + 1 - v % 2
+    nx, ny = odd(max(3, math.ceil(px / target))), odd(max(3, math.ceil(py / target)))
     half = lens.aperture_um / 2 + margin_um
     mx, my = math.ceil(half / px), math.ceil(half / py)
     grid = PupilGrid(2 * mx * nx, 2 * my * ny, px / nx, py / ny, -mx * px, -my * py)
     return grid, (nx, ny), (2 * mx, 2 * my)
 
 
-def tile_mask(layout, cell_n: tuple[int, int], tiles: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, float]:
-    """Amplitude raster over the window, and κ = mean intensity / mean |amplitude|² of a cell.
+MASK_RASTERS = ("band_limited", "area")
 
-    κ ≥ 1 restores the power that area averaging of amplitude removes at opening edges, so
-    the transmitted power is exact (PHYSICS.md §6: zero-order energy = open fraction).
+
+def cell_raster(layout, nx: int, ny: int, mask_raster: str) -> tuple[np.ndarray, float]:
+    """One period of the amplitude on nx × ny cell-centred samples, and its exact mean intensity.
+
+    'band_limited': the layout's exact Fourier series truncated to the grid's band (ideal
+    low-pass: the raster's spectrum equals the true one for |ν| < 1/2δ, nothing aliases in).
+    'area': exact area-weighted averages (box filter: spectrum × sinc(δν), high orders alias).
+    """
+    mean_intensity = layout.power_transmittance
+    if mask_raster == "area":
+        amp, _ = layout.cell_raster(nx, ny)
+        return amp, mean_intensity
+    kx = np.rint(np.fft.fftfreq(nx, 1 / nx)).astype(int)
+    ky = np.rint(np.fft.fftfreq(ny, 1 / ny)).astype(int)
+    c = layout.fourier_coefficients(kx, ky) * np.exp(1j * np.pi * (kx[None, :] / nx + ky[:, None] / ny))
+    amp = np.fft.ifft2(c) * (nx * ny)
+    if np.isrealobj(layout.fourier_coefficients(np.array([0]), np.array([0]))) or np.abs(amp.imag).max() < 1e-9:
+        amp = amp.real
+    return amp, mean_intensity
+
+
+def tile_mask(layout, cell_n: tuple[int, int], tiles: tuple[int, int], mask_raster: str = "band_limited"
+              ) -> tuple[np.ndarray, float]:
+    """Amplitude raster over the window, and κ = exact mean intensity / mean |raster|².
+
+    κ ≥ 1 restores the power that the raster cannot carry (orders beyond its band or lost to box
+    filtering): that light leaves at angles outside the alias-free field, so the transmitted power
+    and hence energy_outside are exact (PHYSICS.md §6: zero-order energy = open fraction).
     """
     nx, ny = cell_n
-    amp, inten = layout.cell_raster(nx, ny)
+    amp, mean_intensity = cell_raster(layout, nx, ny, mask_raster)
     power = float(np.mean(np.abs(amp) ** 2))
-    if power <= 0.0:
-        raise ValueError(f"display {layout.name}: the mask is fully opaque at this sampling; nothing is transmitted")
-    kappa = float(np.mean(inten)) / power
+    if power <= 0.0 or mean_intensity <= 0.0:
+        raise ValueError(f"display {layout.name}: the mask is fully opaque; nothing is transmitted")
+    kappa = mean_intensity / power
     tx, ty = tiles
     rot = layout.tile_rotations(tx, ty) if hasattr(layout, "tile_rotations") else None
     if rot is None or not rot.any():
-        return np.tile(amp, (ty, tx)), amp, kappa
+        return np.tile(amp, (ty, tx)), kappa
     rows = [np.concatenate([np.rot90(amp, k) for k in rot[j]], axis=1) for j in range(ty)]
-    return np.concatenate(rows, axis=0), amp, kappa
+    return np.concatenate(rows, axis=0), kappa
