@@ -17,6 +17,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from . import fourier
+from .banding import PowerSeries
 from .lens import Lens
 from .propagation import angular_spectrum_tf, frequencies, shift_ramp
 from .pupil import MASK_RASTERS, aperture_slices, display_grid, lens_grid, tile_mask
@@ -166,6 +167,9 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                           f"{free:.0f} µm at {wl.min():g} nm; raise pupil_samples", AliasingWarning, stacklevel=2)
 
     use_field = d_um > 0 and display is not None
+    # Transmitted power: the exact series of psf.banding for periodic displays; for a bare lens
+    # the exact disc area; for aperiodic tiles the raster sum, corrected by κ for raster losses.
+    exact_power = display is not None and getattr(display, "periodic", True)
     if d_um > 0 and display is None:
         notes.append("distance_mm > 0 with a bare lens: nothing to propagate, principal-plane result")
     if not use_field and field_phases > 1:
@@ -195,6 +199,7 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
         ratio[k] = lens.aperture_um * pixel_um / (lam * lens.focal_length_um)
         defocus = lens.pupil_phase(pgrid.x_um, pgrid.y_um, lam)
         tf = angular_spectrum_tf(fx, fy, lam, d_um) if use_field else None
+        series = PowerSeries(display, lens, lam, d_um) if exact_power else None
         acc, acc_power, acc_window = np.zeros((S, S)), 0.0, 0.0
         for j in range(phases):
             for i in range(phases):
@@ -205,7 +210,10 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                     m = mask[sy, sx]
                 else:
                     m = np.ones(aperture.shape)
-                power = kappa * float(np.sum(np.abs(m) ** 2 * aperture)) * pgrid.dx_um * pgrid.dy_um
+                if series is not None:
+                    power = float(series(shifts[j, i]))
+                else:
+                    power = kappa * float(np.sum(np.abs(m) ** 2 * aperture)) * pgrid.dx_um * pgrid.dy_um
                 g = (m * aperture).astype(cdtype)
                 if defocus is not None:
                     g = g * defocus.astype(cdtype)

@@ -1,0 +1,85 @@
+"""The `udc-render psf` command: outputs, metadata, clear one-line errors, cache reuse."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from udc_render.cli import main
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("UDC_RENDER_CACHE", str(tmp_path / "cache"))
+
+
+def test_psf_writes_kernels_plots_and_parameters(tmp_path, capsys):
+    out = tmp_path / "o"
+    assert main(["psf", "--display", "toled", "--wavelengths-nm", "450,640", "--size", "63", "--out", str(out)]) == 0
+    with np.load(out / "psf.npz") as z:
+        k = z["kernels"]
+        assert k.shape == (2, 63, 63) and k.dtype == np.float32
+        np.testing.assert_allclose(k.sum(axis=(1, 2)), 1.0, atol=1e-5)
+        np.testing.assert_array_equal(z["wavelengths_nm"], [450.0, 640.0])
+        assert float(z["pixel_um"]) == 3.1 and float(z["focal_length_um"]) == 6000.0
+        params = json.loads(str(z["params_json"]))
+        # r = δ_N N ρ / (λ f) with N δ_N = the aperture (PHYSICS.md §2)
+        np.testing.assert_allclose(z["ratio_r"], 3333 * 3.1 / (np.array([450, 640]) * 1e-3 * 6000))
+    assert params["display"]["name"] == "toled" and params["method"] == "mft"
+    for name in ("psf.png", "mtf.png", "psf.json"):
+        assert (out / name).stat().st_size > 0
+    assert not (out / "banding.png").exists()
+    assert "450 nm" in capsys.readouterr().out
+
+
+def test_psf_with_distance_writes_banding(tmp_path):
+    out = tmp_path / "o"
+    assert main(["psf", "--display", "poled", "--wavelengths-nm", "520", "--size", "31", "--distance-mm", "1",
+                 "--field-phases", "2", "--out", str(out)]) == 0
+    with np.load(out / "psf.npz") as z:
+        assert z["field_kernels"].shape == (1, 2, 2, 31, 31)
+        np.testing.assert_allclose(z["banding_period_um"], [6000 * 64 / 1000] * 2)
+        assert z["banding_x_power"].shape == (1, 400)
+        np.testing.assert_allclose(z["banding_x_power"].mean(), 1.0, atol=1e-12)
+    assert (out / "banding.png").stat().st_size > 0
+
+
+def test_cache_hit_gives_identical_kernels(tmp_path, capsys):
+    args = ["psf", "--display", "none", "--wavelengths-nm", "520", "--size", "31"]
+    assert main(args + ["--out", str(tmp_path / "a")]) == 0
+    assert main(args + ["--out", str(tmp_path / "b")]) == 0
+    assert "(kernels from cache)" in capsys.readouterr().out
+    with np.load(tmp_path / "a" / "psf.npz") as a, np.load(tmp_path / "b" / "psf.npz") as b:
+        np.testing.assert_array_equal(a["kernels"], b["kernels"])
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--size", "64"], "odd"),
+    (["--size", "-3"], "odd"),
+    (["--pixel-um", "-1"], "--pixel-um must be > 0"),
+    (["--distance-mm", "-2"], "--distance-mm must be ≥ 0"),
+    (["--display", "hexagon"], "not none, toled, poled"),
+    (["--display", "missing.png"], "no such file"),
+    (["--wavelengths-nm", "450,abc"], "comma-separated"),
+    (["--method", "fft"], "invalid choice"),
+    (["--aperture-um", "0"], "--aperture-um must be > 0"),
+])
+def test_bad_arguments_give_one_line_and_exit_2(tmp_path, capsys, args, fragment):
+    assert main(["psf", "--out", str(tmp_path / "o")] + args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and fragment in err and "Traceback" not in err
+
+
+def test_unreadable_micrograph_names_the_file(tmp_path, capsys):
+    bad = tmp_path / "broken.png"
+    bad.write_bytes(b"not a png")
+    assert main(["psf", "--display", str(bad), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "broken.png" in err and "cannot be read" in err
+
+
+def test_console_script_exits_nonzero_without_traceback(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "udc_render.cli", "psf", "--size", "4", "--out", str(tmp_path)],
+                       capture_output=True, text=True)
+    assert r.returncode == 2 and "Traceback" not in r.stderr and r.stderr.count("\n") == 1

@@ -1,0 +1,245 @@
+"""The `udc-render` command line.
+
+    udc-render psf --display {none,toled,poled,PATH} --wavelengths-nm 450,520,640 --out DIR
+    udc-render study psf --out DIR [--quick]
+
+User errors print one line naming the argument, value and what is allowed, and exit 2;
+no traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from psf import Lens, MicrographLayout, compute_kernels, layouts
+from psf.banding import banding_profile
+from psf.cache import cached
+from psf.engine import METHODS, PRECISIONS, AliasingWarning, UnderSamplingWarning
+from psf.layouts import LayoutError
+from psf.lens import LensError
+from psf.engine import PSFError
+from psf.pupil import MASK_RASTERS
+from psf.spectral import band_kernels, channel_kernels
+
+USER_ERRORS = (PSFError, LayoutError, LensError)
+
+
+class UserError(Exception):
+    """A bad command-line value; printed as one line."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise UserError(f"{self.prog}: {message}")
+
+
+def _positive(name, cast=float):
+    def parse(text):
+        try:
+            v = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got '{text}'") from None
+        if not (v > 0 and math.isfinite(v)):
+            raise argparse.ArgumentTypeError(f"{name} must be > 0, got {text}")
+        return v
+    return parse
+
+
+def _non_negative(name):
+    def parse(text):
+        try:
+            v = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got '{text}'") from None
+        if not (v >= 0 and math.isfinite(v)):
+            raise argparse.ArgumentTypeError(f"{name} must be ≥ 0, got {text}")
+        return v
+    return parse
+
+
+def _float_list(text):
+    try:
+        values = [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got '{text}'") from None
+    if not values or any(not (v > 0 and math.isfinite(v)) for v in values):
+        raise argparse.ArgumentTypeError(f"wavelengths must be positive numbers, got '{text}'")
+    return values
+
+
+def _bands(text):
+    try:
+        bands = [tuple(float(v) for v in b.split("-")) for b in text.split(",") if b.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"bands must look like 400-500,500-600, got '{text}'") from None
+    if not bands or any(len(b) != 2 or not 0 < b[0] < b[1] for b in bands):
+        raise argparse.ArgumentTypeError(f"bands must look like 400-500,500-600 with lo < hi, got '{text}'")
+    return bands
+
+
+def _odd_size(text):
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"size must be an odd integer ≥ 3, got '{text}'") from None
+    if v < 3 or v % 2 == 0:
+        raise argparse.ArgumentTypeError(f"size must be an odd integer ≥ 3 (centre at size//2), got {v}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog="udc-render", description="Physically based under-display camera simulation.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    p = sub.add_parser("psf", help="wave-optics PSF kernels of a display in front of a lens")
+    p.add_argument("--display", default="toled",
+                   help="none (bare lens), toled, poled, or a micrograph file (PNG/TIFF/EXR) [toled]")
+    spec = p.add_mutually_exclusive_group()
+    spec.add_argument("--wavelengths-nm", type=_float_list, default=[450.0, 520.0, 640.0],
+                      help="monochromatic kernels at these wavelengths [450,520,640]")
+    spec.add_argument("--bands-nm", type=_bands, help="band kernels, e.g. 400-500,500-600,600-700")
+    spec.add_argument("--camera", help="channel-effective kernels for a colour-science camera "
+                                       "('Nikon 5100 (NPL)', 'Sigma SDMerill (NPL)') or a CSV of sensitivities")
+    p.add_argument("--band-step-nm", type=_positive("--band-step-nm"), default=3.0,
+                   help="wavelength step inside a band or channel [3]")
+    p.add_argument("--illuminant", default="E", help="weight spectrum for --camera: E or a colour-science name [E]")
+    p.add_argument("--distance-mm", type=_non_negative("--distance-mm"), default=0.0,
+                   help="display-to-lens distance d; 0 = principal-plane model [0]")
+    p.add_argument("--pixel-um", type=_positive("--pixel-um"), default=3.1, help="sensor pixel pitch [3.1]")
+    p.add_argument("--size", type=_odd_size, default=255, help="kernel size in pixels, odd [255]")
+    p.add_argument("--focal-length-um", type=_positive("--focal-length-um"), default=6000.0)
+    p.add_argument("--aperture-um", type=_positive("--aperture-um"), default=3333.0)
+    p.add_argument("--focus-distance-mm", type=_positive("--focus-distance-mm"), default=math.inf)
+    p.add_argument("--object-distance-mm", type=_positive("--object-distance-mm"), default=math.inf)
+    p.add_argument("--method", choices=METHODS, default="mft", help="Fraunhofer transform [mft]")
+    p.add_argument("--pupil-samples", type=_positive("--pupil-samples", int), default=None,
+                   help="samples across the aperture [auto: ≥ 1024 and alias-free]")
+    p.add_argument("--field-phases", type=_positive("--field-phases", int), default=4,
+                   help="mask shifts per axis over one display period, d > 0 only [4]")
+    p.add_argument("--precision", choices=tuple(PRECISIONS), default="float32")
+    p.add_argument("--mask-raster", choices=MASK_RASTERS, default="band_limited")
+    p.add_argument("--micrograph-pixel-um", type=_positive("--micrograph-pixel-um"), default=1.0,
+                   help="pixel size of a micrograph display in µm [1.0]")
+    p.add_argument("--micrograph-values", choices=("amplitude", "intensity"), default="amplitude")
+    p.add_argument("--tile-rotation", action="store_true", help="rotate each micrograph tile randomly")
+    p.add_argument("--seed", type=int, default=0, help="seed of the tile rotations [0]")
+    p.add_argument("--no-cache", action="store_true", help="neither read nor write the kernel cache")
+    p.add_argument("--out", type=Path, default=Path("out/psf"), help="output folder [out/psf]")
+
+    s = sub.add_parser("study", help="error-versus-run-time studies of the approximation knobs")
+    s.add_argument("what", choices=("psf",))
+    s.add_argument("--out", type=Path, default=Path("out/study"))
+    s.add_argument("--quick", action="store_true", help="a reduced grid (smoke run)")
+    return parser
+
+
+def make_display(args):
+    if args.display == "none":
+        return None
+    if args.display in layouts.BUILTIN:
+        return layouts.BUILTIN[args.display]()
+    path = Path(args.display)
+    if path.suffix.lower() not in (".png", ".tif", ".tiff", ".exr"):
+        raise UserError(f"--display: '{args.display}' is not none, toled, poled or a .png/.tif/.tiff/.exr file")
+    return MicrographLayout.load(path, args.micrograph_pixel_um, args.micrograph_values, args.tile_rotation, args.seed)
+
+
+def run_psf(args) -> int:
+    from tqdm import tqdm
+    from .fileio import save_json, save_npz
+    from .plots import plot_banding, plot_kernels, plot_mtf
+
+    display = make_display(args)
+    lens = Lens(args.focal_length_um, args.aperture_um, args.focus_distance_mm, args.object_distance_mm)
+    common = dict(pixel_um=args.pixel_um, size_px=args.size, distance_mm=args.distance_mm,
+                  field_phases=args.field_phases, method=args.method, pupil_samples=args.pupil_samples,
+                  precision=args.precision, mask_raster=args.mask_raster)
+    phases = args.field_phases ** 2 if args.distance_mm > 0 and display is not None else 1
+    with warnings.catch_warnings(record=True) as caught, tqdm(desc="psf kernels", unit="kernel", disable=None) as bar:
+        warnings.simplefilter("always", AliasingWarning)
+        warnings.simplefilter("always", UnderSamplingWarning)
+        common["progress"] = bar.update
+        if args.bands_nm:
+            bar.total = phases * sum(math.ceil((hi - lo) / args.band_step_nm - 1e-9) for lo, hi in args.bands_nm)
+            ks, hit = cached(band_kernels, "band", display, lens, not args.no_cache, bands_nm=args.bands_nm,
+                             step_nm=args.band_step_nm, **common)
+        elif args.camera:
+            ks, hit = cached(channel_kernels, "channel", display, lens, not args.no_cache, camera=args.camera,
+                             illuminant=args.illuminant, step_nm=args.band_step_nm, **common)
+        else:
+            bar.total = phases * len(args.wavelengths_nm)
+            ks, hit = cached(compute_kernels, "mono", display, lens, not args.no_cache,
+                             wavelengths_nm=args.wavelengths_nm, **common)
+    for w in {str(w.message) for w in caught}:
+        print(f"warning: {w}", file=sys.stderr)
+
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    arrays = dict(kernels=ks.kernels, wavelengths_nm=ks.wavelengths_nm, pixel_um=np.float64(ks.pixel_um),
+                  energy_outside=ks.energy_outside, transmittance=ks.transmittance, ratio_r=ks.ratio_r,
+                  params_json=np.array(json.dumps(ks.params)))
+    for key in ("size_px", "distance_mm", "method", "pupil_samples", "precision", "field_phases"):
+        arrays[key] = np.array(ks.params[key])
+    for key, value in ks.params["lens"].items():
+        arrays[key] = np.float64(value)
+    banding = ks.field_kernels is not None and getattr(display, "periodic", True)
+    if ks.field_kernels is not None:
+        arrays.update(field_kernels=ks.field_kernels, field_power=ks.field_power, field_shifts_um=ks.field_shifts_um)
+        z = lens.image_distance_um
+        arrays["field_positions_um"] = ks.field_shifts_um * z / (args.distance_mm * 1000)
+    if banding:
+        profiles = {}
+        for axis in ("x", "y"):
+            powers = []
+            for w in ks.wavelengths_nm:
+                x, p = banding_profile(display, lens, float(w), args.distance_mm, axis=axis)
+                profiles[(axis, f"{w:.0f} nm")] = (x, p)
+                powers.append(p)
+            arrays[f"banding_{axis}_um"], arrays[f"banding_{axis}_power"] = x, np.stack(powers)
+        period = tuple(z * p / (args.distance_mm * 1000) for p in display.period_um)
+        arrays["banding_period_um"] = np.array(period)
+        plot_banding(profiles, period, out / "banding.png")
+    save_npz(out / "psf.npz", **arrays)
+    save_json(out / "psf.json", {**ks.params, "energy_outside": ks.energy_outside, "transmittance": ks.transmittance,
+                                 "ratio_r": ks.ratio_r, "notes": ks.notes, "from_cache": hit})
+    plot_kernels(ks, out / "psf.png")
+    plot_mtf(ks, out / "mtf.png")
+
+    print(f"{'kernel':>18} {'r (paper)':>10} {'energy outside':>15} {'transmittance':>14}")
+    labels = ks.params.get("channels") or [f"{w:g} nm" for w in ks.wavelengths_nm]
+    for lab, r, e, t in zip(labels, ks.ratio_r, ks.energy_outside, ks.transmittance):
+        print(f"{lab:>18} {r:>10.3f} {e:>15.4%} {t:>14.4f}")
+    for note in ks.notes:
+        print(f"note: {note}")
+    print(f"wrote {out / 'psf.npz'}, psf.png, mtf.png{', banding.png' if banding else ''}"
+          f"{' (kernels from cache)' if hit else ''}")
+    return 0
+
+
+def run_study(args) -> int:
+    from .study_psf import run_study as study
+    study(args.out, quick=args.quick)
+    print(f"wrote {args.out}/study_psf.csv, study_psf.md, study_psf.png")
+    return 0
+
+
+def main(argv=None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        return run_psf(args) if args.command == "psf" else run_study(args)
+    except (UserError, *USER_ERRORS) as exc:
+        print(f"udc-render: error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("udc-render: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
