@@ -159,12 +159,15 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     bare_power = math.pi * lens.aperture_um ** 2 / 4
 
     # Alias check: the window must fit inside the alias-free field λz/δ of the pupil raster.
-    half_window = (size_px / 2) * pixel_um
+    window = size_px * pixel_um
     for axis, step in (("x", pgrid.dx_um), ("y", pgrid.dy_um)):
         free = float(wl.min()) * 1e-3 * z / step
-        if 2 * half_window > free and method != "paper":
-            warnings.warn(f"kernel window {2 * half_window:.0f} µm exceeds the alias-free field λz/δ{axis} = "
-                          f"{free:.0f} µm at {wl.min():g} nm; raise pupil_samples", AliasingWarning, stacklevel=2)
+        if window > free and method != "paper":
+            need = auto_pupil_samples(lens, float(wl.min()), pixel_um, size_px)
+            warnings.warn(f"kernel window {window:.0f} µm exceeds the alias-free field λz/δ{axis} = {free:.0f} µm "
+                          f"at {wl.min():g} nm (pupil_samples={n_pupil}); need pupil_samples ≥ {need}",
+                          AliasingWarning, stacklevel=2)
+            break
 
     use_field = d_um > 0 and display is not None
     # Transmitted power: the exact series of psf.banding for periodic displays; for a bare lens

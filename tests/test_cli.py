@@ -64,6 +64,7 @@ def test_cache_hit_gives_identical_kernels(tmp_path, capsys):
     (["--wavelengths-nm", "450,abc"], "comma-separated"),
     (["--method", "fft"], "invalid choice"),
     (["--aperture-um", "0"], "--aperture-um must be > 0"),
+    (["--pupil-samples", "300"], "need pupil_samples ≥"),
 ])
 def test_bad_arguments_give_one_line_and_exit_2(tmp_path, capsys, args, fragment):
     assert main(["psf", "--out", str(tmp_path / "o")] + args) == 2

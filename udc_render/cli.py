@@ -176,6 +176,9 @@ def run_psf(args) -> int:
             bar.total = phases * len(args.wavelengths_nm)
             ks, hit = cached(compute_kernels, "mono", display, lens, not args.no_cache,
                              wavelengths_nm=args.wavelengths_nm, **common)
+    for w in caught:
+        if issubclass(w.category, AliasingWarning) and args.pupil_samples is not None:
+            raise UserError(f"--pupil-samples is too coarse for the requested window: {w.message}")
     for w in {str(w.message) for w in caught}:
         print(f"warning: {w}", file=sys.stderr)
 
