@@ -71,7 +71,8 @@ def cached(fn, name: str, display, lens, use_cache: bool = True, **kwargs) -> tu
     """fn(display, lens, **kwargs) through the cache; returns (kernels, came_from_cache)."""
     if not use_cache:
         return fn(display, lens, **kwargs), False
-    key = cache_key(name, display, lens, **{k: v for k, v in kwargs.items() if k != "progress"})
+    # Callables (progress bars, weight functions) are named by other arguments (weight_name).
+    key = cache_key(name, display, lens, **{k: v for k, v in kwargs.items() if not callable(v)})
     hit = load(key)
     if hit is not None:
         return hit, True

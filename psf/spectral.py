@@ -50,7 +50,8 @@ def combine(ks: KernelSet, weights: np.ndarray, centres_nm, extra_params: dict) 
                      ks.field_shifts_um, list(ks.notes))
 
 
-def band_kernels(display, lens, bands_nm, step_nm: float = 3.0, weight=None, **kwargs) -> KernelSet:
+def band_kernels(display, lens, bands_nm, step_nm: float = 3.0, weight=None, weight_name: str | None = None,
+                 **kwargs) -> KernelSet:
     """One kernel per band [(lo, hi), …] nm, integrated over weight(λ) (flat when None)."""
     samples, rows = [], []
     for lo, hi in bands_nm:
@@ -65,7 +66,8 @@ def band_kernels(display, lens, bands_nm, step_nm: float = 3.0, weight=None, **k
         start += r.size
     ks = compute_kernels(display, lens, allwl, **kwargs)
     centres = [0.5 * (lo + hi) for lo, hi in bands_nm]
-    return combine(ks, W, centres, {"bands_nm": [list(b) for b in bands_nm], "band_step_nm": step_nm})
+    return combine(ks, W, centres, {"bands_nm": [list(b) for b in bands_nm], "band_step_nm": step_nm,
+                                        "weight": weight_name or ("E" if weight is None else "callable")})
 
 
 def load_sensitivities(camera: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -90,24 +92,40 @@ def load_sensitivities(camera: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
     return data[:, 0], data[:, 1:].T, [h.strip() for h in header[1:]]
 
 
+def load_weight(spec: str = "E"):
+    """A weight spectrum w(λ) as a callable: 'E' (flat), a colour-science illuminant, or a CSV
+    (header row; wavelength_nm, weight), linearly interpolated and 0 outside its range."""
+    if spec == "E":
+        return lambda lam: np.ones_like(np.asarray(lam, dtype=np.float64))
+    import colour
+    if spec in colour.SDS_ILLUMINANTS:
+        sd = colour.SDS_ILLUMINANTS[spec]
+        wl, values = np.asarray(sd.wavelengths, float), np.asarray(sd.values, float)
+    else:
+        path = Path(spec)
+        if not path.is_file():
+            raise PSFError(f"weight spectrum '{spec}': neither 'E', a colour-science illuminant (e.g. D65) nor a CSV file")
+        try:
+            data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        except ValueError as exc:
+            raise PSFError(f"weight spectrum {path}: cannot be read as CSV (wavelength_nm, weight): {exc}") from None
+        if data.shape[1] != 2 or np.any(np.diff(data[:, 0]) <= 0) or np.any(data[:, 1] < 0):
+            raise PSFError(f"weight spectrum {path}: need two columns, increasing wavelengths, weights ≥ 0")
+        wl, values = data[:, 0], data[:, 1]
+    return lambda lam: np.interp(lam, wl, values, left=0.0, right=0.0)
+
+
 def channel_kernels(display, lens, camera: str = "Nikon 5100 (NPL)", illuminant: str = "E",
                     step_nm: float = 5.0, relative_cutoff: float = 1e-3, **kwargs) -> KernelSet:
     """Channel-effective kernels: weights S_c(λ) E(λ) δλ over the wavelengths the channels reach.
 
     Wavelengths where every channel's weight is below relative_cutoff × its maximum are left out
-    (and listed in notes). illuminant: 'E' (equal energy) or a colour-science illuminant name.
+    (and listed in notes). illuminant: a weight spectrum for load_weight ('E', 'D65', a CSV).
     """
     wl_s, sens, names = load_sensitivities(camera)
     lam, dl = band_samples(float(wl_s[0]), float(wl_s[-1]), step_nm)
     S = np.stack([np.interp(lam, wl_s, s, left=0.0, right=0.0) for s in sens])
-    if illuminant == "E":
-        E = np.ones_like(lam)
-    else:
-        import colour
-        if illuminant not in colour.SDS_ILLUMINANTS:
-            raise PSFError(f"illuminant '{illuminant}': unknown; use 'E' or a colour-science name such as 'D65'")
-        sd = colour.SDS_ILLUMINANTS[illuminant]
-        E = np.interp(lam, sd.wavelengths, sd.values)
+    E = load_weight(illuminant)(lam)
     W = S * E[None, :] * dl[None, :]
     keep = np.any(W >= relative_cutoff * W.max(axis=1, keepdims=True), axis=0)
     ks = compute_kernels(display, lens, lam[keep], **kwargs)

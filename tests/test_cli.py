@@ -84,3 +84,24 @@ def test_console_script_exits_nonzero_without_traceback(tmp_path):
     r = subprocess.run([sys.executable, "-m", "udc_render.cli", "psf", "--size", "4", "--out", str(tmp_path)],
                        capture_output=True, text=True)
     assert r.returncode == 2 and "Traceback" not in r.stderr and r.stderr.count("\n") == 1
+
+
+def test_cache_key_changes_with_every_parameter(tmp_path):
+    from psf import Lens, layouts
+    from psf.cache import cache_key
+    base = dict(wavelengths_nm=[520.0], size_px=31, distance_mm=0.0)
+    k0 = cache_key("mono", layouts.toled(), Lens(), **base)
+    assert k0 == cache_key("mono", layouts.toled(), Lens(), **base)
+    assert k0 != cache_key("mono", layouts.toled(open_fraction=0.2), Lens(), **base)
+    assert k0 != cache_key("mono", layouts.toled(), Lens(aperture_um=3000), **base)
+    assert k0 != cache_key("mono", layouts.toled(), Lens(), **dict(base, distance_mm=0.5))
+    assert k0 != cache_key("band", layouts.toled(), Lens(), **base)
+
+
+def test_band_weight_spectrum_from_illuminant_changes_kernels(tmp_path):
+    args = ["psf", "--bands-nm", "400-700", "--band-step-nm", "30", "--size", "31"]
+    assert main(args + ["--weight", "E", "--out", str(tmp_path / "e")]) == 0
+    assert main(args + ["--weight", "A", "--out", str(tmp_path / "a")]) == 0
+    with np.load(tmp_path / "e" / "psf.npz") as e, np.load(tmp_path / "a" / "psf.npz") as a:
+        assert np.abs(e["kernels"] - a["kernels"]).sum() > 1e-4
+        assert json.loads(str(a["params_json"]))["weight"] == "A"

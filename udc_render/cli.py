@@ -25,7 +25,7 @@ from psf.layouts import LayoutError
 from psf.lens import LensError
 from psf.engine import PSFError
 from psf.pupil import MASK_RASTERS
-from psf.spectral import band_kernels, channel_kernels
+from psf.spectral import band_kernels, channel_kernels, load_weight
 
 USER_ERRORS = (PSFError, LayoutError, LensError)
 
@@ -108,7 +108,9 @@ def build_parser() -> argparse.ArgumentParser:
                                        "('Nikon 5100 (NPL)', 'Sigma SDMerill (NPL)') or a CSV of sensitivities")
     p.add_argument("--band-step-nm", type=_positive("--band-step-nm"), default=3.0,
                    help="wavelength step inside a band or channel [3]")
-    p.add_argument("--illuminant", default="E", help="weight spectrum for --camera: E or a colour-science name [E]")
+    p.add_argument("--weight", default="E",
+                   help="weight spectrum for --bands-nm and --camera: E (flat), a colour-science illuminant "
+                        "such as D65, or a CSV (wavelength_nm, weight) [E]")
     p.add_argument("--distance-mm", type=_non_negative("--distance-mm"), default=0.0,
                    help="display-to-lens distance d; 0 = principal-plane model [0]")
     p.add_argument("--pixel-um", type=_positive("--pixel-um"), default=3.1, help="sensor pixel pitch [3.1]")
@@ -168,10 +170,11 @@ def run_psf(args) -> int:
         if args.bands_nm:
             bar.total = phases * sum(math.ceil((hi - lo) / args.band_step_nm - 1e-9) for lo, hi in args.bands_nm)
             ks, hit = cached(band_kernels, "band", display, lens, not args.no_cache, bands_nm=args.bands_nm,
-                             step_nm=args.band_step_nm, **common)
+                             step_nm=args.band_step_nm, weight=load_weight(args.weight), weight_name=args.weight,
+                             **common)
         elif args.camera:
             ks, hit = cached(channel_kernels, "channel", display, lens, not args.no_cache, camera=args.camera,
-                             illuminant=args.illuminant, step_nm=args.band_step_nm, **common)
+                             illuminant=args.weight, step_nm=args.band_step_nm, **common)
         else:
             bar.total = phases * len(args.wavelengths_nm)
             ks, hit = cached(compute_kernels, "mono", display, lens, not args.no_cache,
