@@ -51,6 +51,7 @@ class KernelSet:
     field_kernels      [K, P, P, S, S] per field phase (d > 0 only), each unit sum
     field_power        [K, P, P]  transmitted power per phase / its mean (the banding samples)
     field_shifts_um    [P, P, 2]  mask shift (x, y) of each phase; image position = shift · z_i / d
+                                  (see field_shifts: a whole period, or the part the sensor sees)
     """
     kernels: np.ndarray
     wavelengths_nm: np.ndarray
@@ -73,7 +74,8 @@ def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, meth
               mask_raster):
     wl = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
     if wl.ndim != 1 or wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
-        raise PSFError(f"wavelengths_nm must be positive finite numbers, got {list(np.ravel(wavelengths_nm))}")
+        raise PSFError(f"wavelengths_nm must be positive finite numbers, got "
+                       f"{[float(v) for v in np.ravel(np.asarray(wavelengths_nm, dtype=float))]}")
     if not (isinstance(size_px, (int, np.integer)) and size_px >= 3 and size_px % 2 == 1):
         raise PSFError(f"size_px must be an odd integer ≥ 3 (kernel centred at size//2), got {size_px}")
     if not (pixel_um > 0 and math.isfinite(pixel_um)):
@@ -100,6 +102,26 @@ def auto_pupil_samples(lens: Lens, wavelength_min_nm: float, pixel_um: float, si
     return max(DEFAULT_PUPIL_SAMPLES, int(math.ceil(need)))
 
 
+PAPER_SENSOR_UM = (2048 * 1.55, 1024 * 1.55)
+
+
+def field_shifts(period_um, distance_um: float, image_distance_um: float, phases: int,
+                 sensor_um=PAPER_SENSOR_UM) -> np.ndarray:
+    """Mask shifts [P, P, 2] (µm) at which field kernels are sampled, per axis:
+    the whole display period (s_i = i p / P) when the sensor sees at least one banding period
+    (sensor · d / z_i ≥ p), else P points across the sensor (s_i = x_i d / z_i, x_i centred cells).
+    So the field average tends to the principal-plane kernel (s = 0) as d → 0.
+    """
+    axes = []
+    for p, width in zip(period_um, sensor_um):
+        span = width * distance_um / image_distance_um
+        i = np.arange(phases)
+        axes.append(i / phases * p if span >= p else ((i + 0.5) / phases - 0.5) * span)
+    out = np.zeros((phases, phases, 2))
+    out[..., 0], out[..., 1] = axes[0][None, :], axes[1][:, None]
+    return out
+
+
 def _spread_margin_um(distance_um, wavelength_um, d_um):
     """Lateral spread over d of the highest angle the grid carries (sin θ = λ / 2δ)."""
     s = min(wavelength_um / (2 * d_um), 0.999)
@@ -110,12 +132,13 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                     pixel_um: float = 3.1, size_px: int = 255, distance_mm: float = 0.0,
                     field_phases: int = 4, method: str = "mft", pupil_samples: int | None = None,
                     precision: str = "float32", pixel_integration: bool = True,
-                    mask_raster: str = "band_limited", progress=None) -> KernelSet:
+                    mask_raster: str = "band_limited", sensor_um=PAPER_SENSOR_UM, progress=None) -> KernelSet:
     """PSF kernels at the sensor for a display (None: bare lens) in front of a lens.
 
     display: a layout with period_um and cell_raster (psf.layouts, psf.micrograph) or None.
     distance_mm: display-to-pupil gap d; 0 is the paper's principal-plane model.
-    field_phases: P mask shifts per axis over one display period (d > 0 only).
+    field_phases: P mask shifts per axis (d > 0 only), over one display period or over the sensor
+        extent sensor_um (x, y) when that sees less than a period (field_shifts).
     pupil_samples: samples across the aperture (None: auto, see auto_pupil_samples).
     precision: 'float32' (complex64 FFTs and products) or 'float64'.
     mask_raster: 'band_limited' (exact Fourier series, default) or 'area' (area-weighted, then
@@ -128,7 +151,8 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     cdtype = PRECISIONS[precision]
     n_pupil = pupil_samples or auto_pupil_samples(lens, float(wl.min()), pixel_um, size_px)
     z = lens.image_distance_um
-    # De-apodise where the pupil's spectrum is box-filtered: an area-weighted mask or a bare aperture.
+    # De-apodise where the pupil's spectrum is box-filtered: an area-weighted mask or a bare aperture
+    # (not with defocus: its phase is point-sampled, not box-filtered).
     deapodize = display is None or mask_raster == "area"
     d_um = distance_mm * 1000.0
     notes = []
@@ -178,10 +202,7 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     if not use_field and field_phases > 1:
         notes.append("field phases skipped: the PSF is field-independent when d = 0 or without a display")
     phases = field_phases if use_field else 1
-    shifts = np.zeros((phases, phases, 2))
-    if use_field:
-        shifts[..., 0] = (np.arange(phases) / phases * period[0])[None, :]
-        shifts[..., 1] = (np.arange(phases) / phases * period[1])[:, None]
+    shifts = field_shifts(period, d_um, z, phases, sensor_um) if use_field else np.zeros((1, 1, 2))
 
     if use_field:
         mask_spec = sfft.fft2(mask.astype(cdtype), workers=fourier.WORKERS)
@@ -227,6 +248,9 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                                       f"DFT grid is coarser than the {pixel_um} µm pixel", UnderSamplingWarning,
                                       stacklevel=2)
                         warned_r = True
+                elif not pixel_integration:
+                    kern = fourier.point_kernel(g, pgrid.x_um, pgrid.y_um, pgrid.dx_um, pgrid.dy_um, lam, z,
+                                                pixel_um, S, method, cdtype, deapodize and defocus is None)
                 else:
                     reuse = not use_field and defocus is None
                     if reuse and cache_R is not None:
@@ -236,7 +260,7 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                         if reuse:
                             cache_R = R
                     kern = fourier.pixel_kernel(R, pgrid.dx_um, pgrid.dy_um, lam, z, pixel_um, S, method,
-                                                pixel_integration, cdtype, deapodize)
+                                                True, cdtype, deapodize and defocus is None)
                 window = float(kern.sum())
                 if not (np.all(np.isfinite(kern)) and window > 0):
                     raise PSFError(f"kernel at {lam_nm:g} nm is not finite or carries no energy "
@@ -255,6 +279,9 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
         if use_field:
             field_p[k] /= field_p[k].mean()
 
+    if trans.max() < 1e-6:
+        notes.append(f"almost nothing is transmitted (transmittance {trans.max():.2e}): the aperture sees "
+                     f"little or no display opening; kernels are normalised all the same")
     out_dtype = np.float32 if precision == "float32" else np.float64
     params = {"display": display.describe() if display is not None else {"kind": "none"},
               "lens": lens.describe(), "wavelengths_nm": wl.tolist(), "pixel_um": pixel_um,
@@ -263,7 +290,7 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
               "pixel_integration": bool(pixel_integration), "mask_raster": mask_raster,
               "deapodize": bool(deapodize),
               "pupil_pitch_um": [pgrid.dx_um, pgrid.dy_um], "pupil_shape": [pgrid.ny, pgrid.nx],
-              "image_distance_um": z, "model": "finite-distance" if use_field else "principal-plane"}
+              "image_distance_um": z, "sensor_um": list(sensor_um), "model": "finite-distance" if use_field else "principal-plane"}
     return KernelSet(kernels.astype(out_dtype), wl, float(pixel_um), outside, trans, ratio, params,
                      field_k.astype(out_dtype) if use_field else None, field_p,
                      shifts if use_field else None, notes)

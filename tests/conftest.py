@@ -1,0 +1,142 @@
+"""Shared helpers for the PSF-engine tests: analytic oracles and independent re-implementations.
+
+Everything here is written from the physics (PHYSICS.md §3, §4, §6), not copied from the engine,
+so that a test compares the engine with something that could disagree with it.
+Helpers are plain functions exposed through the `psfkit` fixture (tests never import conftest).
+"""
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import scipy.signal
+from scipy.special import j0, j1, jn_zeros
+
+from psf.lens import Lens
+from psf.pupil import aperture_slices, display_grid, lens_grid, tile_mask
+
+
+def bare_pupil(lens: Lens, n: int):
+    """The engine's bare-lens raster (δ = D/N, area-weighted disc) cropped to the aperture: (grid, g)."""
+    grid = lens_grid(lens, n)
+    sy, sx = aperture_slices(grid, lens.aperture_um)
+    pg = grid.crop(sy, sx)
+    return pg, lens.aperture_area_fraction(pg.x_edges_um, pg.y_edges_um)
+
+
+def display_pupil(layout, lens: Lens, n: int, mask_raster: str = "band_limited"):
+    """The engine's display raster (whole periods, tile_mask) × aperture, cropped: (grid, g, kappa)."""
+    grid, cell_n, tiles = display_grid(layout.period_um, lens, n)
+    mask, kappa = tile_mask(layout, cell_n, tiles, mask_raster)
+    sy, sx = aperture_slices(grid, lens.aperture_um)
+    pg = grid.crop(sy, sx)
+    return pg, mask[sy, sx] * lens.aperture_area_fraction(pg.x_edges_um, pg.y_edges_um), kappa
+
+
+def airy_norm(r_um, lens: Lens, wavelength_um: float):
+    """(2 J1(v)/v)², v = π D r / (λ z): the Airy intensity relative to its peak."""
+    v = math.pi * lens.aperture_um * np.asarray(r_um, dtype=np.float64) / (wavelength_um * lens.image_distance_um)
+    safe = np.where(v > 0, v, 1.0)
+    return np.where(v > 0, (2 * j1(safe) / safe) ** 2, 1.0)
+
+
+def airy_peak(lens: Lens, wavelength_um: float) -> float:
+    """Peak intensity (A/λz)² for unit irradiance on the pupil; the total power is A = πD²/4."""
+    return (math.pi * lens.aperture_um ** 2 / 4 / (wavelength_um * lens.image_distance_um)) ** 2
+
+
+def airy_pixel_energy(centres_um, pixel_um: float, lens: Lens, wavelength_um: float, nodes: int = 32):
+    """Energy of the analytic Airy pattern on each pixel (pixel centres on a square grid), as a
+    fraction of the total power, by a nodes × nodes Gauss-Legendre rule per pixel ([M, M] array)."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    x, w = x * pixel_um / 2, w * pixel_um / 2
+    pts = np.asarray(centres_um, dtype=np.float64)[:, None] + x[None, :]           # [M, n]
+    r = np.hypot(pts[:, :, None, None], pts[None, None, :, :])                     # [My, n, Mx, n]
+    val = airy_norm(r, lens, wavelength_um) * airy_peak(lens, wavelength_um)
+    area = math.pi * lens.aperture_um ** 2 / 4
+    return np.einsum("anbm,n,m->ab", val, w, w) / area
+
+
+def disc_ft(nu, diameter_um: float):
+    """Fourier transform of the aperture disc at radial frequency ν: π D²/4 · 2 J1(π D ν)/(π D ν)."""
+    q = math.pi * diameter_um * np.abs(np.asarray(nu, dtype=np.float64))
+    safe = np.where(q > 0, q, 1.0)
+    return math.pi * diameter_um ** 2 / 4 * np.where(q > 0, 2 * j1(safe) / safe, 1.0)
+
+
+def propagated_orders(layout, wavelength_um: float, distance_um: float):
+    """Fourier coefficients a_m = c_m H_m of the mask propagated over d (propagating orders only).
+
+    H_m = exp(2πi d [sqrt(1/λ² − |ν_m|²) − 1/λ]) written directly (not the engine's
+    cancellation-safe form); evanescent orders (|ν| ≥ 1/λ) are dropped. Returns (kx, ky, a[ky, kx]).
+    """
+    px, py = layout.period_um
+    mx, my = int(px / wavelength_um) + 1, int(py / wavelength_um) + 1
+    kx, ky = np.arange(-mx, mx + 1), np.arange(-my, my + 1)
+    nu2 = (kx[None, :] / px) ** 2 + (ky[:, None] / py) ** 2
+    prop = nu2 < 1.0 / wavelength_um ** 2
+    root = np.sqrt(np.where(prop, 1.0 / wavelength_um ** 2 - nu2, 0.0))
+    H = np.exp(2j * np.pi * distance_um * (root - 1.0 / wavelength_um))
+    a = np.where(prop, layout.fourier_coefficients(kx, ky) * H, 0.0)
+    return kx, ky, a
+
+
+def series_power(layout, lens: Lens, wavelength_um: float, distance_um: float, shifts_um):
+    """Transmitted power P(s) = Σ_k b_k(d) Â(k/p) exp(−2πi k·s/p) (PHYSICS.md §4), [..., 2] shifts (x, y).
+
+    b_k = Σ_m a_{m+k} a*_m (scipy.signal.correlate), Â the disc transform. The mask shifted by +s
+    (m(x − s)) under a fixed aperture: P(s) = ∫ A(x) |m_d(x − s)|² dx, hence the minus sign.
+    """
+    kx, ky, a = propagated_orders(layout, wavelength_um, distance_um)
+    b = scipy.signal.correlate(a, a, mode="full", method="fft")
+    bkx = np.arange(-(kx.size - 1), kx.size)
+    bky = np.arange(-(ky.size - 1), ky.size)
+    px, py = layout.period_um
+    weights = b * disc_ft(np.hypot(bkx[None, :] / px, bky[:, None] / py), lens.aperture_um)
+    s = np.asarray(shifts_um, dtype=np.float64)
+    ex = np.exp(-2j * np.pi * s[..., 0, None] * bkx / px)
+    ey = np.exp(-2j * np.pi * s[..., 1, None] * bky / py)
+    return np.einsum("...y,yx,...x->...", ey, weights, ex)
+
+
+
+def slit_power_quadrature(layout, lens: Lens, wavelength_um: float, distance_um: float, shifts_x_um,
+                          panels: int = 400, nodes: int = 24):
+    """Brute force for masks invariant along y: P(s) = ∫ 2 sqrt(R² − x²) |m_d(x − s)|² dx by composite
+    Gauss-Legendre in θ (x = R sin θ removes the square-root end points). No Bessel functions,
+    no correlation of orders: the field m_d(x) = Σ a_m e^{2πimx/p} is summed at every node."""
+    kx, ky, a = propagated_orders(layout, wavelength_um, distance_um)
+    row = a[ky == 0][0]
+    assert np.allclose(a[ky != 0], 0.0), "mask must be invariant along y"
+    R = lens.aperture_um / 2
+    t, w = np.polynomial.legendre.leggauss(nodes)
+    edges = np.linspace(-math.pi / 2, math.pi / 2, panels + 1)
+    half = np.diff(edges) / 2
+    theta = ((edges[:-1] + half)[:, None] + half[:, None] * t[None, :]).ravel()
+    weight = (half[:, None] * w[None, :]).ravel() * 2 * R * R * np.cos(theta) ** 2
+    x = R * np.sin(theta)
+    px = layout.period_um[0]
+    shifts = np.atleast_1d(np.asarray(shifts_x_um, dtype=np.float64))
+    # m_d(x − s) = Σ a_m e^{−2πims/p} e^{2πimx/p}
+    coef = row[:, None] * np.exp(-2j * np.pi * np.outer(kx, shifts) / px)
+    total = np.zeros(shifts.size)
+    for lo in range(0, x.size, 2048):
+        field = np.exp(2j * np.pi * np.outer(x[lo:lo + 2048], kx) / px) @ coef
+        total += weight[lo:lo + 2048] @ (np.abs(field) ** 2)
+    return total
+
+
+def encircled_energy(v):
+    """Fraction of the Airy power inside radius v (in units of λz/(πD)): 1 − J0² − J1²."""
+    return 1.0 - j0(v) ** 2 - j1(v) ** 2
+
+
+@pytest.fixture(scope="session")
+def psfkit():
+    return SimpleNamespace(bare_pupil=bare_pupil, display_pupil=display_pupil, airy_norm=airy_norm,
+                           airy_peak=airy_peak, airy_pixel_energy=airy_pixel_energy, disc_ft=disc_ft,
+                           propagated_orders=propagated_orders, series_power=series_power,
+                           slit_power_quadrature=slit_power_quadrature, encircled_energy=encircled_energy,
+                           j1_zeros=jn_zeros(1, 3))
