@@ -46,6 +46,8 @@ class KernelSet:
 
     kernels            [K, S, S]  unit sum inside the window (power-weighted mean over field phases)
     energy_outside     [K]        fraction of the transmitted power that falls outside the window
+                                  (point-sampled kernels: the Riemann estimate Σ ρ² I(u_j), which is
+                                  negative where pixels undersample an Airy core; see pixel_integration)
     transmittance      [K]        power through display and aperture / power through the bare aperture
     ratio_r            [K]        the paper's down-sampling ratio r = δ_N N ρ / (λ f), N δ_N = aperture
     field_kernels      [K, P, P, S, S] per field phase (d > 0 only), each unit sum

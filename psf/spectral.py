@@ -4,8 +4,10 @@ kernels for camera sensitivities.
 A band kernel is the power-weighted mean of monochromatic kernels (midpoint rule, step δλ):
     k_band = Σ_i w(λ_i) T(λ_i) (1 − e_out(λ_i)) k(λ_i)  /  Σ_i w(λ_i) T(λ_i) (1 − e_out(λ_i))
 with T the transmittance and e_out the energy outside the window, so the result is exactly what a
-sensor integrating w(λ) sees. PHYSICS.md §3: δλ ≈ 3 nm keeps a 100 nm band within 0.8 % L1;
-the needed step shrinks as the kernel grows (δλ ≲ λ · pixel / kernel radius).
+sensor integrating w(λ) sees. The default step is δλ = λ_lo / S (S the kernel size in pixels): the kernel's outer orders move by
+δλ/λ · S/2 pixels between samples, so this keeps that shift at half a pixel. Measured
+(`udc-render study psf`, T-OLED, 100 nm bands, worst band): S = 127 at 3 nm (≈ 400/127) 1.1e-3 L1;
+S = 255 at 3 nm 7.3e-3, at 1.5 nm (≈ 400/255) 3.9e-4.
 """
 from __future__ import annotations
 
@@ -50,12 +52,20 @@ def combine(ks: KernelSet, weights: np.ndarray, centres_nm, extra_params: dict) 
                      ks.field_shifts_um, list(ks.notes))
 
 
-def band_kernels(display, lens, bands_nm, step_nm: float = 3.0, weight=None, weight_name: str | None = None,
+def auto_step_nm(lo_nm: float, size_px: int) -> float:
+    """Default wavelength step for a band starting at lo_nm and kernels of size_px: λ_lo / S."""
+    return lo_nm / size_px
+
+
+def band_kernels(display, lens, bands_nm, step_nm: float | None = None, weight=None, weight_name: str | None = None,
                  **kwargs) -> KernelSet:
-    """One kernel per band [(lo, hi), …] nm, integrated over weight(λ) (flat when None)."""
+    """One kernel per band [(lo, hi), …] nm, integrated over weight(λ) (flat when None; see
+    load_weight), with wavelength step step_nm (None: auto_step_nm per band)."""
     samples, rows = [], []
-    for lo, hi in bands_nm:
-        lam, dl = band_samples(lo, hi, step_nm)
+    size_px = kwargs.get("size_px", 255)
+    steps = [step_nm or auto_step_nm(lo, size_px) for lo, _ in bands_nm]
+    for (lo, hi), step in zip(bands_nm, steps):
+        lam, dl = band_samples(lo, hi, step)
         samples.append(lam)
         rows.append(dl * (1.0 if weight is None else np.asarray(weight(lam), dtype=np.float64)))
     allwl = np.concatenate(samples)
@@ -66,7 +76,7 @@ def band_kernels(display, lens, bands_nm, step_nm: float = 3.0, weight=None, wei
         start += r.size
     ks = compute_kernels(display, lens, allwl, **kwargs)
     centres = [0.5 * (lo + hi) for lo, hi in bands_nm]
-    return combine(ks, W, centres, {"bands_nm": [list(b) for b in bands_nm], "band_step_nm": step_nm,
+    return combine(ks, W, centres, {"bands_nm": [list(b) for b in bands_nm], "band_step_nm": steps,
                                         "weight": weight_name or ("E" if weight is None else "callable")})
 
 
@@ -116,13 +126,14 @@ def load_weight(spec: str = "E"):
 
 
 def channel_kernels(display, lens, camera: str = "Nikon 5100 (NPL)", illuminant: str = "E",
-                    step_nm: float = 5.0, relative_cutoff: float = 1e-3, **kwargs) -> KernelSet:
+                    step_nm: float | None = None, relative_cutoff: float = 1e-3, **kwargs) -> KernelSet:
     """Channel-effective kernels: weights S_c(λ) E(λ) δλ over the wavelengths the channels reach.
 
     Wavelengths where every channel's weight is below relative_cutoff × its maximum are left out
     (and listed in notes). illuminant: a weight spectrum for load_weight ('E', 'D65', a CSV).
     """
     wl_s, sens, names = load_sensitivities(camera)
+    step_nm = step_nm or auto_step_nm(float(wl_s[0]), kwargs.get("size_px", 255))
     lam, dl = band_samples(float(wl_s[0]), float(wl_s[-1]), step_nm)
     S = np.stack([np.interp(lam, wl_s, s, left=0.0, right=0.0) for s in sens])
     E = load_weight(illuminant)(lam)

@@ -105,3 +105,17 @@ def test_band_weight_spectrum_from_illuminant_changes_kernels(tmp_path):
     with np.load(tmp_path / "e" / "psf.npz") as e, np.load(tmp_path / "a" / "psf.npz") as a:
         assert np.abs(e["kernels"] - a["kernels"]).sum() > 1e-4
         assert json.loads(str(a["params_json"]))["weight"] == "A"
+
+
+def test_study_quick_writes_table_csv_and_plot(tmp_path):
+    from udc_render.study_psf import run_study
+    rows = run_study(tmp_path, quick=True, progress=False)
+    knobs = {r["knob"] for r in rows}
+    assert knobs == {"pupil_samples", "method", "precision", "band_step_nm", "field_phases", "size_px"}
+    assert all(r["time_s"] > 0 for r in rows)
+    # each knob's error falls from its coarsest to its finest setting in the quick grid
+    for knob in ("pupil_samples", "band_step_nm"):
+        errs = [r["error_L1"] for r in rows if r["knob"] == knob and r.get("series", "") in ("band_limited", "bands")]
+        assert errs[-1] < errs[0]
+    for name in ("study_psf.csv", "study_psf.md", "study_psf.png"):
+        assert (tmp_path / name).stat().st_size > 0

@@ -25,7 +25,7 @@ from psf.layouts import LayoutError
 from psf.lens import LensError
 from psf.engine import PSFError
 from psf.pupil import MASK_RASTERS
-from psf.spectral import band_kernels, channel_kernels, load_weight
+from psf.spectral import auto_step_nm, band_kernels, channel_kernels, load_weight
 
 USER_ERRORS = (PSFError, LayoutError, LensError)
 
@@ -106,8 +106,8 @@ def build_parser() -> argparse.ArgumentParser:
     spec.add_argument("--bands-nm", type=_bands, help="band kernels, e.g. 400-500,500-600,600-700")
     spec.add_argument("--camera", help="channel-effective kernels for a colour-science camera "
                                        "('Nikon 5100 (NPL)', 'Sigma SDMerill (NPL)') or a CSV of sensitivities")
-    p.add_argument("--band-step-nm", type=_positive("--band-step-nm"), default=3.0,
-                   help="wavelength step inside a band or channel [3]")
+    p.add_argument("--band-step-nm", type=_positive("--band-step-nm"), default=None,
+                   help="wavelength step inside a band or channel [auto: λ_lo / size, 1.6 nm at 400 nm, 255 px]")
     p.add_argument("--weight", default="E",
                    help="weight spectrum for --bands-nm and --camera: E (flat), a colour-science illuminant "
                         "such as D65, or a CSV (wavelength_nm, weight) [E]")
@@ -168,7 +168,8 @@ def run_psf(args) -> int:
         warnings.simplefilter("always", UnderSamplingWarning)
         common["progress"] = bar.update
         if args.bands_nm:
-            bar.total = phases * sum(math.ceil((hi - lo) / args.band_step_nm - 1e-9) for lo, hi in args.bands_nm)
+            bar.total = phases * sum(math.ceil((hi - lo) / (args.band_step_nm or auto_step_nm(lo, args.size)) - 1e-9)
+                                     for lo, hi in args.bands_nm)
             ks, hit = cached(band_kernels, "band", display, lens, not args.no_cache, bands_nm=args.bands_nm,
                              step_nm=args.band_step_nm, weight=load_weight(args.weight), weight_name=args.weight,
                              **common)
