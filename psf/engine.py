@@ -130,6 +130,31 @@ def _spread_margin_um(distance_um, wavelength_um, d_um):
     return distance_um * s / math.sqrt(1 - s * s)
 
 
+def _window(display, lens: Lens, n_pupil: int, wl: np.ndarray, d_um: float, mask_raster: str):
+    """The pupil-plane window and the display's amplitude raster on it: (grid, mask or None, κ).
+
+    Periodic displays need no margin (the window holds whole periods, propagation is exact);
+    aperiodic tiles at d > 0 get a margin for the lateral spread over d plus one period of shift.
+    """
+    if display is None:
+        return lens_grid(lens, n_pupil), None, 1.0
+    period = display.period_um
+    margin = 0.0
+    if not getattr(display, "periodic", True) and d_um > 0:
+        step = min(period) / math.ceil(min(period) * n_pupil / lens.aperture_um)
+        margin = _spread_margin_um(d_um, float(wl.max()) * 1e-3, step) + max(period)
+        if margin > 20 * lens.aperture_um:
+            raise PSFError(f"distance_mm={d_um / 1000:g}: an aperiodic display (random tile rotation) needs "
+                           f"{margin / 1000:.1f} mm of padding; allowed ≤ {20 * lens.aperture_um / 1000:.1f} mm "
+                           f"(use a periodic display or a smaller distance)")
+    grid, cell_n, tiles = display_grid(period, lens, n_pupil, margin)
+    try:
+        mask, kappa = tile_mask(display, cell_n, tiles, mask_raster)
+    except ValueError as exc:
+        raise PSFError(str(exc)) from None
+    return grid, mask, kappa
+
+
 def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.0, 520.0, 640.0),
                     pixel_um: float = 3.1, size_px: int = 255, distance_mm: float = 0.0,
                     field_phases: int = 4, method: str = "mft", pupil_samples: int | None = None,
@@ -137,7 +162,8 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                     mask_raster: str = "band_limited", sensor_um=PAPER_SENSOR_UM, progress=None) -> KernelSet:
     """PSF kernels at the sensor for a display (None: bare lens) in front of a lens.
 
-    display: a layout with period_um and cell_raster (psf.layouts, psf.micrograph) or None.
+    display: a layout (psf.layouts, psf.micrograph: period_um, fourier_coefficients, cell_raster)
+        or None for the bare lens.
     distance_mm: display-to-pupil gap d; 0 is the paper's principal-plane model.
     field_phases: P mask shifts per axis (d > 0 only), over one display period or over the sensor
         extent sensor_um (x, y) when that sees less than a period (field_shifts).
@@ -159,25 +185,8 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     d_um = distance_mm * 1000.0
     notes = []
 
-    if display is None:
-        grid = lens_grid(lens, n_pupil)
-        mask, kappa, period = None, 1.0, None
-    else:
-        period = display.period_um
-        aperiodic = not getattr(display, "periodic", True)
-        margin = 0.0
-        if aperiodic and d_um > 0:
-            dmin = min(period[0], period[1]) / max(2, math.ceil(min(period) * n_pupil / lens.aperture_um))
-            margin = _spread_margin_um(d_um, float(wl.max()) * 1e-3, dmin) + max(period)
-            if margin > 20 * lens.aperture_um:
-                raise PSFError(f"distance_mm={distance_mm}: an aperiodic display (random tile rotation) needs "
-                               f"{margin / 1000:.1f} mm of padding; allowed ≤ {20 * lens.aperture_um / 1000:.1f} mm "
-                               f"(use a periodic display or a smaller distance)")
-        grid, cell_n, tiles = display_grid(period, lens, n_pupil, margin)
-        try:
-            mask, kappa = tile_mask(display, cell_n, tiles, mask_raster)
-        except ValueError as exc:
-            raise PSFError(str(exc)) from None
+    grid, mask, kappa = _window(display, lens, n_pupil, wl, d_um, mask_raster)
+    period = display.period_um if display is not None else None
 
     sy, sx = aperture_slices(grid, lens.aperture_um)
     pgrid = grid.crop(sy, sx)
