@@ -29,6 +29,11 @@ def test_psf_writes_kernels_plots_and_parameters(tmp_path, capsys):
     assert params["display"]["name"] == "toled" and params["method"] == "mft"
     for name in ("psf.png", "mtf.png", "psf.json"):
         assert (out / name).stat().st_size > 0
+    import OpenEXR
+    with OpenEXR.File(str(out / "psf.exr"), separate_channels=True) as f:
+        chans = f.channels()
+        assert set(chans) == {"psf_450nm", "psf_640nm"}
+        np.testing.assert_array_equal(chans["psf_640nm"].pixels, k[1])
     assert not (out / "banding.png").exists()
     assert "450 nm" in capsys.readouterr().out
 

@@ -154,7 +154,7 @@ def make_display(args):
 
 def run_psf(args) -> int:
     from tqdm import tqdm
-    from .fileio import save_json, save_npz
+    from .fileio import save_exr, save_json, save_npz
     from .plots import plot_banding, plot_kernels, plot_mtf
 
     display = make_display(args)
@@ -215,6 +215,8 @@ def run_psf(args) -> int:
     save_npz(out / "psf.npz", **arrays)
     save_json(out / "psf.json", {**ks.params, "energy_outside": ks.energy_outside, "transmittance": ks.transmittance,
                                  "ratio_r": ks.ratio_r, "notes": ks.notes, "from_cache": hit})
+    names = ks.params.get("channels") or [f"{w:g}nm".replace(".", "p") for w in ks.wavelengths_nm]
+    save_exr(out / "psf.exr", {f"psf_{n}": k for n, k in zip(names, ks.kernels)})
     plot_kernels(ks, out / "psf.png")
     plot_mtf(ks, out / "mtf.png")
 
@@ -224,7 +226,7 @@ def run_psf(args) -> int:
         print(f"{lab:>18} {r:>10.3f} {e:>15.4%} {t:>14.4f}")
     for note in ks.notes:
         print(f"note: {note}")
-    print(f"wrote {out / 'psf.npz'}, psf.png, mtf.png{', banding.png' if banding else ''}"
+    print(f"wrote {out / 'psf.npz'}, psf.exr, psf.png, mtf.png{', banding.png' if banding else ''}"
           f"{' (kernels from cache)' if hit else ''}")
     return 0
 

@@ -41,6 +41,16 @@ def save_text(path, text: str) -> None:
         tmp.write_text(text)
 
 
+def save_exr(path, channels: dict) -> None:
+    """Linear float32 image channels [H, W] (named, e.g. 'psf_450nm') as one ZIP-compressed OpenEXR."""
+    import OpenEXR
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    data = {name: np.ascontiguousarray(a, dtype=np.float32) for name, a in channels.items()}
+    with atomic_path(path, ".exr") as tmp:
+        with OpenEXR.File(header, data) as f:
+            f.write(str(tmp))
+
+
 def save_figure(fig, path) -> None:
     with atomic_path(path, ".png") as tmp:
         fig.savefig(tmp, dpi=110, bbox_inches="tight")
