@@ -330,3 +330,19 @@ def test_bad_lens_raises_one_line_lens_error(kwargs):
     with pytest.raises(LensError) as err:
         Lens(**kwargs)
     assert "\n" not in str(err.value)
+
+
+def test_huge_aperture_keeps_only_the_zero_order_in_a_small_window():
+    # f/0.3 (D = 20 mm): the Airy core (0.19 µm) sits inside the centre pixel and the first order
+    # (λz/p = 52 µm = 16.8 px) lies outside a 31-px window, so the window holds the zero order:
+    # |c0|² of the transmitted (propagating) power T, i.e. f² / T ≈ f (PHYSICS.md §6). Measured:
+    # 0.21167 against 0.21098 (the other orders' Airy tails), centre pixel 0.979.
+    lens = Lens(aperture_um=20000.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # 1024 samples stay alias-free for a 31-px window
+        ks = compute_kernels(layouts.toled(), lens, [520.0], size_px=31, precision="float64")
+    assert np.all(np.isfinite(ks.kernels)) and abs(ks.kernels.sum() - 1) < 1e-12
+    zero_order_share = 0.21 ** 2 / ks.transmittance[0]
+    assert abs((1 - ks.energy_outside[0]) - zero_order_share) < 1e-3
+    assert ks.kernels[0, 15, 15] > 0.97
+    assert abs(ks.transmittance[0] - 0.21) < 2e-3  # evanescent orders excluded
