@@ -50,6 +50,17 @@ def test_psf_with_distance_writes_banding(tmp_path):
     assert (out / "banding.png").stat().st_size > 0
 
 
+def test_small_distance_samples_field_phases_across_the_sensor(tmp_path):
+    # d = 0.01 mm: the banding period z p / d = 36 mm exceeds a 3 mm sensor, so the phases span the
+    # shifts the sensor sees (± sensor · d / 2z), not a whole display period.
+    out = tmp_path / "o"
+    assert main(["psf", "--wavelengths-nm", "520", "--size", "15", "--distance-mm", "0.01", "--field-phases", "2",
+                 "--sensor-um", "3000,1500", "--out", str(out)]) == 0
+    with np.load(out / "psf.npz") as z:
+        np.testing.assert_allclose(z["field_positions_um"][0, :, 0], [-750.0, 750.0])
+        np.testing.assert_allclose(z["field_positions_um"][:, 0, 1], [-375.0, 375.0])
+
+
 def test_cache_hit_gives_identical_kernels(tmp_path, capsys):
     args = ["psf", "--display", "none", "--wavelengths-nm", "520", "--size", "31"]
     assert main(args + ["--out", str(tmp_path / "a")]) == 0
@@ -70,6 +81,7 @@ def test_cache_hit_gives_identical_kernels(tmp_path, capsys):
     (["--method", "fft"], "invalid choice"),
     (["--aperture-um", "0"], "--aperture-um must be > 0"),
     (["--pupil-samples", "300"], "need pupil_samples ≥"),
+    (["--sensor-um", "3000"], "--sensor-um must be two positive numbers"),
 ])
 def test_bad_arguments_give_one_line_and_exit_2(tmp_path, capsys, args, fragment):
     assert main(["psf", "--out", str(tmp_path / "o")] + args) == 2

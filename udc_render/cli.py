@@ -20,7 +20,7 @@ import numpy as np
 from psf import Lens, MicrographLayout, compute_kernels, layouts
 from psf.banding import banding_profile
 from psf.cache import cached
-from psf.engine import METHODS, PRECISIONS, AliasingWarning, UnderSamplingWarning
+from psf.engine import METHODS, PAPER_SENSOR_UM, PRECISIONS, AliasingWarning, UnderSamplingWarning
 from psf.layouts import LayoutError
 from psf.lens import LensError
 from psf.engine import PSFError
@@ -71,6 +71,18 @@ def _float_list(text):
     if not values or any(not (v > 0 and math.isfinite(v)) for v in values):
         raise argparse.ArgumentTypeError(f"wavelengths must be positive numbers, got '{text}'")
     return values
+
+
+def _float_pair(name):
+    def parse(text):
+        try:
+            values = tuple(float(t) for t in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be two numbers W,H, got '{text}'") from None
+        if len(values) != 2 or any(not (v > 0 and math.isfinite(v)) for v in values):
+            raise argparse.ArgumentTypeError(f"{name} must be two positive numbers W,H, got '{text}'")
+        return values
+    return parse
 
 
 def _bands(text):
@@ -124,6 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="samples across the aperture [auto: ≥ 1024 and alias-free]")
     p.add_argument("--field-phases", type=_positive("--field-phases", int), default=4,
                    help="mask shifts per axis over one display period, d > 0 only [4]")
+    p.add_argument("--sensor-um", type=_float_pair("--sensor-um"), default=PAPER_SENSOR_UM,
+                   help="image width,height in µm: field phases span what it sees of a banding period "
+                        "[3174.4,1587.2, the paper's 2048×1024 × 1.55 µm]")
     p.add_argument("--precision", choices=tuple(PRECISIONS), default="float32")
     p.add_argument("--mask-raster", choices=MASK_RASTERS, default="band_limited")
     p.add_argument("--micrograph-pixel-um", type=_positive("--micrograph-pixel-um"), default=1.0,
@@ -161,7 +176,7 @@ def run_psf(args) -> int:
     lens = Lens(args.focal_length_um, args.aperture_um, args.focus_distance_mm, args.object_distance_mm)
     common = dict(pixel_um=args.pixel_um, size_px=args.size, distance_mm=args.distance_mm,
                   field_phases=args.field_phases, method=args.method, pupil_samples=args.pupil_samples,
-                  precision=args.precision, mask_raster=args.mask_raster)
+                  precision=args.precision, mask_raster=args.mask_raster, sensor_um=args.sensor_um)
     phases = args.field_phases ** 2 if args.distance_mm > 0 and display is not None else 1
     with warnings.catch_warnings(record=True) as caught, tqdm(desc="psf kernels", unit="kernel", disable=None) as bar:
         warnings.simplefilter("always", AliasingWarning)
