@@ -449,6 +449,11 @@ def _table(rows: list[dict], cols: list[tuple[str, str]]) -> list[str]:
     return out
 
 
+def _fmt(value) -> str:
+    """A knob value for labels: floats to 3 significant figures, anything else as it is."""
+    return f"{value:.3g}" if isinstance(value, float) else str(value)
+
+
 def _recommend(rows: list[dict], tol: float = TOLERANCE_L1, key: str = "error_L1") -> str:
     groups: dict = {}
     for r in rows:
@@ -458,7 +463,7 @@ def _recommend(rows: list[dict], tol: float = TOLERANCE_L1, key: str = "error_L1
         ok = [r for r in rs if r.get(key) is not None and r[key] <= tol]
         if ok:
             best = min(ok, key=lambda r: r["time_s"])
-            parts.append(f"{d}/{s}: {best['value']} ({key} {best[key]:.2g}, {best['time_s']:.2g} s)")
+            parts.append(f"{d}/{s}: {_fmt(best['value'])} ({key} {best[key]:.2g}, {best['time_s']:.2g} s)")
         else:
             parts.append(f"{d}/{s}: none within {tol:g}")
     return f"Cheapest setting with {key} ≤ {tol:g}: " + "; ".join(parts) + "."
@@ -623,7 +628,7 @@ def _plot(rows: list[dict], path: Path, cfg: Config) -> None:
             e = [max(e, floor) for _, e in pts]
             line, = ax.loglog(t, e, marker="o", ms=5, lw=1, label=label)
             for (r, _), ti, ei in zip(pts, t, e):
-                ax.annotate(str(r["value"]), (ti, ei), textcoords="offset points", xytext=(4, 3), fontsize=7,
+                ax.annotate(_fmt(r["value"]), (ti, ei), textcoords="offset points", xytext=(4, 3), fontsize=7,
                             color=line.get_color())
                 if r["is_default"]:
                     ax.scatter([ti], [ei], s=160, facecolors="none", edgecolors="red", linewidths=2, zorder=5,
