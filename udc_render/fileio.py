@@ -36,11 +36,6 @@ def save_json(path, obj) -> None:
         tmp.write_text(json.dumps(obj, indent=2, sort_keys=True, default=_jsonable) + "\n")
 
 
-def save_text(path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(text)
-
-
 def save_exr(path, channels: dict) -> None:
     """Linear float32 image channels [H, W] (named, e.g. 'psf_450nm') as one ZIP-compressed OpenEXR."""
     import OpenEXR
