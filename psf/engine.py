@@ -25,6 +25,7 @@ from .pupil import MASK_RASTERS, aperture_slices, display_grid, lens_grid, tile_
 METHODS = ("mft", "czt", "paper")
 PRECISIONS = {"float32": np.complex64, "float64": np.complex128}
 DEFAULT_PUPIL_SAMPLES = 1024
+DEFAULT_FIELD_PHASES = 4  # per axis; study: mean kernel 2.3e-4 L1, banding within 15 % of its amplitude
 ALIAS_GUARD = 1.05
 
 
@@ -84,7 +85,7 @@ def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, meth
         raise PSFError(f"pixel_um must be > 0, got {pixel_um}")
     if not (distance_mm >= 0 and math.isfinite(distance_mm)):
         raise PSFError(f"distance_mm must be ≥ 0 and finite, got {distance_mm}")
-    if not (isinstance(field_phases, (int, np.integer)) and field_phases >= 1):
+    if field_phases is not None and not (isinstance(field_phases, (int, np.integer)) and field_phases >= 1):
         raise PSFError(f"field_phases must be an integer ≥ 1, got {field_phases}")
     if method not in METHODS:
         raise PSFError(f"method must be one of {', '.join(METHODS)}, got '{method}'")
@@ -157,7 +158,7 @@ def _window(display, lens: Lens, n_pupil: int, wl: np.ndarray, d_um: float, mask
 
 def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.0, 520.0, 640.0),
                     pixel_um: float = 3.1, size_px: int = 255, distance_mm: float = 0.0,
-                    field_phases: int = 4, method: str = "mft", pupil_samples: int | None = None,
+                    field_phases: int | None = None, method: str = "mft", pupil_samples: int | None = None,
                     precision: str = "float32", pixel_integration: bool = True,
                     mask_raster: str = "band_limited", sensor_um=PAPER_SENSOR_UM, progress=None) -> KernelSet:
     """PSF kernels at the sensor for a display (None: bare lens) in front of a lens.
@@ -165,8 +166,8 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     display: a layout (psf.layouts, psf.micrograph: period_um, fourier_coefficients, cell_raster)
         or None for the bare lens.
     distance_mm: display-to-pupil gap d; 0 is the paper's principal-plane model.
-    field_phases: P mask shifts per axis (d > 0 only), over one display period or over the sensor
-        extent sensor_um (x, y) when that sees less than a period (field_shifts).
+    field_phases: P mask shifts per axis (d > 0 only; None: DEFAULT_FIELD_PHASES), over one display
+        period or over the sensor extent sensor_um (x, y) when that sees less than a period (field_shifts).
     pupil_samples: samples across the aperture (None: auto, see auto_pupil_samples).
     precision: 'float32' (complex64 FFTs and products) or 'float64'.
     mask_raster: 'band_limited' (exact Fourier series, default) or 'area' (area-weighted, then
@@ -210,9 +211,9 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     exact_power = display is not None and getattr(display, "periodic", True)
     if d_um > 0 and display is None:
         notes.append("distance_mm > 0 with a bare lens: nothing to propagate, principal-plane result")
-    if not use_field and field_phases > 1:
+    if not use_field and field_phases is not None and field_phases > 1:
         notes.append("field phases skipped: the PSF is field-independent when d = 0 or without a display")
-    phases = field_phases if use_field else 1
+    phases = (field_phases or DEFAULT_FIELD_PHASES) if use_field else 1
     shifts = field_shifts(period, d_um, z, phases, sensor_um) if use_field else np.zeros((1, 1, 2))
 
     if use_field:

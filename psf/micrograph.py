@@ -44,8 +44,8 @@ def read_transmission_image(path: str | Path) -> np.ndarray:
         if path.suffix.lower() == ".exr":
             img = _read_exr(path)
         else:
-            from skimage.io import imread
-            raw = imread(str(path))
+            from imageio import v3 as iio
+            raw = iio.imread(path, plugin="pillow" if path.suffix.lower() == ".png" else "tifffile")
             img = raw.astype(np.float64)
             if np.issubdtype(raw.dtype, np.integer):
                 img /= np.iinfo(raw.dtype).max

@@ -20,7 +20,7 @@ import numpy as np
 from psf import Lens, MicrographLayout, compute_kernels, layouts
 from psf.banding import banding_profile
 from psf.cache import cached
-from psf.engine import METHODS, PAPER_SENSOR_UM, PRECISIONS, AliasingWarning, UnderSamplingWarning
+from psf.engine import DEFAULT_FIELD_PHASES, METHODS, PAPER_SENSOR_UM, PRECISIONS, AliasingWarning, UnderSamplingWarning
 from psf.layouts import LayoutError
 from psf.lens import LensError
 from psf.engine import PSFError
@@ -134,7 +134,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=METHODS, default="mft", help="Fraunhofer transform [mft]")
     p.add_argument("--pupil-samples", type=_positive("--pupil-samples", int), default=None,
                    help="samples across the aperture [auto: ≥ 1024 and alias-free]")
-    p.add_argument("--field-phases", type=_positive("--field-phases", int), default=4,
+    p.add_argument("--field-phases", type=_positive("--field-phases", int), default=None,
                    help="mask shifts per axis over one display period, d > 0 only [4]")
     p.add_argument("--sensor-um", type=_float_pair("--sensor-um"), default=PAPER_SENSOR_UM,
                    help="image width,height in µm: field phases span what it sees of a banding period "
@@ -177,7 +177,7 @@ def run_psf(args) -> int:
     common = dict(pixel_um=args.pixel_um, size_px=args.size, distance_mm=args.distance_mm,
                   field_phases=args.field_phases, method=args.method, pupil_samples=args.pupil_samples,
                   precision=args.precision, mask_raster=args.mask_raster, sensor_um=args.sensor_um)
-    phases = args.field_phases ** 2 if args.distance_mm > 0 and display is not None else 1
+    phases = (args.field_phases or DEFAULT_FIELD_PHASES) ** 2 if args.distance_mm > 0 and display is not None else 1
     with warnings.catch_warnings(record=True) as caught, tqdm(desc="psf kernels", unit="kernel", disable=None) as bar:
         warnings.simplefilter("always", AliasingWarning)
         warnings.simplefilter("always", UnderSamplingWarning)
