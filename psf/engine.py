@@ -250,9 +250,13 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                     power = float(series(shifts[j, i]))
                 else:
                     power = kappa * float(np.sum(np.abs(m) ** 2 * aperture)) * pgrid.dx_um * pgrid.dy_um
-                g = (m * aperture).astype(cdtype)
-                if defocus is not None:
-                    g = g * defocus.astype(cdtype)
+                # With d = 0 and no defocus the pupil is the same at every wavelength: its
+                # autocorrelation is computed once and the field is not rebuilt.
+                reuse = pixel_integration and method != "paper" and not use_field and defocus is None
+                if not (reuse and cache_R is not None):
+                    g = (m * aperture).astype(cdtype)
+                    if defocus is not None:
+                        g = g * defocus.astype(cdtype)
                 if method == "paper":
                     kern, r_used = fourier.paper_kernel(g, pgrid.dx_um, pgrid.dy_um, lam, z, pixel_um, S)
                     if r_used < 1 and not warned_r:
@@ -264,13 +268,11 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                     kern = fourier.point_kernel(g, pgrid.x_um, pgrid.y_um, pgrid.dx_um, pgrid.dy_um, lam, z,
                                                 pixel_um, S, method, cdtype, deapodize and defocus is None)
                 else:
-                    reuse = not use_field and defocus is None
                     if reuse and cache_R is not None:
                         R = cache_R
                     else:
                         R = fourier.autocorrelation_half(g, pgrid.dx_um, pgrid.dy_um)
-                        if reuse:
-                            cache_R = R
+                        cache_R = R if reuse else None
                     kern = fourier.pixel_kernel(R, pgrid.dx_um, pgrid.dy_um, lam, z, pixel_um, S, method,
                                                 True, cdtype, deapodize and defocus is None)
                 window = float(kern.sum())
