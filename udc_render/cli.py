@@ -1,7 +1,8 @@
 """The `udc-render` command line.
 
     udc-render psf --display {none,toled,poled,PATH} --wavelengths-nm 450,520,640 --out DIR
-    udc-render study psf --out DIR [--quick]
+    udc-render render SCENE --out DIR [--spp N | --noise 0.01] [--bands-nm 400:700:10]
+    udc-render study {psf,render} --out DIR [--quick]
 
 User errors print one line naming the argument, value and what is allowed, and exit 2;
 no traceback.
@@ -27,7 +28,11 @@ from psf.engine import PSFError
 from psf.pupil import MASK_RASTERS
 from psf.spectral import auto_step_nm, band_kernels, channel_kernels, load_weight
 
-USER_ERRORS = (PSFError, LayoutError, LensError)
+from udc_render.display_image import DisplayImageError
+from udc_render.scene import RENDER_PATHS, SceneError
+from udc_render.spectra import SpectrumError
+
+USER_ERRORS = (PSFError, LayoutError, LensError, SceneError, SpectrumError, DisplayImageError)
 
 
 class UserError(Exception):
@@ -149,8 +154,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the kernel cache")
     p.add_argument("--out", type=Path, default=Path("out/psf"), help="output folder [out/psf]")
 
+    r = sub.add_parser("render", help="render a scene to band radiance images with Mitsuba 3")
+    r.add_argument("scene", help="a scene file (TOML) or the name of one in scenes/ (monitor, room, hdr)")
+    r.add_argument("--out", type=Path, default=Path("out/render"), help="output folder [out/render]")
+    samples = r.add_mutually_exclusive_group()
+    samples.add_argument("--spp", type=_positive("--spp", int), help="samples per pixel [the scene's render.spp]")
+    samples.add_argument("--noise", type=_positive("--noise"),
+                         help="target relative RMS noise; spp is chosen from pilot renders (e.g. 0.01)")
+    r.add_argument("--bands-nm", help="LOW:HIGH:STEP in nm [the scene's bands, default 400:700:10]")
+    r.add_argument("--seed", type=int, help="render seed [the scene's render.seed, 0]")
+    r.add_argument("--path", choices=RENDER_PATHS, help="render path [auto: rgb_matrix for the monitor alone]")
+    r.add_argument("--image", help="what the monitor shows: an image file, builtin:NAME or pattern:NAME")
+    r.add_argument("--sensor-px", type=_float_pair("--sensor-px"), help="sensor width,height in pixels")
+    r.add_argument("--pitch-um", type=_positive("--pitch-um"), help="sensor pixel pitch in µm")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+
     s = sub.add_parser("study", help="error-versus-run-time studies of the approximation knobs")
-    s.add_argument("what", choices=("psf",))
+    s.add_argument("what", choices=("psf", "render"))
     s.add_argument("--out", type=Path, default=Path("out/study"))
     s.add_argument("--quick", action="store_true", help="a reduced grid (smoke run)")
     return parser
@@ -247,16 +267,72 @@ def run_psf(args) -> int:
 
 
 def run_study(args) -> int:
+    if args.what == "render":
+        from .study_render import run_study as study_render
+        study_render(args.out, quick=args.quick)
+        print(f"wrote {args.out}/study_render.csv, study_render.md, study_render.png")
+        return 0
     from .study_psf import run_study as study
     study(args.out, quick=args.quick)
     print(f"wrote {args.out}/study_psf.csv, study_psf.md, study_psf.png")
     return 0
 
 
+def scene_from_args(args):
+    """The scene file with the command line's overrides applied."""
+    from dataclasses import replace
+    from udc_render.scene import Monitor, load_scene, parse_bands
+    scene = load_scene(args.scene)
+    if args.spp is not None:
+        scene = scene.with_render(spp=args.spp, noise=None)
+    if args.noise is not None:
+        scene = scene.with_render(spp=None, noise=args.noise)
+    if args.seed is not None:
+        if not 0 <= args.seed < 2**32:
+            raise UserError(f"--seed = {args.seed}: expected 0 <= seed < 2^32")
+        scene = scene.with_render(seed=args.seed)
+    if args.path is not None:
+        if args.path == "rgb_matrix" and not isinstance(scene.content, Monitor):
+            raise UserError(f"--path rgb_matrix: only for the monitor alone; {scene.source} has {scene.content_type} content")
+        scene = scene.with_render(path=args.path)
+    if args.bands_nm is not None:
+        scene = scene.with_bands(parse_bands(args.bands_nm))
+    if args.image is not None:
+        if not isinstance(scene.content, Monitor):
+            raise UserError(f"--image: only for monitor scenes; {scene.source} has {scene.content_type} content")
+        scene = replace(scene, content=replace(scene.content, image=args.image))
+    if args.sensor_px is not None:
+        w, h = args.sensor_px
+        if w != int(w) or h != int(h):
+            raise UserError(f"--sensor-px = {w:g},{h:g}: expected whole numbers of pixels")
+        scene = replace(scene, sensor=replace(scene.sensor, width_px=int(w), height_px=int(h)))
+    if args.pitch_um is not None:
+        scene = replace(scene, sensor=replace(scene.sensor, pitch_um=args.pitch_um))
+    return scene
+
+
+def run_render(args) -> int:
+    from udc_render.band_io import save_band_image
+    from udc_render.render import RenderError, render_scene
+    scene = scene_from_args(args)
+    try:
+        band_image = render_scene(scene, progress=not args.quiet)
+    except RenderError as e:
+        raise UserError(str(e)) from None
+    written = save_band_image(band_image, args.out)
+    m = band_image.meta
+    noise = f", relative noise {m['noise_rel']:.2e}" if m["noise_rel"] is not None else ""
+    print(f"rendered {scene.source} via {m['render_path']} ({m['variant']}): {band_image.bands.shape[0]} bands, "
+          f"{band_image.bands.shape[2]}x{band_image.bands.shape[1]} px (margin {band_image.margin_px}), "
+          f"{m['spp']} spp{noise}, {m['seconds']:.1f} s")
+    print("wrote " + ", ".join(written.values()))
+    return 0
+
+
 def main(argv=None) -> int:
     try:
         args = build_parser().parse_args(argv)
-        return run_psf(args) if args.command == "psf" else run_study(args)
+        return {"psf": run_psf, "render": run_render, "study": run_study}[args.command](args)
     except (UserError, *USER_ERRORS) as exc:
         print(f"udc-render: error: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2
