@@ -81,13 +81,26 @@ def pass_seed(seed: int, group: int, pass_index: int, pilot: bool = False) -> in
     return int(np.random.SeedSequence(key).generate_state(1)[0])
 
 
-def relative_noise(passes: np.ndarray) -> float:
-    """Relative RMS noise ‖σ‖₂ / ‖x̄‖₂ of the mean x̄ of P independent passes [P, ...], σ² the
-    variance of the mean per value (the same norm as the study's relative error)."""
+def pass_statistics(passes: np.ndarray, matrix: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
+    """Mean of P independent passes [P, C, H, W] (float32), and over all band values the sums
+    Σ σ² (variance of the mean) and Σ x̄², for the relative noise sqrt(Σσ²/Σx̄²) = ‖σ‖₂/‖x̄‖₂ (the
+    norm of the study's relative error). With `matrix` [C, K] the bands are x_k = Σ_c M_ck w_c of
+    the rendered channels w (the rgb path), and both sums follow exactly from the C × C covariance
+    and Gram matrices summed over pixels."""
     p = passes.shape[0]
-    mean = passes.astype(np.float64).mean(0)
-    var_of_mean = passes.var(0, ddof=1, dtype=np.float64) / p
-    return float(math.sqrt(var_of_mean.mean() / max((mean ** 2).mean(), 1e-300)))
+    mean = passes.mean(0, dtype=np.float64)
+    flat = mean.reshape(mean.shape[0], -1)
+    gram = flat @ flat.T
+    if p > 1:
+        dev = (passes - mean[None].astype(np.float32)).reshape(p, mean.shape[0], -1).astype(np.float64)
+        cov = np.einsum("pcn,pdn->cd", dev, dev) / (p - 1) / p
+    else:
+        cov = np.full_like(gram, np.nan)
+    if matrix is None:
+        var_sum, sq_sum = float(np.trace(cov)), float(np.trace(gram))
+    else:
+        var_sum, sq_sum = float(np.trace(matrix.T @ cov @ matrix)), float(np.trace(matrix.T @ gram @ matrix))
+    return mean.astype(np.float32), var_sum, sq_sum
 
 
 class _Job:
@@ -167,10 +180,27 @@ class _Job:
         return img[:b - a] / np.diff(self.edges[a:b + 1]).astype(np.float32)[:, None, None]
 
     def to_bands(self, values: list[np.ndarray]) -> np.ndarray:
+        """Band images [K, H, W] from each group's rendered mean."""
         if self.path == "rgb_matrix":
-            w = values[0]
-            return np.einsum("ck,chw->khw", self.matrix.astype(np.float32), w)
+            return np.einsum("ck,chw->khw", self.matrix.astype(np.float32), values[0])
         return np.concatenate(values, 0)
+
+    def render_all(self, spp: int, n_pass: int, seed: int, pilot: bool = False, bar=None) -> tuple[list, float | None]:
+        """Each group's mean over `n_pass` passes of `spp` (group by group: one Mitsuba scene
+        alive at a time) and the relative noise of the bands (None for a single pass)."""
+        means, var_sum, sq_sum = [], 0.0, 0.0
+        matrix = self.matrix if self.path == "rgb_matrix" else None
+        for g in range(len(self.groups)):
+            passes = []
+            for p in range(n_pass):
+                passes.append(self.render_group(g, spp, pass_seed(seed, g, p, pilot)))
+                if bar is not None:
+                    bar.update()
+            mean, v, q = pass_statistics(np.stack(passes), matrix)
+            means.append(mean)
+            var_sum, sq_sum = var_sum + v, sq_sum + q
+        noise = math.sqrt(var_sum / sq_sum) if n_pass > 1 and sq_sum > 0 else None
+        return means, noise
 
     def depth(self) -> np.ndarray:
         """Axial distance (m) at every pixel centre; inf where the ray leaves the scene."""
@@ -198,10 +228,9 @@ def _passes(spp: int, path: str) -> tuple[int, int]:
 
 def estimate_spp(job: _Job, target: float, seed: int) -> tuple[int, float]:
     """spp for a relative noise `target`, from two pilot passes; also the pilot's noise."""
-    pilots = []
-    for p in range(2):
-        pilots.append(job.to_bands([job.render_group(g, PILOT_SPP, pass_seed(seed, g, p, pilot=True)) for g in range(len(job.groups))]))
-    noise = relative_noise(np.stack(pilots))  # of the mean of the two pilots: 2·PILOT_SPP samples
+    _, noise = job.render_all(PILOT_SPP, 2, seed, pilot=True)  # noise of the mean: 2·PILOT_SPP samples
+    if noise is None or noise == 0:
+        return 1, 0.0
     spp = math.ceil(2 * PILOT_SPP * (noise / target) ** 2)
     if spp > MAX_SPP:
         warnings.warn(f"noise target {target} needs {spp} spp; capped at {MAX_SPP}", RuntimeWarning, stacklevel=2)
@@ -222,18 +251,10 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
     n_pass, pass_spp = _passes(spp, path)
     bar = tqdm(total=n_pass * len(job.groups), desc=f"render ({path}, {job.backend.variant('rgb' if path == 'rgb_matrix' else 'spectral')})",
                unit="pass", disable=not progress, leave=False)
-    passes = []
-    for p in range(n_pass):
-        groups = []
-        for g in range(len(job.groups)):
-            groups.append(job.render_group(g, pass_spp, pass_seed(r.seed, g, p)))
-            bar.update()
-        passes.append(job.to_bands(groups))
+    means, noise = job.render_all(pass_spp, n_pass, r.seed, bar=bar)
     bar.close()
-    stack = np.stack(passes)
-    bands = stack.mean(0)
-    noise = relative_noise(stack) if n_pass > 1 else None
-    del stack, passes
+    bands = job.to_bands(means)
+    del means
     want_depth = r.depth if r.depth is not None else not isinstance(job.scene.content, Monitor)
     depth = job.depth() if want_depth else None
     g = job.geom
