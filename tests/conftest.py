@@ -140,3 +140,61 @@ def psfkit():
                            propagated_orders=propagated_orders, series_power=series_power,
                            slit_power_quadrature=slit_power_quadrature, encircled_energy=encircled_energy,
                            j1_zeros=jn_zeros(1, 3))
+
+
+# ---------------------------------------------------------------- rendering (udc_render) helpers
+
+
+def toml_text(doc: dict) -> str:
+    """A scene document (top-level tables of numbers, strings, booleans and lists) as TOML text."""
+    def value(v):
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(value(x) for x in v) + "]"
+        return repr(v)
+    lines = []
+    for table, body in doc.items():
+        lines.append(f"[{table}]")
+        lines += [f"{k} = {value(v)}" for k, v in body.items()]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def monitor_doc(image="pattern:white", framing="fill", sensor_px=(128, 64), pitch_um=24.8,
+                resolution_px=(480, 270), render=None, bands=None, **content) -> dict:
+    """A tiny virtual-MCIS scene document: a small panel, a small coarse sensor, 4 spp, seed 1.
+    24.8 µm = 16 × the paper's 1.55 µm, so 128 × 64 px see what 2048 × 1024 px do."""
+    doc = {"sensor": {"width_px": sensor_px[0], "height_px": sensor_px[1], "pitch_um": pitch_um},
+           "render": {"spp": 4, "seed": 1, **(render or {})},
+           "content": {"type": "monitor", "image": image, "framing": framing,
+                       "resolution_px": list(resolution_px), **content}}
+    if bands:
+        doc["bands"] = bands
+    return doc
+
+
+def write_scene(path, doc: dict):
+    """Write `doc` as TOML to `path` and return the validated Scene."""
+    from pathlib import Path
+    from udc_render.scene import load_scene
+    path = Path(path)
+    path.write_text(toml_text(doc))
+    return load_scene(path)
+
+
+@pytest.fixture(scope="session")
+def udc():
+    """Scene-building helpers for the render tests (tests never import conftest)."""
+    return SimpleNamespace(toml_text=toml_text, monitor_doc=monitor_doc, write_scene=write_scene)
+
+
+@pytest.fixture(scope="module")
+def render_cache(tmp_path_factory):
+    """A fresh UDC_RENDER_CACHE (LLVM probe verdicts) for a render test module, not the user's."""
+    with pytest.MonkeyPatch.context() as mp:
+        path = tmp_path_factory.mktemp("udc_cache")
+        mp.setenv("UDC_RENDER_CACHE", str(path))
+        yield path

@@ -64,11 +64,10 @@ def read_code_values(spec: str, base: Path | None = None) -> np.ndarray:
                                     + ", ".join(f"builtin:{n}" for n in BUILTIN_IMAGES))
         a = getattr(skimage.data, name)()
     else:
-        import imageio.v3 as iio
         path = Path(spec) if base is None or Path(spec).is_absolute() else base / spec
         try:
-            a = iio.imread(path)
-        except Exception as e:  # imageio raises many kinds for unreadable files
+            a = _read_png16(path) if _is_png16(path) else _read_any(path)
+        except Exception as e:  # the readers raise many kinds for unreadable files
             raise DisplayImageError(f"content.image = {spec!r}: cannot read {path} as an image ({type(e).__name__})") from None
     a = np.asarray(a)
     if a.ndim == 2:
@@ -84,6 +83,29 @@ def read_code_values(spec: str, base: Path | None = None) -> np.ndarray:
     if not np.all(np.isfinite(a)) or a.min() < 0 or a.max() > 1:
         raise DisplayImageError(f"content.image = {spec!r}: floating-point values must be finite and in [0, 1]")
     return a
+
+
+def _is_png16(path: Path) -> bool:
+    """A 16-bit PNG (IHDR bit depth at byte 24): Pillow, imageio's PNG reader, drops colour ones to 8 bits."""
+    with open(path, "rb") as f:
+        head = f.read(25)
+    return head[:8] == b"\x89PNG\r\n\x1a\n" and len(head) == 25 and head[24] == 16
+
+
+def _read_png16(path: Path) -> np.ndarray:
+    import png  # pypng: exact 16-bit decoding
+    w, h, rows, info = png.Reader(filename=str(path)).asDirect()
+    planes = info["planes"]
+    a = np.vstack([np.asarray(r, dtype=np.uint16) for r in rows]).reshape(h, w, planes)
+    return a[..., 0] if planes == 1 else a
+
+
+def _read_any(path: Path) -> np.ndarray:
+    import warnings
+    import imageio.v3 as iio
+    with warnings.catch_warnings():  # probing a non-image wakes imageio's deprecated legacy plugins
+        warnings.simplefilter("ignore", DeprecationWarning)
+        return iio.imread(path)
 
 
 def fit_to_panel(code: np.ndarray, cols: int, rows: int) -> tuple[np.ndarray, dict]:

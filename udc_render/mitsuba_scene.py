@@ -31,7 +31,7 @@ def sensor(mi, geom: CameraGeometry, lens: Lens, film: dict, sampler: dict) -> d
          "to_world": mi.ScalarTransform4f().look_at(origin=list(geom.origin_m), target=list(geom.target_m), up=list(geom.up)),
          "film": film, "sampler": sampler}
     if lens.model == "thinlens":
-        d.update(type="thinlens", aperture_radius=lens.aperture_mm * 1e-3 / 2, focus_distance=geom.focus_distance_m)
+        d.update(type="thinlens", aperture_radius=lens.aperture_mm * 1e-3 / 2, focus_distance=min(geom.focus_distance_m, 1e9))
     return d
 
 
@@ -196,6 +196,7 @@ def room(mi, content: Room) -> dict:
 
 
 SUN_ANGULAR_DIAMETER_DEG = 0.53
+SUN_SEEN_AT_M = (0.3, 1.5, ROOM_Z[0])  # the camera sees the sun through this point of the window
 
 
 def hdr_room(mi, content: HDRRoom, camera_origin_m) -> dict:
@@ -207,7 +208,7 @@ def hdr_room(mi, content: HDRRoom, camera_origin_m) -> dict:
     for name in [k for k in d if k.startswith("chart_")]:  # the chart would cover the window
         del d[name]
     d["sky"] = {"type": "constant", "radiance": spectrum(spectra.scaled_to_luminance(spectra.illuminant("D65"), content.sky_luminance_cd_m2))}
-    sun_dir = np.subtract((0.3, 1.8, ROOM_Z[0]), camera_origin_m)
+    sun_dir = np.subtract(SUN_SEEN_AT_M, camera_origin_m)
     sun_dir /= np.linalg.norm(sun_dir)
     dist = 1000.0
     sun = spectra.scaled_to_luminance(spectra.illuminant("D55"), content.sun_luminance_cd_m2)

@@ -30,7 +30,7 @@ import numpy as np
 
 from udc_render import mitsuba_scene as ms
 from udc_render import spectra
-from udc_render.display_image import panel_drive
+from udc_render.display_image import DisplayImageError, panel_drive
 from udc_render.rig import CameraGeometry, axial_depth_m, camera_geometry
 from udc_render.scene import Monitor, MitsubaXML, Scene
 from udc_render.variants import set_variant
@@ -121,12 +121,14 @@ class _Job:
                 self.xml_scene = mi.load_file(str(xml))
             except Exception as e:  # Mitsuba raises RuntimeError with a long message
                 first = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
-                raise RenderError(f"{xml}: Mitsuba cannot load it: {first}") from None
+                raise RenderError(f"{scene.source}: content.file = {content.file!r}: Mitsuba cannot load {xml}: {first}") from None
             if content.use_xml_camera:
                 pose = ms.xml_camera_pose(mi, xml)
                 if pose is None:
                     raise RenderError(f"{scene.source}: content.use_xml_camera = true but {xml} has no sensor")
                 scene = replace(scene, camera=replace(scene.camera, origin_m=pose[0], target_m=pose[1], up=pose[2]))
+                if scene.lens.focus_distance_m is None:  # the pose has no target distance: focus at infinity
+                    scene = replace(scene, lens=replace(scene.lens, focus_distance_m=math.inf))
                 self.scene = scene
         self.geom: CameraGeometry = camera_geometry(scene)
         default_depth = 2 if isinstance(content, Monitor) else 8
@@ -134,8 +136,11 @@ class _Job:
         self.integrator = {"type": "path", "max_depth": self.max_depth}
         if isinstance(content, Monitor):
             m = content
-            self.drive, how = panel_drive(m.image, *m.resolution_px, m.transfer, _base(scene))
-            self.primaries, prim_desc = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, _base(scene))
+            try:
+                self.drive, how = panel_drive(m.image, *m.resolution_px, m.transfer, _base(scene))
+                self.primaries, prim_desc = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, _base(scene))
+            except (DisplayImageError, spectra.SpectrumError) as e:
+                raise RenderError(f"{scene.source}: {e}") from None
             self.matrix = spectra.band_means(self.primaries, self.edges)  # [3, K]
             self.meta.update(display=how, primaries=prim_desc, monitor_size_m=list(m.size_m),
                              monitor_distance_m=self.geom.focus_distance_m if scene.lens.focus_distance_m is None else None,

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from udc_render.scene import Monitor, Scene
+from udc_render.scene import Monitor, Scene, SceneError
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ def camera_geometry(scene: Scene) -> CameraGeometry:
         origin, target, up = (0.0, 0.0, dist), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0)
     else:
         if scene.camera.origin_m is None:
-            raise ValueError(f"{scene.source}: camera.origin_m is required for content.type = {scene.content_type}")
+            raise SceneError(f"{scene.source}: camera.origin_m is required for content.type = {scene.content_type}")
         origin, target, up = scene.camera.origin_m, scene.camera.target_m, scene.camera.up
         dist = float(np.linalg.norm(np.subtract(target, origin)))
     focus = lens.focus_distance_m or dist

@@ -246,8 +246,12 @@ def _content(data, source: str):
         )
     if kind == "room":
         d = Room()
+        illuminant = t.string("illuminant", d.illuminant)
+        import colour
+        if illuminant not in colour.SDS_ILLUMINANTS:
+            t.fail("illuminant", illuminant, "a colour-science illuminant such as D65, A, D50, FL2")
         return Room(light_luminance_cd_m2=t.number("light_luminance_cd_m2", d.light_luminance_cd_m2, 0, 1e10, lo_open=True),
-                    illuminant=t.string("illuminant", d.illuminant))
+                    illuminant=illuminant)
     if kind == "hdr":
         d = HDRRoom()
         return HDRRoom(**{k: t.number(k, getattr(d, k), 0, 1e12) for k in _CONTENT_KEYS["hdr"][1:]})
@@ -312,6 +316,10 @@ def parse_scene(data: dict, source: str) -> Scene:
         render = replace(render, spp=None)
     if render.path == "rgb_matrix" and not isinstance(content, Monitor):
         t.fail("path", render.path, "\"spectral\" or \"auto\" for content other than the monitor (its transport depends on wavelength)")
+    needs_pose = isinstance(content, (Room, HDRRoom)) or (isinstance(content, MitsubaXML) and not content.use_xml_camera)
+    if camera.origin_m is None and needs_pose:
+        raise SceneError(f"{source}: camera.origin_m = None: expected the camera position in metres "
+                         f"for content.type = {data['content']['type']}")
     return Scene(source=source, content=content, camera=camera, lens=lens, sensor=sensor, bands=bands, render=render)
 
 
