@@ -62,8 +62,9 @@ def tmp_module(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def white_spectral(udc, tmp_module):
-    """pattern:white filling the frame, full spectral path: 64 × 32 px, 8 spp, no margin."""
-    s = scene_of(udc, tmp_module, framing="fill", **SMALL, render={"spp": 8, "path": "spectral", "margin_um": 0})
+    """pattern:white filling the frame, full spectral path: 64 × 32 px, 8 spp, 4 bands per render, no margin."""
+    s = scene_of(udc, tmp_module, framing="fill", **SMALL,
+                 render={"spp": 8, "path": "spectral", "margin_um": 0, "bands_per_render": 4})
     return s, render_scene(s, progress=False)
 
 
@@ -71,7 +72,7 @@ def white_spectral(udc, tmp_module):
 def astronaut(udc, tmp_module):
     """builtin:astronaut (fit), 64 × 32 px, 16 spp: the rgb path (seed 1) and the spectral path (seed 2)."""
     s = scene_of(udc, tmp_module, image="builtin:astronaut", framing="fit", **SMALL,
-                 render={"spp": 16, "margin_um": 0})
+                 render={"spp": 16, "margin_um": 0, "bands_per_render": 4})
     return (s, render_scene(s.with_render(path="rgb_matrix", seed=1), progress=False),
             render_scene(s.with_render(path="spectral", seed=2), progress=False))
 

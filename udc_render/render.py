@@ -15,7 +15,7 @@ margin of ``margin_px`` on every side; the sensor frame is ``bands[:, m:-m, m:-m
 
 Samples: ``spp`` split into equal passes with seeds from SeedSequence([seed, group, pass]); the
 spread between passes measures the image's own Monte Carlo noise (relative RMS ‖σ‖₂/‖x‖₂ over
-all bands and pixels), recorded as ``noise_rel``. With a
+all bands and pixels, x the noise-free image), recorded as ``noise_rel``. With a
 noise target, two pilot passes at ``PILOT_SPP`` estimate the noise and spp = ⌈pilot·(σ/target)²⌉.
 """
 from __future__ import annotations
@@ -83,8 +83,8 @@ def pass_seed(seed: int, group: int, pass_index: int, pilot: bool = False) -> in
 
 def pass_statistics(passes: np.ndarray, matrix: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
     """Mean of P independent passes [P, C, H, W] (float32), and over all band values the sums
-    Σ σ² (variance of the mean) and Σ x̄², for the relative noise sqrt(Σσ²/Σx̄²) = ‖σ‖₂/‖x̄‖₂ (the
-    norm of the study's relative error). With `matrix` [C, K] the bands are x_k = Σ_c M_ck w_c of
+    Σ σ² (variance of the mean) and Σ x̄², for the relative noise ‖σ‖₂/‖x‖₂ = sqrt(Σσ²/(Σx̄² − Σσ²))
+    (x the noise-free image; the norm of the study's relative error). With `matrix` [C, K] the bands are x_k = Σ_c M_ck w_c of
     the rendered channels w (the rgb path), and both sums follow exactly from the C × C covariance
     and Gram matrices summed over pixels."""
     p = passes.shape[0]
@@ -204,7 +204,9 @@ class _Job:
             mean, v, q = pass_statistics(np.stack(passes), matrix)
             means.append(mean)
             var_sum, sq_sum = var_sum + v, sq_sum + q
-        noise = math.sqrt(var_sum / sq_sum) if n_pass > 1 and sq_sum > 0 else None
+        # E[x̄²] = x² + σ²: relative to the noise-free image, Σx² ≈ Σx̄² − Σσ²
+        noise = math.sqrt(var_sum / (sq_sum - var_sum)) if n_pass > 1 and sq_sum > var_sum else (
+            math.inf if n_pass > 1 and var_sum > 0 else None)
         return means, noise
 
     def depth(self) -> np.ndarray:
