@@ -272,7 +272,7 @@ def test_hdr_sky_and_sun_have_their_luminance(spp):
     4.5 standard errors of the pixel mean. The sun (0.53°, 1.6e9 cd/m², inside the frame) is
     sub-pixel: Σ Y over its pixels = Y_sun × its projected area in px² = Ω v²/(cos³θ pitch²);
     the hit count is binomial, σ_rel ≤ 1/√(spp · area) (12.5 % at 256 spp, 2.2 % at 8192)."""
-    from udc_render.mitsuba_scene import SUN_ANGULAR_DIAMETER_DEG, SUN_SEEN_AT_M
+    from udc_render.mitsuba_scene import SUN_ANGULAR_DIAMETER_DEG, SUN_SEEN_AT_M, WINDOW_M
     from udc_render.scene import load_scene, Sensor, Bands
     s = load_scene("hdr")
     s = replace(s, sensor=Sensor(32, 16, 99.2), bands=Bands((400.0, 700.0), 50.0))
@@ -281,8 +281,9 @@ def test_hdr_sky_and_sun_have_their_luminance(spp):
     g = rig.camera_geometry(s)
     o = np.asarray(g.origin_m)
     yweights = spectra.band_xyz(b.edges_nm)[1]
-    # the sky through the window (x ∈ [−0.5, 0.5], y ∈ [1.2, 2.0] in the back wall z = −2), 1 px in
-    (x0, y0), (x1, y1) = rig.projection_px(g, np.array([[-0.5, 2.0, -2.0], [0.5, 1.2, -2.0]]))
+    # the sky through the window (WINDOW_M in the back wall z = −2), 1 px in
+    wx0, wx1, wy0, wy1 = WINDOW_M
+    (x0, y0), (x1, y1) = rig.projection_px(g, np.array([[wx0, wy1, -2.0], [wx1, wy0, -2.0]]))
     yy, xx = np.mgrid[0:g.height_px, 0:g.width_px] + 0.5
     d = np.subtract(SUN_SEEN_AT_M, o)
     d /= np.linalg.norm(d)
@@ -375,7 +376,7 @@ def test_monitor_depth_is_the_axial_distance_where_the_centre_ray_hits(udc, tmp_
 
 def test_room_depth_is_finite_and_hits_the_back_wall_on_the_axis(tmp_path):
     # the room at 32 × 16 px of 99.2 µm (64 × 1.55 µm: the paper's field of view), 1 spp, 3 bands
-    doc = {"content": {"type": "room"}, "camera": {"origin_m": [0.0, 1.1, 3.4], "target_m": [0.0, 0.75, -2.0]},
+    doc = {"content": {"type": "room"}, "camera": {"origin_m": [0.0, 1.1, 3.4], "target_m": [0.0, 0.2, -2.0]},
            "sensor": {"width_px": 32, "height_px": 16, "pitch_um": 99.2}, "bands": {"step_nm": 100},
            "render": {"spp": 1, "max_depth": 2, "margin_um": 0}}
     s = parse_scene(doc, str(tmp_path / "room.toml"))
@@ -398,7 +399,7 @@ def test_room_depth_is_finite_and_hits_the_back_wall_on_the_axis(tmp_path):
             ray = fwd * g.image_distance_um + right * x_um + up * y_um
             t = (-2.0 - g.origin_m[2]) / ray[2]
             p = np.asarray(g.origin_m) + t * ray
-            assert -0.5 < p[1] < 0.95  # below the chart, above the floor objects' line of sight
+            assert 0.0 < p[1] < 0.43  # above the floor, below the chart (its lowest row starts at 0.43 m)
             assert d[j, i] == pytest.approx(rig.axial_depth_m(g, p), rel=1e-5)
 
 

@@ -30,7 +30,7 @@ def test_shipped_scenes_load_with_their_documented_values():
 
     room = load_scene(SCENES_DIR / "room.toml")
     assert isinstance(room.content, Room) and room.content.illuminant == "D65"
-    assert room.camera.origin_m == (0.0, 1.1, 3.4) and room.camera.target_m == (0.0, 0.75, -2.0)
+    assert room.camera.origin_m == (0.0, 1.1, 3.4) and room.camera.target_m == (0.0, 0.2, -2.0)
     hdr = load_scene("hdr")
     assert isinstance(hdr.content, HDRRoom) and hdr.content.sun_luminance_cd_m2 == 1.6e9
     assert hdr.render.max_depth == 6 and hdr.render.bands_per_render == 30

@@ -175,14 +175,14 @@ def _objects(mi) -> dict:
         "sphere_blue": _sphere((0.15, 0.22, -0.2), 0.22, _diffuse(cc("blue"))),
         "sphere_yellow": _sphere((0.55, 0.15, 0.35), 0.15, _diffuse(cc("yellow"))),
         "box_green": _box(mi, (0.95, 0.35, -0.9), (0.5, 0.7, 0.5), 25, cc("green")),
-        "box_magenta": _box(mi, (-0.2, 0.2, -1.3), (0.6, 0.4, 0.4), -15, cc("magenta")),
+        "box_magenta": _box(mi, (-0.45, 0.2, -1.3), (0.6, 0.4, 0.4), -15, cc("magenta")),
         "box_cyan": _box(mi, (-1.3, 0.6, -1.5), (0.4, 1.2, 0.4), 10, cc("cyan")),
     }
     patch, gap = 0.12, 0.02
     for i, name in enumerate(names):
         r, c = divmod(i, 6)
         x = (c - 2.5) * (patch + gap)
-        y = 1.25 - (r - 1.5) * (patch + gap)
+        y = 0.70 - (r - 1.5) * (patch + gap)
         obj[f"chart_{i:02d}"] = _rect(mi, (x, y, ROOM_Z[0] + 0.005), (patch, patch), None, _diffuse(cc(name)))
     return obj
 
@@ -196,6 +196,7 @@ def room(mi, content: Room) -> dict:
 
 
 SUN_ANGULAR_DIAMETER_DEG = 0.53
+WINDOW_M = (-0.5, 0.5, 1.15, 1.65)  # x0, x1, y0, y1 of the opening in the back wall
 SUN_SEEN_AT_M = (0.3, 1.5, ROOM_Z[0])  # the camera sees the sun through this point of the window
 
 
@@ -203,8 +204,7 @@ def hdr_room(mi, content: HDRRoom, camera_origin_m) -> dict:
     """The room, dim, with a window (sky: a constant environment seen only through it; the sun: a
     sphere of 0.53° seen through the window from the camera) and two small lamps (2 cm spheres,
     illuminant A)."""
-    window = (-0.5, 0.5, 1.2, 2.0)
-    d = {"type": "scene", **_shell(mi, window), **_objects(mi)}
+    d = {"type": "scene", **_shell(mi, WINDOW_M), **_objects(mi)}
     for name in [k for k in d if k.startswith("chart_")]:  # the chart would cover the window
         del d[name]
     d["sky"] = {"type": "constant", "radiance": spectrum(spectra.scaled_to_luminance(spectra.illuminant("D65"), content.sky_luminance_cd_m2))}
@@ -215,7 +215,7 @@ def hdr_room(mi, content: HDRRoom, camera_origin_m) -> dict:
     d["sun"] = _sphere(np.asarray(camera_origin_m) + dist * sun_dir, dist * math.tan(math.radians(SUN_ANGULAR_DIAMETER_DEG / 2)),
                        emitter={"type": "area", "radiance": spectrum(sun)})
     lamp = spectrum(spectra.scaled_to_luminance(spectra.illuminant("A"), content.lamp_luminance_cd_m2))
-    d["lamp_left"] = _sphere((-1.3, 1.25, -1.5), 0.02, emitter={"type": "area", "radiance": lamp})
+    d["lamp_left"] = _sphere((-1.0, 1.25, -1.5), 0.02, emitter={"type": "area", "radiance": lamp})
     d["lamp_right"] = _sphere((1.0, 0.75, -0.9), 0.02, emitter={"type": "area", "radiance": lamp})
     if content.room_light_luminance_cd_m2 > 0:
         d["ceiling_light"] = _rect(mi, (0.0, ROOM_Y[1] - 0.01, 0.5), (1.2, 1.2), [([1, 0, 0], 90)],
