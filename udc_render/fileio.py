@@ -38,6 +38,23 @@ def save_npz(path, **arrays) -> None:
         np.savez_compressed(tmp, **arrays)
 
 
+def save_text(path, text: str) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+
+
+def csv_text(rows: list[dict], columns: list[str]) -> str:
+    """Rows as CSV with the given columns (None and missing as empty cells)."""
+    import csv
+    import io
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: ("" if r.get(k) is None else r.get(k, "")) for k in columns})
+    return buf.getvalue()
+
+
 def save_json(path, obj) -> None:
     with atomic_path(path) as tmp:
         tmp.write_text(json.dumps(obj, indent=2, sort_keys=True, default=_jsonable) + "\n")

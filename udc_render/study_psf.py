@@ -21,13 +21,10 @@ place. --quick runs a reduced grid (small kernels and pupils, one repeat) as a s
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import math
 import os
 import platform
 import statistics
-import tempfile
 import time
 import warnings
 from dataclasses import dataclass
@@ -39,6 +36,7 @@ import numpy as np
 from psf import Lens, compute_kernels, layouts
 from psf.engine import auto_pupil_samples
 from psf.spectral import auto_step_nm, band_kernels
+from udc_render.fileio import atomic_path, csv_text, save_text
 
 PIXEL_UM = 3.1
 SIZE_PX = 255
@@ -319,8 +317,8 @@ def run_study(out_dir: Path, quick: bool = False, progress: bool = True) -> list
             "load_end": os.getloadavg() if hasattr(os, "getloadavg") else None,
             "auto_n": auto_pupil_samples(lens, min(WAVELENGTHS_NM), PIXEL_UM, cfg.size_px),
             "banding_ref": _banding_amplitude(refs[("field", "toled")])}
-    _write_text(out_dir / "study_psf.csv", _csv(rows))
-    _write_text(out_dir / "study_psf.md", _markdown(rows, meta))
+    save_text(out_dir / "study_psf.csv", csv_text(rows, COLUMNS))
+    save_text(out_dir / "study_psf.md", _markdown(rows, meta))
     _plot(rows, out_dir / "study_psf.png", cfg)
     return rows
 
@@ -392,34 +390,6 @@ def _compare_size(get_ref):
 
 # ----------------------------------------------------------------------------------------------
 # Output
-
-
-def _umask_mode() -> int:
-    """0o666 less the process umask: what open() would give (mkstemp's files are 0o600)."""
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def _write_text(path: Path, text: str) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as f:
-            f.write(text)
-        os.chmod(tmp, _umask_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def _csv(rows: list[dict]) -> str:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: ("" if r.get(k) is None else r.get(k, "")) for k in COLUMNS})
-    return buf.getvalue()
 
 
 def _g(v, digits=3) -> str:
@@ -648,15 +618,9 @@ def _plot(rows: list[dict], path: Path, cfg: Config) -> None:
     fig.suptitle(("QUICK grid — " if cfg.quick else "") + "PSF knobs: error vs run time (dotted: L1 = 1e-3; "
                  "red ring: engine default)", fontsize=12)
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".png", dir=path.parent)
-    os.close(fd)
     try:
-        fig.savefig(tmp, dpi=110, format="png")
-        os.chmod(tmp, _umask_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        with atomic_path(path, ".png") as tmp:
+            fig.savefig(tmp, dpi=110, format="png")
     finally:
         plt.close(fig)
 

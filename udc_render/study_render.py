@@ -39,8 +39,6 @@ with spp) and study_render.json (the rows, fits and recommendations). Every file
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import math
 import os
 import platform
@@ -52,7 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from udc_render import spectra
-from udc_render.fileio import atomic_path, save_figure, save_json
+from udc_render.fileio import csv_text, save_figure, save_json, save_text
 from udc_render.render import render_scene
 from udc_render.scene import SCENES_DIR, Scene, Sensor, load_scene
 
@@ -272,12 +270,10 @@ def run_study(out_dir, quick: bool = False, progress: bool = True) -> list[dict]
             "variant_rgb": next((r["variant"] for r in rows if r["path"] == "rgb_matrix"), None),
             "variant_spectral": next((r["variant"] for r in rows if r["path"] == "spectral"), None),
             "grid": {name: _grid_px(s) for name, s in scenes.items()}}
-    _write_text(out_dir / "study_render.csv", _csv(rows))
-    _write_text(out_dir / "study_render.md", markdown(rows, analysis, meta, cfg))
+    save_text(out_dir / "study_render.csv", csv_text(rows, COLUMNS))
+    save_text(out_dir / "study_render.md", markdown(rows, analysis, meta, cfg))
     save_json(out_dir / "study_render.json", {"meta": meta, "analysis": analysis, "rows": rows})
     plot(rows, analysis, out_dir / "study_render.png", cfg)
-    for name in ("study_render.json", "study_render.png"):  # fileio's temporary files are 0600
-        os.chmod(out_dir / name, _umask_mode())
     return rows
 
 
@@ -486,27 +482,6 @@ def analyse(rows: list[dict], cfg: Config, scenes: dict[str, Scene]) -> dict:
 
 # ----------------------------------------------------------------------------------------------
 # Output
-
-
-def _umask_mode() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
-def _write_text(path: Path, text: str) -> None:
-    with atomic_path(path) as tmp:
-        tmp.write_text(text, encoding="utf-8")
-        os.chmod(tmp, _umask_mode())
-
-
-def _csv(rows: list[dict]) -> str:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=COLUMNS, extrasaction="ignore", lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow({k: ("" if r.get(k) is None else r.get(k, "")) for k in COLUMNS})
-    return buf.getvalue()
 
 
 def _g(v, digits=3) -> str:
