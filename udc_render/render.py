@@ -37,7 +37,7 @@ from udc_render.variants import set_variant
 
 PILOT_SPP = 4
 MAX_SPP = 1 << 14
-PASS_SPP = {"rgb_matrix": 64, "spectral": 32}  # largest pass; progress ticks once per pass
+PASS_SPP = {"rgb_matrix": 64, "spectral": 8}  # largest pass; progress ticks once per pass (a 3D pass is ~1 min at full size)
 
 
 class RenderError(ValueError):
