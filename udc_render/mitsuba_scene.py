@@ -5,8 +5,6 @@ Only this module and `render` import mitsuba; they are called after `variants.se
 from __future__ import annotations
 
 import math
-from pathlib import Path
-
 import numpy as np
 
 from udc_render import spectra
@@ -223,11 +221,10 @@ def hdr_room(mi, content: HDRRoom, camera_origin_m) -> dict:
     return d
 
 
-def xml_camera_pose(mi, path: Path) -> tuple:
-    """(origin, target, up) of the first sensor of a Mitsuba XML scene."""
-    sc = mi.load_file(str(path))
-    if not sc.sensors():
+def camera_pose(scene) -> tuple | None:
+    """(origin, target at unit distance, up) of the first sensor of a loaded Mitsuba scene, or None."""
+    if not scene.sensors():
         return None
-    m = np.array(sc.sensors()[0].world_transform().matrix, dtype=float).reshape(4, 4)
+    m = np.array(scene.sensors()[0].world_transform().matrix, dtype=float).reshape(4, 4)
     origin = m[:3, 3]
     return tuple(origin), tuple(origin + m[:3, 2]), tuple(m[:3, 1])

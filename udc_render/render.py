@@ -123,7 +123,7 @@ class _Job:
                 first = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
                 raise RenderError(f"{scene.source}: content.file = {content.file!r}: Mitsuba cannot load {xml}: {first}") from None
             if content.use_xml_camera:
-                pose = ms.xml_camera_pose(mi, xml)
+                pose = ms.camera_pose(self.xml_scene)
                 if pose is None:
                     raise RenderError(f"{scene.source}: content.use_xml_camera = true but {xml} has no sensor")
                 scene = replace(scene, camera=replace(scene.camera, origin_m=pose[0], target_m=pose[1], up=pose[2]))
