@@ -222,10 +222,19 @@ def test_monitor_white_has_the_peak_luminance():
     wl, ybar = _colour_ybar()
     white = np.interp(wl, spectra.GRID_NM, prim.sum(0))
     assert 683.0 * np.trapezoid(white * ybar, wl) == pytest.approx(300.0, rel=1e-6)
-    # the primaries keep their ratios (scaled copies of colour-science's spectra)
+    # each primary is a scaled copy of colour-science's spectrum, and white has D65's chromaticity
     raw, _ = spectra.load_primaries("Apple Studio Display")
-    ratio = prim[raw > 0] / raw[raw > 0]
+    for c in range(3):
+        ratio = prim[c][raw[c] > 0] / raw[c][raw[c] > 0]
+        np.testing.assert_allclose(ratio, ratio[0], rtol=1e-12)
+    X, Y, Z = spectra.cmfs() @ prim.sum(0)
+    np.testing.assert_allclose([X / (X + Y + Z), Y / (X + Y + Z)], [0.3127, 0.3290], atol=1e-12)
+    # "native" keeps the measured ratios between the primaries (white then greenish: y = 0.357)
+    native, _ = spectra.monitor_primaries("Apple Studio Display", 300.0, white_point="native")
+    ratio = native[raw > 0] / raw[raw > 0]
     np.testing.assert_allclose(ratio, ratio[0], rtol=1e-12)
+    with pytest.raises(spectra.SpectrumError, match="content.white_point = 'D99'"):
+        spectra.monitor_primaries("Apple Studio Display", 300.0, white_point="D99")
 
 
 def test_band_means_of_a_linear_spectrum_is_its_value_at_the_band_centre():

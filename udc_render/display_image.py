@@ -9,12 +9,24 @@ the panel's own primaries, as a monitor without colour management does.
 """
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
+from udc_render import charts
+
 BUILTIN_IMAGES = ("astronaut", "coffee", "chelsea", "rocket", "camera", "immunohistochemistry")
 PATTERNS = ("checker", "white", "grid", "orientation")
+CHARTS = {  # name: (function(cols, rows, arg), argument type, default argument)
+    "slanted_edge": (charts.slanted_edge, float, 5.0),
+    "sine_x": (lambda c, r, n: charts.sine(c, r, n, "x"), float, 64.0),
+    "sine_y": (lambda c, r, n: charts.sine(c, r, n, "y"), float, 64.0),
+    "siemens": (charts.siemens, int, 72),
+    "dead_leaves": (charts.dead_leaves, int, 0),
+}
+PATTERN_ARGS = {"slanted_edge": "ANGLE_DEG (0 to 45)", "sine_x": "CYCLES", "sine_y": "CYCLES",
+                "siemens": "SPOKES", "dead_leaves": "SEED"}
 
 
 class DisplayImageError(ValueError):
@@ -31,25 +43,39 @@ def decode(code: np.ndarray, transfer: str) -> np.ndarray:
 
 
 def pattern(name: str, cols: int, rows: int) -> np.ndarray:
-    """Test patterns in linear drive levels [3, rows, cols]:
+    """Test patterns in linear drive levels [3, rows, cols]; `name` is NAME or NAME:ARG:
     checker (8 × 8 squares per panel height), white, grid (1-px white lines every 1/8 of the height),
-    orientation (black panel, red square top-left, green top-right, blue bottom-left, 1/8 height)."""
+    orientation (black panel, red square top-left, green top-right, blue bottom-left, 1/8 height),
+    and the grey charts of `udc_render.charts`: slanted_edge[:ANGLE_DEG], sine_x[:CYCLES],
+    sine_y[:CYCLES], siemens[:SPOKES], dead_leaves[:SEED]."""
+    kind, _, arg = name.partition(":")
+    if kind in CHARTS:
+        chart, cast, default = CHARTS[kind]
+        try:
+            value = cast(arg) if arg else default
+        except ValueError:
+            value = None
+        if (value is None or not math.isfinite(value) or value < 0 or (kind == "slanted_edge" and value >= 45)
+                or (kind == "siemens" and value < 1)):
+            raise DisplayImageError(f"content.image = 'pattern:{name}': expected pattern:{kind}:{PATTERN_ARGS[kind]}")
+        return np.broadcast_to(chart(cols, rows, value)[None], (3, rows, cols)).copy()
+    if arg or kind not in PATTERNS:
+        raise DisplayImageError(f"content.image = 'pattern:{name}': expected one of "
+                                + ", ".join(f"pattern:{p}" for p in PATTERNS)
+                                + ", " + ", ".join(f"pattern:{k}[:{v}]" for k, v in PATTERN_ARGS.items()))
     y, x = np.mgrid[0:rows, 0:cols]
     s = max(rows // 8, 1)
     img = np.zeros((3, rows, cols))
-    if name == "white":
+    if kind == "white":
         img[:] = 1.0
-    elif name == "checker":
+    elif kind == "checker":
         img[:] = ((y // s + x // s) % 2)[None]
-    elif name == "grid":
+    elif kind == "grid":
         img[:] = ((y % s == 0) | (x % s == 0))[None]
-    elif name == "orientation":
+    else:  # orientation
         img[0, :s, :s] = 1.0
         img[1, :s, -s:] = 1.0
         img[2, -s:, :s] = 1.0
-    else:
-        raise DisplayImageError(f"content.image = 'pattern:{name}': expected one of "
-                                + ", ".join(f"pattern:{p}" for p in PATTERNS))
     return img
 
 

@@ -138,7 +138,8 @@ class _Job:
             m = content
             try:
                 self.drive, how = panel_drive(m.image, *m.resolution_px, m.transfer, _base(scene))
-                self.primaries, prim_desc = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, _base(scene))
+                self.primaries, prim_desc = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, _base(scene),
+                                                                       m.white_point)
             except (DisplayImageError, spectra.SpectrumError) as e:
                 raise RenderError(f"{scene.source}: {e}") from None
             self.matrix = spectra.band_means(self.primaries, self.edges)  # [3, K]

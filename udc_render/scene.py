@@ -95,6 +95,7 @@ class Monitor:
     resolution_px: tuple[int, int] = (3840, 2160)
     peak_luminance_cd_m2: float = 300.0
     primaries: str = "Apple Studio Display"
+    white_point: str = "D65"  # the panel's calibrated white; "native": the measured primaries' ratios
     transfer: str = "srgb"
     framing: str = "fit"  # fit: whole monitor in frame (the paper); fill: monitor fills the frame
 
@@ -218,7 +219,8 @@ class _Table:
 
 
 _CONTENT_KEYS = {
-    "monitor": ("type", "image", "diagonal_in", "resolution_px", "peak_luminance_cd_m2", "primaries", "transfer", "framing"),
+    "monitor": ("type", "image", "diagonal_in", "resolution_px", "peak_luminance_cd_m2", "primaries", "white_point", "transfer",
+                "framing"),
     "room": ("type", "light_luminance_cd_m2", "illuminant"),
     "hdr": ("type", "sun_luminance_cd_m2", "sky_luminance_cd_m2", "lamp_luminance_cd_m2", "room_light_luminance_cd_m2"),
     "mitsuba_xml": ("type", "file", "use_xml_camera"),
@@ -241,6 +243,7 @@ def _content(data, source: str):
             resolution_px=(int(res[0]), int(res[1])),
             peak_luminance_cd_m2=t.number("peak_luminance_cd_m2", d.peak_luminance_cd_m2, 0, 1e7, lo_open=True),
             primaries=t.string("primaries", d.primaries),
+            white_point=t.string("white_point", d.white_point),
             transfer=t.string("transfer", d.transfer, TRANSFERS),
             framing=t.string("framing", d.framing, FRAMINGS),
         )

@@ -99,12 +99,27 @@ def _header_lines(path: Path) -> int:
         return 1
 
 
-def monitor_primaries(spec: str, peak_luminance_cd_m2: float, base: Path | None = None) -> tuple[np.ndarray, str]:
-    """Primary radiance spectra [3, G] in W·sr⁻¹·m⁻²·nm⁻¹ at full drive, scaled so that white
-    (all three at full drive) has `peak_luminance_cd_m2`; the primaries keep their ratios."""
+def monitor_primaries(spec: str, peak_luminance_cd_m2: float, base: Path | None = None,
+                      white_point: str = "D65") -> tuple[np.ndarray, str]:
+    """Primary radiance spectra [3, G] in W·sr⁻¹·m⁻²·nm⁻¹ at full drive, scaled so that white (all
+    three at full drive) has `peak_luminance_cd_m2` and, like a calibrated monitor, the chromaticity
+    of `white_point` (a colour-science illuminant, default D65, the sRGB white): the gains a solve
+    Σ_c a_c XYZ_c = XYZ_white. `white_point = "native"` keeps the measured primaries' ratios."""
+    import colour
     prim, desc = load_primaries(spec, base)
-    white = float(luminance_cd_m2(prim.sum(0)))
-    return prim * (peak_luminance_cd_m2 / white), desc
+    if white_point == "native":
+        return prim * (peak_luminance_cd_m2 / float(luminance_cd_m2(prim.sum(0)))), desc
+    ccs = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]
+    if white_point not in ccs:
+        raise SpectrumError(f"content.white_point = {white_point!r}: expected native or a colour-science "
+                            "illuminant such as D65, D50")
+    x, y = ccs[white_point]
+    target = peak_luminance_cd_m2 * np.array([x / y, 1.0, (1 - x - y) / y])
+    xyz = KM_LM_PER_W * cmfs() @ prim.T  # [3 (XYZ), 3 (primaries)]
+    gains = np.linalg.solve(xyz, target)
+    if not np.all(gains > 0):
+        raise SpectrumError(f"content.white_point = {white_point!r}: outside the gamut of the primaries ({desc})")
+    return prim * gains[:, None], f"{desc}, white balanced to {white_point}"
 
 
 def band_means(spectra: np.ndarray, edges_nm) -> np.ndarray:

@@ -1,0 +1,77 @@
+"""Procedural test charts for the virtual monitor, in linear drive levels [rows, cols] within [0, 1].
+
+Each panel pixel shows one value (the monitor is a pixel grid), computed at the pixel centre
+(x, y) = (col + 0.5, row + 0.5), origin at the panel's top-left corner, y down.
+
+- slanted_edge: ISO 12233 style, a near-vertical edge through the centre tilted by `angle_deg`
+  (default 5°), levels 0.2 | 0.8 (4:1 contrast); the edge pixels take the clipped signed distance
+  clip(0.5 + d, 0, 1) as coverage (exact for |d| ≤ (1 − tan θ)/2, within tan θ / 8 otherwise).
+- sine_x / sine_y: 0.5 + 0.5 sin(2π n x / cols) (or y / rows), n whole cycles across the panel.
+- siemens: sinusoidal Siemens star, 0.5 + 0.5 sin(n φ) with n spokes, radius 0.45 × rows; 0.5 outside.
+- dead_leaves: occluding discs (Lee, Mumford & Huang 2001; Cao et al. 2010) with radii drawn from
+  p(r) ∝ r⁻³ on [r_min, r_max] and uniform grey levels, painted front to back until every pixel is
+  covered; scale-invariant texture for texture-MTF studies. Seeded.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+DEAD_LEAVES_R_MIN_PX = 4.0
+DEAD_LEAVES_R_MAX_FRACTION = 0.25  # of the panel height
+
+
+def _centres(cols: int, rows: int):
+    return np.arange(cols) + 0.5, np.arange(rows) + 0.5
+
+
+def slanted_edge(cols: int, rows: int, angle_deg: float = 5.0, low: float = 0.2, high: float = 0.8) -> np.ndarray:
+    """Dark left, bright right; the edge x = cx + (y − cy) tan θ (θ clockwise from vertical)."""
+    x, y = _centres(cols, rows)
+    t = math.tan(math.radians(angle_deg))
+    d = (x[None, :] - cols / 2 - (y[:, None] - rows / 2) * t) / math.sqrt(1 + t * t)  # px, + on the bright side
+    return low + (high - low) * np.clip(0.5 + d, 0.0, 1.0)
+
+
+def sine(cols: int, rows: int, cycles: float, axis: str = "x") -> np.ndarray:
+    x, y = _centres(cols, rows)
+    if axis == "x":
+        return np.broadcast_to(0.5 + 0.5 * np.sin(2 * np.pi * cycles * x / cols), (rows, cols)).copy()
+    return np.broadcast_to((0.5 + 0.5 * np.sin(2 * np.pi * cycles * y / rows))[:, None], (rows, cols)).copy()
+
+
+def siemens(cols: int, rows: int, spokes: int = 72) -> np.ndarray:
+    x, y = _centres(cols, rows)
+    dx, dy = x[None, :] - cols / 2, y[:, None] - rows / 2
+    star = 0.5 + 0.5 * np.sin(spokes * np.arctan2(dy, dx))
+    return np.where(np.hypot(dx, dy) <= 0.45 * rows, star, 0.5)
+
+
+def dead_leaves(cols: int, rows: int, seed: int = 0, r_min_px: float = DEAD_LEAVES_R_MIN_PX,
+                r_max_px: float | None = None) -> np.ndarray:
+    """Front-to-back occluding discs: each new disc fills only the pixels not yet covered."""
+    rng = np.random.default_rng(seed)
+    r_max = r_max_px or DEAD_LEAVES_R_MAX_FRACTION * rows
+    img = np.zeros((rows, cols))
+    covered = np.zeros((rows, cols), bool)
+    left = rows * cols
+    batch = 4096
+    while left:
+        u = rng.random(batch)  # inverse CDF of p(r) ∝ r⁻³: r⁻² uniform between r_max⁻² and r_min⁻²
+        radii = (r_min_px ** -2 + u * (r_max ** -2 - r_min_px ** -2)) ** -0.5
+        cx, cy, value = rng.random(batch) * cols, rng.random(batch) * rows, rng.random(batch)
+        for r, x0, y0, v in zip(radii, cx, cy, value):
+            r0, r1 = max(int(y0 - r), 0), min(int(y0 + r) + 1, rows)
+            c0, c1 = max(int(x0 - r), 0), min(int(x0 + r) + 1, cols)
+            yy = np.arange(r0, r1)[:, None] + 0.5 - y0
+            xx = np.arange(c0, c1)[None, :] + 0.5 - x0
+            new = (xx * xx + yy * yy <= r * r) & ~covered[r0:r1, c0:c1]
+            n = int(new.sum())
+            if n:
+                img[r0:r1, c0:c1][new] = v
+                covered[r0:r1, c0:c1] |= new
+                left -= n
+                if not left:
+                    break
+    return img
