@@ -1,7 +1,6 @@
 """Error-versus-run-time study of every approximation knob of the PSF engine.
 
     udc-render study psf --out DIR [--quick]
-    python -m udc_render.study_psf --out DIR [--quick]
 
 Each knob is varied with everything else at the paper's rig defaults (Lens(): f = 6 mm, f/1.8;
 3.1 µm pixels; 255² kernels; T-OLED display, and P-OLED for the pupil knob). For every setting
@@ -20,7 +19,6 @@ place. --quick runs a reduced grid (small kernels and pupils, one repeat) as a s
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import platform
@@ -623,19 +621,3 @@ def _plot(rows: list[dict], path: Path, cfg: Config) -> None:
             fig.savefig(tmp, dpi=110, format="png")
     finally:
         plt.close(fig)
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m udc_render.study_psf",
-                                 description="Error-versus-run-time study of the PSF engine's knobs.")
-    ap.add_argument("--out", type=Path, required=True, help="output folder (created if missing)")
-    ap.add_argument("--quick", action="store_true", help="reduced grid, well under a minute (smoke test)")
-    ap.add_argument("--no-progress", action="store_true", help="no progress bar")
-    args = ap.parse_args(argv)
-    rows = run_study(args.out, quick=args.quick, progress=not args.no_progress)
-    print(f"{len(rows)} rows; wrote {args.out}/study_psf.csv, study_psf.md, study_psf.png")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())

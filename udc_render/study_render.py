@@ -1,7 +1,6 @@
 """Error-versus-run-time study of the renderer's knobs: samples per pixel, render path, bands per render.
 
     udc-render study render --out DIR [--quick]
-    python -m udc_render.study_render --out DIR [--quick]
 
 Two scenes at reduced resolution, same framing as the full 2048 × 1024 × 1.55 µm sensor (the
 sensor's physical size is kept: fewer, larger pixels):
@@ -38,7 +37,6 @@ with spp) and study_render.json (the rows, fits and recommendations). Every file
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import platform
@@ -730,20 +728,3 @@ def plot(rows: list[dict], an: dict, path: Path, cfg: Config) -> None:
     fig.tight_layout()
     save_figure(fig, path)
     plt.close(fig)
-
-
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m udc_render.study_render",
-                                 description="Error-versus-run-time study of the renderer "
-                                             "(spp, path, bands per render).")
-    ap.add_argument("--out", type=Path, required=True, help="output folder (created if missing)")
-    ap.add_argument("--quick", action="store_true", help="tiny grid, well under a minute (smoke test)")
-    ap.add_argument("--no-progress", action="store_true", help="no progress bar")
-    args = ap.parse_args(argv)
-    rows = run_study(args.out, quick=args.quick, progress=not args.no_progress)
-    print(f"{len(rows)} rows; wrote {args.out}/study_render.csv, study_render.md, study_render.png")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
