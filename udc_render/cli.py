@@ -29,10 +29,19 @@ from psf.pupil import MASK_RASTERS
 from psf.spectral import auto_step_nm, band_kernels, channel_kernels, load_weight
 
 from udc_render.display_image import DisplayImageError
+from udc_render.displays import DisplayError
+from udc_render.optics import OpticsError
 from udc_render.scene import RENDER_PATHS, SceneError
+from udc_render.render import RenderError
+from udc_render.sensor import SensorError
 from udc_render.spectra import SpectrumError
+from udc_render.synth import SynthError
 
-USER_ERRORS = (PSFError, LayoutError, LensError, SceneError, SpectrumError, DisplayImageError)
+USER_ERRORS = (PSFError, LayoutError, LensError, SceneError, SpectrumError, DisplayImageError, DisplayError,
+               OpticsError, SensorError, SynthError, RenderError)
+
+# Subcommands that live in their own modules: each has register(subparsers) -> {name: run(args) -> int}.
+COMMAND_MODULES = ("udc_render.synth_cli",)
 
 
 class UserError(Exception):
@@ -110,6 +119,21 @@ def _odd_size(text):
     return v
 
 
+def add_scene_arguments(r: argparse.ArgumentParser) -> None:
+    """Overrides of a scene file's settings (applied by scene_from_args)."""
+    samples = r.add_mutually_exclusive_group()
+    samples.add_argument("--spp", type=_positive("--spp", int), help="samples per pixel [the scene's render.spp]")
+    samples.add_argument("--noise", type=_positive("--noise"),
+                         help="target relative RMS noise; spp is chosen from pilot renders (e.g. 0.01)")
+    r.add_argument("--bands-nm", help="LOW:HIGH:STEP in nm [the scene's bands, default 400:700:10]")
+    r.add_argument("--seed", type=int, help="render seed [the scene's render.seed, 0]")
+    r.add_argument("--path", choices=RENDER_PATHS, help="render path [auto: rgb_matrix for the monitor alone]")
+    r.add_argument("--image", help="what the monitor shows: an image file, builtin:NAME or pattern:NAME")
+    r.add_argument("--sensor-px", type=_float_pair("--sensor-px"), help="sensor width,height in pixels")
+    r.add_argument("--pitch-um", type=_positive("--pitch-um"), help="sensor pixel pitch in µm")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(prog="udc-render", description="Physically based under-display camera simulation.")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
@@ -157,22 +181,17 @@ def build_parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", help="render a scene to band radiance images with Mitsuba 3")
     r.add_argument("scene", help="a scene file (TOML) or the name of one in scenes/ (monitor, room, hdr)")
     r.add_argument("--out", type=Path, default=Path("out/render"), help="output folder [out/render]")
-    samples = r.add_mutually_exclusive_group()
-    samples.add_argument("--spp", type=_positive("--spp", int), help="samples per pixel [the scene's render.spp]")
-    samples.add_argument("--noise", type=_positive("--noise"),
-                         help="target relative RMS noise; spp is chosen from pilot renders (e.g. 0.01)")
-    r.add_argument("--bands-nm", help="LOW:HIGH:STEP in nm [the scene's bands, default 400:700:10]")
-    r.add_argument("--seed", type=int, help="render seed [the scene's render.seed, 0]")
-    r.add_argument("--path", choices=RENDER_PATHS, help="render path [auto: rgb_matrix for the monitor alone]")
-    r.add_argument("--image", help="what the monitor shows: an image file, builtin:NAME or pattern:NAME")
-    r.add_argument("--sensor-px", type=_float_pair("--sensor-px"), help="sensor width,height in pixels")
-    r.add_argument("--pitch-um", type=_positive("--pitch-um"), help="sensor pixel pitch in µm")
-    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_scene_arguments(r)
 
     s = sub.add_parser("study", help="error-versus-run-time studies of the approximation knobs")
     s.add_argument("what", choices=("psf", "render"))
     s.add_argument("--out", type=Path, default=Path("out/study"))
     s.add_argument("--quick", action="store_true", help="a reduced grid (smoke run)")
+
+    import importlib
+    parser.runners = {"psf": run_psf, "render": run_render, "study": run_study}
+    for name in COMMAND_MODULES:
+        parser.runners.update(importlib.import_module(name).register(sub))
     return parser
 
 
@@ -331,8 +350,9 @@ def run_render(args) -> int:
 
 def main(argv=None) -> int:
     try:
-        args = build_parser().parse_args(argv)
-        return {"psf": run_psf, "render": run_render, "study": run_study}[args.command](args)
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        return parser.runners[args.command](args)
     except (UserError, *USER_ERRORS) as exc:
         print(f"udc-render: error: {str(exc).splitlines()[0]}", file=sys.stderr)
         return 2

@@ -307,6 +307,27 @@ def cos4_map(height_px: int, width_px: int, pitch_um: float, focal_length_um: fl
     return 1.0 / (1.0 + (y[:, None] ** 2 + x[None, :] ** 2) / focal_length_um ** 2) ** 2
 
 
+def band_electron_weights(edges_nm, sensor: SensorConfig) -> np.ndarray:
+    """[3, K] electrons per pixel per unit band radiance (W·sr⁻¹·m⁻²·nm⁻¹) of band k in channel c:
+    π/(4N²) · A · t · Δλ_k · q_ck (on-axis, no cos⁴)."""
+    edges = np.asarray(edges_nm, float)
+    area_m2 = (sensor.pitch_um * 1e-6) ** 2
+    const = math.pi / (4 * sensor.f_number ** 2) * area_m2 * sensor.exposure_s
+    return photon_weights(edges, sensor.camera, sensor.peak_qe) * np.diff(edges)[None, :] * const
+
+
+def electrons_rgb(radiance_bands: np.ndarray, edges_nm, sensor: SensorConfig) -> np.ndarray:
+    """[3, H, W] mean electrons that an R, G and B pixel would collect at every pixel (the
+    demosaic-free camera RGB used as ground truth; no noise, no full well, cos⁴ if enabled)."""
+    L = np.asarray(radiance_bands)
+    L, _ = _check_finite(L, "radiance_bands")
+    w = band_electron_weights(edges_nm, sensor)
+    e = np.einsum("ck,khw->chw", w, L, dtype=np.float64, optimize=True)
+    if sensor.cos4_falloff:
+        e *= cos4_map(*e.shape[1:], sensor.pitch_um, sensor.focal_length_um)
+    return e
+
+
 def electrons_spectral(radiance_bands: np.ndarray, edges_nm, sensor: SensorConfig,
                        input_pitch_um: float | None = None) -> np.ndarray:
     """Mean collected electrons [H, W] (float64, no noise, no full well) of an RGGB mosaic from
@@ -320,9 +341,7 @@ def electrons_spectral(radiance_bands: np.ndarray, edges_nm, sensor: SensorConfi
     L, _ = _check_finite(L, "radiance_bands")
     L, _ = _bin(L, input_pitch_um, sensor.pitch_um, "radiance_bands")
     _check_even(L.shape, "radiance_bands")
-    area_m2 = (sensor.pitch_um * 1e-6) ** 2
-    const = math.pi / (4 * sensor.f_number ** 2) * area_m2 * sensor.exposure_s
-    w = photon_weights(edges, sensor.camera, sensor.peak_qe) * np.diff(edges)[None, :] * const  # [3, K]
+    w = band_electron_weights(edges, sensor)
     h, wd = L.shape[1:]
     e = np.zeros((h, wd))
     for c, (i, j) in enumerate(SITES):
