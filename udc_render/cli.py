@@ -2,7 +2,8 @@
 
     udc-render psf --display {none,toled,poled,PATH} --wavelengths-nm 450,520,640 --out DIR
     udc-render render SCENE --out DIR [--spp N | --noise 0.01] [--bands-nm 400:700:10]
-    udc-render study {psf,render} --out DIR [--quick]
+    udc-render study {psf,render,capture} --out DIR [--quick]
+    udc-render synth SCENE --display toled[,poled,FILE] --out DIR;  udc-render demo [--out DIR]
 
 User errors print one line naming the argument, value and what is allowed, and exit 2;
 no traceback.
@@ -41,7 +42,7 @@ USER_ERRORS = (PSFError, LayoutError, LensError, SceneError, SpectrumError, Disp
                OpticsError, SensorError, SynthError, RenderError)
 
 # Subcommands that live in their own modules: each has register(subparsers) -> {name: run(args) -> int}.
-COMMAND_MODULES = ("udc_render.synth_cli",)
+COMMAND_MODULES = ("udc_render.synth_cli", "udc_render.dataset", "udc_render.calibrate")
 
 
 class UserError(Exception):
@@ -184,7 +185,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_scene_arguments(r)
 
     s = sub.add_parser("study", help="error-versus-run-time studies of the approximation knobs")
-    s.add_argument("what", choices=("psf", "render"))
+    s.add_argument("what", choices=("psf", "render", "capture"))
     s.add_argument("--out", type=Path, default=Path("out/study"))
     s.add_argument("--quick", action="store_true", help="a reduced grid (smoke run)")
 
@@ -286,6 +287,11 @@ def run_psf(args) -> int:
 
 
 def run_study(args) -> int:
+    if args.what == "capture":
+        from .study_capture import run_study as study_capture
+        study_capture(args.out, quick=args.quick)
+        print(f"wrote {args.out}/study_capture.csv, study_capture.md, study_capture.png")
+        return 0
     if args.what == "render":
         from .study_render import run_study as study_render
         study_render(args.out, quick=args.quick)

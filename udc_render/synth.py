@@ -22,7 +22,11 @@ displays the paper's gains 6 and 25 bring the levels back); for 3D scenes the EX
 of the glass image's brightest channel takes that place.
 
 Kernels are computed at the render pitch with size 2·margin + 1 (the largest the margin allows), for
-the object at the focus distance (in focus), and cached on disk (psf.cache).
+the object at the focus distance (in focus), and cached on disk (psf.cache). They integrate over
+the render pixel, and the render's pixels are area means too, so at render.supersample = 1 the
+sensor pixel's box enters twice (an extra blur of one pixel); with supersample s the render and the
+kernels use pitch / s and the sensor bins s × s, leaving an extra box of 1/s pixel
+(`udc-render study capture` measures the error).
 """
 from __future__ import annotations
 
@@ -96,17 +100,22 @@ def kernel_size_px(band_image: BandImage) -> int:
     return 2 * int(band_image.margin_px) + 1
 
 
-def display_kernels(display: Display, scene: Scene, band_image: BandImage, cfg: SynthConfig, progress=None):
+def display_kernels(display: Display, scene: Scene, band_image: BandImage, cfg: SynthConfig, progress: bool = False):
     """psf.KernelSet at the band centres (spectral form) for `display` on the render grid."""
+    from tqdm import tqdm
+    from psf.engine import DEFAULT_FIELD_PHASES
     frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
     size = kernel_size_px(band_image)
     if size < 3:
         raise SynthError(f"render margin {band_image.margin_px} px leaves no room for a kernel: raise render.margin_um")
-    ks, _ = cached(compute_kernels, "mono", display.layout, rig_lens(scene), cfg.use_cache,
-                   wavelengths_nm=band_image.centres_nm, pixel_um=float(band_image.pitch_um), size_px=size,
-                   distance_mm=display.distance_mm if display.layout is not None else 0.0,
-                   field_phases=cfg.field_phases, precision=cfg.kernel_precision, sensor_um=frame_um,
-                   progress=progress)
+    d_mm = display.distance_mm if display.layout is not None else 0.0
+    phases = (cfg.field_phases or DEFAULT_FIELD_PHASES) ** 2 if d_mm > 0 else 1
+    with tqdm(total=phases * band_image.centres_nm.size, desc=f"kernels {display.name}", unit="kernel",
+              disable=not progress, leave=False) as bar:  # ticks only when the kernels are not cached
+        ks, _ = cached(compute_kernels, "mono", display.layout, rig_lens(scene), cfg.use_cache,
+                       wavelengths_nm=band_image.centres_nm, pixel_um=float(band_image.pitch_um), size_px=size,
+                       distance_mm=d_mm, field_phases=cfg.field_phases, precision=cfg.kernel_precision,
+                       sensor_um=frame_um, progress=bar.update)
     return ks
 
 
@@ -152,8 +161,17 @@ def noise_seed(seed: int, item: int, display_name: str) -> np.random.SeedSequenc
 def ground_truth(band_image: BandImage, glass_kernels, sensor: SensorConfig, cfg: SynthConfig) -> tuple[np.ndarray, dict]:
     """[3, H, W] linear camera RGB of the clean view in units of the full well (1 = white at gain 1)."""
     optics = apply_kernels(band_image, glass_kernels, None, cfg.precision)
-    gt = electrons_rgb(optics.images, band_image.edges_nm, sensor) / sensor.full_well_e
-    return gt.astype(np.float32), optics.applied
+    gt = bin_pixels(electrons_rgb(optics.images, band_image.edges_nm, sensor), band_image.pitch_um, sensor.pitch_um)
+    return (gt / sensor.full_well_e).astype(np.float32), optics.applied
+
+
+def bin_pixels(a: np.ndarray, pitch_um: float, sensor_pitch_um: float) -> np.ndarray:
+    """Block mean [..., H·s, W·s] -> [..., H, W] where s = sensor pitch / render pitch (render.supersample)."""
+    s = int(round(sensor_pitch_um / pitch_um))
+    if s == 1:
+        return a
+    *lead, h, w = a.shape
+    return a.reshape(*lead, h // s, s, w // s, s).mean(axis=(-3, -1))
 
 
 def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg: SynthConfig = SynthConfig(),
@@ -164,22 +182,23 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     if len(set(names)) != len(names):
         raise SynthError(f"displays {names}: names must be distinct (they name the output folders)")
     t0 = time.perf_counter()
-    exposure, how = (cfg.exposure_s, "set") if cfg.exposure_s is not None else auto_exposure_s(band_image, cfg.sensor)
-    base_sensor = replace(cfg.sensor, exposure_s=float(exposure), pitch_um=float(band_image.pitch_um))
+    at_pitch = replace(cfg.sensor, pitch_um=float(scene.sensor.pitch_um))
+    exposure, how = (cfg.exposure_s, "set") if cfg.exposure_s is not None else auto_exposure_s(band_image, at_pitch)
+    base_sensor = replace(at_pitch, exposure_s=float(exposure))
     glass = next((d for d in displays if d.is_glass), None) or Display("glass", None)
     bar = tqdm(total=len(displays) + 1, desc="captures", unit="view", disable=not progress, leave=False)
-    glass_ks = display_kernels(glass, scene, band_image, cfg)
+    glass_ks = display_kernels(glass, scene, band_image, cfg, progress)
     gt, gt_optics = ground_truth(band_image, glass_ks, base_sensor, cfg)
     bar.update()
     captures, display_meta = {}, {}
     for d in displays:
         rng = np.random.default_rng(noise_seed(cfg.seed, item, d.name))
         if cfg.form == "spectral":
-            ks = glass_ks if d.is_glass and d.distance_mm == 0 else display_kernels(d, scene, band_image, cfg)
+            ks = glass_ks if d.is_glass and d.distance_mm == 0 else display_kernels(d, scene, band_image, cfg, progress)
             t = d.transmission.band_means(band_image.edges_nm)
             optics = apply_kernels(band_image, ks, t, cfg.precision, blend=cfg.blend)
             sensor = replace(base_sensor, gain=d.gain, form="spectral")
-            cap = capture(optics.images, band_image.edges_nm, sensor, rng)
+            cap = capture(optics.images, band_image.edges_nm, sensor, rng, input_pitch_um=float(band_image.pitch_um))
             extra = {"optics": optics.applied, "optics_gains": optics.gains.tolist(),
                      "transmission_band_means": t.tolist()}
         else:
@@ -217,7 +236,8 @@ def _per_channel_capture(band_image, scene, d: Display, cfg: SynthConfig, base_s
     gamma, why = display_gamma(d, scene, band_image, cfg, glass_ks)
     x = electrons_rgb(band_image.bands, band_image.edges_nm, base_sensor) / base_sensor.full_well_e
     ks = display_channel_kernels(d, scene, band_image, cfg)
-    blurred = convolve_bands(x.astype(np.float32), ks.kernels, band_image.margin_px, None, cfg.precision)
+    blurred = bin_pixels(convolve_bands(x.astype(np.float32), ks.kernels, band_image.margin_px, None, cfg.precision),
+                         band_image.pitch_um, base_sensor.pitch_um)
     g_rggb = (gamma[0], gamma[1], gamma[1], gamma[2])
     # DN = gain · (γ/gain) · x · R: the paper's γ includes the display's gain; electrons are γ/gain · x · FW
     sensor = replace(base_sensor, gain=d.gain, form="per_channel", gamma_rggb=tuple(g / d.gain for g in g_rggb))

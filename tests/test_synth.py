@@ -1,0 +1,263 @@
+"""Capture synthesis end to end: displays, synthesize(), the capture files and the synth/demo commands."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from udc_render import displays as D
+from udc_render.capture_io import demosaic_bilinear, load_raw_png, mosaic_of, psnr_db
+from udc_render.render import render_scene
+from udc_render.sensor import SensorConfig, pack_rggb
+from udc_render.synth import SynthConfig, SynthError, display_gamma, display_kernels, synthesize
+
+PRESETS = [D.preset(n) for n in ("glass", "toled", "poled")]
+NOISELESS = SynthConfig(sensor=SensorConfig(noise="none"))
+
+
+def _scene(udc, path, image="pattern:white", bands=None, **kw):
+    doc = udc.monitor_doc(image=image, bands=bands or {"range_nm": [400, 700], "step_nm": 100}, **kw)
+    return udc.write_scene(path, doc)
+
+
+@pytest.fixture(scope="module")
+def white(udc, tmp_path_factory, render_cache):
+    """A tiny monitor filling the frame with full white; 3 bands of 100 nm; margin 16 px of 24.8 µm."""
+    scene = _scene(udc, tmp_path_factory.mktemp("white") / "white.toml")
+    return scene, render_scene(scene, progress=False)
+
+
+def _centre(a, frac=0.25):
+    h, w = a.shape[-2:]
+    return a[..., int(h * frac):int(h * (1 - frac)), int(w * frac):int(w * (1 - frac))]
+
+
+# ---------------------------------------------------------------- displays
+
+
+def test_presets_reproduce_the_papers_gammas():
+    """The fitted T(λ) constants give γ_G = 0.97 (T-OLED) and γ_R = 0.34, γ_B = 0.20 (P-OLED) on the
+    default rig (30 bands, 511-px kernels at 1.55 µm, monitor white, Nikon 5100), and refitting
+    returns the stored constants."""
+    from psf import compute_kernels, layouts
+    from psf.cache import cached
+    from udc_render.synth import rig_lens
+    from udc_render.scene import load_scene
+    lens = rig_lens(load_scene("monitor"))
+    edges = np.arange(400.0, 701.0, 10.0)
+    wl = 0.5 * (edges[1:] + edges[:-1])
+    g = {}
+    for name, lay in (("glass", None), ("toled", layouts.toled()), ("poled", layouts.poled())):
+        ks, _ = cached(compute_kernels, "mono", lay, lens, True, wavelengths_nm=wl, pixel_um=1.55, size_px=511,
+                       sensor_um=(2048 * 1.55, 1024 * 1.55))
+        g[name] = ks.transmittance * (1 - ks.energy_outside)
+    w = D._white_weights(edges, "Nikon 5100 (NPL)")
+    gt = D.channel_gamma(w, D.preset("toled"), g["toled"], g["glass"], edges)
+    gp = D.channel_gamma(w, D.preset("poled"), g["poled"], g["glass"], edges)
+    assert gt[1] == pytest.approx(0.97, rel=2e-3)
+    assert np.all(np.abs(gt / 0.97 - 1) < 0.02)  # flat T: channels differ only by the kernels' lost energy
+    assert gp[0] == pytest.approx(0.34, rel=2e-3) and gp[2] == pytest.approx(0.20, rel=2e-3)
+    assert 0.30 < gp[1] < 0.34  # a monotonic edge cannot lift G without B: 0.327 (paper 0.34)
+    assert D.fit_toled_transmission(g["toled"], g["glass"], edges) == pytest.approx(D.TOLED_T, rel=1e-3)
+    scale, edge = D.fit_poled_transmission(g["poled"], g["glass"], edges)
+    assert scale == pytest.approx(D.POLED_SCALE, rel=1e-3) and edge == pytest.approx(D.POLED_EDGE_NM, abs=0.05)
+
+
+def test_poled_transmission_is_lower_in_the_blue_and_toled_flat():
+    wl = np.array([420.0, 450.0, 520.0, 640.0])
+    tp, tt = D.preset("poled").transmission(wl), D.preset("toled").transmission(wl)
+    assert np.all(np.diff(tp) > 0) and tp[0] < 0.1 * tp[-1]
+    assert np.all(tt == D.TOLED_T)
+    assert D.preset("glass").transmission(wl).tolist() == [1.0] * 4
+
+
+def test_display_file_round_trip(tmp_path):
+    (tmp_path / "t.csv").write_text("wavelength_nm,t\n400,0.1\n700,0.4\n")
+    (tmp_path / "d.toml").write_text(
+        '[display]\nname = "mine"\ngain = 4\ndistance_mm = 0.5\n'
+        '[display.layout]\ntype = "toled"\npitch_um = 50\nopen_fraction = 0.3\n'
+        '[display.transmission]\ntype = "csv"\nfile = "t.csv"\n')
+    d = D.load_display(str(tmp_path / "d.toml"))
+    assert (d.name, d.gain, d.distance_mm, d.layout.pitch_x_um) == ("mine", 4.0, 0.5, 50.0)
+    assert d.transmission([400, 550, 700]).tolist() == pytest.approx([0.1, 0.25, 0.4])
+    assert d.transmission.band_means([400, 700])[0] == pytest.approx(0.25)
+
+
+@pytest.mark.parametrize("body, needle", [
+    ('[display]\nlayout = {type = "hex"}\n', "display.layout.type = 'hex'"),
+    ('[display]\nlayout = {type = "toled", pitch = 3}\n', "display.layout.pitch = 3"),
+    ('[display]\nlayout = {type = "toled"}\ngain = -1\n', "display.gain = -1"),
+    ('[display]\nlayout = {type = "toled", open_fraction = 0.95}\n', "open_fraction"),
+    ('[display]\nlayout = {type = "toled"}\ntransmission = {type = "flat", value = 2}\n', "display.transmission.value = 2"),
+    ('[display]\nlayout = {type = "toled"}\ntransmission = {type = "csv", file = "nope.csv"}\n', "nope.csv"),
+    ('[display]\nlayout = {type = "micrograph", file = "nope.png"}\n', "display.layout.file = 'nope.png'"),
+    ('[screen]\n', "screen"),
+])
+def test_bad_display_files_give_one_line_naming_file_and_key(tmp_path, capsys, body, needle):
+    from udc_render.cli import main
+    f = tmp_path / "bad.toml"
+    f.write_text(body)
+    assert main(["synth", "monitor", "--display", str(f), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(f) in err and needle in err, err
+
+
+# ---------------------------------------------------------------- synthesize()
+
+
+def test_levels_follow_gamma_and_glass_is_the_ground_truth(white):
+    """Noise off, a white field: the glass capture equals the ground truth's mosaic (same optics, same
+    exposure) and each display's level is γ × glass, γ from the display's kernels and T(λ)."""
+    scene, bi = white
+    res = synthesize(bi, scene, PRESETS, NOISELESS)
+    glass = res.captures["glass"].clean_dn / 65535
+    assert np.allclose(glass, np.clip(mosaic_of(res.gt), 0, 1), rtol=2e-5, atol=2e-5)
+    gl = pack_rggb(_centre(res.captures["glass"].clean_dn))
+    glass_ks = display_kernels(D.preset("glass"), scene, bi, NOISELESS)
+    for name in ("toled", "poled"):
+        d = D.preset(name)
+        as_file = D.Display(name, d.layout, d.transmission, d.gain, source="file")  # analytic γ, not the paper's
+        gamma, _ = display_gamma(as_file, scene, bi, NOISELESS, glass_ks)
+        lv = pack_rggb(_centre(res.captures[name].clean_dn))
+        ratio = lv.reshape(4, -1).mean(1) / gl.reshape(4, -1).mean(1)
+        assert ratio[[0, 1, 3]] == pytest.approx(np.array(gamma), rel=0.01), name
+
+
+def test_per_channel_form_uses_the_papers_gamma(white):
+    scene, bi = white
+    cfg = SynthConfig(form="per_channel", sensor=SensorConfig(noise="none"))
+    res = synthesize(bi, scene, PRESETS, cfg)
+    gl = pack_rggb(_centre(res.captures["glass"].clean_dn)).reshape(4, -1).mean(1)
+    for name in ("toled", "poled"):
+        lv = pack_rggb(_centre(res.captures[name].clean_dn)).reshape(4, -1).mean(1)
+        g = D.PAPER_GAMMA[name]
+        assert lv / gl == pytest.approx([g[0], g[1], g[1], g[2]], rel=0.01), name
+        assert res.display_meta[name]["gamma_rgb"] == list(g)
+
+
+def test_zero_light_is_black_and_finite(udc, tmp_path, render_cache):
+    scene = _scene(udc, tmp_path / "black.toml", image="pattern:orientation")
+    bi = render_scene(scene, progress=False)
+    dark = type(bi)(np.zeros_like(bi.bands), bi.edges_nm, bi.pitch_um, bi.margin_px, None, bi.meta)
+    res = synthesize(dark, scene, PRESETS, SynthConfig(sensor=SensorConfig(noise="poisson", read_noise_e=0)))
+    for cap in res.captures.values():
+        assert cap.mosaic_dn.max() == 0
+    assert np.all(res.gt == 0)
+
+
+def test_saturation_and_huge_gain_clip_at_the_white_level(white):
+    scene, bi = white
+    cfg = SynthConfig(exposure_s=10.0)  # ~300× the auto exposure
+    res = synthesize(bi, scene, [D.preset("glass"), D.Display("hot", D.layouts.toled(), gain=1e6)], cfg)
+    for cap in res.captures.values():
+        assert np.all(_centre(cap.mosaic_dn) == 65535)
+    assert np.all(np.isfinite(res.gt)) and res.gt.max() > 100  # the ground truth is not clipped
+
+
+def test_nan_band_image_is_rejected(white):
+    from udc_render.optics import OpticsError
+    scene, bi = white
+    bands = bi.bands.copy()
+    bands[1, 5, 7] = np.nan
+    bad = type(bi)(bands, bi.edges_nm, bi.pitch_um, bi.margin_px, None, bi.meta)
+    with pytest.raises(OpticsError, match="NaN"):
+        synthesize(bad, scene, PRESETS[:2], NOISELESS)
+
+
+def test_kernel_larger_than_the_frame(udc, tmp_path, render_cache):
+    """A 16 × 8 px frame with a 33-px kernel: still exact linear convolution (no wrap)."""
+    scene = _scene(udc, tmp_path / "small.toml", sensor_px=(16, 8))
+    res = synthesize(render_scene(scene, progress=False), scene, PRESETS, NOISELESS)
+    assert res.meta["kernel_size_px"] > 16
+    assert all(np.all(np.isfinite(c.clean_dn)) for c in res.captures.values())
+
+
+def test_duplicate_display_names_rejected(white):
+    scene, bi = white
+    with pytest.raises(SynthError, match="distinct"):
+        synthesize(bi, scene, [D.preset("toled"), D.preset("toled")], NOISELESS)
+
+
+def test_banding_period_in_the_capture(udc, tmp_path, render_cache):
+    """A flat field through the T-OLED at d = 2 mm: the noise-free capture's column profile (G sites
+    of both rows, so every column) has its spectral peaks at harmonics of d / (z_i p) (period
+    z_i · p / d); at d = 0 the profile is flat to round-off."""
+    scene = _scene(udc, tmp_path / "band.toml", sensor_px=(512, 16), resolution_px=(1920, 1080))
+    bi = render_scene(scene, progress=False)
+    from udc_render.synth import rig_lens
+    period_px = rig_lens(scene).image_distance_um * 60.0 / 2000.0 / bi.pitch_um
+    spectra = {}
+    for d_mm in (0.0, 2.0):
+        res = synthesize(bi, scene, [D.preset("toled").with_distance(d_mm)], NOISELESS)
+        m = res.captures["toled"].clean_dn.astype(np.float64)
+        g = np.where(np.arange(m.shape[1]) % 2 == 1, m[0::2].mean(0), m[1::2].mean(0))  # Gr odd, Gb even columns
+        prof = g[40:-40] / g[40:-40].mean() - 1  # away from the monitor's edges
+        spectra[d_mm] = np.abs(np.fft.rfft(prof * np.hanning(prof.size)))
+    f = np.fft.rfftfreq(prof.size)
+    spec = spectra[2.0]
+    top = np.argsort(spec[1:])[-2:] + 1  # the two strongest lines
+    for i in top:
+        harmonic = f[i] * period_px
+        assert abs(harmonic - round(harmonic)) * (1 / period_px) < 2 / prof.size and round(harmonic) in (1, 2), f[i]
+    assert spectra[0.0][1:].max() < 0.02 * spec[1:].max()
+
+
+# ---------------------------------------------------------------- files and commands
+
+
+def test_synth_files_round_trip_and_are_byte_identical(udc, tmp_path, render_cache):
+    from udc_render.cli import main
+    import OpenEXR
+    import tifffile
+    scene_file = tmp_path / "img.toml"
+    _scene(udc, scene_file, image="builtin:camera", framing="fit")
+    outs = [tmp_path / "a", tmp_path / "b"]
+    for o in outs:
+        assert main(["synth", str(scene_file), "--display", "toled,poled", "--out", str(o), "--quiet"]) == 0
+    a, b = outs
+    files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
+    assert {"gt.exr", "toled/raw.png", "toled/packed.tiff", "poled/capture.json", "glass/preview.png",
+            "side_by_side.png", "summary.md", "synth.json"} <= {str(p) for p in files}
+    for p in files:
+        if p.suffix != ".png" or "raw" in p.name:  # matplotlib previews embed a version; RAW/PNG writers do not
+            assert (a / p).read_bytes() == (b / p).read_bytes(), p
+    raw = load_raw_png(a / "toled/raw.png")
+    assert raw.dtype == np.uint16 and raw.shape == (64, 128)
+    assert np.array_equal(tifffile.imread(a / "toled/packed.tiff"), pack_rggb(raw))
+    meta = json.loads((a / "toled/capture.json").read_text())
+    assert meta["display"]["name"] == "toled" and meta["sensor"]["gain"] == 6.0 and "rng_state_before" in meta
+    with OpenEXR.File(str(a / "gt.exr")) as f:
+        assert f.channels()["RGB"].pixels.shape == (64, 128, 3)  # R, G, B channels (grouped by OpenEXR)
+    summary = json.loads((a / "summary.json").read_text())
+    assert summary["views"]["glass"]["psnr_db_vs_gt"] > summary["views"]["toled"]["psnr_db_vs_gt"] \
+        > summary["views"]["poled"]["psnr_db_vs_gt"]
+
+
+def test_demo_runs_and_reports(tmp_path, capsys, render_cache):
+    from udc_render.cli import main
+    assert main(["demo", "--out", str(tmp_path), "--sensor-px", "64,32", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    for name in ("glass", "toled", "poled"):
+        assert name in out and (tmp_path / name / "raw.png").is_file()
+    assert (tmp_path / "side_by_side.png").stat().st_size > 1000
+
+
+def test_demosaic_bilinear_is_exact_on_a_linear_ramp():
+    y, x = np.mgrid[0:16, 0:20].astype(float)
+    rgb = np.stack([x + y, 2 * x, 3 * y + 1])
+    out = demosaic_bilinear(mosaic_of(rgb))
+    assert np.allclose(out[:, 2:-2, 2:-2], rgb[:, 2:-2, 2:-2])
+    assert psnr_db(rgb, rgb) == math.inf
+
+
+@pytest.mark.slow
+def test_study_capture_quick_writes_table_and_errors_order(tmp_path):
+    """`udc-render study capture --quick` (minutes: it computes every kernel with the cache off)."""
+    from udc_render.study_capture import run_study
+    rows = run_study(tmp_path, quick=True, progress=False)
+    assert {"study_capture.csv", "study_capture.md", "study_capture.png"} <= {p.name for p in tmp_path.iterdir()}
+    by = {(r["study"], r["setting"]): r["rel_error"] for r in rows}
+    assert by[("precision", "float64")] == 0.0 and by[("precision", "float32")] < 1e-5
+    assert all(np.isfinite(r["rel_error"]) and r["kernel_s"] >= 0 for r in rows)
