@@ -20,7 +20,7 @@ synthesize() for that display with the kernels computed (cache off: ``kernel_s``
   box and the kernel's pixel integration count the sensor pixel twice at s = 1 (synth.py).
 
 Outputs: study_capture.csv, study_capture.md (tables and the defaults they justify), study_capture.png.
-``quick``: 128 × 64 px of 6.2 µm, fewer settings (a smoke run, well under a minute with cached kernels).
+``quick``: 128 × 64 px of 6.2 µm, fewer settings (a smoke run, about 70 s on 2 cores).
 """
 from __future__ import annotations
 
