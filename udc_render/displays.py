@@ -23,7 +23,6 @@ A display file (TOML) describes any other display; see ``load_display`` and scen
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -127,13 +126,8 @@ def load_display(spec: str) -> Display:
     path = Path(spec)
     if path.suffix.lower() != ".toml":
         raise DisplayError(f"--display = {spec!r}: expected one of {', '.join(PRESETS)} or a display file (.toml)")
-    try:
-        data = tomllib.loads(path.read_text())
-    except OSError as e:
-        raise DisplayError(f"{path}: cannot read the display file ({e.strerror or e})") from None
-    except tomllib.TOMLDecodeError as e:
-        raise DisplayError(f"{path}: not valid TOML ({e})") from None
-    return parse_display(data, path)
+    from udc_render.fileio import read_toml
+    return parse_display(read_toml(path, DisplayError, "display file"), path)
 
 
 _LAYOUT_KEYS = {"toled": ("pitch_um", "open_fraction", "slit_height_fraction"),

@@ -33,6 +33,17 @@ def current_umask() -> int:
     return mask
 
 
+def read_toml(path, error_cls, what: str) -> dict:
+    """Parse a TOML file; unreadable or invalid files raise error_cls with one line naming `what`."""
+    import tomllib
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except OSError as e:
+        raise error_cls(f"{what} {path}: cannot read ({e.strerror or e})") from None
+    except tomllib.TOMLDecodeError as e:
+        raise error_cls(f"{what} {path}: not valid TOML ({e})") from None
+
+
 def save_npz(path, **arrays) -> None:
     with atomic_path(path, ".npz") as tmp:
         np.savez_compressed(tmp, **arrays)

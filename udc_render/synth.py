@@ -158,11 +158,12 @@ def noise_seed(seed: int, item: int, display_name: str) -> np.random.SeedSequenc
     return np.random.SeedSequence([int(seed), int(item), zlib.crc32(display_name.encode())])
 
 
-def ground_truth(band_image: BandImage, glass_kernels, sensor: SensorConfig, cfg: SynthConfig) -> tuple[np.ndarray, dict]:
-    """[3, H, W] linear camera RGB of the clean view in units of the full well (1 = white at gain 1)."""
+def ground_truth(band_image: BandImage, glass_kernels, sensor: SensorConfig, cfg: SynthConfig):
+    """([3, H, W] linear camera RGB of the clean view in units of the full well (1 = white at gain 1),
+    the glass optics result it came from)."""
     optics = apply_kernels(band_image, glass_kernels, None, cfg.precision)
     gt = bin_pixels(electrons_rgb(optics.images, band_image.edges_nm, sensor), band_image.pitch_um, sensor.pitch_um)
-    return (gt / sensor.full_well_e).astype(np.float32), optics.applied
+    return (gt / sensor.full_well_e).astype(np.float32), optics
 
 
 def bin_pixels(a: np.ndarray, pitch_um: float, sensor_pitch_um: float) -> np.ndarray:
@@ -188,21 +189,27 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     glass = next((d for d in displays if d.is_glass), None) or Display("glass", None)
     bar = tqdm(total=len(displays) + 1, desc="captures", unit="view", disable=not progress, leave=False)
     glass_ks = display_kernels(glass, scene, band_image, cfg, progress)
-    gt, gt_optics = ground_truth(band_image, glass_ks, base_sensor, cfg)
+    gt, glass_optics = ground_truth(band_image, glass_ks, base_sensor, cfg)
     bar.update()
-    captures, display_meta = {}, {}
+    captures, display_meta, rgb = {}, {}, None
     for d in displays:
         rng = np.random.default_rng(noise_seed(cfg.seed, item, d.name))
         if cfg.form == "spectral":
-            ks = glass_ks if d.is_glass and d.distance_mm == 0 else display_kernels(d, scene, band_image, cfg, progress)
             t = d.transmission.band_means(band_image.edges_nm)
-            optics = apply_kernels(band_image, ks, t, cfg.precision, blend=cfg.blend)
+            if d.is_glass and d.distance_mm == 0 and np.all(t == 1):  # the ground truth's optics exactly
+                optics = glass_optics
+            else:
+                ks = display_kernels(d, scene, band_image, cfg, progress)
+                optics = apply_kernels(band_image, ks, t, cfg.precision, blend=cfg.blend)
             sensor = replace(base_sensor, gain=d.gain, form="spectral")
             cap = capture(optics.images, band_image.edges_nm, sensor, rng, input_pitch_um=float(band_image.pitch_um))
             extra = {"optics": optics.applied, "optics_gains": optics.gains.tolist(),
                      "transmission_band_means": t.tolist()}
         else:
-            cap, extra = _per_channel_capture(band_image, scene, d, cfg, base_sensor, rng, glass_ks)
+            if rgb is None:  # the un-blurred camera RGB of the render grid, shared by every display
+                rgb = (electrons_rgb(band_image.bands, band_image.edges_nm, base_sensor)
+                       / base_sensor.full_well_e).astype(np.float32)
+            cap, extra = _per_channel_capture(band_image, rgb, scene, d, cfg, base_sensor, rng, glass_ks)
         captures[d.name] = cap
         display_meta[d.name] = {"display": d.describe(), "form": cfg.form, "noise_seed":
                                 f"SeedSequence([{cfg.seed}, {item}, crc32('{d.name}')])", **extra}
@@ -210,7 +217,7 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     bar.close()
     meta = {"form": cfg.form, "exposure_s": exposure, "exposure_rule": how, "seed": cfg.seed, "item": item,
             "gt": "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, / full well "
-                  "(1.0 = white level at gain 1), not clipped", "gt_optics": gt_optics,
+                  "(1.0 = white level at gain 1), not clipped", "gt_optics": glass_optics.applied,
             "kernel_size_px": kernel_size_px(band_image), "kernel_pixel_um": float(band_image.pitch_um),
             "kernel_precision": cfg.kernel_precision, "lens": rig_lens(scene).describe(),
             "render": {k: v for k, v in band_image.meta.items() if k != "seconds"}}
@@ -232,11 +239,10 @@ def display_gamma(d: Display, scene: Scene, band_image: BandImage, cfg: SynthCon
     return tuple(float(x) for x in g), "analytic γ of the display file (displays.channel_gamma)"
 
 
-def _per_channel_capture(band_image, scene, d: Display, cfg: SynthConfig, base_sensor, rng, glass_ks):
+def _per_channel_capture(band_image, rgb, scene, d: Display, cfg: SynthConfig, base_sensor, rng, glass_ks):
     gamma, why = display_gamma(d, scene, band_image, cfg, glass_ks)
-    x = electrons_rgb(band_image.bands, band_image.edges_nm, base_sensor) / base_sensor.full_well_e
     ks = display_channel_kernels(d, scene, band_image, cfg)
-    blurred = bin_pixels(convolve_bands(x.astype(np.float32), ks.kernels, band_image.margin_px, None, cfg.precision),
+    blurred = bin_pixels(convolve_bands(rgb, ks.kernels, band_image.margin_px, None, cfg.precision),
                          band_image.pitch_um, base_sensor.pitch_um)
     g_rggb = (gamma[0], gamma[1], gamma[1], gamma[2])
     # DN = gain · (γ/gain) · x · R: the paper's γ includes the display's gain; electrons are γ/gain · x · FW

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import time
-import tomllib
 from dataclasses import replace
 from pathlib import Path
 
@@ -58,13 +57,9 @@ def synth_config(args):
     from udc_render.synth import SynthConfig
     sensor = SensorConfig()
     if getattr(args, "sensor_config", None) is not None:
+        from udc_render.fileio import read_toml
         path = args.sensor_config
-        try:
-            data = tomllib.loads(path.read_text())
-        except OSError as e:
-            raise UserError(f"--sensor-config {path}: cannot read ({e.strerror or e})") from None
-        except tomllib.TOMLDecodeError as e:
-            raise UserError(f"--sensor-config {path}: not valid TOML ({e})") from None
+        data = read_toml(path, UserError, "--sensor-config")
         try:
             sensor = SensorConfig.from_dict(data)
         except SensorError as e:
