@@ -156,7 +156,9 @@ class Rig:
         folder = self.out / "patterns"
         folder.mkdir(parents=True, exist_ok=True)
         path = folder / name
-        iio.imwrite(path, np.repeat(code.astype(np.uint8)[..., None], 3, -1))
+        from udc_render.fileio import atomic_path
+        with atomic_path(path, ".png") as tmp:
+            iio.imwrite(tmp, np.repeat(code.astype(np.uint8)[..., None], 3, -1), extension=".png")
         return str(path.resolve())
 
 
