@@ -1,0 +1,56 @@
+"""Face chart for the downstream face-detection experiment, from images bundled with scikit-image.
+
+`face_chart` lays out the first 100 images of `skimage.data.lfw_subset()` (25 × 25 px grey,
+tightly cropped faces from Labeled Faces in the Wild) upscaled to 60–160 px, one per cell of a
+200 px grid, on a smooth random colour texture or plain grey. The ground-truth box of a face tile of
+side s at (x, y) follows MTCNN's box convention: (x + 0.06 s, y, x + 0.82 s, y + 0.96 s), the
+median MTCNN box relative to the tile measured over 135 faces on three charts (the detector cuts
+the tiles' left and right margins). Against these boxes MTCNN's mean IoU on a clean chart is
+about 0.85; against the bare tiles it is 0.48–0.78.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+FACE_BOX = (0.06, 0.0, 0.82, 0.96)   # ground-truth box as fractions of the tile side (x1, y1, x2, y2)
+CELL_PX = 200                        # grid cell; faces are at most CELL_PX − GAP_PX wide
+GAP_PX = 24                          # least gap between two tiles
+
+
+def face_chart(width_px: int = 1920, height_px: int = 1080, seed: int = 0, face_px=(60, 160),
+               background: str = "texture") -> tuple[np.ndarray, np.ndarray]:
+    """(image uint8 [H, W, 3], true boxes [N, 4] x1, y1, x2, y2 in pixels): N = ⌊W/200⌋ ⌊H/200⌋ faces.
+
+    Sizes (uniform in `face_px`), positions within their cells and the choice of faces depend only
+    on `seed`. `background`: "texture" (0.5 plus Gaussian-smoothed noise per channel, σ 6 px,
+    standard deviation 0.15) or "grey" (0.5).
+    """
+    from scipy.ndimage import gaussian_filter
+    from skimage import data
+    from skimage.transform import resize
+
+    lo, hi = face_px
+    if not 12 <= lo <= hi <= CELL_PX - GAP_PX:
+        raise ValueError(f"face_px must satisfy 12 ≤ min ≤ max ≤ {CELL_PX - GAP_PX}, got {face_px}")
+    rows, cols = height_px // CELL_PX, width_px // CELL_PX
+    if rows * cols == 0:
+        raise ValueError(f"a face chart needs at least {CELL_PX} × {CELL_PX} px, got {width_px} × {height_px}")
+    rng = np.random.default_rng(seed)
+    if background == "texture":
+        noise = gaussian_filter(rng.standard_normal((height_px, width_px, 3)), (6, 6, 0))
+        img = 0.5 + 0.15 * noise / noise.std()
+    elif background == "grey":
+        img = np.full((height_px, width_px, 3), 0.5)
+    else:
+        raise ValueError(f"unknown background {background!r} (texture, grey)")
+    faces = data.lfw_subset()[:100]
+    picks = rng.choice(len(faces), rows * cols, replace=rows * cols > len(faces))
+    y0, x0 = (height_px - rows * CELL_PX) // 2, (width_px - cols * CELL_PX) // 2
+    boxes = []
+    for k, (r, c) in enumerate(np.ndindex(rows, cols)):
+        s = int(rng.integers(lo, hi + 1))
+        y = y0 + r * CELL_PX + GAP_PX // 2 + int(rng.integers(0, CELL_PX - GAP_PX - s + 1))
+        x = x0 + c * CELL_PX + GAP_PX // 2 + int(rng.integers(0, CELL_PX - GAP_PX - s + 1))
+        img[y:y + s, x:x + s] = resize(faces[picks[k]], (s, s), order=3)[:, :, None]
+        boxes.append([x + FACE_BOX[0] * s, y + FACE_BOX[1] * s, x + FACE_BOX[2] * s, y + FACE_BOX[3] * s])
+    return (np.clip(img, 0, 1) * 255 + 0.5).astype(np.uint8), np.asarray(boxes, dtype=np.float64)
