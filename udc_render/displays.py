@@ -259,7 +259,8 @@ def channel_gamma(band_weights: np.ndarray, display: Display, display_gain_k: np
     return display.gain * num / den
 
 
-def _white_weights(edges_nm, camera: str, white_point: str = "D65") -> np.ndarray:
+def white_weights(edges_nm, camera: str, white_point: str = "D65") -> np.ndarray:
+    """[3, K] electrons per band and camera channel of the monitor's white (relative units)."""
     from udc_render import spectra
     from udc_render.sensor import photon_weights
     prim, _ = spectra.monitor_primaries("Apple Studio Display", 300.0, None, white_point)
@@ -270,7 +271,7 @@ def _white_weights(edges_nm, camera: str, white_point: str = "D65") -> np.ndarra
 def fit_toled_transmission(display_gain_k, glass_gain_k, edges_nm, camera="Nikon 5100 (NPL)",
                            target=PAPER_GAMMA["toled"][1], gain=PAPER_GAIN["toled"]) -> float:
     """Flat T giving γ_G = target (γ is linear in T)."""
-    w = _white_weights(edges_nm, camera)
+    w = white_weights(edges_nm, camera)
     unit = Display("t", layouts.toled(), Transmission("flat", 1.0), gain)
     return float(target / channel_gamma(w, unit, display_gain_k, glass_gain_k, edges_nm)[1])
 
@@ -280,7 +281,7 @@ def fit_poled_transmission(display_gain_k, glass_gain_k, edges_nm, camera="Nikon
                            floor=POLED_FLOOR) -> tuple[float, float]:
     """(scale, edge_nm) giving γ_B/γ_R = target_B/target_R (bisection on the edge) and γ_R = target_R."""
     from scipy.optimize import brentq
-    w = _white_weights(edges_nm, camera)
+    w = white_weights(edges_nm, camera)
 
     def gammas(edge, scale=1.0):
         d = Display("p", layouts.poled(), Transmission("edge", scale=scale, edge_nm=edge, width_nm=width_nm,

@@ -1,0 +1,180 @@
+"""Paired data for the restorers: what `udc-render dataset` writes, read as (packed RAW, ground truth).
+
+    <data>/manifest.jsonl                      one line per item: folder, split, displays
+    <data>/<split>/shard_k/item_i/gt.exr       linear camera RGB [3, H, W], units of the white level
+    <data>/<split>/shard_k/item_i/<display>/packed.tiff   uint16 [4, H/2, W/2] (R, Gr, Gb, B)
+    <data>/<split>/shard_k/item_i/<display>/capture.json  black level and range (DN)
+
+Input x = (DN − black) / (white − black) per packed plane; target y = gt (same units, not clipped).
+
+Augmentation keeps the Bayer pattern (Liu et al. 2019, PHYSICS.md §7): the 8 flips/transposes are
+applied to the full-resolution mosaic and to the ground truth; a flip along an axis moves R to odd
+indices on that axis, so the crop starts one pixel in (crops start on the R site), and the crop is
+packed again. A transpose keeps R at (0, 0) and swaps Gr with Gb (both green).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from udc_render.sensor import pack_rggb, unpack_rggb
+
+SPLITS = ("train", "val", "test")
+
+
+class DataError(ValueError):
+    """A dataset folder the restorers cannot read; one line."""
+
+
+@dataclass(frozen=True)
+class Pair:
+    """One (capture, ground truth) pair: item folder and the display seen through."""
+    item: int
+    split: str
+    folder: Path
+    display: str
+    image: str
+
+    @property
+    def name(self) -> str:
+        return f"item_{self.item:06d}_{self.display}"
+
+
+def read_manifest(data_dir: Path) -> list[dict]:
+    path = Path(data_dir) / "manifest.jsonl"
+    if not path.is_file():
+        raise DataError(f"{path}: no manifest.jsonl: expected a folder written by `udc-render dataset`")
+    rows = []
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        if line.strip():
+            try:
+                rows.append(json.loads(line))
+            except json.JSONDecodeError as exc:
+                raise DataError(f"{path}:{n}: not JSON ({exc.msg})") from None
+    return rows
+
+
+def dataset_displays(data_dir: Path) -> list[str]:
+    """Displays of the dataset (from the first manifest line), glass excluded."""
+    rows = read_manifest(data_dir)
+    return [d for d in (rows[0]["displays"] if rows else []) if d != "glass"]
+
+
+def list_pairs(data_dir: Path, split: str, displays: list[str]) -> list[Pair]:
+    """Pairs of `split` for each display, in item order; errors name what is missing."""
+    if split not in SPLITS:
+        raise DataError(f"split = {split!r}: expected one of {', '.join(SPLITS)}")
+    rows = read_manifest(data_dir)
+    pairs = []
+    for d in displays:
+        for r in rows:
+            if r["split"] != split:
+                continue
+            if d not in r["displays"]:
+                raise DataError(f"{Path(data_dir) / 'manifest.jsonl'}: display = {d!r} not in item {r['item']} "
+                                f"(has {', '.join(r['displays'])})")
+            pairs.append(Pair(int(r["item"]), split, Path(data_dir) / r["folder"], d, r.get("image", "")))
+    return pairs
+
+
+def load_packed(capture_dir: Path) -> np.ndarray:
+    """[4, h, w] float32 packed RAW in units of the white level: (DN − black) / range."""
+    import tifffile
+    capture_dir = Path(capture_dir)
+    try:
+        sensor = json.loads((capture_dir / "capture.json").read_text())["sensor"]
+        dn = tifffile.imread(capture_dir / "packed.tiff")
+    except FileNotFoundError as exc:
+        raise DataError(f"{exc.filename}: missing (is the dataset complete? re-run `udc-render dataset`)") from None
+    black, white = float(sensor["black_level_dn"]), float(sensor["white_level_dn"])
+    return ((dn.astype(np.float32) - black) / (white - black)).astype(np.float32)
+
+
+def load_gt(item_dir: Path) -> np.ndarray:
+    """[3, H, W] float32 ground truth (gt.exr channels R, G, B)."""
+    import OpenEXR
+    path = Path(item_dir) / "gt.exr"
+    if not path.is_file():
+        raise DataError(f"{path}: missing (is the dataset complete? re-run `udc-render dataset`)")
+    with OpenEXR.File(str(path)) as f:
+        ch = f.channels()
+        if "RGB" in ch:  # OpenEXR ≥ 3.3 groups R, G, B into one [H, W, 3] channel
+            return np.ascontiguousarray(np.moveaxis(np.asarray(ch["RGB"].pixels, np.float32), -1, 0))
+        return np.stack([np.asarray(ch[c].pixels, np.float32) for c in "RGB"])
+
+
+def load_pair(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
+    packed, gt = load_packed(pair.folder / pair.display), load_gt(pair.folder)
+    if gt.shape[1:] != (2 * packed.shape[1], 2 * packed.shape[2]):
+        raise DataError(f"{pair.folder}: gt {gt.shape} does not match packed {packed.shape} (expected 2× its size)")
+    return packed, gt
+
+
+def dihedral(a: np.ndarray, mode: int) -> np.ndarray:
+    """One of the 8 flips/transposes of the last two axes: bit 0 transpose, bit 1 flip rows, bit 2 flip columns."""
+    if mode & 1:
+        a = np.swapaxes(a, -1, -2)
+    if mode & 2:
+        a = a[..., ::-1, :]
+    if mode & 4:
+        a = a[..., :, ::-1]
+    return a
+
+
+def augment_crop(packed: np.ndarray, gt: np.ndarray, mode: int, crop_px: int | None, rng: np.random.Generator):
+    """(packed [4, c/2, c/2], gt [3, c, c]): Bayer-preserving transform `mode`, then a random square
+    crop of c = crop_px full-resolution pixels starting on an R site (module doc). A crop larger than
+    the image is capped at its smaller side less 2 px (room for the shift after a flip), so that
+    every crop has the same size whatever the transform. crop_px None: the whole (transformed) frame,
+    less one row/column per flip."""
+    mosaic, target = dihedral(unpack_rggb(packed), mode), dihedral(gt, mode)
+    r_row, r_col = int(bool(mode & 2)), int(bool(mode & 4))  # R moved to odd rows/columns by a flip
+    H, W = mosaic.shape
+    if crop_px is None:
+        ch, cw = (H - r_row) // 2 * 2, (W - r_col) // 2 * 2
+    else:
+        if min(H, W) < 4:
+            raise DataError(f"image {H} × {W} px: too small for crops (at least 4 × 4)")
+        ch = cw = min(crop_px, (min(H, W) - 2) // 2 * 2)
+    y0 = r_row + 2 * int(rng.integers(0, (H - r_row - ch) // 2 + 1))
+    x0 = r_col + 2 * int(rng.integers(0, (W - r_col - cw) // 2 + 1))
+    crop = np.ascontiguousarray(mosaic[y0:y0 + ch, x0:x0 + cw])
+    return pack_rggb(crop), np.ascontiguousarray(target[:, y0:y0 + ch, x0:x0 + cw])
+
+
+class PairDataset(torch.utils.data.Dataset):
+    """Random square crops (crop_px full-resolution pixels, 256 by default) of the pairs, `crops_per_pair`
+    per pair and epoch, with Bayer-preserving augmentation. Deterministic: the crop and transform
+    of index i in epoch e come from SeedSequence([seed, e, i]) (set_epoch), so resumed training
+    sees the same samples. Pairs are read once and kept in memory."""
+
+    def __init__(self, pairs: list[Pair], crop_px: int | None = 256, augment: bool = True, seed: int = 0,
+                 crops_per_pair: int = 1):
+        if not pairs:
+            raise DataError("no pairs to train on: the split is empty")
+        if crop_px is not None and (crop_px < 2 or crop_px % 2):
+            raise DataError(f"crop_px = {crop_px}: expected an even number ≥ 2 (whole RGGB cells)")
+        self.pairs, self.crop_px, self.augment, self.seed = pairs, crop_px, augment, seed
+        self.crops_per_pair, self.epoch, self._cache = crops_per_pair, 0, {}
+
+    def __len__(self):
+        return len(self.pairs) * self.crops_per_pair
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = epoch
+
+    def arrays(self, k: int):
+        if k not in self._cache:
+            self._cache[k] = load_pair(self.pairs[k])
+        return self._cache[k]
+
+    def __getitem__(self, i: int):
+        packed, gt = self.arrays(i % len(self.pairs))
+        rng = np.random.default_rng([self.seed, self.epoch, i])
+        mode = int(rng.integers(0, 8)) if self.augment else 0
+        x, y = augment_crop(packed, gt, mode, self.crop_px, rng)
+        return torch.from_numpy(x), torch.from_numpy(y)

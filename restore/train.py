@@ -1,0 +1,223 @@
+"""Training a restorer (UNet or ResNet) on one display's pairs: the paper's recipe (§5).
+
+    L1 loss (or L1 + (1 − SSIM)), Adam β = (0.9, 0.999), ε = 1e-8, learning rate 1e-4 halved at
+    half the schedule (the paper: 400 epochs, halved after 200), random 256-px crops with
+    Bayer-preserving augmentation (restore.data).
+
+An epoch is `crops_per_pair` random crops of every training pair. The run folder holds:
+    train.json       the settings (a different run on the same folder is refused)
+    checkpoint.pt    model, optimiser, epochs done, loss log (atomic; written every checkpoint_s
+                     seconds at an epoch's end and at the end): a re-run resumes from it
+    model.pt         the final weights and how to rebuild the model (what `evaluate` loads)
+    loss.csv, loss.png   the loss log (mean training loss per epoch, validation PSNR)
+Resumed training gives the same weights as an uninterrupted run on the same machine and threads:
+sample order and crops are seeded by (seed, epoch).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from restore.data import PairDataset, list_pairs, load_pair, read_manifest
+from restore.losses import loss_fn
+from restore.models import build_model, model_config
+from udc_render.fileio import atomic_path, csv_text, save_figure, save_json, save_text
+
+LOG_COLUMNS = ["epoch", "step", "lr", "loss", "val_psnr_db", "seconds"]
+
+
+class TrainError(ValueError):
+    """Training settings or a run folder that cannot be used; one line."""
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    """Everything that decides the trained weights (recorded in train.json)."""
+    model: dict
+    display: str
+    epochs: int = 400
+    batch: int = 4
+    crop_px: int = 256
+    crops_per_pair: int = 1
+    lr: float = 1e-4
+    loss: str = "l1"
+    seed: int = 0
+    data_fingerprint: str = ""
+
+
+def data_fingerprint(data_dir: Path) -> str:
+    """sha256 of the dataset's manifest: which items, splits and displays (not where the folder is)."""
+    read_manifest(data_dir)  # a clear error when it is not a dataset folder
+    return hashlib.sha256((Path(data_dir) / "manifest.jsonl").read_bytes()).hexdigest()[:16]
+
+
+def pick_device(name: str = "auto") -> torch.device:
+    """'auto': the GPU when one is present, else the CPU."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise TrainError(f"--device = {name!r}: no CUDA GPU here (use auto or cpu)")
+    return torch.device(name)
+
+
+def learning_rate(settings: TrainSettings, epoch: int) -> float:
+    """lr, halved from epoch ⌊epochs / 2⌋ on."""
+    return settings.lr * (0.5 if epoch >= settings.epochs // 2 else 1.0)
+
+
+def predict(model: torch.nn.Module, packed: np.ndarray, device: torch.device) -> np.ndarray:
+    """[3, H, W] float32 restored image of one packed RAW [4, H/2, W/2]."""
+    with torch.inference_mode():
+        x = torch.from_numpy(np.ascontiguousarray(packed, np.float32))[None].to(device)
+        return model(x)[0].float().cpu().numpy()
+
+
+def validation_psnr(model, pairs, device) -> float | None:
+    """Mean PSNR (dB, linear units clipped to [0, 1], whole frame) over the validation pairs."""
+    if not pairs:
+        return None
+    model.eval()
+    vals = []
+    for p in pairs:
+        packed, gt = load_pair(p)
+        err = np.mean((np.clip(predict(model, packed, device), 0, 1) - np.clip(gt, 0, 1)) ** 2)
+        vals.append(10 * math.log10(1 / max(err, 1e-20)))
+    model.train()
+    return float(np.mean(vals))
+
+
+def _check_run_folder(out: Path, settings: TrainSettings) -> None:
+    path = out / "train.json"
+    if path.is_file():
+        old = json.loads(path.read_text())
+        new = json.loads(json.dumps(asdict(settings)))
+        diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+        if diff:
+            k = diff[0]
+            raise TrainError(f"{path}: {k} = {new.get(k)!r} differs from this folder's run ({old.get(k)!r}): "
+                             "use another --out or the same settings to resume")
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        save_json(path, asdict(settings))
+
+
+def _save_checkpoint(out: Path, model, opt, epoch: int, step: int, log: list, settings: TrainSettings) -> None:
+    state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "epoch": epoch, "step": step, "log": log,
+             "model_config": model_config(model), "settings": asdict(settings)}
+    with atomic_path(out / "checkpoint.pt", ".pt") as tmp:
+        torch.save(state, tmp)
+    save_text(out / "loss.csv", csv_text(log, LOG_COLUMNS))
+    plot_loss(log, out / "loss.png")
+
+
+def plot_loss(log: list, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    if not log:
+        return
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    ax.semilogy([r["epoch"] for r in log], [r["loss"] for r in log], label="training loss")
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("loss")
+    val = [(r["epoch"], r["val_psnr_db"]) for r in log if r.get("val_psnr_db") is not None]
+    if val:
+        ax2 = ax.twinx()
+        ax2.plot(*zip(*val), "o-", color="C1", label="validation PSNR")
+        ax2.set_ylabel("validation PSNR (dB)")
+    ax.set_title("training log")
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "auto", checkpoint_s: float = 60.0,
+          val_every: int = 10, progress: bool = True) -> dict:
+    """Train (or resume) in `out`; returns a summary (epochs, final loss, validation PSNR, seconds)."""
+    from tqdm import tqdm
+    data_dir, out = Path(data_dir), Path(out)
+    if settings.epochs < 1 or settings.batch < 1:
+        raise TrainError(f"epochs = {settings.epochs}, batch = {settings.batch}: expected integers ≥ 1")
+    loss_of = loss_fn(settings.loss)
+    pairs = list_pairs(data_dir, "train", [settings.display])
+    val_pairs = list_pairs(data_dir, "val", [settings.display])
+    _check_run_folder(out, settings)
+    dev = pick_device(device)
+    torch.manual_seed(settings.seed)
+    model = build_model(settings.model).to(dev)
+    opt = torch.optim.Adam(model.parameters(), lr=settings.lr, betas=(0.9, 0.999), eps=1e-8)
+    start_epoch, step, log = 0, 0, []
+    ckpt = out / "checkpoint.pt"
+    if ckpt.is_file():
+        state = torch.load(ckpt, map_location=dev, weights_only=False)
+        model.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+        start_epoch, step, log = state["epoch"], state["step"], state["log"]
+    data = PairDataset(pairs, settings.crop_px, augment=True, seed=settings.seed,
+                       crops_per_pair=settings.crops_per_pair)
+    t_start, t_ckpt = time.perf_counter(), time.perf_counter()
+    model.train()
+    bar = tqdm(range(start_epoch, settings.epochs), initial=start_epoch, total=settings.epochs, unit="epoch",
+               desc=f"train {settings.model['type']} {settings.display}", disable=not progress)
+    for epoch in bar:
+        for group in opt.param_groups:
+            group["lr"] = learning_rate(settings, epoch)
+        data.set_epoch(epoch)
+        order = torch.Generator().manual_seed(settings.seed * 1_000_003 + epoch)
+        loader = torch.utils.data.DataLoader(data, batch_size=settings.batch, shuffle=True, generator=order)
+        losses = []
+        for x, y in loader:
+            x, y = x.to(dev), y.to(dev)
+            loss = loss_of(model(x), y)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            losses.append(loss.item())
+            step += 1
+        if not all(math.isfinite(v) for v in losses):
+            raise TrainError(f"epoch {epoch + 1}: the loss is not finite ({losses[-1]}); lower the learning rate")
+        last = epoch + 1 == settings.epochs
+        val = validation_psnr(model, val_pairs, dev) if (last or (epoch + 1) % val_every == 0) else None
+        log.append({"epoch": epoch + 1, "step": step, "lr": learning_rate(settings, epoch),
+                    "loss": float(np.mean(losses)), "val_psnr_db": val,
+                    "seconds": round(time.perf_counter() - t_start, 2)})
+        bar.set_postfix(loss=f"{log[-1]['loss']:.4g}")
+        if last or time.perf_counter() - t_ckpt >= checkpoint_s:
+            _save_checkpoint(out, model, opt, epoch + 1, step, log, settings)
+            t_ckpt = time.perf_counter()
+    bar.close()
+    final = {"model_config": model_config(model), "state_dict": model.state_dict(), "display": settings.display,
+             "settings": asdict(settings), "epochs_done": settings.epochs}
+    with atomic_path(out / "model.pt", ".pt") as tmp:
+        torch.save(final, tmp)
+    summary = {"epochs": settings.epochs, "steps": step, "final_loss": log[-1]["loss"] if log else None,
+               "val_psnr_db": next((r["val_psnr_db"] for r in reversed(log) if r["val_psnr_db"] is not None), None),
+               "train_pairs": len(pairs), "val_pairs": len(val_pairs), "device": str(dev),
+               "seconds_this_run": round(time.perf_counter() - t_start, 1)}
+    save_json(out / "train_summary.json", summary)
+    return summary
+
+
+def load_model(path: Path, device: str = "auto") -> tuple[torch.nn.Module, dict]:
+    """(model in eval mode, its record) from model.pt or checkpoint.pt."""
+    path = Path(path)
+    if not path.is_file():
+        raise TrainError(f"--model = {str(path)!r}: no such checkpoint file (expected model.pt or checkpoint.pt "
+                         "from `udc-render train`, or dep)")
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=False)
+        cfg = state["model_config"]
+        weights = state["state_dict"] if "state_dict" in state else state["model"]
+    except Exception as exc:  # any unreadable or foreign file
+        raise TrainError(f"{path}: not a udc-render checkpoint ({type(exc).__name__}: {str(exc).splitlines()[0]})") from None
+    model = build_model(cfg, source=str(path))
+    model.load_state_dict(weights)
+    dev = pick_device(device)
+    return model.to(dev).eval(), {"model_config": cfg, "display": state.get("display") or state["settings"]["display"],
+                                  "settings": state["settings"], "device": str(dev)}

@@ -1,0 +1,153 @@
+"""Training and scoring restorers on synthetic pairs (tiny models, a few CPU seconds)."""
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import write_pairs
+from restore.data import list_pairs, load_pair
+from restore.train import TrainError, TrainSettings, load_model, predict, train
+from udc_render.capture_io import demosaic_bilinear
+from udc_render.cli import main
+from udc_render.sensor import unpack_rggb
+
+TINY_UNET = {"type": "unet", "width": 8, "depth": 3}
+TINY_RESNET = {"type": "resnet", "features": 8, "blocks": 2}
+
+
+@pytest.fixture(autouse=True)
+def two_threads():
+    old = torch.get_num_threads()
+    torch.set_num_threads(2)
+    yield
+    torch.set_num_threads(old)
+
+
+def _psnr(a, b):
+    return 10 * math.log10(1 / np.mean((np.clip(a, 0, 1) - b) ** 2))
+
+
+def test_tiny_unet_learns_and_beats_the_identity_on_held_out_pairs(tmp_path):
+    """Noisy (σ 0.1), blurred, γ = 0.5 captures of smooth content: 120 Adam steps of a width-8 UNet
+    beat the γ-corrected degraded input by > 2 dB on the test split (measured: +3.5 to +4.5 dB)."""
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 8), ("test", 2)), blur_px=3, noise=0.1)
+    s = TrainSettings(model=TINY_UNET, display="blur", epochs=30, batch=4, crop_px=48, crops_per_pair=2, lr=3e-3)
+    summary = train(data, tmp_path / "run", s, progress=False)
+    log = json.loads(json.dumps([r for r in torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)["log"]]))
+    assert summary["steps"] == 120 and log[-1]["loss"] < 0.5 * log[0]["loss"]
+    model, record = load_model(tmp_path / "run" / "model.pt", "cpu")
+    assert record["display"] == "blur"
+    for p in list_pairs(data, "test", ["blur"]):
+        packed, gt = load_pair(p)
+        identity = demosaic_bilinear(unpack_rggb(packed)) / 0.5
+        assert _psnr(predict(model, packed, torch.device("cpu")), gt) > _psnr(identity, gt) + 2
+    for f in ("train.json", "checkpoint.pt", "model.pt", "loss.csv", "loss.png", "train_summary.json"):
+        assert (tmp_path / "run" / f).is_file()
+
+
+def test_resumed_training_gives_the_uninterrupted_weights(tmp_path, monkeypatch):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 4),), size_px=(32, 32))
+    s = TrainSettings(model=TINY_RESNET, display="blur", epochs=4, batch=2, crop_px=16, lr=1e-3)
+    train(data, tmp_path / "straight", s, progress=False)
+    import restore.train as T
+    real = T.learning_rate
+
+    def stop_at_third_epoch(settings, epoch):
+        if epoch == 2:
+            raise KeyboardInterrupt
+        return real(settings, epoch)
+    monkeypatch.setattr(T, "learning_rate", stop_at_third_epoch)
+    with pytest.raises(KeyboardInterrupt):
+        train(data, tmp_path / "resumed", s, checkpoint_s=0, progress=False)
+    assert torch.load(tmp_path / "resumed" / "checkpoint.pt", weights_only=False)["epoch"] == 2
+    monkeypatch.setattr(T, "learning_rate", real)
+    train(data, tmp_path / "resumed", s, progress=False)
+    a = torch.load(tmp_path / "straight" / "model.pt", weights_only=False)["state_dict"]
+    b = torch.load(tmp_path / "resumed" / "model.pt", weights_only=False)["state_dict"]
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_learning_rate_is_halved_at_half_the_schedule(tmp_path):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
+    s = TrainSettings(model=TINY_RESNET, display="blur", epochs=4, batch=2, crop_px=16, lr=1e-3)
+    train(data, tmp_path / "run", s, progress=False)
+    log = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)["log"]
+    assert [r["lr"] for r in log] == [1e-3, 1e-3, 5e-4, 5e-4]
+    opt = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)["optimizer"]["param_groups"][0]
+    assert opt["betas"] == (0.9, 0.999) and opt["eps"] == 1e-8
+
+
+def test_a_different_run_in_the_same_folder_is_refused(tmp_path):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
+    s = TrainSettings(model=TINY_RESNET, display="blur", epochs=1, batch=2, crop_px=16)
+    train(data, tmp_path / "run", s, progress=False)
+    with pytest.raises(TrainError, match="lr = 0.001 differs"):
+        train(data, tmp_path / "run", TrainSettings(model=TINY_RESNET, display="blur", epochs=1, batch=2,
+                                                    crop_px=16, lr=1e-3), progress=False)
+
+
+def test_train_and_evaluate_commands(tmp_path, capsys):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 3), ("test", 2)), size_px=(48, 64))
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text('type = "unet"\nwidth = 4\ndepth = 2\n')
+    assert main(["train", "--data", str(data), "--model", "unet", "--config", str(cfg), "--display", "blur",
+                 "--out", str(tmp_path / "run"), "--epochs", "2", "--crop-px", "32", "--quiet"]) == 0
+    assert "trained unet on 3 blur pairs, 2 epochs" in capsys.readouterr().out
+    out = tmp_path / "eval"
+    assert main(["evaluate", "--data", str(data), "--model", "input", "--display", "blur", "--out", str(out),
+                 "--quiet", "--previews", "1"]) == 0
+    assert main(["evaluate", "--data", str(data), "--model", str(tmp_path / "run" / "model.pt"), "--out", str(out),
+                 "--quiet", "--previews", "1"]) == 0
+    results = json.loads((out / "results.json").read_text())
+    assert list(results["methods"]) == ["input", "unet"]
+    unet = results["methods"]["unet"]
+    assert unet["params"] == sum(p.numel() for p in load_model(tmp_path / "run" / "model.pt", "cpu")[0].parameters())
+    assert unet["macs_g"] > 0 and unet["displays"]["blur"]["images"] == 2
+    r = results["methods"]["input"]["displays"]["blur"]
+    assert 10 < r["psnr_db"] < 60 and 0 < r["ssim"] < 1 and 0 <= r["lpips"] < 1 and r["ms_per_mp"] > 0
+    md = (out / "results.md").read_text()
+    assert md.index("| input |") < md.index("| unet |") and "Protocol:" in md
+    assert (out / "results.csv").read_text().startswith("method,display,params")
+    assert (out / "unet" / "previews" / "blur_item_000003_blur.png").is_file()
+
+
+def test_command_errors_are_one_line(tmp_path, capsys):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 1),), size_px=(16, 16))
+    bad = tmp_path / "bad.toml"
+    bad.write_text('type = "unet"\nwidht = 4\n')
+    cases = [
+        (["train", "--data", str(data), "--model", "unet", "--config", str(bad), "--display", "blur", "--out",
+          str(tmp_path / "r")], "widht = 4"),
+        (["train", "--data", str(data), "--model", "unet", "--display", "poled", "--out", str(tmp_path / "r")],
+         "display = 'poled' not in item"),
+        (["train", "--data", str(tmp_path), "--model", "unet", "--display", "blur", "--out", str(tmp_path / "r")],
+         "no manifest.jsonl"),
+        (["train", "--data", str(data), "--model", "unet", "--display", "blur", "--out", str(tmp_path / "r"),
+          "--crop-px", "33"], "--crop-px = 33"),
+        (["evaluate", "--data", str(data), "--model", str(tmp_path / "nope.pt"), "--out", str(tmp_path / "e")],
+         "no such checkpoint file"),
+        (["evaluate", "--data", str(data), "--model", str(bad), "--out", str(tmp_path / "e")],
+         "not a udc-render checkpoint"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert message in err and len(err.splitlines()) == 1 and "Traceback" not in err
+
+
+def test_metric_protocol_on_identical_and_shifted_images():
+    from restore.evaluate import BORDER_PX, display_referred, image_metrics
+    from restore.lpips import LPIPS
+    from udc_render.capture_io import daylight_balance
+    rng = np.random.default_rng(0)
+    gt = rng.random((3, 96, 128)).astype(np.float32) * 0.8
+    bal = daylight_balance()
+    assert display_referred(gt, bal).shape == (3, 96 - 2 * BORDER_PX, 128 - 2 * BORDER_PX)
+    m = image_metrics(gt, gt, bal, LPIPS())
+    assert m["psnr_db"] == math.inf and m["ssim"] == pytest.approx(1.0) and m["lpips"] == pytest.approx(0, abs=1e-6)
+    worse = image_metrics(gt * 0.5, gt, bal, LPIPS())
+    assert worse["psnr_db"] < 20 and worse["ssim"] < 1 and worse["lpips"] > 0
+    # values outside [0, 1] are clipped by the protocol: 10 × white scores like white
+    assert image_metrics(np.full_like(gt, 10), np.full_like(gt, 1), bal, LPIPS())["psnr_db"] == math.inf
