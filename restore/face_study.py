@@ -87,7 +87,7 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
     with atomic_path(out / "chart.png", ".png") as tmp:
         iio.imwrite(tmp, chart)
     scene = load_scene("monitor")
-    scene = replace(scene, content=replace(scene.content, image=str(out / "chart.png")),
+    scene = replace(scene, content=replace(scene.content, image=str((out / "chart.png").resolve())),
                     sensor=replace(scene.sensor, width_px=int(sensor_px[0]), height_px=int(sensor_px[1])))
     result = synthesize(render_scene(scene, progress=progress), scene, [preset(n) for n in ("glass", "toled", "poled")],
                         SynthConfig(seed=seed), progress=progress)

@@ -73,9 +73,11 @@ def learning_rate(settings: TrainSettings, epoch: int) -> float:
 
 
 def predict(model: torch.nn.Module, packed: np.ndarray, device: torch.device) -> np.ndarray:
-    """[3, H, W] float32 restored image of one packed RAW [4, H/2, W/2]."""
+    """[3, H, W] float32 restored image of one packed RAW [4, H/2, W/2] (channels_last: 1.4–1.5× faster
+    inference on the CPU, benchmarks/README.md)."""
     with torch.inference_mode():
         x = torch.from_numpy(np.ascontiguousarray(packed, np.float32))[None].to(device)
+        x = x.to(memory_format=torch.channels_last)
         return model(x)[0].float().cpu().numpy()
 
 
@@ -219,5 +221,5 @@ def load_model(path: Path, device: str = "auto") -> tuple[torch.nn.Module, dict]
     model = build_model(cfg, source=str(path))
     model.load_state_dict(weights)
     dev = pick_device(device)
-    return model.to(dev).eval(), {"model_config": cfg, "display": state.get("display") or state["settings"]["display"],
+    return model.to(dev, memory_format=torch.channels_last).eval(), {"model_config": cfg, "display": state.get("display") or state["settings"]["display"],
                                   "settings": state["settings"], "device": str(dev)}
