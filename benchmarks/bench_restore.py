@@ -22,7 +22,6 @@ import argparse
 import json
 import os
 import platform
-import statistics
 import sys
 import time
 from pathlib import Path
@@ -30,17 +29,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from bench_capture import _timed  # benchmarks/ is on sys.path when a benchmark runs as a script
 from restore.models import RESNET_CONFIG, UNET_CONFIG, build_model
 
 
 def _timed_ms(fn, repeats: int) -> float:
-    fn()
-    times = []
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return 1e3 * statistics.median(times)
+    """Median wall time in ms after a warm-up (bench_capture's timer)."""
+    return 1e3 * _timed(fn, repeats)
 
 
 def model_cases(size: tuple[int, int], repeats: int) -> list[dict]:

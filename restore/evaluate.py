@@ -65,7 +65,7 @@ class Restorer:
     """A method under test: restore(packed, pair) -> [3, H, W] and its description."""
 
     def __init__(self, method: str, pairs_by_display: dict, device: str = "auto", denoiser: str | None = None,
-                 name: str | None = None):
+                 name: str | None = None, loaded: tuple | None = None):
         self.method, self.device = method, device
         self.model, self.record, self.known = None, {}, {}
         if method in ("input", "dep"):
@@ -77,7 +77,7 @@ class Restorer:
             self.denoiser = denoiser
         else:
             from restore.train import load_model
-            self.model, self.record = load_model(Path(method), device)
+            self.model, self.record = loaded or load_model(Path(method), device)
             self.name = name or self.record["model_config"]["type"]
 
     def restore(self, packed: np.ndarray, pair: Pair) -> tuple[np.ndarray, float, dict]:
@@ -140,16 +140,17 @@ def evaluate(data_dir: Path, method: str, out: Path, split: str = "test", displa
     from tqdm import tqdm
     from restore.lpips import LPIPS
     data_dir, out = Path(data_dir), Path(out)
+    loaded = None
+    if method not in ("input", "dep"):
+        from restore.train import load_model
+        loaded = load_model(Path(method), device)
     if displays is None:
-        displays = dataset_displays(data_dir)
-        if method not in ("input", "dep"):
-            from restore.train import load_model
-            displays = [load_model(Path(method), "cpu")[1]["display"]]
+        displays = [loaded[1]["display"]] if loaded else dataset_displays(data_dir)
     pairs_by_display = {d: list_pairs(data_dir, split, [d]) for d in displays}
     for d, pairs in pairs_by_display.items():
         if not pairs:
             raise DataError(f"{data_dir}: split = {split!r} has no items (display {d})")
-    restorer = Restorer(method, pairs_by_display, device, denoiser, name)
+    restorer = Restorer(method, pairs_by_display, device, denoiser, name, loaded)
     lp, balance = LPIPS().eval(), daylight_balance()
     entry = dict(restorer.describe(), name=restorer.name, split=split, displays={})
     folder = out / restorer.name

@@ -106,7 +106,8 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
             model, record = load_model(Path(models[d]), "auto")
             images[(record["model_config"]["type"], d)] = predict(model, packed, next(model.parameters()).device)
             del model
-            torch.cuda.empty_cache() if torch.cuda.is_available() else None
+            if torch.cuda.is_available():
+                torch.cuda.empty_cache()
     rows, panels = [], []
     for (condition, d), rgb in images.items():
         img = preview_srgb(rgb, balance)
