@@ -65,6 +65,8 @@ def register(sub) -> dict:
     e.add_argument("--display", help="comma-separated displays [a checkpoint's own; all of the dataset's for dep]")
     e.add_argument("--name", help="row name in the tables [input, dep, or the model type]")
     e.add_argument("--denoiser", help="DeP's denoiser [restore.dep's default]")
+    e.add_argument("--kernel-px", type=_positive("--kernel-px", int),
+                   help="DeP's kernel size at the packed-plane pitch, odd [half the synthesis kernel: 257]")
     e.add_argument("--previews", type=int, default=4, help="side-by-side previews per display [4]")
     e.add_argument("--device", default="auto", help="auto, cpu, cuda [auto]")
     e.add_argument("--threads", type=_positive("--threads", int), help="CPU threads for torch")
@@ -106,7 +108,7 @@ def run_evaluate(args) -> int:
         _threads(args.threads)
         displays = args.display.split(",") if args.display else None
         entry = evaluate(args.data, args.model, args.out, args.split, displays, args.name, args.device,
-                         args.previews, args.denoiser, progress=not args.quiet)
+                         args.previews, args.denoiser, progress=not args.quiet, kernel_px=args.kernel_px)
     for d, r in entry["displays"].items():
         print(f"{entry['name']} {d}: PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.4f}, LPIPS {r['lpips']:.4f}, "
               f"{r['ms_per_mp']:.0f} ms/MP over {r['images']} images")

@@ -65,14 +65,15 @@ class Restorer:
     """A method under test: restore(packed, pair) -> [3, H, W] and its description."""
 
     def __init__(self, method: str, pairs_by_display: dict, device: str = "auto", denoiser: str | None = None,
-                 name: str | None = None, loaded: tuple | None = None):
+                 name: str | None = None, loaded: tuple | None = None, kernel_px: int | None = None):
         self.method, self.device = method, device
         self.model, self.record, self.known = None, {}, {}
         if method in ("input", "dep"):
             from restore.known import known_gamma_rggb, known_kernels_rggb, measured_gamma_rggb
             self.name = name or method
             for d, pairs in pairs_by_display.items():
-                self.known[d] = ({"gamma": known_gamma_rggb(pairs[0]), "kernels": known_kernels_rggb(pairs[0])}
+                self.known[d] = ({"gamma": known_gamma_rggb(pairs[0]),
+                                  "kernels": known_kernels_rggb(pairs[0], kernel_px)}
                                  if method == "dep" else {"gamma": measured_gamma_rggb(pairs), "kernels": None})
             self.denoiser = denoiser
         else:
@@ -135,7 +136,7 @@ def preview_panel(panels: list[tuple[str, np.ndarray]], balance: np.ndarray, pat
 
 def evaluate(data_dir: Path, method: str, out: Path, split: str = "test", displays: list[str] | None = None,
              name: str | None = None, device: str = "auto", previews: int = 4, denoiser: str | None = None,
-             progress: bool = True) -> dict:
+             progress: bool = True, kernel_px: int | None = None) -> dict:
     """Score `method` on `split` for `displays`; merge into <out>/results.json; returns its entry."""
     from tqdm import tqdm
     from restore.lpips import LPIPS
@@ -150,7 +151,7 @@ def evaluate(data_dir: Path, method: str, out: Path, split: str = "test", displa
     for d, pairs in pairs_by_display.items():
         if not pairs:
             raise DataError(f"{data_dir}: split = {split!r} has no items (display {d})")
-    restorer = Restorer(method, pairs_by_display, device, denoiser, name, loaded)
+    restorer = Restorer(method, pairs_by_display, device, denoiser, name, loaded, kernel_px)
     lp, balance = LPIPS().eval(), daylight_balance()
     entry = dict(restorer.describe(), name=restorer.name, split=split, displays={})
     folder = out / restorer.name

@@ -23,7 +23,7 @@ import numpy as np
 from psf import Lens
 from psf.cache import cached
 from psf.spectral import channel_kernels
-from restore.data import Pair, load_pair
+from restore.data import DataError, Pair, load_pair
 from udc_render.capture_io import mosaic_of
 from udc_render.displays import load_display, preset, white_weights
 from udc_render.sensor import pack_rggb
@@ -31,7 +31,11 @@ from udc_render.sensor import pack_rggb
 
 def capture_display(pair: Pair):
     """The Display a pair was captured through (preset or the display file it came from)."""
-    d = json.loads((pair.folder / pair.display / "capture.json").read_text())["display"]
+    path = pair.folder / pair.display / "capture.json"
+    d = json.loads(path.read_text()).get("display")
+    if d is None:
+        raise DataError(f"{path}: no display record: DeP needs the display the capture was made through "
+                        "(captures written by `udc-render dataset` or `synth` have one)")
     return preset(d["name"]) if d["source"] == "preset" else load_display(d["source"])
 
 
@@ -39,6 +43,8 @@ def _channel_kernels(pair: Pair, size_px: int | None, use_cache: bool):
     synth = json.loads((pair.folder / "synth.json").read_text())
     sensor = json.loads((pair.folder / pair.display / "capture.json").read_text())["sensor"]
     size = size_px or (synth["kernel_size_px"] // 2) | 1
+    if size % 2 == 0:
+        raise DataError(f"kernel_px = {size}: expected an odd number of pixels (a centred kernel)")
     ks, _ = cached(channel_kernels, "channel", capture_display(pair).layout, Lens(**synth["lens"]), use_cache,
                    camera=sensor["camera"], illuminant="D65", step_nm=None, pixel_um=2 * float(sensor["pitch_um"]),
                    size_px=size, distance_mm=0.0, precision="float32")

@@ -151,3 +151,10 @@ def test_metric_protocol_on_identical_and_shifted_images():
     assert worse["psnr_db"] < 20 and worse["ssim"] < 1 and worse["lpips"] > 0
     # values outside [0, 1] are clipped by the protocol: 10 × white scores like white
     assert image_metrics(np.full_like(gt, 10), np.full_like(gt, 1), bal, LPIPS())["psnr_db"] == math.inf
+
+
+def test_dep_on_captures_without_a_display_record_is_a_one_line_error(pairs_dir, tmp_path, capsys):
+    assert main(["evaluate", "--data", str(pairs_dir), "--model", "dep", "--display", "blur",
+                 "--out", str(tmp_path / "e"), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "no display record" in err and len(err.splitlines()) == 1
