@@ -16,6 +16,7 @@ small frames reads low: the wide kernels carry light out of the frame.
 """
 from __future__ import annotations
 
+import functools
 import json
 
 import numpy as np
@@ -39,6 +40,7 @@ def capture_display(pair: Pair):
     return preset(d["name"]) if d["source"] == "preset" else load_display(d["source"])
 
 
+@functools.lru_cache(maxsize=8)  # γ and the kernels of one pair read the same KernelSet
 def _channel_kernels(pair: Pair, size_px: int | None, use_cache: bool):
     synth = json.loads((pair.folder / "synth.json").read_text())
     sensor = json.loads((pair.folder / pair.display / "capture.json").read_text())["sensor"]
