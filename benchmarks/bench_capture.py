@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 
-from udc_render.fileio import csv_text, save_text
+from udc_render.io.files import csv_text, save_text
 from udc_render.optics import apply_kernels, convolve_bands
 from udc_render.render import BandImage
 from udc_render.sensor import SensorConfig, capture

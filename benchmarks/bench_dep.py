@@ -29,8 +29,9 @@ import numpy as np
 import scipy.signal
 
 from restore.dep import DENOISERS, DePError, dep_restore
-from udc_render.capture_io import demosaic_bilinear, mosaic_of, psnr_db
-from udc_render.fileio import csv_text, save_figure, save_text
+from udc_render.sensor import demosaic_bilinear, mosaic_of
+from udc_render.metrics import psnr_db
+from udc_render.io.files import csv_text, save_figure, save_text
 from udc_render.sensor import pack_rggb, unpack_rggb
 
 GAMMA, SHOT, READ = 0.97, 1e-3, 1e-6

@@ -70,10 +70,10 @@ def worker(spec: dict) -> dict:
     from dataclasses import replace
 
     from udc_render.render import render_scene
-    from udc_render.rig import camera_geometry
-    from udc_render.scene import SCENES_DIR, Sensor, load_scene
+    from udc_render.scene.geometry import camera_geometry
+    from udc_render.scene import scenes_dir, Sensor, load_scene
 
-    scene = load_scene(SCENES_DIR / f"{spec['scene']}.toml")
+    scene = load_scene(scenes_dir() / f"{spec['scene']}.toml")
     if spec["sensor"]:
         scene = replace(scene, sensor=Sensor(*spec["sensor"]))
     scene = scene.with_render(spp=spec["spp"], noise=None, path=spec["path"], depth=False)
@@ -140,9 +140,9 @@ def run_case(case, repeats: int, quick: bool, stop_after_s: float) -> dict:
 
 
 def _full_grid(scene: str) -> tuple[int, int]:
-    from udc_render.rig import camera_geometry
-    from udc_render.scene import SCENES_DIR, load_scene
-    g = camera_geometry(load_scene(SCENES_DIR / f"{scene}.toml"))
+    from udc_render.scene.geometry import camera_geometry
+    from udc_render.scene import scenes_dir, load_scene
+    g = camera_geometry(load_scene(scenes_dir() / f"{scene}.toml"))
     return g.width_px, g.height_px
 
 
@@ -220,7 +220,7 @@ def ratios(rows: list[dict], study: dict | None) -> list[str]:
 def environment(load0: float, seconds: float) -> str:
     from importlib.metadata import version
 
-    from udc_render.variants import choose_backend
+    from udc_render.render.variants import choose_backend
     llvm = choose_backend().libllvm or "none working (llvm cases fell back to scalar)"
     return (f"Python {sys.version.split()[0]}, mitsuba {version('mitsuba')}, drjit {version('drjit')}, libLLVM "
             f"{llvm}; {os.cpu_count()} CPUs; 1-min load average {load0:.1f} at start, {os.getloadavg()[0]:.1f} at "

@@ -32,8 +32,8 @@ def cache_key(name: str, display, lens, **kwargs) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
-def load(key: str) -> KernelSet | None:
-    path = cache_dir() / f"{key}.npz"
+def load(key: str, folder: Path | None = None) -> KernelSet | None:
+    path = Path(folder or cache_dir()) / f"{key}.npz"
     if not path.is_file():
         return None
     try:
@@ -51,8 +51,8 @@ def load(key: str) -> KernelSet | None:
         return None  # a damaged entry is recomputed
 
 
-def store(key: str, ks: KernelSet) -> None:
-    folder = cache_dir()
+def store(key: str, ks: KernelSet, folder: Path | None = None) -> None:
+    folder = Path(folder or cache_dir())
     folder.mkdir(parents=True, exist_ok=True)
     arrays = {f.name: getattr(ks, f.name) for f in fields(KernelSet) if getattr(ks, f.name) is not None}
     arrays["params"] = np.array(json.dumps(ks.params))
@@ -67,15 +67,17 @@ def store(key: str, ks: KernelSet) -> None:
         raise
 
 
-def cached(fn, name: str, display, lens, use_cache: bool = True, **kwargs) -> tuple[KernelSet, bool]:
-    """fn(display, lens, **kwargs) through the cache; returns (kernels, came_from_cache)."""
+def cached(fn, name: str, display, lens, use_cache: bool = True, *, cache_dir: Path | str | None = None,
+           **kwargs) -> tuple[KernelSet, bool]:
+    """fn(display, lens, **kwargs) through the cache in `cache_dir` (None: cache_dir()'s default);
+    returns (kernels, came_from_cache)."""
     if not use_cache:
         return fn(display, lens, **kwargs), False
     # Callables (progress bars, weight functions) are named by other arguments (weight_name).
     key = cache_key(name, display, lens, **{k: v for k, v in kwargs.items() if not callable(v)})
-    hit = load(key)
+    hit = load(key, cache_dir)
     if hit is not None:
         return hit, True
     ks = fn(display, lens, **kwargs)
-    store(key, ks)
+    store(key, ks, cache_dir)
     return ks, False

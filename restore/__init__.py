@@ -1,1 +1,11 @@
-"""Restoration (DeP, UNet, ResNet) on rendered pairs: not built yet, see issue 5."""
+"""Restoration on rendered pairs: DeP (denoise, ÷γ, Wiener deconvolution, demosaic), the UNet and the
+ResNet of the paper, training, evaluation under a stated metric protocol, LPIPS and MTCNN.
+
+    data.py      pairs of a dataset folder as a torch Dataset (Bayer-preserving crops)
+    models.py    UNet, ResNet, the model registry and TOML configs; counting.py: parameters and MACs
+    dep.py       DeP; known.py: the kernels and γ DeP may know
+    train.py     training with atomic checkpoints and bit-identical resume; losses.py
+    evaluate.py  PSNR/SSIM/LPIPS, parameters, MACs, ms/MP, the paper's table layout
+    lpips.py     LPIPS (AlexNet) in torch; mtcnn.py: MTCNN face detection
+    studies/     the face-detection study and the results loop (RESULTS.md)
+"""

@@ -22,11 +22,12 @@ import numpy as np
 import torch
 
 from udc_render.sensor import pack_rggb, unpack_rggb
+from udc_render.errors import UdcError
 
 SPLITS = ("train", "val", "test")
 
 
-class DataError(ValueError):
+class DataError(UdcError):
     """A dataset folder the restorers cannot read; one line."""
 
 

@@ -32,8 +32,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from udc_render.capture_io import demosaic_bilinear
+from udc_render.sensor import demosaic_bilinear
 from udc_render.sensor import unpack_rggb
+from udc_render.errors import UdcError
 
 DENOISERS = ("nlm", "wavelet", "bm3d", "none")
 BOUNDARIES = ("reflect", "symmetric", "edge", "taper")
@@ -44,7 +45,7 @@ FILL_LAMBDA = 1e-2
 _DB2_HIGH = np.array([-0.48296291314469025, 0.836516303737469, -0.22414386804185735, -0.12940952255092145])
 
 
-class DePError(ValueError):
+class DePError(UdcError):
     """A bad DeP argument; one line naming the argument, its value and what is allowed."""
 
 

@@ -25,9 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from restore.data import DataError, Pair, dataset_displays, list_pairs, load_pair
-from udc_render.band_io import encode_srgb
-from udc_render.capture_io import daylight_balance, demosaic_bilinear
-from udc_render.fileio import csv_text, save_figure, save_json, save_text
+from udc_render.io.previews import encode_srgb
+from udc_render.io.previews import daylight_balance
+from udc_render.sensor import demosaic_bilinear
+from udc_render.io.files import csv_text, save_figure, save_json, save_text
 from udc_render.sensor import unpack_rggb
 
 BORDER_PX = 16

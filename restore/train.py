@@ -28,12 +28,13 @@ import torch
 from restore.data import PairDataset, list_pairs, load_pair, read_manifest
 from restore.losses import loss_fn
 from restore.models import build_model, model_config
-from udc_render.fileio import atomic_path, csv_text, save_figure, save_json, save_text
+from udc_render.io.files import atomic_path, csv_text, save_figure, save_json, save_text
+from udc_render.errors import UdcError
 
 LOG_COLUMNS = ["epoch", "step", "lr", "loss", "val_psnr_db", "seconds"]
 
 
-class TrainError(ValueError):
+class TrainError(UdcError):
     """Training settings or a run folder that cannot be used; one line."""
 
 

@@ -209,8 +209,8 @@ def write_pairs(root, splits=(("train", 6), ("val", 1), ("test", 2)), size_px=(6
     from pathlib import Path
     import tifffile
     from scipy.ndimage import gaussian_filter, uniform_filter1d
-    from udc_render.capture_io import mosaic_of
-    from udc_render.fileio import save_exr
+    from udc_render.sensor import mosaic_of
+    from udc_render.io.exr import save_exr
     from udc_render.sensor import pack_rggb
     root, rng = Path(root), np.random.default_rng(seed)
     h, w = size_px

@@ -11,10 +11,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from udc_render import calibrate as cal
+from udc_render.calibration import protocols as cal
 from udc_render.cli import main
-from udc_render.displays import load_display
-from udc_render.synth import SynthConfig
+from udc_render.optics.displays import load_display
+from udc_render.pipeline import SynthConfig
 
 pytestmark = pytest.mark.usefixtures("render_cache")
 

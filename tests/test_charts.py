@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from udc_render import charts
-from udc_render.display_image import DisplayImageError, pattern
+from udc_render.content import charts
+from udc_render.content.monitor_image import DisplayImageError, pattern
 
 
 def test_sine_has_exactly_its_cycles_along_its_axis():

@@ -73,7 +73,7 @@ def test_cache_hit_gives_identical_kernels(tmp_path, capsys):
 @pytest.mark.parametrize("args, fragment", [
     (["--size", "64"], "odd"),
     (["--size", "-3"], "odd"),
-    (["--pixel-um", "-1"], "--pixel-um must be > 0"),
+    (["--pixel-um", "-1"], "--pitch-um must be > 0"),
     (["--distance-mm", "-2"], "--distance-mm must be ≥ 0"),
     (["--display", "hexagon"], "not none, toled, poled"),
     (["--display", "missing.png"], "no such file"),
@@ -81,7 +81,7 @@ def test_cache_hit_gives_identical_kernels(tmp_path, capsys):
     (["--method", "fft"], "invalid choice"),
     (["--aperture-um", "0"], "--aperture-um must be > 0"),
     (["--pupil-samples", "300"], "need pupil_samples ≥"),
-    (["--sensor-um", "3000"], "--sensor-um must be two positive numbers"),
+    (["--sensor-um", "3000"], "--sensor-extent-um must be two positive numbers"),
 ])
 def test_bad_arguments_give_one_line_and_exit_2(tmp_path, capsys, args, fragment):
     assert main(["psf", "--out", str(tmp_path / "o")] + args) == 2
@@ -125,7 +125,7 @@ def test_band_weight_spectrum_from_illuminant_changes_kernels(tmp_path):
 
 
 def test_study_quick_writes_table_csv_and_plot(tmp_path):
-    from udc_render.study_psf import run_study
+    from udc_render.studies.psf_knobs import run_study
     rows = run_study(tmp_path, quick=True, progress=False)
     knobs = {r["knob"] for r in rows}
     assert knobs == {"pupil_samples", "method", "precision", "band_step_nm", "field_phases", "size_px"}

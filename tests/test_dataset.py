@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from udc_render import dataset
+from udc_render.dataset import executors
+from udc_render.dataset import plan as dataset
 from udc_render.cli import main
 
 pytestmark = pytest.mark.usefixtures("render_cache")
@@ -168,8 +169,8 @@ def test_image_folder_is_cycled_with_new_seeds(scene, tmp_path):
 
 
 def test_builtin_images_stay_distinct_past_the_list():
-    images, _ = dataset.image_list(argparse.Namespace(builtin=True))
-    tasks = dataset.plan(40, (30, 5, 5), 8, images, True, 0)
+    images, _ = dataset.image_list(None)
+    tasks = dataset.plan_tasks(40, (30, 5, 5), 8, images, True, 0)
     assert len({t.image for t in tasks}) == 40 and tasks[-1].image.startswith("pattern:dead_leaves:")
     assert tasks[9].folder == "train/shard_0001/item_000009" and tasks[39].folder == "test/shard_0000/item_000039"
     assert len({t.render_seed for t in tasks}) == 40
@@ -193,7 +194,7 @@ def test_bad_input_is_one_line(argv, says, tmp_path, monkeypatch, capsys):
     (tmp_path / "EMPTY").mkdir()
     (tmp_path / "EMPTY" / "readme.txt").write_text("no images here")
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(dataset, "CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(executors, "CONNECT_TIMEOUT_S", 1.0)
     if "NO_DISTRIBUTED" in argv:
         monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed raises ImportError
     assert main(["dataset", *argv, "--out", str(tmp_path / "out"), "--quiet"]) == 2

@@ -12,7 +12,8 @@ import pytest
 import scipy.signal
 
 from restore.dep import DENOISERS, DePError, centred_psf, dep_restore, denoise_plane, wiener_plane
-from udc_render.capture_io import demosaic_bilinear, mosaic_of, psnr_db
+from udc_render.sensor import demosaic_bilinear, mosaic_of
+from udc_render.metrics import psnr_db
 from udc_render.sensor import pack_rggb, unpack_rggb
 
 GAMMA = 0.97

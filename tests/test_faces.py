@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import torch
 
-from restore.faces import face_chart
+from restore.studies.face_chart import face_chart
 from restore.mtcnn import MTCNN, box_iou, recall
 
 torch.set_num_threads(2)

@@ -7,7 +7,7 @@ import torch
 
 from restore.data import DataError, PairDataset, augment_crop, dihedral, list_pairs, load_pair
 from restore.losses import loss_fn, ssim
-from udc_render.capture_io import mosaic_of
+from udc_render.sensor import mosaic_of
 from udc_render.sensor import pack_rggb
 
 

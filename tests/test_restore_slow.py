@@ -8,7 +8,7 @@ pytestmark = pytest.mark.slow
 def test_face_study_recalls_the_clean_chart_and_loses_faces_behind_the_displays(tmp_path):
     """The chart's boxes mapped through the rig's geometry must match MTCNN's detections on the
     clean capture (measured at 1024 × 512: 45/45, mean IoU 0.85; at 512 × 256: 42/45)."""
-    from restore.face_study import face_experiment
+    from restore.studies.faces import face_experiment
     t = face_experiment(tmp_path / "faces", sensor_px=(512, 256), progress=False)
     rows = {(r["condition"], r["display"]): r for r in t["rows"]}
     clean = rows[("clean", "glass")]
@@ -19,7 +19,7 @@ def test_face_study_recalls_the_clean_chart_and_loses_faces_behind_the_displays(
 
 
 def test_results_quick_budget_runs_every_stage(tmp_path):
-    from restore.results import run_results
+    from restore.studies.results import run_results
     r = run_results(tmp_path / "res", "quick", progress=False)
     methods = r["results"]["methods"]
     assert set(methods) == {"input", "dep", "unet", "resnet"}

@@ -9,9 +9,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from udc_render import display_image as di
-from udc_render import rig, spectra
-from udc_render.scene import (SCENES_DIR, Bands, HDRRoom, Monitor, Room, SceneError, load_scene, parse_bands,
+from udc_render.content import monitor_image as di
+from udc_render.scene import geometry as rig
+from udc_render.content import spectra
+from udc_render.scene import (scenes_dir, Bands, HDRRoom, Monitor, Room, SceneError, load_scene, parse_bands,
                               parse_scene)
 
 
@@ -20,7 +21,7 @@ from udc_render.scene import (SCENES_DIR, Bands, HDRRoom, Monitor, Room, SceneEr
 
 def test_shipped_scenes_load_with_their_documented_values():
     mon = load_scene("monitor")  # a bare name is looked up in scenes/
-    assert mon.source == str(SCENES_DIR / "monitor.toml")
+    assert mon.source == str(scenes_dir() / "monitor.toml")
     assert isinstance(mon.content, Monitor) and mon.content.resolution_px == (3840, 2160)
     assert mon.content.image == "builtin:astronaut" and mon.content.framing == "fit"
     assert (mon.lens.focal_length_mm, mon.lens.f_number, mon.lens.focus_distance_m) == (6.0, 1.8, None)
@@ -28,7 +29,7 @@ def test_shipped_scenes_load_with_their_documented_values():
     assert (mon.render.spp, mon.render.max_depth, mon.render.margin_um, mon.render.path) == (16, 2, 396.0, "auto")
     assert mon.bands.count == 30 and mon.bands.edges_nm[0] == 400 and mon.bands.edges_nm[-1] == 700
 
-    room = load_scene(SCENES_DIR / "room.toml")
+    room = load_scene(scenes_dir() / "room.toml")
     assert isinstance(room.content, Room) and room.content.illuminant == "D65"
     assert room.camera.origin_m == (0.0, 1.1, 3.4) and room.camera.target_m == (0.0, 0.2, -2.0)
     hdr = load_scene("hdr")

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from udc_render import study_render as sr
+from udc_render.studies import render_knobs as sr
 
 
 def test_budget_spp_spends_the_same_samples_on_every_bands_per_render_line():

@@ -7,11 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from udc_render import displays as D
-from udc_render.capture_io import demosaic_bilinear, load_raw_png, mosaic_of, psnr_db
+from udc_render.optics import displays as D
+from udc_render.sensor import demosaic_bilinear, mosaic_of
+from udc_render.io.images import load_raw_png
+from udc_render.metrics import psnr_db
 from udc_render.render import render_scene
 from udc_render.sensor import SensorConfig, pack_rggb
-from udc_render.synth import SynthConfig, SynthError, display_gamma, display_kernels, synthesize
+from udc_render.pipeline import SynthConfig, SynthError, display_gamma, plan_kernels, sensor_for_scene, synthesize
 
 PRESETS = [D.preset(n) for n in ("glass", "toled", "poled")]
 NOISELESS = SynthConfig(sensor=SensorConfig(noise="none"))
@@ -43,9 +45,9 @@ def test_presets_reproduce_the_papers_gammas():
     returns the stored constants."""
     from psf import compute_kernels, layouts
     from psf.cache import cached
-    from udc_render.synth import rig_lens
     from udc_render.scene import load_scene
-    lens = rig_lens(load_scene("monitor"))
+    from udc_render.scene.geometry import psf_lens
+    lens = psf_lens(load_scene("monitor"))
     edges = np.arange(400.0, 701.0, 10.0)
     wl = 0.5 * (edges[1:] + edges[:-1])
     g = {}
@@ -115,11 +117,11 @@ def test_levels_follow_gamma_and_glass_is_the_ground_truth(white):
     glass = res.captures["glass"].clean_dn / 65535
     assert np.allclose(glass, np.clip(mosaic_of(res.gt), 0, 1), rtol=2e-5, atol=2e-5)
     gl = pack_rggb(_centre(res.captures["glass"].clean_dn))
-    glass_ks = display_kernels(D.preset("glass"), scene, bi, NOISELESS)
     for name in ("toled", "poled"):
         d = D.preset(name)
         as_file = D.Display(name, d.layout, d.transmission, d.gain, source="file")  # analytic γ, not the paper's
-        gamma, _ = display_gamma(as_file, scene, bi, NOISELESS, glass_ks)
+        kernels = plan_kernels(scene, [as_file], NOISELESS)
+        gamma, _ = display_gamma(as_file, bi, kernels, sensor_for_scene(NOISELESS.sensor, scene))
         lv = pack_rggb(_centre(res.captures[name].clean_dn))
         ratio = lv.reshape(4, -1).mean(1) / gl.reshape(4, -1).mean(1)
         assert ratio[[0, 1, 3]] == pytest.approx(np.array(gamma), rel=0.01), name
@@ -186,8 +188,8 @@ def test_banding_period_in_the_capture(udc, tmp_path, render_cache):
     z_i · p / d); at d = 0 the profile is flat to round-off."""
     scene = _scene(udc, tmp_path / "band.toml", sensor_px=(512, 16), resolution_px=(1920, 1080))
     bi = render_scene(scene, progress=False)
-    from udc_render.synth import rig_lens
-    period_px = rig_lens(scene).image_distance_um * 60.0 / 2000.0 / bi.pitch_um
+    from udc_render.scene.geometry import psf_lens
+    period_px = psf_lens(scene).image_distance_um * 60.0 / 2000.0 / bi.pitch_um
     spectra = {}
     for d_mm in (0.0, 2.0):
         res = synthesize(bi, scene, [D.preset("toled").with_distance(d_mm)], NOISELESS)
@@ -255,7 +257,7 @@ def test_demosaic_bilinear_is_exact_on_a_linear_ramp():
 @pytest.mark.slow
 def test_study_capture_quick_writes_table_and_errors_order(tmp_path):
     """`udc-render study capture --quick` (minutes: it computes every kernel with the cache off)."""
-    from udc_render.study_capture import run_study
+    from udc_render.studies.capture_knobs import run_study
     rows = run_study(tmp_path, quick=True, progress=False)
     assert {"study_capture.csv", "study_capture.md", "study_capture.png"} <= {p.name for p in tmp_path.iterdir()}
     by = {(r["study"], r["setting"]): r["rel_error"] for r in rows}

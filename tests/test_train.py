@@ -9,7 +9,7 @@ import torch
 from conftest import write_pairs
 from restore.data import list_pairs, load_pair
 from restore.train import TrainError, TrainSettings, load_model, predict, train
-from udc_render.capture_io import demosaic_bilinear
+from udc_render.sensor import demosaic_bilinear
 from udc_render.cli import main
 from udc_render.sensor import unpack_rggb
 
@@ -140,7 +140,7 @@ def test_command_errors_are_one_line(tmp_path, capsys):
 def test_metric_protocol_on_identical_and_shifted_images():
     from restore.evaluate import BORDER_PX, display_referred, image_metrics
     from restore.lpips import LPIPS
-    from udc_render.capture_io import daylight_balance
+    from udc_render.io.previews import daylight_balance
     rng = np.random.default_rng(0)
     gt = rng.random((3, 96, 128)).astype(np.float32) * 0.8
     bal = daylight_balance()

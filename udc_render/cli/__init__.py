@@ -1,0 +1,52 @@
+"""The `udc-render` command line: one thin module per command, each parsing its options and calling
+one library or experiment function.
+
+    udc-render psf --display {none,toled,poled,PATH} --wavelengths-nm 450,520,640 --out DIR
+    udc-render render SCENE --out DIR [--spp N | --noise 0.01] [--bands-nm 400:700:10]
+    udc-render synth SCENE --display toled[,poled,FILE] --out DIR;   udc-render demo [--out DIR]
+    udc-render dataset --builtin | --images DIR --count N --out DIR [--workers N | --scheduler ADDR]
+    udc-render calibrate --display toled --out DIR
+    udc-render study {psf,render,capture} --out DIR [--quick]
+    udc-render train / evaluate / results   (restore/)
+
+A user error (UdcError, and the psf package's errors) prints one line naming the option, file or key,
+the value and what is allowed, and exits 2; no traceback. Output folders are made and checked
+before any computation.
+"""
+from __future__ import annotations
+
+import sys
+
+from psf.engine import PSFError
+from psf.layouts import LayoutError
+from psf.lens import LensError
+from udc_render.cli import calibrate, dataset, evaluate, psf, render, results, study, synth, train
+from udc_render.cli.args import Parser
+from udc_render.errors import UdcError
+
+COMMANDS = (psf, render, synth, dataset, calibrate, study, train, evaluate, results)
+USER_ERRORS = (UdcError, PSFError, LayoutError, LensError)
+
+
+def build_parser() -> Parser:
+    parser = Parser(prog="udc-render", description="Physically based under-display camera simulation.")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    for command in COMMANDS:
+        command.register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    try:
+        args = build_parser().parse_args(argv)
+        return args.run(args)
+    except USER_ERRORS as exc:
+        print(f"udc-render: error: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("udc-render: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,162 @@
+"""What the commands share: the one-line UserError, argument types, the scene and capture option
+groups (one vocabulary for every command), and the check of an output folder before any work."""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
+
+from udc_render.errors import UdcError
+
+
+class UserError(UdcError):
+    """A bad command-line value; printed as one line."""
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):
+        raise UserError(f"{self.prog}: {message}")
+
+
+def number(name: str, cast=float, lo: float = 0.0, lo_open: bool = True):
+    """An argument type: a finite number > lo (≥ lo when not lo_open), naming the option when it is not."""
+    def parse(text):
+        try:
+            v = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be a number, got '{text}'") from None
+        if not (math.isfinite(v) and (v > lo if lo_open else v >= lo)):
+            raise argparse.ArgumentTypeError(f"{name} must be {'>' if lo_open else '≥'} {lo:g}, got {text}")
+        return v
+    return parse
+
+
+def positive(name: str, cast=float):
+    return number(name, cast)
+
+
+def non_negative(name: str):
+    return number(name, float, 0.0, lo_open=False)
+
+
+def float_list(text):
+    try:
+        values = [float(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected comma-separated numbers, got '{text}'") from None
+    if not values or any(not (v > 0 and math.isfinite(v)) for v in values):
+        raise argparse.ArgumentTypeError(f"wavelengths must be positive numbers, got '{text}'")
+    return values
+
+
+def float_pair(name: str):
+    def parse(text):
+        try:
+            values = tuple(float(t) for t in text.split(","))
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be two numbers W,H, got '{text}'") from None
+        if len(values) != 2 or any(not (v > 0 and math.isfinite(v)) for v in values):
+            raise argparse.ArgumentTypeError(f"{name} must be two positive numbers W,H, got '{text}'")
+        return values
+    return parse
+
+
+def odd_size(name: str):
+    def parse(text):
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{name} must be an odd integer ≥ 3, got '{text}'") from None
+        if v < 3 or v % 2 == 0:
+            raise argparse.ArgumentTypeError(f"{name} must be an odd integer ≥ 3 (centre at size//2), got {v}")
+        return v
+    return parse
+
+
+def out_dir(path: Path, option: str = "--out") -> Path:
+    """Create the output folder now, before any computation; a path that cannot be a writable folder
+    (an existing file, a folder under a file, no permission) is a one-line UserError."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UserError(f"{option} {path}: exists and is not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise UserError(f"{option} {path}: cannot create the folder ({e.strerror or e})") from None
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise UserError(f"{option} {path}: the folder is not writable")
+    return path
+
+
+def add_scene_arguments(r: argparse.ArgumentParser, scene_option: bool = False) -> None:
+    """Overrides of a scene file's settings (applied by scene_from_args); the scene itself is a
+    positional argument, or --scene when `scene_option`."""
+    from udc_render.scene import RENDER_PATHS
+    if scene_option:
+        r.add_argument("--scene", default="monitor", help="a monitor scene file or name [monitor]")
+    else:
+        r.add_argument("scene", help="a scene file (TOML) or a built-in scene's name (monitor, room, hdr)")
+    samples = r.add_mutually_exclusive_group()
+    samples.add_argument("--spp", type=positive("--spp", int), help="samples per pixel [the scene's render.spp]")
+    samples.add_argument("--noise", type=positive("--noise"),
+                         help="target relative RMS noise; spp is chosen from pilot renders (e.g. 0.01)")
+    r.add_argument("--bands-nm", help="LOW:HIGH:STEP in nm [the scene's bands, default 400:700:10]")
+    r.add_argument("--seed", type=int, help="render seed [the scene's render.seed, 0]")
+    r.add_argument("--path", choices=RENDER_PATHS, help="render path [auto: rgb_matrix for the monitor alone]")
+    r.add_argument("--image", help="what the monitor shows: an image file, builtin:NAME or pattern:NAME")
+    r.add_argument("--sensor-px", type=float_pair("--sensor-px"), help="sensor width,height in pixels")
+    r.add_argument("--pitch-um", type=positive("--pitch-um"), help="sensor pixel pitch in µm")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def scene_from_args(args):
+    """The scene file with the command line's overrides applied (scene.overrides)."""
+    from udc_render.scene import load_scene
+    from udc_render.scene.overrides import with_overrides
+    return with_overrides(load_scene(args.scene), spp=args.spp, noise=args.noise, seed=args.seed,
+                          path=getattr(args, "path", None), bands_nm=args.bands_nm, image=getattr(args, "image", None),
+                          sensor_px=args.sensor_px, pitch_um=args.pitch_um)
+
+
+def add_capture_arguments(p: argparse.ArgumentParser) -> None:
+    """Knobs shared by synth, demo and dataset."""
+    p.add_argument("--display", default="toled",
+                   help="comma-separated: glass, toled, poled or display files (.toml); the glass "
+                        "capture is always made too [toled]")
+    p.add_argument("--distance-mm", type=non_negative("--distance-mm"),
+                   help="display-to-lens distance d for every display [each display's own: 0 for the presets]")
+    p.add_argument("--form", choices=("spectral", "per_channel"), default="spectral",
+                   help="spectral: K band kernels and camera sensitivities (physical); per_channel: the "
+                        "paper's y = γ x ⊗ k + n with 3 channel kernels [spectral]")
+    add_sensor_arguments(p)
+    p.add_argument("--exposure-s", type=positive("--exposure-s"),
+                   help="exposure time [auto: the monitor's white at 0.8 of the full well through glass]")
+    p.add_argument("--field-phases", type=positive("--field-phases", int), help="d > 0: phases per axis [4]")
+    p.add_argument("--precision", choices=("float32", "float64"), default="float32", help="optics FFTs [float32]")
+
+
+def add_sensor_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--sensor-config", type=Path,
+                   help="TOML file of sensor-model keys (gain is per display; see udc_render/sensor/config.py)")
+    p.add_argument("--noise-model", choices=("poisson", "gaussian", "none"), help="[poisson]")
+    p.add_argument("--noise-seed", type=int, default=0, help="seed of the sensor noise [0]")
+    p.add_argument("--no-cache", action="store_true", help="neither read nor write the kernel cache")
+    p.add_argument("--cache-dir", type=Path, help="kernel cache folder [$UDC_RENDER_CACHE or ~/.cache/udc-render/psf]")
+
+
+def synth_config(args):
+    """SynthConfig from the capture options (absent options take the defaults)."""
+    from dataclasses import replace
+    from udc_render.pipeline import SynthConfig
+    from udc_render.sensor import SensorConfig
+    sensor = SensorConfig()
+    if getattr(args, "sensor_config", None) is not None:
+        sensor = SensorConfig.from_toml(args.sensor_config)
+    if getattr(args, "noise_model", None):
+        sensor = replace(sensor, noise=args.noise_model)
+    cache = getattr(args, "cache_dir", None)
+    return SynthConfig(form=getattr(args, "form", "spectral"), sensor=sensor,
+                       exposure_s=getattr(args, "exposure_s", None), precision=getattr(args, "precision", "float32"),
+                       field_phases=getattr(args, "field_phases", None), seed=getattr(args, "noise_seed", 0),
+                       use_cache=not getattr(args, "no_cache", False), kernel_cache=None if cache is None else str(cache))

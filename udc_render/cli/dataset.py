@@ -1,0 +1,69 @@
+"""`udc-render dataset`: many capture pairs (udc_render.dataset has the layout and the guarantees).
+
+    udc-render dataset --images DIR | --builtin --display glass,toled,poled --count N --out DIR
+                       [--split 200,40,60] [--shard-size 1000] [--workers N | --scheduler ADDRESS]
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from udc_render.cli.args import UserError, add_capture_arguments, add_scene_arguments, positive, scene_from_args, synth_config
+
+
+def _split(text: str) -> tuple[int, int, int]:
+    try:
+        counts = tuple(int(t) for t in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--split must be TRAIN,VAL,TEST counts, got '{text}'") from None
+    if len(counts) != 3 or min(counts) < 0 or sum(counts) < 1:
+        raise argparse.ArgumentTypeError(f"--split must be three counts ≥ 0 (TRAIN,VAL,TEST) summing to ≥ 1, got '{text}'")
+    return counts
+
+
+def register(sub) -> None:
+    p = sub.add_parser("dataset", help="many capture pairs: one image per item through every display "
+                                       "(sharded, resumable, parallel)")
+    p.set_defaults(run=run, path=None, image=None)
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--images", type=Path, help="a folder of images (searched recursively, sorted by path)")
+    src.add_argument("--builtin", action="store_true",
+                     help="scikit-image's samples and the procedural charts, then dead-leaves charts")
+    p.add_argument("--count", type=positive("--count", int), help="number of items [the sum of --split]")
+    p.add_argument("--split", type=_split, help="TRAIN,VAL,TEST item counts, assigned in id order [all train]")
+    p.add_argument("--out", type=Path, default=Path("out/dataset"), help="output folder [out/dataset]")
+    p.add_argument("--shard-size", type=positive("--shard-size", int), default=1000, help="items per shard folder [1000]")
+    run_on = p.add_mutually_exclusive_group()
+    run_on.add_argument("--workers", type=positive("--workers", int), default=1,
+                        help="1: in this process; N > 1: a local pool of N processes [1]")
+    run_on.add_argument("--scheduler", help="address of a Dask distributed scheduler (tcp://HOST:PORT) to run items on")
+    p.add_argument("--side-by-side", action="store_true", help="also write each item's side_by_side.png")
+    add_scene_arguments(p, scene_option=True)
+    add_capture_arguments(p)
+
+
+def split_counts(count: int | None, split: tuple[int, int, int] | None) -> tuple[int, int, int]:
+    """(train, val, test) from --count and --split."""
+    if split is None:
+        if count is None:
+            raise UserError("--count N is required (or --split TRAIN,VAL,TEST)")
+        return count, 0, 0
+    if count is not None and count != sum(split):
+        raise UserError(f"--split {','.join(map(str, split))} sums to {sum(split)}, but --count is {count}")
+    return split
+
+
+def run(args) -> int:
+    from udc_render.dataset import DatasetJob, run_dataset
+    from udc_render.optics.displays import load_displays
+    from udc_render.cli.args import out_dir
+    split = split_counts(args.count, args.split)
+    job = DatasetJob(scene_from_args(args), load_displays(args.display, args.distance_mm), synth_config(args),
+                     out=out_dir(args.out), split=split, images_dir=args.images, shard_size=args.shard_size,
+                     side_by_side=args.side_by_side)
+    s = run_dataset(job, args.workers, args.scheduler, progress=not args.quiet)
+    rate = f", {s['wall_s'] / s['made']:.2f} s/item wall" if s["made"] else ""
+    stale = f", {s['stale_removed']} stale temporary folders removed" if s["stale_removed"] else ""
+    print(f"{s['complete']}/{s['count']} items in {s['out']} ({s['made']} made now{rate}, "
+          f"{s['count'] - s['made']} already there{stale}); manifest.jsonl, job.json, timing.jsonl")
+    return 0

@@ -1,0 +1,39 @@
+"""`udc-render evaluate --data DIR --model {input,dep,CHECKPOINT} --out DIR`: score a restorer."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from udc_render.cli.args import out_dir, positive
+from udc_render.cli.train import set_threads
+
+
+def register(sub) -> None:
+    e = sub.add_parser("evaluate", help="score a restorer on a dataset split: PSNR, SSIM, LPIPS, MACs, ms/MP")
+    e.add_argument("--data", type=Path, required=True, help="a folder written by `udc-render dataset`")
+    e.add_argument("--model", required=True, help="input (the degraded capture), dep, or a model.pt/checkpoint.pt")
+    e.add_argument("--out", type=Path, required=True, help="results folder (rows of several runs are merged)")
+    e.add_argument("--split", default="test", choices=("train", "val", "test"), help="split to score [test]")
+    e.add_argument("--display", help="comma-separated displays [a checkpoint's own; all of the dataset's for dep]")
+    e.add_argument("--name", help="row name in the tables [input, dep, or the model type]")
+    e.add_argument("--denoiser", help="DeP's denoiser [restore.dep's default]")
+    e.add_argument("--kernel-px", type=positive("--kernel-px", int),
+                   help="DeP's kernel size at the packed-plane pitch, odd [half the synthesis kernel: 257]")
+    e.add_argument("--previews", type=int, default=4, help="side-by-side previews per display [4]")
+    e.add_argument("--device", default="auto", help="auto, cpu, cuda [auto]")
+    e.add_argument("--threads", type=positive("--threads", int), help="CPU threads for torch")
+    e.add_argument("--quiet", action="store_true", help="no progress bar")
+    e.set_defaults(run=run)
+
+
+def run(args) -> int:
+    out_dir(args.out)
+    from restore.evaluate import evaluate
+    set_threads(args.threads)
+    displays = args.display.split(",") if args.display else None
+    entry = evaluate(args.data, args.model, args.out, args.split, displays, args.name, args.device,
+                     args.previews, args.denoiser, progress=not args.quiet, kernel_px=args.kernel_px)
+    for d, r in entry["displays"].items():
+        print(f"{entry['name']} {d}: PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.4f}, LPIPS {r['lpips']:.4f}, "
+              f"{r['ms_per_mp']:.0f} ms/MP over {r['images']} images")
+    print(f"tables: {args.out / 'results.md'}, {args.out / 'results.csv'}")
+    return 0

@@ -1,0 +1,136 @@
+"""`udc-render psf`: wave-optics kernels of a display in front of the lens, written as files.
+
+    udc-render psf --display {none,toled,poled,PATH} --wavelengths-nm 450,520,640 --out DIR
+"""
+from __future__ import annotations
+
+import math
+import sys
+import warnings
+from pathlib import Path
+
+from psf.engine import DEFAULT_FIELD_PHASES, METHODS, PAPER_SENSOR_UM, PRECISIONS, AliasingWarning, UnderSamplingWarning
+from psf.pupil import MASK_RASTERS
+from udc_render.cli.args import UserError, float_list, float_pair, non_negative, odd_size, out_dir, positive
+
+
+def _bands(text):
+    import argparse
+    try:
+        bands = [tuple(float(v) for v in b.split("-")) for b in text.split(",") if b.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--bands-nm must look like 400-500,500-600, got '{text}'") from None
+    if not bands or any(len(b) != 2 or not 0 < b[0] < b[1] for b in bands):
+        raise argparse.ArgumentTypeError(f"--bands-nm must look like 400-500,500-600 with lo < hi, got '{text}'")
+    return bands
+
+
+def register(sub) -> None:
+    p = sub.add_parser("psf", help="wave-optics PSF kernels of a display in front of a lens")
+    p.set_defaults(run=run)
+    p.add_argument("--display", default="toled",
+                   help="none (bare lens), toled, poled, or a micrograph file (PNG/TIFF/EXR) [toled]")
+    spec = p.add_mutually_exclusive_group()
+    spec.add_argument("--wavelengths-nm", type=float_list, default=[450.0, 520.0, 640.0],
+                      help="monochromatic kernels at these wavelengths [450,520,640]")
+    spec.add_argument("--bands-nm", type=_bands, help="band kernels, e.g. 400-500,500-600,600-700")
+    spec.add_argument("--camera", help="channel-effective kernels for a colour-science camera "
+                                       "('Nikon 5100 (NPL)', 'Sigma SDMerill (NPL)') or a CSV of sensitivities")
+    p.add_argument("--band-step-nm", type=positive("--band-step-nm"), default=None,
+                   help="wavelength step inside a band or channel [auto: λ_lo / size, 1.6 nm at 400 nm, 255 px]")
+    p.add_argument("--weight", default="E",
+                   help="weight spectrum for --bands-nm and --camera: E (flat), a colour-science illuminant "
+                        "such as D65, or a CSV (wavelength_nm, weight) [E]")
+    p.add_argument("--distance-mm", type=non_negative("--distance-mm"), default=0.0,
+                   help="display-to-lens distance d; 0 = principal-plane model [0]")
+    p.add_argument("--pitch-um", "--pixel-um", dest="pitch_um", type=positive("--pitch-um"), default=3.1,
+                   help="sensor pixel pitch (old spelling --pixel-um) [3.1]")
+    p.add_argument("--kernel-px", "--size", dest="kernel_px", type=odd_size("--kernel-px"), default=255,
+                   help="kernel size in pixels, odd (old spelling --size) [255]")
+    p.add_argument("--focal-length-um", type=positive("--focal-length-um"), default=6000.0)
+    p.add_argument("--aperture-um", type=positive("--aperture-um"), default=3333.0)
+    p.add_argument("--focus-distance-mm", type=positive("--focus-distance-mm"), default=math.inf)
+    p.add_argument("--object-distance-mm", type=positive("--object-distance-mm"), default=math.inf)
+    p.add_argument("--method", choices=METHODS, default="mft", help="Fraunhofer transform [mft]")
+    p.add_argument("--pupil-samples", type=positive("--pupil-samples", int), default=None,
+                   help="samples across the aperture [auto: ≥ 1024 and alias-free]")
+    p.add_argument("--field-phases", type=positive("--field-phases", int), default=None,
+                   help="mask shifts per axis over one display period, d > 0 only [4]")
+    p.add_argument("--sensor-extent-um", "--sensor-um", dest="sensor_extent_um",
+                   type=float_pair("--sensor-extent-um"), default=PAPER_SENSOR_UM,
+                   help="image width,height in µm: field phases span what it sees of a banding period "
+                        "(old spelling --sensor-um) [3174.4,1587.2, the paper's 2048×1024 × 1.55 µm]")
+    p.add_argument("--precision", choices=tuple(PRECISIONS), default="float32")
+    p.add_argument("--mask-raster", choices=MASK_RASTERS, default="band_limited")
+    p.add_argument("--micrograph-pixel-um", type=positive("--micrograph-pixel-um"), default=1.0,
+                   help="pixel size of a micrograph display in µm [1.0]")
+    p.add_argument("--micrograph-values", choices=("amplitude", "intensity"), default="amplitude")
+    p.add_argument("--tile-rotation", action="store_true", help="rotate each micrograph tile randomly")
+    p.add_argument("--tile-seed", "--seed", dest="tile_seed", type=int, default=0,
+                   help="seed of the tile rotations (old spelling --seed) [0]")
+    p.add_argument("--no-cache", action="store_true", help="neither read nor write the kernel cache")
+    p.add_argument("--cache-dir", type=Path, help="kernel cache folder [$UDC_RENDER_CACHE or ~/.cache/udc-render/psf]")
+    p.add_argument("--out", type=Path, default=Path("out/psf"), help="output folder [out/psf]")
+
+
+def make_display(args):
+    from psf import MicrographLayout, layouts
+    if args.display == "none":
+        return None
+    if args.display in layouts.BUILTIN:
+        return layouts.BUILTIN[args.display]()
+    path = Path(args.display)
+    if path.suffix.lower() not in (".png", ".tif", ".tiff", ".exr"):
+        raise UserError(f"--display: '{args.display}' is not none, toled, poled or a .png/.tif/.tiff/.exr file")
+    return MicrographLayout.load(path, args.micrograph_pixel_um, args.micrograph_values, args.tile_rotation,
+                                 args.tile_seed)
+
+
+def compute(args, display, lens, bar):
+    """(KernelSet, from_cache) for the kind of kernels asked: bands, camera channels or wavelengths."""
+    from psf import compute_kernels
+    from psf.cache import cached
+    from psf.spectral import auto_step_nm, band_kernels, channel_kernels, load_weight
+    common = dict(pixel_um=args.pitch_um, size_px=args.kernel_px, distance_mm=args.distance_mm,
+                  field_phases=args.field_phases, method=args.method, pupil_samples=args.pupil_samples,
+                  precision=args.precision, mask_raster=args.mask_raster, sensor_um=args.sensor_extent_um,
+                  progress=bar.update, cache_dir=args.cache_dir)
+    phases = (args.field_phases or DEFAULT_FIELD_PHASES) ** 2 if args.distance_mm > 0 and display is not None else 1
+    if args.bands_nm:
+        bar.total = phases * sum(math.ceil((hi - lo) / (args.band_step_nm or auto_step_nm(lo, args.kernel_px)) - 1e-9)
+                                 for lo, hi in args.bands_nm)
+        return cached(band_kernels, "band", display, lens, not args.no_cache, bands_nm=args.bands_nm,
+                      step_nm=args.band_step_nm, weight=load_weight(args.weight), weight_name=args.weight, **common)
+    if args.camera:
+        return cached(channel_kernels, "channel", display, lens, not args.no_cache, camera=args.camera,
+                      illuminant=args.weight, step_nm=args.band_step_nm, **common)
+    bar.total = phases * len(args.wavelengths_nm)
+    return cached(compute_kernels, "mono", display, lens, not args.no_cache, wavelengths_nm=args.wavelengths_nm,
+                  **common)
+
+
+def run(args) -> int:
+    from tqdm import tqdm
+    from psf import Lens
+    from udc_render.io.kernels import write_kernel_files
+    out = out_dir(args.out)
+    display = make_display(args)
+    lens = Lens(args.focal_length_um, args.aperture_um, args.focus_distance_mm, args.object_distance_mm)
+    with warnings.catch_warnings(record=True) as caught, tqdm(desc="psf kernels", unit="kernel", disable=None) as bar:
+        warnings.simplefilter("always", AliasingWarning)
+        warnings.simplefilter("always", UnderSamplingWarning)
+        ks, hit = compute(args, display, lens, bar)
+    for w in caught:
+        if issubclass(w.category, AliasingWarning) and args.pupil_samples is not None:
+            raise UserError(f"--pupil-samples is too coarse for the requested window: {w.message}")
+    for w in {str(w.message) for w in caught}:
+        print(f"warning: {w}", file=sys.stderr)
+    written = write_kernel_files(out, ks, display, lens, args.distance_mm, hit)
+    print(f"{'kernel':>18} {'r (paper)':>10} {'energy outside':>15} {'transmittance':>14}")
+    labels = ks.params.get("channels") or [f"{w:g} nm" for w in ks.wavelengths_nm]
+    for lab, r, e, t in zip(labels, ks.ratio_r, ks.energy_outside, ks.transmittance):
+        print(f"{lab:>18} {r:>10.3f} {e:>15.4%} {t:>14.4f}")
+    for note in ks.notes:
+        print(f"note: {note}")
+    print(f"wrote {out / written[0]}, {', '.join(written[1:])}{' (kernels from cache)' if hit else ''}")
+    return 0

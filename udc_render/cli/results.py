@@ -1,0 +1,28 @@
+"""`udc-render results --budget {cpu,quick,paper} --write RESULTS.md`: dataset ─► training ─►
+evaluation ─► faces ─► the document (restore.studies.results), resumable."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from udc_render.cli.args import out_dir
+
+
+def register(sub) -> None:
+    from restore.studies.results import BUDGETS
+    p = sub.add_parser("results", help="dataset → train → evaluate → face detection → RESULTS.md (resumable)")
+    p.add_argument("--out", type=Path, default=Path("out/results"), help="work folder [out/results]")
+    p.add_argument("--budget", choices=tuple(BUDGETS), default="cpu",
+                   help="cpu (about 40 min here), quick (a smoke run), paper (400 epochs; a GPU) [cpu]")
+    p.add_argument("--write", type=Path, help="also write the document here (e.g. RESULTS.md)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from restore.studies.results import ordering_checks, run_results
+    out_dir(args.out)
+    r = run_results(args.out, args.budget, args.write, progress=not args.quiet)
+    for claim, ok, v in ordering_checks(r["results"]):
+        print(f"{'ok  ' if ok else 'FAIL'} {claim}: {v}")
+    print(f"written: {args.out / 'RESULTS.md'}" + (f" and {args.write}" if args.write else ""))
+    return 0

@@ -1,0 +1,30 @@
+"""`udc-render study {psf,render,capture} --out DIR [--quick]`: error-versus-run-time studies."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from udc_render.cli.args import out_dir
+
+STUDIES = ("psf", "render", "capture")
+
+
+def register(sub) -> None:
+    s = sub.add_parser("study", help="error-versus-run-time studies of the approximation knobs")
+    s.set_defaults(run=run)
+    s.add_argument("what", choices=STUDIES)
+    s.add_argument("--out", type=Path, default=Path("out/study"))
+    s.add_argument("--quick", action="store_true", help="a reduced grid (smoke run)")
+
+
+def run(args) -> int:
+    out = out_dir(args.out)
+    if args.what == "capture":
+        from udc_render.studies.capture_knobs import run_study
+    elif args.what == "render":
+        from udc_render.studies.render_knobs import run_study
+    else:
+        from udc_render.studies.psf_knobs import run_study
+    run_study(out, quick=args.quick)
+    name = f"study_{args.what}"
+    print(f"wrote {out}/{name}.csv, {name}.md, {name}.png")
+    return 0

@@ -1,0 +1,68 @@
+"""`udc-render train --data DIR --model {unet,resnet} --display D --out RUN`: train a restorer
+(torch is imported when the command runs, not when the command line is built)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from udc_render.cli.args import UserError, out_dir, positive
+
+
+def _even(text: str) -> int:
+    import argparse
+    v = positive("--crop-px", int)(text)
+    if v % 2:
+        raise argparse.ArgumentTypeError(f"--crop-px = {v}: expected an even number (whole RGGB cells)")
+    return v
+
+
+def set_threads(n: int | None) -> None:
+    if n:
+        import torch
+        torch.set_num_threads(n)
+
+
+def register(sub) -> None:
+    p = sub.add_parser("train", help="train a restorer (UNet or ResNet) on one display's pairs of a dataset")
+    p.add_argument("--data", type=Path, required=True, help="a folder written by `udc-render dataset`")
+    p.add_argument("--model", required=True, choices=("unet", "resnet"), help="the model type")
+    p.add_argument("--config", type=Path, help="a model TOML file: type = ... and the model's arguments")
+    p.add_argument("--display", required=True, help="the display whose captures to restore (e.g. toled, poled)")
+    p.add_argument("--out", type=Path, required=True, help="run folder (re-run the same command to resume)")
+    p.add_argument("--epochs", type=positive("--epochs", int), default=400, help="epochs [400, the paper's]")
+    p.add_argument("--batch", type=positive("--batch", int), default=4, help="crops per step [4]")
+    p.add_argument("--crop-px", type=_even, default=256, help="crop size in sensor pixels [256]")
+    p.add_argument("--crops-per-pair", type=positive("--crops-per-pair", int), default=1,
+                   help="random crops of each pair per epoch [1]")
+    p.add_argument("--lr", type=positive("--lr"), default=1e-4, help="learning rate [1e-4], halved at half the epochs")
+    p.add_argument("--loss", choices=("l1", "l1+ssim"), default="l1", help="training loss [l1]")
+    p.add_argument("--seed", type=int, default=0, help="initialisation, crops and order [0]")
+    p.add_argument("--device", default="auto", help="auto (a GPU when present), cpu, cuda, cuda:N [auto]")
+    p.add_argument("--threads", type=positive("--threads", int), help="CPU threads for torch [torch's default]")
+    p.add_argument("--checkpoint-s", type=positive("--checkpoint-s"), default=60.0,
+                   help="seconds between checkpoints (written at an epoch's end) [60]")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    out_dir(args.out)
+    from restore.models import RESNET_CONFIG, UNET_CONFIG, load_config
+    from restore.train import TrainSettings, data_fingerprint, train
+    set_threads(args.threads)
+    cfg = dict({"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}[args.model])
+    if args.config:
+        cfg = load_config(args.config)
+        if cfg.get("type") != args.model:
+            raise UserError(f"{args.config}: type = {cfg.get('type')!r} but --model is {args.model!r}")
+    settings = TrainSettings(model=cfg, display=args.display, epochs=args.epochs, batch=args.batch,
+                             crop_px=args.crop_px, crops_per_pair=args.crops_per_pair, lr=args.lr,
+                             loss=args.loss, seed=args.seed, data_fingerprint=data_fingerprint(args.data))
+    s = train(args.data, args.out, settings, args.device, args.checkpoint_s, progress=not args.quiet)
+    print(f"trained {cfg['type']} on {s['train_pairs']} {args.display} pairs, {s['epochs']} epochs ({s['steps']} "
+          f"steps) on {s['device']}: final loss {s['final_loss']:.4g}"
+          + (f", validation PSNR {s['val_psnr_db']:.2f} dB" if s["val_psnr_db"] is not None else "")
+          + f"; {args.out / 'model.pt'}")
+    return 0
+
+

@@ -1,0 +1,135 @@
+"""Where items run: in this process, a spawn process pool, or a Dask distributed cluster. No home-made
+scheduler: a window of submitted items, results as they finish."""
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import socket
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from itertools import islice
+from pathlib import Path
+
+from udc_render.dataset.plan import DatasetError, Task
+from udc_render.dataset.store import TMP_PREFIX, item_record
+from udc_render.optics.displays import Display
+from udc_render.pipeline import Kernels, SynthConfig
+from udc_render.scene import Scene
+
+CONNECT_TIMEOUT_S = 10.0  # reaching a Dask scheduler and waiting for its first worker
+
+
+@dataclass(frozen=True)
+class Shared:
+    """What every item needs: the scene without its image, the displays, the synthesis knobs (with
+    the kernel cache folder the parent filled: workers load those kernels and never recompute them,
+    so every worker uses the same bits), the output folder (absolute), and whether to plot."""
+    scene: Scene
+    displays: list[Display]
+    cfg: SynthConfig
+    out: Path
+    side_by_side: bool
+
+
+_WORKER_KERNELS: dict[str, Kernels] = {}  # per process: the job's kernels, loaded once per worker
+
+
+def worker_kernels(shared: Shared) -> Kernels:
+    """The job's kernels, loaded from the cache on a worker's first item and kept for the next ones."""
+    from udc_render.pipeline import plan_kernels
+    key = str(shared.out)
+    if key not in _WORKER_KERNELS:
+        _WORKER_KERNELS.clear()
+        _WORKER_KERNELS[key] = plan_kernels(shared.scene, shared.displays, shared.cfg)
+    return _WORKER_KERNELS[key]
+
+
+def make_item(shared: Shared, task: Task) -> dict:
+    """Render and synthesise one item into a temporary folder, then rename it into place.
+    Runs in this process, a pool process or a Dask worker; returns run times (s) for the log."""
+    from udc_render.io.capture import write_synthesis
+    from udc_render.io.files import current_umask, save_json
+    from udc_render.pipeline import synthesize
+    from udc_render.render import render_scene
+    t0 = time.perf_counter()
+    scene = replace(shared.scene, content=replace(shared.scene.content, image=task.image),
+                    render=replace(shared.scene.render, seed=task.render_seed))
+    band_image = render_scene(scene, progress=False)
+    t1 = time.perf_counter()
+    result = synthesize(band_image, scene, shared.displays, shared.cfg, task.item, kernels=worker_kernels(shared))
+    t2 = time.perf_counter()
+    final = shared.out / task.folder
+    final.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}{final.name}-", dir=final.parent))
+    try:
+        write_synthesis(tmp, result, shared.cfg.sensor.camera, side_by_side=shared.side_by_side)
+        save_json(tmp / "item.json", item_record(task, [d.name for d in shared.displays], shared.cfg.seed))
+        os.chmod(tmp, 0o777 & ~current_umask())  # mkdtemp makes 0700
+        os.rename(tmp, final)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return {"item": task.item, "folder": task.folder, "render_s": round(t1 - t0, 3), "synth_s": round(t2 - t1, 3),
+            "write_s": round(time.perf_counter() - t2, 3), "host": socket.gethostname(), "pid": os.getpid()}
+
+
+def _windowed(submit, wait_any, tasks, window: int):
+    """Results of submit(task) for every task, as they finish, with at most `window` in flight."""
+    it = iter(tasks)
+    pending = {submit(t) for t in islice(it, window)}
+    while pending:
+        done, pending = wait_any(pending)
+        for f in done:
+            pending |= {submit(t) for t in islice(it, 1)}
+            yield f.result()
+
+
+@contextlib.contextmanager
+def executor(workers: int, scheduler: str | None, shared: Shared):
+    """A function tasks -> iterator of make_item's results: in process, a spawn pool, or Dask."""
+    if scheduler is not None:
+        with _dask_client(scheduler) as client:
+            import distributed
+            shared_f = client.scatter(shared, broadcast=True, hash=False)
+            window = 2 * max(1, sum(client.nthreads().values()))
+
+            def wait_any(fs):
+                r = distributed.wait(fs, return_when="FIRST_COMPLETED")
+                return r.done, r.not_done
+            yield lambda tasks: _windowed(lambda t: client.submit(make_item, shared_f, t, pure=False), wait_any,
+                                          tasks, window)
+        return
+    if workers == 1:
+        yield lambda tasks: (make_item(shared, t) for t in tasks)
+        return
+    import multiprocessing
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))  # Dr.Jit threads and fork do not mix
+    try:
+        yield lambda tasks: _windowed(lambda t: pool.submit(make_item, shared, t),
+                                      lambda fs: wait(fs, return_when=FIRST_COMPLETED), tasks, 2 * workers)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+@contextlib.contextmanager
+def _dask_client(address: str):
+    try:
+        import distributed
+    except ImportError:
+        raise DatasetError("--scheduler needs the 'distributed' package: pip install 'udc-render[dist]'") from None
+    try:
+        client = distributed.Client(address, timeout=CONNECT_TIMEOUT_S)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise DatasetError(f"--scheduler {address}: cannot reach the scheduler ({type(e).__name__}: "
+                        f"{str(e).splitlines()[0] if str(e) else 'no answer'})") from None
+    try:
+        try:
+            client.wait_for_workers(1, timeout=CONNECT_TIMEOUT_S)
+        except TimeoutError:
+            raise DatasetError(f"--scheduler {address}: no workers joined within {CONNECT_TIMEOUT_S:g} s") from None
+        yield client
+    finally:
+        client.close()

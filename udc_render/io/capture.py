@@ -1,0 +1,107 @@
+"""Files of a synthesis: RAW mosaics, packed RAW, ground truth, previews, sidecars, summary.
+
+Layout of one synthesis (one scene, several displays) in a folder:
+
+    gt.exr               linear camera RGB ground truth, float32 channels R, G, B (synth.py: units)
+    gt_preview.png       its sRGB preview (daylight white balance, see preview_srgb)
+    <display>/raw.png    RAW mosaic, 16-bit grey PNG (lossless), RGGB, DN
+    <display>/packed.tiff  packed RAW, uint16 [4, H/2, W/2] (R, Gr, Gb, B), zlib, planar
+    <display>/preview.png  sRGB preview of the bilinear-demosaiced RAW
+    <display>/capture.json every parameter: sensor, display, optics, noise seeds and sampled noise
+    synth.json           shared parameters: render, exposure, lens, kernels, forms
+    side_by_side.png     the previews next to each other, with PSNR
+    summary.json / summary.md  mean level per channel, PSNR of each view against the ground truth
+
+Every file is written atomically and holds nothing that changes between identical runs (no times,
+no host names), so re-running with the same seeds gives byte-identical files; run times go to the
+caller's log.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from udc_render.errors import UdcError
+from udc_render.io.exr import read_exr, save_exr
+from udc_render.io.files import save_json, save_text
+from udc_render.io.images import read_packed_tiff, save_packed_tiff, save_raw_png, write_png
+from udc_render.io.previews import daylight_balance, preview_srgb
+from udc_render.metrics import psnr_db
+from udc_render.sensor import CHANNELS, demosaic_bilinear, mosaic_of, pack_rggb
+
+
+class CaptureFileError(UdcError):
+    """A capture or ground-truth file that is missing or unreadable; one line."""
+
+
+def capture_summary(cap, gt: np.ndarray, white_level_dn: int, black_level_dn: int) -> dict:
+    """Mean level per RGGB channel (fraction of the range) and PSNR against the ground truth's mosaic."""
+    rng_dn = white_level_dn - black_level_dn
+    norm = (cap.packed_dn.astype(np.float64) - black_level_dn) / rng_dn
+    ref = pack_rggb(np.clip(mosaic_of(gt), 0, 1))
+    return {"mean_level": {c: float(norm[i].mean()) for i, c in enumerate(CHANNELS)},
+            "psnr_db_vs_gt": psnr_db(norm, ref),
+            "saturated_fraction": float((cap.mosaic_dn >= white_level_dn).mean())}
+
+
+def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True) -> dict:
+    """Write every file of a synth.SynthResult into `out` (module doc); returns the summary."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    balance = daylight_balance(camera)
+    save_exr(out / "gt.exr", {c: result.gt[i] for i, c in enumerate("RGB")})
+    write_png(out / "gt_preview.png", preview_srgb(result.gt, balance))
+    summary = {"views": {}, "units": "mean_level: fraction of white − black; PSNR on packed RAW in [0, 1] "
+                                     "against the ground truth's RGGB samples clipped to [0, 1]"}
+    previews = {}
+    for name, cap in result.captures.items():
+        d = out / name
+        d.mkdir(exist_ok=True)
+        s = cap.params["sensor"]
+        save_raw_png(d / "raw.png", cap.mosaic_dn)
+        save_packed_tiff(d / "packed.tiff", cap.packed_dn)
+        rgb = demosaic_bilinear(cap.mosaic_dn.astype(np.float64) - s["black_level_dn"]) / (s["white_level_dn"] - s["black_level_dn"])
+        previews[name] = preview_srgb(rgb, balance)
+        write_png(d / "preview.png", previews[name])
+        save_json(d / "capture.json", {**cap.params, **result.display_meta[name]})
+        summary["views"][name] = capture_summary(cap, result.gt, s["white_level_dn"], s["black_level_dn"])
+    save_json(out / "synth.json", result.meta)
+    save_json(out / "summary.json", summary)
+    save_text(out / "summary.md", summary_markdown(summary))
+    if side_by_side:
+        from udc_render.io.plots import plot_side_by_side
+        plot_side_by_side(previews, summary, out / "side_by_side.png")
+    return summary
+
+
+def summary_markdown(summary: dict) -> str:
+    lines = ["| view | mean R | mean Gr | mean Gb | mean B | PSNR vs GT (dB) | saturated |",
+             "|---|---|---|---|---|---|---|"]
+    for name, v in summary["views"].items():
+        m = v["mean_level"]
+        lines.append(f"| {name} | {m['R']:.4f} | {m['Gr']:.4f} | {m['Gb']:.4f} | {m['B']:.4f} | "
+                     f"{v['psnr_db_vs_gt']:.2f} | {v['saturated_fraction']:.2%} |")
+    return "\n".join(lines) + f"\n\n{summary['units']}\n"
+
+
+def load_packed(capture_dir: Path) -> np.ndarray:
+    """[4, h, w] float32 packed RAW in units of the white level: (DN − black) / range."""
+    capture_dir = Path(capture_dir)
+    try:
+        sensor = json.loads((capture_dir / "capture.json").read_text())["sensor"]
+        dn = read_packed_tiff(capture_dir / "packed.tiff")
+    except FileNotFoundError as exc:
+        raise CaptureFileError(f"{exc.filename}: missing (is the dataset complete? re-run `udc-render dataset`)") from None
+    black, white = float(sensor["black_level_dn"]), float(sensor["white_level_dn"])
+    return ((dn.astype(np.float32) - black) / (white - black)).astype(np.float32)
+
+
+def load_gt(item_dir: Path) -> np.ndarray:
+    """[3, H, W] float32 ground truth (gt.exr channels R, G, B)."""
+    path = Path(item_dir) / "gt.exr"
+    if not path.is_file():
+        raise CaptureFileError(f"{path}: missing (is the dataset complete? re-run `udc-render dataset`)")
+    ch = read_exr(path)
+    return np.stack([ch[c] for c in "RGB"])

@@ -1,0 +1,322 @@
+"""Optics stage: apply PSF kernels to rendered band images (PHYSICS.md §1, §3 Boundaries/Centring, §4).
+
+Per band k (wavelength λ_k), on the render grid (sensor frame plus ``margin_px`` on every side):
+
+    y_k = g_k · (x_k ⊗ k_k),    g_k = T_display(λ_k) · transmittance_k · (1 − energy_outside_k)
+
+- ⊗ is *linear* convolution: the scene beyond the frame (the margin) blurs into it, nothing wraps.
+  The margin is cropped afterwards, so the output is the sensor frame. Needs margin_px ≥ S // 2.
+- Kernel convention (same as psf.engine): odd S, centre at index S // 2, so a delta at pixel p
+  gives the kernel with its centre at p: y[p + u] = k[S//2 + u].
+- Light that the PSF sends outside the kernel window is lost (energy_outside), not renormalised.
+- Glass (no display): pass the bare-lens KernelSet (transmittance 1) and transmission None (T = 1).
+
+Field dependence (distance d > 0, PHYSICS.md §4): the beam of a scene point imaged at sensor position
+x (µm from the optical axis = the frame centre; +x along columns, +y along rows) crosses the display
+at the mask shift s(x) = x · d / z_i, so its PSF and transmitted power depend on x with period
+z_i · p / d. With field kernels k_q and powers P_q sampled at phases q (KernelSet.field_*):
+
+    blend='source' (default):  y = g · Σ_q k_q ⊗ (w_q · P_q · x)      (the PSF belongs to the source point)
+    blend='output'          :  y = g · Σ_q w_q · P_q · (k_q ⊗ x)      (weights at the output pixel)
+
+w_q(x) are bilinear (tensor-product linear) interpolation weights in phase, periodic over the display
+period when the phases span a whole period, clamped at the end phases when they span only the part
+of the display the sensor sees (psf.engine.field_shifts). 'source' conserves energy exactly
+(Σ y = g · Σ x · P(s(x))); a flat field then shows the banding profile smoothed by the PSF.
+'output' gives a flat field exactly the interpolated P(s(x)). With d = 0 (or no field kernels) one
+kernel per band is used and nothing field-dependent is computed.
+
+FFTs: scipy.fft rfft2/irfft2 with ``workers``; float32/complex64 by default, float64 on request.
+FFT size per axis: next_fast_len(H) — the kernel is stored wrapped around index 0, so circular
+wrap-around only reaches the margin rows/columns that are cropped (exact linear result in the frame
+whenever margin_px ≥ S // 2; see ``convolve_bands``).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.fft as sfft
+from udc_render.errors import UdcError
+
+PRECISIONS = {"float32": np.float32, "float64": np.float64}
+BLENDS = ("source", "output")
+PITCH_RTOL = 1e-6
+
+
+class OpticsError(UdcError):
+    """Inputs the optics stage cannot honour (message is one line for the user)."""
+
+
+@dataclass(frozen=True)
+class OpticsResult:
+    """Irradiance at the sensor per band, sensor frame only.
+
+    images          [K, H, W] float32, same units as the band images × (dimensionless gains)
+    pitch_um        sensor-plane pixel pitch of images
+    wavelengths_nm  [K] kernel wavelengths
+    gains           [K] g_k = transmission_k · transmittance_k · (1 − energy_outside_k)
+    transmission    [K] display spectral transmission T(λ_k) that was applied
+    applied         what was done: model, blend, precision, fft_shape, margin_px, kernel_px, phases, ...
+    """
+    images: np.ndarray
+    pitch_um: float
+    wavelengths_nm: np.ndarray
+    gains: np.ndarray
+    transmission: np.ndarray
+    applied: dict = field(default_factory=dict)
+
+
+# ---------------------------------------------------------------------------- checks
+
+
+def _check_finite(bands: np.ndarray, names=None) -> None:
+    bad = ~np.isfinite(bands).reshape(bands.shape[0], -1).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        name = names[k] if names is not None else f"band {k}"
+        n = int((~np.isfinite(bands[k])).sum())
+        raise OpticsError(f"{name} (index {k}) holds {n} NaN or infinite value(s); the optics need finite input")
+
+
+def _check_margin(margin_px: int, size_px: int, shape) -> None:
+    if size_px % 2 != 1:
+        raise OpticsError(f"kernel size {size_px} px must be odd (centre at size // 2)")
+    half = size_px // 2
+    if margin_px < half:
+        raise OpticsError(f"margin_px={margin_px} is smaller than the kernel half-width {half} "
+                          f"(kernel {size_px}×{size_px} px); render with margin_px ≥ {half}")
+    if shape[0] <= 2 * margin_px or shape[1] <= 2 * margin_px:
+        raise OpticsError(f"margin_px={margin_px} leaves no sensor frame in a {shape[0]}×{shape[1]} px image")
+
+
+def _precision(precision: str):
+    if precision not in PRECISIONS:
+        raise OpticsError(f"precision must be one of {', '.join(PRECISIONS)}, got '{precision}'")
+    return PRECISIONS[precision]
+
+
+# ---------------------------------------------------------------------------- convolution core
+
+
+def fft_shape(image_shape, size_px: int, margin_px: int) -> tuple[int, int]:
+    """FFT size per axis: next_fast_len(max(n, n − m + S//2, S)) — enough for the frame to be exact."""
+    half = size_px // 2
+    return tuple(sfft.next_fast_len(max(n, n - margin_px + half, size_px), real=True) for n in image_shape)
+
+
+def _kernel_spectrum(kernel: np.ndarray, shape, dtype, workers: int) -> np.ndarray:
+    """rfft2 of the kernel stored wrapped around index 0 (centre S//2 → index 0), padded to `shape`."""
+    S, half = kernel.shape[-1], kernel.shape[-1] // 2
+    buf = np.zeros(shape, dtype=dtype)
+    buf[:S, :S] = kernel
+    buf = np.roll(buf, (-half, -half), axis=(0, 1))
+    return sfft.rfft2(buf, workers=workers)
+
+
+def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains=None,
+                   precision: str = "float32", workers: int = -1) -> np.ndarray:
+    """Linear convolution per band, cropped to the frame: y_k = g_k · (x_k ⊗ k_k)[m:H−m, m:W−m].
+
+    bands [K, H, W], kernels [K, S, S] (odd S, centre S//2), margin_px ≥ S//2. Output [K, H−2m, W−2m]
+    in `precision`. A kernel larger than the sensor frame is fine (exact) as long as the margin
+    covers its half-width; a kernel larger than the whole grid necessarily fails that check.
+    """
+    dtype = _precision(precision)
+    bands = np.asarray(bands)
+    kernels = np.asarray(kernels)
+    if bands.ndim != 3 or kernels.ndim != 3 or kernels.shape[0] != bands.shape[0] or kernels.shape[1] != kernels.shape[2]:
+        raise OpticsError(f"need bands [K, H, W] and kernels [K, S, S] with the same K, got "
+                          f"{bands.shape} and {kernels.shape}")
+    K, H, W = bands.shape
+    m = int(margin_px)
+    _check_margin(m, kernels.shape[-1], (H, W))
+    gains = np.ones(K) if gains is None else np.asarray(gains, dtype=np.float64)
+    shape = fft_shape((H, W), kernels.shape[-1], m)
+    out = np.empty((K, H - 2 * m, W - 2 * m), dtype=dtype)
+    for k in range(K):
+        spec = sfft.rfft2(bands[k].astype(dtype, copy=False), s=shape, workers=workers)
+        spec *= _kernel_spectrum(kernels[k].astype(dtype, copy=False), shape, dtype, workers)
+        y = sfft.irfft2(spec, s=shape, workers=workers)
+        out[k] = y[m:H - m, m:W - m] * dtype(gains[k])
+    return out
+
+
+# ---------------------------------------------------------------------------- field dependence
+
+
+def phase_weights(positions_um: np.ndarray, shifts_um: np.ndarray, distance_um: float, image_distance_um: float,
+                  period_um: float, periodic: bool) -> np.ndarray:
+    """Linear-interpolation weights [P, N] of N sensor positions x over P phase shifts s_i (one axis).
+
+    s(x) = x · d / z_i. periodic: s_i = i p / P, fractional index u = (s / (p/P)) mod P, wrapping
+    between phase P−1 and 0. Else s_i evenly spaced (field_shifts' centred cells): u clamped to
+    [0, P−1]. Columns sum to 1.
+    """
+    s = np.asarray(positions_um, dtype=np.float64) * distance_um / image_distance_um
+    shifts = np.asarray(shifts_um, dtype=np.float64)
+    P = shifts.size
+    w = np.zeros((P, s.size))
+    if P == 1:
+        w[0] = 1.0
+        return w
+    if periodic:
+        u = np.mod((s - shifts[0]) / (period_um / P), P)
+        i0 = np.floor(u).astype(int) % P
+        i1 = (i0 + 1) % P
+    else:
+        step = (shifts[-1] - shifts[0]) / (P - 1)
+        u = np.clip((s - shifts[0]) / step, 0.0, P - 1)
+        i0 = np.minimum(np.floor(u).astype(int), P - 2)
+        i1 = i0 + 1
+    f = u - np.floor(u) if periodic else u - i0
+    cols = np.arange(s.size)
+    np.add.at(w, (i0, cols), 1.0 - f)
+    np.add.at(w, (i1, cols), f)
+    return w
+
+
+def _axis_is_periodic(shifts: np.ndarray, period_um: float) -> bool:
+    P = shifts.size
+    return bool(P > 1 and np.allclose(shifts, np.arange(P) * period_um / P, rtol=1e-9, atol=1e-9 * period_um))
+
+
+def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np.ndarray, weights_y: np.ndarray,
+                   weights_x: np.ndarray, margin_px: int, gains=None, blend: str = "source",
+                   precision: str = "float32", workers: int = -1) -> np.ndarray:
+    """Field-varying blur: y_k = g_k Σ_{j,i} k_kji ⊗ (w_j(row) w_i(col) P_kji x_k)  (blend='source'),
+    or g_k Σ_{j,i} w_j w_i P_kji (k_kji ⊗ x_k) (blend='output'). Frame cropped as convolve_bands.
+
+    field_kernels [K, Py, Px, S, S], field_power [K, Py, Px], weights_y [Py, H], weights_x [Px, W]
+    (rows/columns of the whole render grid). Phases whose weights vanish everywhere are skipped.
+    """
+    dtype = _precision(precision)
+    if blend not in BLENDS:
+        raise OpticsError(f"blend must be one of {', '.join(BLENDS)}, got '{blend}'")
+    K, H, W = bands.shape
+    m = int(margin_px)
+    S = field_kernels.shape[-1]
+    _check_margin(m, S, (H, W))
+    gains = np.ones(K) if gains is None else np.asarray(gains, dtype=np.float64)
+    shape = fft_shape((H, W), S, m)
+    wy = weights_y.astype(dtype)
+    wx = weights_x.astype(dtype)
+    live = [(j, i) for j in range(wy.shape[0]) for i in range(wx.shape[0])
+            if wy[j].any() and wx[i].any()]
+    out = np.empty((K, H - 2 * m, W - 2 * m), dtype=dtype)
+    fy, fx = slice(m, H - m), slice(m, W - m)
+    for k in range(K):
+        x = bands[k].astype(dtype, copy=False)
+        if blend == "source":
+            acc = None
+            for j, i in live:
+                src = x * (wy[j][:, None] * wx[i][None, :]) * dtype(field_power[k, j, i])
+                term = sfft.rfft2(src, s=shape, workers=workers)
+                term *= _kernel_spectrum(field_kernels[k, j, i].astype(dtype), shape, dtype, workers)
+                acc = term if acc is None else acc + term
+            y = sfft.irfft2(acc, s=shape, workers=workers)[fy, fx]
+        else:
+            spec = sfft.rfft2(x, s=shape, workers=workers)
+            y = np.zeros((H - 2 * m, W - 2 * m), dtype=dtype)
+            for j, i in live:
+                blur = sfft.irfft2(spec * _kernel_spectrum(field_kernels[k, j, i].astype(dtype), shape, dtype,
+                                                           workers), s=shape, workers=workers)[fy, fx]
+                y += blur * (wy[j][fy, None] * wx[i][None, fx]) * dtype(field_power[k, j, i])
+        out[k] = y * dtype(gains[k])
+    return out
+
+
+# ---------------------------------------------------------------------------- the stage
+
+
+def _display_period_um(params: dict, period_um):
+    if period_um is not None:
+        p = tuple(float(v) for v in np.broadcast_to(np.asarray(period_um, dtype=float), (2,)))
+    else:
+        disp = params.get("display", {})
+        if "pitch_x_um" in disp:
+            p = (float(disp["pitch_x_um"]), float(disp["pitch_y_um"]))
+        elif "shape" in disp and "pixel_um" in disp:  # micrograph tile: shape [ny, nx] × pixel_um
+            p = (disp["shape"][1] * disp["pixel_um"], disp["shape"][0] * disp["pixel_um"])
+        else:
+            raise OpticsError("field kernels need the display period: pass period_um (x, y) in µm")
+    if not all(v > 0 and math.isfinite(v) for v in p):
+        raise OpticsError(f"period_um must be > 0, got {p}")
+    return p
+
+
+def _transmission(transmission, K: int) -> np.ndarray:
+    t = np.ones(K) if transmission is None else np.asarray(transmission, dtype=np.float64)
+    t = np.broadcast_to(t, (K,)).astype(np.float64) if t.ndim == 0 else t
+    if t.shape != (K,) or not np.all(np.isfinite(t)) or np.any(t < 0):
+        raise OpticsError(f"transmission must be None, a scalar or [K={K}] finite values ≥ 0, "
+                          f"got shape {t.shape}")
+    return t
+
+
+def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "float32", workers: int = -1,
+                  blend: str = "source", field: bool = True, distance_mm: float | None = None,
+                  image_distance_um: float | None = None, period_um=None) -> OpticsResult:
+    """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
+
+    y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (module doc).
+    transmission: T(λ_k), None (= 1, T-OLED flat or glass), a scalar, or [K].
+    field: use field kernels when the KernelSet has them (d > 0); False forces the mean kernel.
+    distance_mm, image_distance_um, period_um (x, y): override kernel_set.params (d, z_i, display pitch).
+    """
+    _precision(precision)  # validate early: one-line error for an unknown precision
+    bands = np.asarray(band_image.bands)
+    if bands.ndim != 3:
+        raise OpticsError(f"band image must be [K, H, W], got shape {bands.shape}")
+    K, H, W = bands.shape
+    edges = np.asarray(band_image.edges_nm, dtype=np.float64)
+    wl = np.asarray(kernel_set.wavelengths_nm, dtype=np.float64)
+    names = [f"band {0.5 * (edges[k] + edges[k + 1]):g} nm" for k in range(K)] if edges.size == K + 1 else None
+    _check_finite(bands, names)
+    if kernel_set.kernels.shape[0] != K or wl.size != K:
+        raise OpticsError(f"{K} band images but {kernel_set.kernels.shape[0]} kernels: one kernel per band needed")
+    if edges.size == K + 1:
+        outside = (wl < edges[:-1] - 1e-9) | (wl > edges[1:] + 1e-9)
+        if outside.any():
+            k = int(np.argmax(outside))
+            raise OpticsError(f"kernel {k} at {wl[k]:g} nm lies outside band {k} [{edges[k]:g}, {edges[k + 1]:g}] nm")
+    pitch = float(band_image.pitch_um)
+    if not abs(kernel_set.pixel_um - pitch) <= PITCH_RTOL * pitch:
+        raise OpticsError(f"kernel pixel {kernel_set.pixel_um:g} µm differs from the band image pitch {pitch:g} µm "
+                          f"(relative tolerance {PITCH_RTOL:g}); compute kernels at pixel_um={pitch:g}")
+    m = int(band_image.margin_px)
+    S = kernel_set.size_px
+    _check_margin(m, S, (H, W))
+    t = _transmission(transmission, K)
+    gains = t * np.asarray(kernel_set.transmittance, float) * (1.0 - np.asarray(kernel_set.energy_outside, float))
+
+    params = kernel_set.params or {}
+    d_mm = float(params.get("distance_mm", 0.0) if distance_mm is None else distance_mm)
+    applied = {"convolution": "linear, FFT (scipy.fft rfft2), margin cropped", "precision": precision,
+               "fft_shape": list(fft_shape((H, W), S, m)), "margin_px": m, "kernel_px": S,
+               "gain": "T · transmittance · (1 − energy_outside)", "distance_mm": d_mm, "workers": workers}
+    use_field = field and kernel_set.field_kernels is not None and d_mm > 0
+    if not use_field:
+        why = ("field kernels disabled" if kernel_set.field_kernels is not None and not field
+               else "d = 0 or no field kernels: one kernel per band")
+        applied.update(model="field-independent", skipped=[f"field-dependent blur ({why})"])
+        images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers)
+    else:
+        z = float(params["image_distance_um"] if image_distance_um is None else image_distance_um)
+        px, py = _display_period_um(params, period_um)
+        shifts = np.asarray(kernel_set.field_shifts_um, dtype=np.float64)
+        sx, sy = shifts[0, :, 0], shifts[:, 0, 1]
+        per_x, per_y = _axis_is_periodic(sx, px), _axis_is_periodic(sy, py)
+        # positions of pixel centres from the optical axis (the frame centre = the grid centre)
+        x_um = (np.arange(W) - (W - 1) / 2) * pitch
+        y_um = (np.arange(H) - (H - 1) / 2) * pitch
+        wx = phase_weights(x_um, sx, d_mm * 1000, z, px, per_x)
+        wy = phase_weights(y_um, sy, d_mm * 1000, z, py, per_y)
+        images = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m, gains,
+                                blend, precision, workers)
+        applied.update(model="field-dependent", blend=blend, phases=[int(sy.size), int(sx.size)],
+                       interpolation="bilinear in phase", periodic=[per_y, per_x],
+                       banding_period_px=[z * py / (d_mm * 1000) / pitch, z * px / (d_mm * 1000) / pitch],
+                       image_distance_um=z, period_um=[px, py])
+    return OpticsResult(np.ascontiguousarray(images, dtype=np.float32), pitch, wl.copy(), gains, t, applied)

@@ -1,0 +1,308 @@
+"""Displays in front of the camera: pixel layout, display-to-lens gap, spectral transmission, gain.
+
+A display is what the PSF engine needs (a psf layout, or None for the bare lens) plus what the
+optics and sensor need: the spectral transmission T(λ) of the stack apart from the layout's
+openings (substrate, encapsulation, polariser; the openings' own power loss is the kernel set's
+``transmittance``) and the sensor gain the paper used behind it.
+
+Presets (PHYSICS.md §2):
+
+- ``glass``: the clean capture, a thin glass panel of the display's thickness: bare-lens kernels,
+  T = 1, gain 1.
+- ``toled``: stripe layout (open area 21 %), flat T, gain 6. T is set so that the virtual γ
+  calibration gives the paper's γ = 0.97 in every channel: γ = gain · T · transmittance · (1 −
+  energy outside) relative to glass, so T = 0.97 / (6 · 0.21 · …) ≈ 0.82.
+- ``poled``: pentile layout (open area 23 %), gain 25, and a yellow polyimide substrate that absorbs
+  the blue: T(λ) = scale · (floor + (1 − floor) / (1 + exp(−(λ − edge) / width))), with scale and
+  edge fitted (``fit_poled_transmission``) so that γ = 0.34 (R) and 0.20 (B) as the paper measured.
+  Note the paper's own numbers disagree: 2.9 % transmission at gain 25 would give γ ≈ 0.7; we
+  reproduce the γ values (what the captures show), which imply ≈ 1.4 % transmission.
+
+A display file (TOML) describes any other display; see ``load_display`` and scenes/README.md.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from psf import MicrographLayout, layouts
+from udc_render.errors import UdcError
+from udc_render.io.files import read_toml
+
+PAPER_GAMMA = {"glass": (1.0, 1.0, 1.0), "toled": (0.97, 0.97, 0.97), "poled": (0.34, 0.34, 0.20)}
+PAPER_GAIN = {"glass": 1.0, "toled": 6.0, "poled": 25.0}
+PRESETS = ("glass", "toled", "poled")
+TRANSMISSION_TYPES = ("flat", "edge", "csv")
+
+# Fitted by fit_toled_transmission / fit_poled_transmission for the default rig (monitor white D65,
+# Nikon 5100 (NPL), 30 bands of 10 nm, 511-px kernels at 1.55 µm); tests/test_displays.py re-fits them.
+TOLED_T = 0.8227
+POLED_SCALE, POLED_EDGE_NM, POLED_WIDTH_NM, POLED_FLOOR = 0.06786, 463.94, 10.0, 0.0
+
+
+class DisplayError(UdcError):
+    """A bad display name or display file; one line naming the file, key, value and what is allowed."""
+
+
+@dataclass(frozen=True)
+class Transmission:
+    """Spectral transmission T(λ) of the display stack (dimensionless, 0..1)."""
+    kind: str = "flat"
+    value: float = 1.0  # flat
+    scale: float = 1.0  # edge: scale · (floor + (1 − floor) · logistic((λ − edge_nm) / width_nm))
+    edge_nm: float = 480.0
+    width_nm: float = 20.0
+    floor: float = 0.0
+    table_nm: tuple = ()  # csv: wavelengths and values, linear interpolation, ends held
+    table_t: tuple = ()
+    source: str = ""
+
+    def __call__(self, wavelengths_nm) -> np.ndarray:
+        wl = np.asarray(wavelengths_nm, dtype=np.float64)
+        if self.kind == "flat":
+            return np.full(wl.shape, self.value)
+        if self.kind == "edge":
+            logistic = 0.5 * (1.0 + np.tanh(0.5 * (wl - self.edge_nm) / self.width_nm))  # overflow-free
+            return self.scale * (self.floor + (1.0 - self.floor) * logistic)
+        return np.interp(wl, np.asarray(self.table_nm), np.asarray(self.table_t))
+
+    def band_means(self, edges_nm, samples_per_band: int = 16) -> np.ndarray:
+        """Mean of T over each band (midpoint rule with samples_per_band points)."""
+        e = np.asarray(edges_nm, float)
+        u = (np.arange(samples_per_band) + 0.5) / samples_per_band
+        pts = e[:-1, None] + np.diff(e)[:, None] * u[None, :]
+        return self(pts).mean(axis=1)
+
+    def describe(self) -> dict:
+        if self.kind == "flat":
+            return {"type": "flat", "value": self.value}
+        if self.kind == "edge":
+            return {"type": "edge", "scale": self.scale, "edge_nm": self.edge_nm, "width_nm": self.width_nm,
+                    "floor": self.floor, "formula": "scale (floor + (1 - floor) / (1 + exp(-(l - edge) / width)))"}
+        return {"type": "csv", "file": self.source, "wavelength_nm": list(self.table_nm), "t": list(self.table_t)}
+
+
+@dataclass(frozen=True)
+class Display:
+    """A display (or the glass panel) in front of the lens."""
+    name: str
+    layout: object | None  # a psf layout; None: bare lens (glass)
+    transmission: Transmission = field(default_factory=Transmission)
+    gain: float = 1.0
+    distance_mm: float = 0.0
+    source: str = "preset"
+
+    @property
+    def is_glass(self) -> bool:
+        return self.layout is None
+
+    def describe(self) -> dict:
+        return {"name": self.name, "source": self.source, "distance_mm": self.distance_mm, "gain": self.gain,
+                "layout": None if self.layout is None else self.layout.describe(),
+                "transmission": self.transmission.describe()}
+
+    def with_distance(self, distance_mm: float) -> "Display":
+        from dataclasses import replace
+        return replace(self, distance_mm=float(distance_mm))
+
+
+def preset(name: str) -> Display:
+    if name == "glass":
+        return Display("glass", None, Transmission("flat", 1.0), PAPER_GAIN["glass"])
+    if name == "toled":
+        return Display("toled", layouts.toled(), Transmission("flat", TOLED_T), PAPER_GAIN["toled"])
+    if name == "poled":
+        return Display("poled", layouts.poled(),
+                       Transmission("edge", scale=POLED_SCALE, edge_nm=POLED_EDGE_NM, width_nm=POLED_WIDTH_NM,
+                                    floor=POLED_FLOOR), PAPER_GAIN["poled"])
+    raise DisplayError(f"--display = {name!r}: expected one of {', '.join(PRESETS)} or a display file (.toml)")
+
+
+def load_display(spec: str) -> Display:
+    """A preset name (glass, toled, poled) or a display TOML file (scenes/README.md, 'Display files')."""
+    if spec in PRESETS:
+        return preset(spec)
+    path = Path(spec)
+    if path.suffix.lower() != ".toml":
+        raise DisplayError(f"--display = {spec!r}: expected one of {', '.join(PRESETS)} or a display file (.toml)")
+    return parse_display(read_toml(path, DisplayError, "display file"), path)
+
+
+def load_displays(specs: str, distance_mm: float | None = None) -> list[Display]:
+    """Glass first, then each display of the comma-separated `specs` once (presets or files), with
+    the display-to-lens distance override applied to all but glass."""
+    names = [t.strip() for t in specs.split(",") if t.strip()]
+    if not names:
+        raise DisplayError(f"--display = {specs!r}: expected glass, toled, poled or display files, comma-separated")
+    out = [load_display("glass")]
+    for n in names:
+        d = load_display(n)
+        if not d.is_glass:
+            out.append(d if distance_mm is None else d.with_distance(distance_mm))
+    return out
+
+
+_LAYOUT_KEYS = {"toled": ("pitch_um", "open_fraction", "slit_height_fraction"),
+                "poled": ("pitch_um", "open_fraction", "small_to_large"),
+                "micrograph": ("file", "pixel_um", "values")}
+_TOP_KEYS = ("name", "layout", "distance_mm", "gain", "transmission")
+
+
+def _fail(path, key, value, allowed):
+    raise DisplayError(f"{path}: {key} = {value!r}: expected {allowed}")
+
+
+def _number(path, table: dict, key: str, prefix: str, lo: float, hi: float, default=None, lo_open=False):
+    if key not in table:
+        if default is None:
+            _fail(path, prefix + key, None, f"a number in [{lo:g}, {hi:g}]")
+        return default
+    v = table[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) \
+            or not ((v > lo) if lo_open else (v >= lo)) or v > hi:
+        _fail(path, prefix + key, v, f"a number in {'(' if lo_open else '['}{lo:g}, {hi:g}]")
+    return float(v)
+
+
+def _check_keys(path, table, allowed, prefix):
+    if not isinstance(table, dict):
+        _fail(path, prefix.rstrip("."), table, "a table")
+    for k in table:
+        if k not in allowed:
+            _fail(path, prefix + k, table[k], f"a known key ({', '.join(allowed)})")
+
+
+def parse_display(data: dict, path: Path) -> Display:
+    """Validate a display document: [display] name, layout {type, …}, distance_mm, gain, transmission."""
+    _check_keys(path, data, ("display",), "")
+    d = data.get("display")
+    if d is None:
+        _fail(path, "display", None, "a [display] table")
+    _check_keys(path, d, _TOP_KEYS, "display.")
+    name = d.get("name", path.stem)
+    if not isinstance(name, str) or not name or any(c in name for c in "/\\ "):
+        _fail(path, "display.name", name, "a non-empty name without spaces or slashes")
+    lay = d.get("layout")
+    kind = lay.get("type") if isinstance(lay, dict) else None
+    if kind not in _LAYOUT_KEYS:
+        _fail(path, "display.layout.type", kind, "one of " + ", ".join(_LAYOUT_KEYS))
+    _check_keys(path, lay, ("type",) + _LAYOUT_KEYS[kind], "display.layout.")
+    p = "display.layout."
+    try:
+        if kind == "micrograph":
+            f = lay.get("file")
+            if not isinstance(f, str):
+                _fail(path, p + "file", f, "the path of a PNG/TIFF/EXR transmission image")
+            fp = Path(f) if Path(f).is_absolute() else path.parent / f
+            if not fp.is_file():
+                _fail(path, p + "file", f, f"an existing image file (no {fp})")
+            values = lay.get("values", "amplitude")
+            if values not in ("amplitude", "intensity"):
+                _fail(path, p + "values", values, "amplitude or intensity")
+            layout = MicrographLayout.load(fp, _number(path, lay, "pixel_um", p, 0, 1e4, 1.0, lo_open=True), values)
+        else:
+            factory = layouts.toled if kind == "toled" else layouts.poled
+            kw = {k: _number(path, lay, k, p, 0, 1e4, lo_open=True) for k in _LAYOUT_KEYS[kind] if k in lay}
+            layout = factory(**kw)
+    except layouts.LayoutError as e:
+        raise DisplayError(f"{path}: display.layout: {e}") from None
+    t = d.get("transmission", {"type": "flat", "value": 1.0})
+    tkind = t.get("type") if isinstance(t, dict) else None
+    if tkind not in TRANSMISSION_TYPES:
+        _fail(path, "display.transmission.type", tkind, "one of " + ", ".join(TRANSMISSION_TYPES))
+    p = "display.transmission."
+    if tkind == "flat":
+        _check_keys(path, t, ("type", "value"), p)
+        trans = Transmission("flat", _number(path, t, "value", p, 0, 1, lo_open=True))
+    elif tkind == "edge":
+        _check_keys(path, t, ("type", "scale", "edge_nm", "width_nm", "floor"), p)
+        trans = Transmission("edge", scale=_number(path, t, "scale", p, 0, 1, lo_open=True),
+                             edge_nm=_number(path, t, "edge_nm", p, 200, 1200),
+                             width_nm=_number(path, t, "width_nm", p, 0.1, 1000),
+                             floor=_number(path, t, "floor", p, 0, 1, 0.0))
+    else:
+        _check_keys(path, t, ("type", "file"), p)
+        trans = _transmission_csv(path, t.get("file"))
+    return Display(name=name, layout=layout, transmission=trans,
+                   gain=_number(path, d, "gain", "display.", 0, 1e6, 1.0, lo_open=True),
+                   distance_mm=_number(path, d, "distance_mm", "display.", 0, 1e4, 0.0), source=str(path))
+
+
+def _transmission_csv(path: Path, file) -> Transmission:
+    key = "display.transmission.file"
+    if not isinstance(file, str):
+        _fail(path, key, file, "a CSV file of wavelength_nm,t")
+    fp = Path(file) if Path(file).is_absolute() else path.parent / file
+    try:
+        lines = [ln for ln in fp.read_text().splitlines() if ln.strip()]
+    except OSError:
+        _fail(path, key, file, f"an existing CSV file (cannot read {fp})")
+    rows = []
+    for i, ln in enumerate(lines):
+        try:
+            rows.append([float(x) for x in ln.split(",")])
+        except ValueError:
+            if i == 0:
+                continue  # header
+            _fail(path, key, file, f"numeric rows wavelength_nm,t (line {i + 1}: {ln!r})")
+    a = np.asarray(rows, float)
+    if a.ndim != 2 or a.shape[0] < 2 or a.shape[1] != 2 or np.any(np.diff(a[:, 0]) <= 0) \
+            or not np.all(np.isfinite(a)) or np.any(a[:, 1] < 0) or np.any(a[:, 1] > 1):
+        _fail(path, key, file, "≥ 2 rows wavelength_nm,t with increasing wavelengths and 0 ≤ t ≤ 1")
+    return Transmission("csv", table_nm=tuple(a[:, 0]), table_t=tuple(a[:, 1]), source=str(fp))
+
+
+# ---------------------------------------------------------------- γ of a display (analytic)
+
+
+def channel_gamma(band_weights: np.ndarray, display: Display, display_gain_k: np.ndarray,
+                  glass_gain_k: np.ndarray, edges_nm) -> np.ndarray:
+    """γ per camera channel (R, G, B) of a flat field, relative to the glass capture at gain 1:
+
+        γ_c = gain · Σ_k W_ck T_k τ_k (1 − o_k) / Σ_k W_ck τ⁰_k (1 − o⁰_k)
+
+    band_weights W [3, K]: electrons per band of the field through the bare lens (e.g. white
+    radiance × photon weights × Δλ); display_gain_k = τ_k (1 − o_k) of the display's kernels,
+    glass_gain_k the bare lens's; T_k the display's band-mean transmission.
+    """
+    t = display.transmission.band_means(edges_nm)
+    num = band_weights @ (t * display_gain_k)
+    den = band_weights @ glass_gain_k
+    return display.gain * num / den
+
+
+def white_weights(edges_nm, camera: str, white_point: str = "D65") -> np.ndarray:
+    """[3, K] electrons per band and camera channel of the monitor's white (relative units)."""
+    from udc_render.content import spectra
+    from udc_render.sensor import photon_weights
+    prim, _ = spectra.monitor_primaries("Apple Studio Display", 300.0, None, white_point)
+    white = spectra.band_means(prim.sum(axis=0), edges_nm)
+    return photon_weights(edges_nm, camera) * white[None, :] * np.diff(np.asarray(edges_nm, float))[None, :]
+
+
+def fit_toled_transmission(display_gain_k, glass_gain_k, edges_nm, camera="Nikon 5100 (NPL)",
+                           target=PAPER_GAMMA["toled"][1], gain=PAPER_GAIN["toled"]) -> float:
+    """Flat T giving γ_G = target (γ is linear in T)."""
+    w = white_weights(edges_nm, camera)
+    unit = Display("t", layouts.toled(), Transmission("flat", 1.0), gain)
+    return float(target / channel_gamma(w, unit, display_gain_k, glass_gain_k, edges_nm)[1])
+
+
+def fit_poled_transmission(display_gain_k, glass_gain_k, edges_nm, camera="Nikon 5100 (NPL)",
+                           target=PAPER_GAMMA["poled"], gain=PAPER_GAIN["poled"], width_nm=POLED_WIDTH_NM,
+                           floor=POLED_FLOOR) -> tuple[float, float]:
+    """(scale, edge_nm) giving γ_B/γ_R = target_B/target_R (bisection on the edge) and γ_R = target_R."""
+    from scipy.optimize import brentq
+    w = white_weights(edges_nm, camera)
+
+    def gammas(edge, scale=1.0):
+        d = Display("p", layouts.poled(), Transmission("edge", scale=scale, edge_nm=edge, width_nm=width_nm,
+                                                      floor=floor), gain)
+        return channel_gamma(w, d, display_gain_k, glass_gain_k, edges_nm)
+
+    want = target[2] / target[0]
+    edge = brentq(lambda e: gammas(e)[2] / gammas(e)[0] - want, 380.0, 700.0, xtol=1e-4)
+    return float(target[0] / gammas(edge)[0]), float(edge)

@@ -1,0 +1,265 @@
+"""Render a scene to band images: radiance at the sensor in K wavelength bands (+ depth).
+
+Two paths, chosen by what the scene needs and recorded in the metadata:
+
+- ``rgb_matrix`` (the monitor alone in a dark room): light transport does not depend on wavelength,
+  so one RGB render of the panel's drive levels w_c(x) (c = R, G, B) gives every band exactly:
+  L_k(x) = Σ_c w_c(x) · P_ck, with P_ck the band-mean of primary c's radiance over band k.
+- ``spectral`` (3D scenes, user XML, or forced): Mitsuba's spectral variant with a `specfilm` of box
+  responses, ``bands_per_render`` bands per render (each render samples wavelengths only inside
+  its bands).
+
+Band values are pixel-area means of band-mean radiance, W·sr⁻¹·m⁻²·nm⁻¹ (box pixel filter; no
+cos⁴ fall-off and no exposure: those belong to the sensor model). The grid covers the sensor plus a
+margin of ``margin_px`` on every side; the sensor frame is ``bands[:, m:-m, m:-m]``.
+
+Samples: ``spp`` split into equal passes with seeds from SeedSequence([seed, group, pass]); the
+spread between passes measures the image's own Monte Carlo noise (relative RMS ‖σ‖₂/‖x‖₂ over
+all bands and pixels, x the noise-free image), recorded as ``noise_rel``. With a
+noise target, two pilot passes at ``PILOT_SPP`` estimate the noise and spp = ⌈pilot·(σ/target)²⌉.
+"""
+from __future__ import annotations
+
+import math
+import time
+import warnings
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from udc_render.content import spectra
+from udc_render.content.monitor_image import DisplayImageError, panel_drive
+from udc_render.errors import UdcError
+from udc_render.render import mitsuba_scene as ms
+from udc_render.render.band_image import BandImage, band_names
+from udc_render.render.variants import set_variant
+from udc_render.scene import Monitor, MitsubaXML, Scene
+from udc_render.scene.geometry import CameraGeometry, axial_depth_m, camera_geometry
+
+PILOT_SPP = 4
+MAX_SPP = 1 << 14
+PASS_SPP = {"rgb_matrix": 64, "spectral": 8}  # largest pass; progress ticks once per pass (a 3D pass is ~1 min at full size)
+
+
+class RenderError(UdcError):
+    """A scene that cannot be rendered as asked; one line."""
+
+
+def choose_path(scene: Scene) -> str:
+    if scene.render.path != "auto":
+        return scene.render.path
+    return "rgb_matrix" if isinstance(scene.content, Monitor) else "spectral"
+
+
+def pass_seed(seed: int, group: int, pass_index: int, pilot: bool = False) -> int:
+    """Mitsuba's uint32 seed of one pass: SeedSequence([seed, group, pass(, 1 for pilots)])."""
+    key = [seed, group, pass_index] + ([1] if pilot else [])
+    return int(np.random.SeedSequence(key).generate_state(1)[0])
+
+
+def pass_statistics(passes: np.ndarray, matrix: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
+    """Mean of P independent passes [P, C, H, W] (float32), and over all band values the sums
+    Σ σ² (variance of the mean) and Σ x̄², for the relative noise ‖σ‖₂/‖x‖₂ = sqrt(Σσ²/(Σx̄² − Σσ²))
+    (x the noise-free image; the norm of the study's relative error). With `matrix` [C, K] the bands are x_k = Σ_c M_ck w_c of
+    the rendered channels w (the rgb path), and both sums follow exactly from the C × C covariance
+    and Gram matrices summed over pixels."""
+    p = passes.shape[0]
+    mean = passes.mean(0, dtype=np.float64)
+    flat = mean.reshape(mean.shape[0], -1)
+    gram = flat @ flat.T
+    if p > 1:
+        dev = (passes - mean[None].astype(np.float32)).reshape(p, mean.shape[0], -1).astype(np.float64)
+        cov = np.einsum("pcn,pdn->cd", dev, dev) / (p - 1) / p
+    else:
+        cov = np.full_like(gram, np.nan)
+    if matrix is None:
+        var_sum, sq_sum = float(np.trace(cov)), float(np.trace(gram))
+    else:
+        var_sum, sq_sum = float(np.trace(matrix.T @ cov @ matrix)), float(np.trace(matrix.T @ gram @ matrix))
+    return mean.astype(np.float32), var_sum, sq_sum
+
+
+class _Job:
+    """One scene prepared for rendering: Mitsuba scene(s), films, and how bands are formed."""
+
+    def __init__(self, scene: Scene, path: str):
+        self.scene, self.path = scene, path
+        self.edges = np.asarray(scene.bands.edges_nm)
+        self.mi, self.backend = set_variant("rgb" if path == "rgb_matrix" else "spectral")
+        mi = self.mi
+        self.meta: dict = {}
+        content = scene.content
+        if isinstance(content, MitsubaXML):
+            xml = scene.resolve(content.file)
+            if not xml.exists():
+                raise RenderError(f"{scene.source}: content.file = {content.file!r}: no such file {xml}")
+            try:
+                self.xml_scene = mi.load_file(str(xml))
+            except Exception as e:  # Mitsuba raises RuntimeError with a long message
+                first = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
+                raise RenderError(f"{scene.source}: content.file = {content.file!r}: Mitsuba cannot load {xml}: {first}") from None
+            if content.use_xml_camera:
+                pose = ms.camera_pose(self.xml_scene)
+                if pose is None:
+                    raise RenderError(f"{scene.source}: content.use_xml_camera = true but {xml} has no sensor")
+                scene = replace(scene, camera=replace(scene.camera, origin_m=pose[0], target_m=pose[1], up=pose[2]))
+                if scene.lens.focus_distance_m is None:  # the pose has no target distance: focus at infinity
+                    scene = replace(scene, lens=replace(scene.lens, focus_distance_m=math.inf))
+                self.scene = scene
+        self.geom: CameraGeometry = camera_geometry(scene)
+        self.matrix: np.ndarray | None = None  # [3, K] monitor primaries' band means (monitor content only)
+        default_depth = 2 if isinstance(content, Monitor) else 8
+        self.max_depth = scene.render.max_depth or default_depth
+        self.integrator = {"type": "path", "max_depth": self.max_depth}
+        if isinstance(content, Monitor):
+            m = content
+            try:
+                self.drive, how = panel_drive(m.image, *m.resolution_px, m.transfer, _base(scene))
+                self.primaries, prim_desc = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, _base(scene),
+                                                                       m.white_point)
+            except (DisplayImageError, spectra.SpectrumError) as e:
+                raise RenderError(f"{scene.source}: {e}") from None
+            self.matrix = spectra.band_means(self.primaries, self.edges)  # [3, K]
+            self.meta.update(display=how, primaries=prim_desc, monitor_size_m=list(m.size_m),
+                             monitor_distance_m=self.geom.focus_distance_m if scene.lens.focus_distance_m is None else None,
+                             band_matrix=self.matrix.tolist())
+            shape = ms.monitor_shape(mi, m.size_m, self.drive, None if path == "rgb_matrix" else self.primaries)
+            self.content = {"type": "scene", "monitor": shape}
+        elif isinstance(content, MitsubaXML):
+            self.content = None
+        elif scene.content_type == "room":
+            self.content = ms.room(mi, content)
+        else:
+            self.content = ms.hdr_room(mi, content, self.geom.origin_m)
+        groups = [(0, len(self.edges) - 1)] if path == "rgb_matrix" else [
+            (a, min(a + scene.render.bands_per_render, len(self.edges) - 1))
+            for a in range(0, len(self.edges) - 1, scene.render.bands_per_render)]
+        self.groups = groups
+        self._scenes = {}
+
+    def _mitsuba_scene(self, g: int):
+        if g in self._scenes:
+            return self._scenes[g]
+        mi, geom = self.mi, self.geom
+        a, b = self.groups[g]
+        film = ms.rgb_film(geom) if self.path == "rgb_matrix" else ms.band_film(geom, self.edges[a:b + 1])
+        sens = ms.sensor(mi, geom, self.scene.lens, film, {"type": "independent", "sample_count": 1})
+        if self.content is None:
+            built = (self.xml_scene, mi.load_dict(sens), mi.load_dict(self.integrator))
+        else:
+            built = (mi.load_dict({**self.content, "sensor": sens, "integrator": self.integrator}), None, None)
+        self._scenes = {g: built}  # keep one group's scene alive at a time
+        return built
+
+    def render_group(self, g: int, spp: int, seed: int) -> np.ndarray:
+        """Band values [k, H, W] of group g (rgb path: the drive-weighted RGB [3, H, W])."""
+        sc, sens, integ = self._mitsuba_scene(g)
+        img = self.mi.render(sc, sensor=sens, integrator=integ, spp=spp, seed=seed) if sens is not None else \
+            self.mi.render(sc, spp=spp, seed=seed)
+        img = np.array(img, dtype=np.float32).transpose(2, 0, 1)
+        if self.path == "rgb_matrix":
+            return img[:3]
+        a, b = self.groups[g]
+        return img[:b - a] / np.diff(self.edges[a:b + 1]).astype(np.float32)[:, None, None]
+
+    def to_bands(self, values: list[np.ndarray]) -> np.ndarray:
+        """Band images [K, H, W] from each group's rendered mean."""
+        if self.path == "rgb_matrix":
+            return np.einsum("ck,chw->khw", self.matrix.astype(np.float32), values[0])
+        return np.concatenate(values, 0)
+
+    def render_all(self, spp: int, n_pass: int, seed: int, pilot: bool = False, bar=None) -> tuple[list, float | None]:
+        """Each group's mean over `n_pass` passes of `spp` (group by group: one Mitsuba scene
+        alive at a time) and the relative noise of the bands (None for a single pass)."""
+        means, var_sum, sq_sum = [], 0.0, 0.0
+        matrix = self.matrix if self.path == "rgb_matrix" else None
+        for g in range(len(self.groups)):
+            passes = []
+            for p in range(n_pass):
+                passes.append(self.render_group(g, spp, pass_seed(seed, g, p, pilot)))
+                if bar is not None:
+                    bar.update()
+            mean, v, q = pass_statistics(np.stack(passes), matrix)
+            means.append(mean)
+            var_sum, sq_sum = var_sum + v, sq_sum + q
+        # E[x̄²] = x² + σ²: relative to the noise-free image, Σx² ≈ Σx̄² − Σσ²
+        noise = math.sqrt(var_sum / (sq_sum - var_sum)) if n_pass > 1 and sq_sum > var_sum else (
+            math.inf if n_pass > 1 and var_sum > 0 else None)
+        return means, noise
+
+    def depth(self) -> np.ndarray:
+        """Axial distance (m) at every pixel centre; inf where the ray leaves the scene."""
+        mi = self.mi
+        sens = mi.load_dict(ms.depth_sensor(mi, self.geom, self.scene.lens))
+        aov = mi.load_dict({"type": "aov", "aovs": "d:depth,p:position"})
+        sc = self.xml_scene if self.content is None else mi.load_dict(self.content)
+        out = np.array(mi.render(sc, sensor=sens, integrator=aov, spp=1, seed=0), dtype=np.float64)
+        hit, pos = out[..., -4] > 0, out[..., -3:]
+        z = axial_depth_m(self.geom, pos)
+        return np.where(hit, z, np.inf).astype(np.float32)
+
+
+def _base(scene: Scene) -> Path:
+    return Path(scene.source).resolve().parent
+
+
+def _passes(spp: int, path: str) -> tuple[int, int]:
+    """(passes, spp per pass): at least two passes (to measure noise) once spp >= 2."""
+    if spp < 2:
+        return 1, 1
+    n = max(2, math.ceil(spp / PASS_SPP[path]))
+    return n, math.ceil(spp / n)
+
+
+def estimate_spp(job: _Job, target: float, seed: int) -> tuple[int, float]:
+    """spp for a relative noise `target`, from two pilot passes; also the pilot's noise."""
+    _, noise = job.render_all(PILOT_SPP, 2, seed, pilot=True)  # noise of the mean: 2·PILOT_SPP samples
+    if noise is None or noise == 0:
+        return 1, 0.0
+    spp = math.ceil(2 * PILOT_SPP * (noise / target) ** 2)
+    if spp > MAX_SPP:
+        warnings.warn(f"noise target {target} needs {spp} spp; capped at {MAX_SPP}", RuntimeWarning, stacklevel=2)
+    return int(min(max(spp, 1), MAX_SPP)), noise
+
+
+def render_scene(scene: Scene, progress: bool = True) -> BandImage:
+    """Render `scene` to a :class:`BandImage` (see the module docstring for the paths and units)."""
+    from tqdm import tqdm
+    t0 = time.perf_counter()
+    path = choose_path(scene)
+    job = _Job(scene, path)
+    r = job.scene.render
+    pilot = None
+    spp = r.spp
+    if spp is None:
+        spp, pilot = estimate_spp(job, r.noise, r.seed)
+    n_pass, pass_spp = _passes(spp, path)
+    bar = tqdm(total=n_pass * len(job.groups), desc=f"render ({path}, {job.backend.variant('rgb' if path == 'rgb_matrix' else 'spectral')})",
+               unit="pass", disable=not progress, leave=False)
+    means, noise = job.render_all(pass_spp, n_pass, r.seed, bar=bar)
+    bar.close()
+    bands = job.to_bands(means)
+    del means
+    want_depth = r.depth if r.depth is not None else not isinstance(job.scene.content, Monitor)
+    depth = job.depth() if want_depth else None
+    g = job.geom
+    meta = {
+        "scene": job.scene.source, "content": job.scene.content_type, "render_path": path,
+        "variant": job.backend.variant("rgb" if path == "rgb_matrix" else "spectral"),
+        "backend": job.backend.kind, "backend_reason": job.backend.reason,
+        "spp": n_pass * pass_spp, "passes": n_pass, "spp_per_pass": pass_spp, "seed": r.seed,
+        "pass_seeds": "SeedSequence([seed, group, pass]).generate_state(1)[0]",
+        "spp_from_noise_target": r.noise, "pilot_noise_rel": pilot, "pilot_spp": 2 * PILOT_SPP if pilot else None,
+        "noise_rel": noise, "max_depth": job.max_depth, "bands_per_render": r.bands_per_render if path == "spectral" else None,
+        "band_edges_nm": job.edges.tolist(), "band_names": band_names(job.edges),
+        "units": "band-mean radiance, W sr^-1 m^-2 nm^-1, pixel-area mean (box filter)",
+        "camera": g.describe(), "lens": vars(job.scene.lens), "sensor": vars(job.scene.sensor),
+        "supersample": r.supersample, "margin_um": r.margin_um,
+        "depth": "axial distance along the optical axis, m, at pixel centres; inf = no surface" if depth is not None
+        else ("not rendered: the monitor is a plane at camera.focus_distance_m" if isinstance(job.scene.content, Monitor) else "not rendered"),
+        "seconds": None, **job.meta,
+    }
+    meta["seconds"] = round(time.perf_counter() - t0, 3)
+    return BandImage(bands=bands.astype(np.float32), edges_nm=job.edges, pitch_um=g.pitch_um, margin_px=g.margin_px,
+                     depth_m=depth, meta=meta, primaries_matrix=job.matrix)

@@ -1,0 +1,74 @@
+"""The RGGB Bayer convention: R at (row 0, col 0), Gr at (0, 1), Gb at (1, 0), B at (1, 1), period 2.
+Packed RAW is [4, H/2, W/2] in the order (R, Gr, Gb, B)."""
+from __future__ import annotations
+
+import numpy as np
+
+from udc_render.sensor.config import SensorError
+
+CHANNELS = ("R", "Gr", "Gb", "B")
+SITES = ((0, 0), (0, 1), (1, 0), (1, 1))  # (row, col) offsets of R, Gr, Gb, B in the 2 × 2 cell
+SITE_COLOUR = (0, 1, 1, 2)  # index into the camera's (R, G, B) sensitivities
+
+
+def check_even(shape, what):
+    if len(shape) < 2 or shape[-1] < 2 or shape[-2] < 2 or shape[-1] % 2 or shape[-2] % 2:
+        raise SensorError(f"{what}: shape {tuple(shape)}: height and width must be even and ≥ 2 (RGGB 2 × 2 cells)")
+
+
+def pack_rggb(mosaic: np.ndarray) -> np.ndarray:
+    """[..., H, W] RGGB mosaic ──► [..., 4, H/2, W/2] planes (R, Gr, Gb, B); H and W even."""
+    m = np.asarray(mosaic)
+    check_even(m.shape, "mosaic")
+    return np.stack([m[..., i::2, j::2] for i, j in SITES], axis=-3)
+
+
+def unpack_rggb(packed: np.ndarray) -> np.ndarray:
+    """Exact inverse of pack_rggb: [..., 4, h, w] ──► [..., 2h, 2w]."""
+    p = np.asarray(packed)
+    if p.ndim < 3 or p.shape[-3] != 4:
+        raise SensorError(f"packed RAW: shape {p.shape}: expected [..., 4, h, w] (R, Gr, Gb, B)")
+    out = np.empty(p.shape[:-3] + (2 * p.shape[-2], 2 * p.shape[-1]), dtype=p.dtype)
+    for c, (i, j) in enumerate(SITES):
+        out[..., i::2, j::2] = p[..., c, :, :]
+    return out
+
+
+def site_colour(height_px: int, width_px: int) -> np.ndarray:
+    """[H, W] int8: 0 R, 1 Gr, 2 Gb, 3 B (the RGGB convention above)."""
+    check_even((height_px, width_px), "mosaic")
+    return np.tile(np.array([[0, 1], [2, 3]], np.int8), (height_px // 2, width_px // 2))
+
+
+
+
+_BILINEAR_G = np.array([[0, 1, 0], [1, 4, 1], [0, 1, 0]], float) / 4
+_BILINEAR_RB = np.array([[1, 2, 1], [2, 4, 2], [1, 2, 1]], float) / 4
+
+
+def demosaic_bilinear(mosaic: np.ndarray) -> np.ndarray:
+    """[3, H, W] from an RGGB mosaic [H, W] by bilinear interpolation (mirror boundary)."""
+    from scipy.ndimage import convolve
+    m = np.asarray(mosaic, dtype=np.float64)
+    out = np.zeros((3,) + m.shape)
+    for c in range(3):
+        sparse = np.zeros_like(m)
+        for s, (i, j) in enumerate(SITES):
+            if SITE_COLOUR[s] == c:
+                sparse[i::2, j::2] = m[i::2, j::2]
+        out[c] = convolve(sparse, _BILINEAR_G if c == 1 else _BILINEAR_RB, mode="mirror")
+    return out
+
+
+def mosaic_of(rgb: np.ndarray) -> np.ndarray:
+    """RGGB mosaic [H, W] sampled from a full-resolution [3, H, W] image."""
+    out = np.empty(rgb.shape[1:], dtype=rgb.dtype)
+    for s, (i, j) in enumerate(SITES):
+        out[i::2, j::2] = rgb[SITE_COLOUR[s], i::2, j::2]
+    return out
+
+
+def rgb_to_rggb(values) -> tuple:
+    """(R, G, B) per-colour values ──► (R, Gr, Gb, B): the green value for both green sites."""
+    r, g, b = values
+    return (r, g, g, b)
