@@ -1,7 +1,7 @@
 #!/usr/bin/env python
 """Time and accuracy of the PSF engine against hcipy, poppy and the paper's FFT recipe.
 
-Rig (paper, PHYSICS.md §2): f = 6000 µm, D = 3333 µm, sensor pixel ρ = 3.1 µm, 255 × 255 output
+Rig (paper, docs/PHYSICS.md §2): f = 6000 µm, D = 3333 µm, sensor pixel ρ = 3.1 µm, 255 × 255 output
 centred at index 127, wavelengths 450 / 520 / 640 nm. Every method receives the SAME pupil raster g
 (built exactly as psf.engine.compute_kernels builds it: display_grid / lens_grid, tile_mask,
 aperture_slices, area-weighted aperture) and returns point samples on the same sensor grid

@@ -1,4 +1,4 @@
-"""Transmitted power and banding for a display a distance d in front of the pupil (PHYSICS.md §4).
+"""Transmitted power and banding for a display a distance d in front of the pupil (docs/PHYSICS.md §4).
 
 A scene point imaged at sensor position x sends a beam that crosses the display over the
 aperture disc shifted by s = x · d / z_i, so the power that reaches the sensor is

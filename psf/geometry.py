@@ -2,7 +2,7 @@
 
 Every function returns, for each cell of a rectilinear grid, the area (µm²) that a shape covers.
 Area weighting (grey edge pixels) is 20-40x more accurate than binary rasters at equal pupil
-sampling (PHYSICS.md §3); here the areas are exact to floating-point rounding, not supersampled.
+sampling (docs/PHYSICS.md §3); here the areas are exact to floating-point rounding, not supersampled.
 """
 from __future__ import annotations
 

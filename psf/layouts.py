@@ -7,7 +7,7 @@ never by re-rasterising). Transparent openings sit on an opaque background.
 
 Defaults reproduce the paper's open areas (Zhou et al. 2021, §3): T-OLED 21 %, P-OLED 23 %.
 The pitches are not given in the paper; the values below are documented choices of this project
-(60 µm T-OLED cell, as in PHYSICS.md §4; a 64 µm RGBG pentile cell, ≈ 400 ppi).
+(60 µm T-OLED cell, as in docs/PHYSICS.md §4; a 64 µm RGBG pentile cell, ≈ 400 ppi).
 """
 from __future__ import annotations
 
@@ -170,7 +170,7 @@ def poled(pitch_um: float = 64.0, open_fraction: float = 0.23, small_to_large: f
 
 
 def slit_grating(pitch_um: float, opening_um: float, height_um: float | None = None) -> PeriodicLayout:
-    """1-D slit grating (the analytic oracle of PHYSICS.md §6): openings of width opening_um along x.
+    """1-D slit grating (the analytic oracle of docs/PHYSICS.md §6): openings of width opening_um along x.
 
     With height_um None the slits are unbroken along y (a cell as tall as it is wide, fully open in y).
     """

@@ -3,7 +3,7 @@
 Angular spectrum (exact scalar diffraction): H(ν) = exp(2πi d [sqrt(1/λ² − |ν|²) − 1/λ]),
 evanescent for |ν| > 1/λ (decays, never NaN). The constant phase 2πd/λ is dropped and the
 bracket is evaluated as −|ν|² / (1/λ + sqrt(1/λ² − |ν|²)) to avoid cancellation at large d.
-The Fresnel transfer function exp(−iπλd|ν|²) is kept for the Talbot oracle (PHYSICS.md §6).
+The Fresnel transfer function exp(−iπλd|ν|²) is kept for the Talbot oracle (docs/PHYSICS.md §6).
 """
 from __future__ import annotations
 

@@ -109,7 +109,7 @@ def tile_mask(layout, cell_n: tuple[int, int], tiles: tuple[int, int], mask_rast
 
     κ ≥ 1 restores the power that the raster cannot carry (orders beyond its band or lost to box
     filtering): that light leaves at angles outside the alias-free field, so the transmitted power
-    and hence energy_outside are exact (PHYSICS.md §6: zero-order energy = open fraction).
+    and hence energy_outside are exact (docs/PHYSICS.md §6: zero-order energy = open fraction).
     """
     nx, ny = cell_n
     amp, mean_intensity = cell_raster(layout, nx, ny, mask_raster)

@@ -7,7 +7,7 @@
 
 Input x = (DN − black) / (white − black) per packed plane; target y = gt (same units, not clipped).
 
-Augmentation keeps the Bayer pattern (Liu et al. 2019, PHYSICS.md §7): the 8 flips/transposes are
+Augmentation keeps the Bayer pattern (Liu et al. 2019, docs/PHYSICS.md §7): the 8 flips/transposes are
 applied to the full-resolution mosaic and to the ground truth; a flip along an axis moves R to odd
 indices on that axis, so the crop starts one pixel in (crops start on the R site), and the crop is
 packed again. A transpose keeps R at (0, 0) and swaps Gr with Gb (both green).

@@ -6,7 +6,7 @@ with the display at the principal plane (d = 0: a display at d > 0 makes the blu
 which DeP does not model), sampled at the packed plane's pitch (2 × the sensor pitch), the R kernel
 for R, the G kernel for Gr and Gb, B for B. Cached on disk like every kernel (psf.cache).
 
-γ: what the paper's calibration measures (PHYSICS.md §2: a white square with and without the
+γ: what the paper's calibration measures (docs/PHYSICS.md §2: a white square with and without the
 display), computed from the display: γ_c = gain · T̄_c · τ_c (1 − o_c), with T̄_c the display's
 T(λ) averaged over the monitor white seen by camera channel c, τ_c the pixel grid's transmittance
 and o_c the energy outside the kernel window, both channel-weighted (psf.spectral.combine). The

@@ -1,6 +1,6 @@
 """Shared helpers for the PSF-engine tests: analytic oracles and independent re-implementations.
 
-Everything here is written from the physics (PHYSICS.md §3, §4, §6), not copied from the engine,
+Everything here is written from the physics (docs/PHYSICS.md §3, §4, §6), not copied from the engine,
 so that a test compares the engine with something that could disagree with it.
 Helpers are plain functions exposed through the `psfkit` fixture (tests never import conftest).
 """
@@ -84,7 +84,7 @@ def propagated_orders(layout, wavelength_um: float, distance_um: float):
 
 
 def series_power(layout, lens: Lens, wavelength_um: float, distance_um: float, shifts_um):
-    """Transmitted power P(s) = Σ_k b_k(d) Â(k/p) exp(−2πi k·s/p) (PHYSICS.md §4), [..., 2] shifts (x, y).
+    """Transmitted power P(s) = Σ_k b_k(d) Â(k/p) exp(−2πi k·s/p) (docs/PHYSICS.md §4), [..., 2] shifts (x, y).
 
     b_k = Σ_m a_{m+k} a*_m (scipy.signal.correlate), Â the disc transform. The mask shifted by +s
     (m(x − s)) under a fixed aperture: P(s) = ∫ A(x) |m_d(x − s)|² dx, hence the minus sign.

@@ -24,7 +24,7 @@ def test_psf_writes_kernels_plots_and_parameters(tmp_path, capsys):
         np.testing.assert_array_equal(z["wavelengths_nm"], [450.0, 640.0])
         assert float(z["pixel_um"]) == 3.1 and float(z["focal_length_um"]) == 6000.0
         params = json.loads(str(z["params_json"]))
-        # r = δ_N N ρ / (λ f) with N δ_N = the aperture (PHYSICS.md §2)
+        # r = δ_N N ρ / (λ f) with N δ_N = the aperture (docs/PHYSICS.md §2)
         np.testing.assert_allclose(z["ratio_r"], 3333 * 3.1 / (np.array([450, 640]) * 1e-3 * 6000))
     assert params["display"]["name"] == "toled" and params["method"] == "mft"
     for name in ("psf.png", "mtf.png", "psf.json"):

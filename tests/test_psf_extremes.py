@@ -335,7 +335,7 @@ def test_bad_lens_raises_one_line_lens_error(kwargs):
 def test_huge_aperture_keeps_only_the_zero_order_in_a_small_window():
     # f/0.3 (D = 20 mm): the Airy core (0.19 µm) sits inside the centre pixel and the first order
     # (λz/p = 52 µm = 16.8 px) lies outside a 31-px window, so the window holds the zero order:
-    # |c0|² of the transmitted (propagating) power T, i.e. f² / T ≈ f (PHYSICS.md §6). Measured:
+    # |c0|² of the transmitted (propagating) power T, i.e. f² / T ≈ f (docs/PHYSICS.md §6). Measured:
     # 0.21167 against 0.21098 (the other orders' Airy tails), centre pixel 0.979.
     lens = Lens(aperture_um=20000.0)
     with warnings.catch_warnings():

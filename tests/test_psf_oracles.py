@@ -1,6 +1,6 @@
-"""The PSF engine against analytic oracles (PHYSICS.md §6) and conservation laws.
+"""The PSF engine against analytic oracles (docs/PHYSICS.md §6) and conservation laws.
 
-Rig: the paper's lens (f = 6 mm, D = 3.333 mm) unless stated. Tolerances are those of PHYSICS.md §6
+Rig: the paper's lens (f = 6 mm, D = 3.333 mm) unless stated. Tolerances are those of docs/PHYSICS.md §6
 where it lists one; the value measured on this engine (2-core machine, float64) is noted beside
 each assertion as "measured". Heavy variants (N = 4096 pupils) are marked slow.
 """

@@ -1,4 +1,4 @@
-"""`udc-render calibrate`: the paper's calibration protocols run on the virtual rig (PHYSICS.md §2).
+"""`udc-render calibrate`: the paper's calibration protocols run on the virtual rig (docs/PHYSICS.md §2).
 
     udc-render calibrate --display {toled,poled,PATH} [--out DIR] [--quick] [--noise-model M]
 
@@ -400,7 +400,7 @@ def calibrate_mtf(rig: Rig) -> dict:
 
 
 def mtf_checks(display, mtf: dict) -> list:
-    """The expected physics of the presets (PHYSICS.md §2): T-OLED near-nulls along x, P-OLED none."""
+    """The expected physics of the presets (docs/PHYSICS.md §2): T-OLED near-nulls along x, P-OLED none."""
     f = np.array(mtf["frequencies"])
     if display.name == "toled" and display.source == "preset":
         band = (f >= TOLED_DIP_BAND[0]) & (f <= TOLED_DIP_BAND[1])

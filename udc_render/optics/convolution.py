@@ -1,4 +1,4 @@
-"""Optics stage: apply PSF kernels to rendered band images (PHYSICS.md §1, §3 Boundaries/Centring, §4).
+"""Optics stage: apply PSF kernels to rendered band images (docs/PHYSICS.md §1, §3 Boundaries/Centring, §4).
 
 Per band k (wavelength λ_k), on the render grid (sensor frame plus ``margin_px`` on every side):
 
@@ -11,7 +11,7 @@ Per band k (wavelength λ_k), on the render grid (sensor frame plus ``margin_px`
 - Light that the PSF sends outside the kernel window is lost (energy_outside), not renormalised.
 - Glass (no display): pass the bare-lens KernelSet (transmittance 1) and transmission None (T = 1).
 
-Field dependence (distance d > 0, PHYSICS.md §4): the beam of a scene point imaged at sensor position
+Field dependence (distance d > 0, docs/PHYSICS.md §4): the beam of a scene point imaged at sensor position
 x (µm from the optical axis = the frame centre; +x along columns, +y along rows) crosses the display
 at the mask shift s(x) = x · d / z_i, so its PSF and transmitted power depend on x with period
 z_i · p / d. With field kernels k_q and powers P_q sampled at phases q (KernelSet.field_*):

@@ -5,7 +5,7 @@ optics and sensor need: the spectral transmission T(λ) of the stack apart from 
 openings (substrate, encapsulation, polariser; the openings' own power loss is the kernel set's
 ``transmittance``) and the sensor gain the paper used behind it.
 
-Presets (PHYSICS.md §2):
+Presets (docs/PHYSICS.md §2):
 
 - ``glass``: the clean capture, a thin glass panel of the display's thickness: bare-lens kernels,
   T = 1, gain 1.

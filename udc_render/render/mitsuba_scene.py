@@ -19,7 +19,7 @@ def spectrum(values: np.ndarray) -> dict:
 
 
 def box_response(lo_nm: float, hi_nm: float) -> dict:
-    """specfilm channel response: height exactly 1 on [lo, hi] (RENDERING.md: any other height
+    """specfilm channel response: height exactly 1 on [lo, hi] (docs/RENDERING.md: any other height
     misplaces wavelengths); the film value is then ∫ L dλ over the band."""
     return {"type": "regular", "wavelength_min": float(lo_nm), "wavelength_max": float(hi_nm), "values": "1, 1"}
 

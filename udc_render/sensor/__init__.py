@@ -1,4 +1,4 @@
-"""The sensor: band radiance at the sensor plane ──► RGGB RAW mosaic in DN (PHYSICS.md §1, §2, §5).
+"""The sensor: band radiance at the sensor plane ──► RGGB RAW mosaic in DN (docs/PHYSICS.md §1, §2, §5).
 
 Conventions
 -----------

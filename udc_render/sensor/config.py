@@ -35,7 +35,7 @@ def _num(name, v, lo, hi, lo_open=False, integer=False):
 
 @dataclass(frozen=True)
 class SensorConfig:
-    """Every setting of the virtual sensor (defaults: the paper's rig, PHYSICS.md §2, §5).
+    """Every setting of the virtual sensor (defaults: the paper's rig, docs/PHYSICS.md §2, §5).
 
     Optical/radiometric: pitch_um (1.55), f_number (1.8), exposure_s (0.125 = 8 fps), peak_qe,
     camera (colour-science name or CSV path: header row, wavelength_nm, r, g, b), cos4_falloff and
