@@ -263,3 +263,25 @@ def test_study_capture_quick_writes_table_and_errors_order(tmp_path):
     by = {(r["study"], r["setting"]): r["rel_error"] for r in rows}
     assert by[("precision", "float64")] == 0.0 and by[("precision", "float32")] < 1e-5
     assert all(np.isfinite(r["rel_error"]) and r["kernel_s"] >= 0 for r in rows)
+
+
+def test_the_scene_is_the_one_source_of_the_optics(tmp_path):
+    """A scene at f/2.8 with a 4 mm lens gets f/2.8 kernels (aperture f/N), f/2.8 irradiance (electrons
+    ∝ 1/N²) and its own focal length in the cos⁴ fall-off; a sensor file may not set them."""
+    from dataclasses import replace
+    from udc_render.scene import load_scene
+    from udc_render.scene.geometry import psf_lens
+    from udc_render.sensor import SensorError, band_electron_weights
+    base = load_scene("monitor")
+    scene = replace(base, lens=replace(base.lens, f_number=2.8, focal_length_mm=4.0))
+    lens = psf_lens(scene)
+    assert lens.focal_length_um == 4000.0 and lens.aperture_um == pytest.approx(4000.0 / 2.8)
+    s28, s18 = sensor_for_scene(SensorConfig(), scene), sensor_for_scene(SensorConfig(), base)
+    assert (s28.f_number, s28.focal_length_um, s28.pitch_um) == (2.8, 4000.0, base.sensor.pitch_um)
+    edges = np.array([500.0, 510.0])
+    ratio = band_electron_weights(edges, s18) / band_electron_weights(edges, s28)
+    np.testing.assert_allclose(ratio, (2.8 / 1.8) ** 2, rtol=1e-12)
+    cfg = tmp_path / "sensor.toml"
+    cfg.write_text("f_number = 2.8\n")
+    with pytest.raises(SensorError, match="comes from the scene file"):
+        SensorConfig.from_toml(cfg)

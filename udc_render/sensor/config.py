@@ -33,6 +33,11 @@ def _num(name, v, lo, hi, lo_open=False, integer=False):
         _fail(name, v, f"{kind} in {rng}")
 
 
+# Optical settings with one source, the scene: the pipeline fills them (pipeline.sensor_for_scene).
+SCENE_OPTICS = {"pitch_um": "[sensor] pitch_um", "f_number": "[lens] f_number",
+                "focal_length_um": "[lens] focal_length_mm"}
+
+
 @dataclass(frozen=True)
 class SensorConfig:
     """Every setting of the virtual sensor (defaults: the paper's rig, docs/PHYSICS.md §2, §5).
@@ -120,6 +125,8 @@ class SensorConfig:
         """From a TOML table (lists for tuples); unknown keys rejected. Errors name the key."""
         names = [f.name for f in dataclasses.fields(cls)]
         for k in data:
+            if k in SCENE_OPTICS:
+                _fail(k, data[k], f"no value here: {k} comes from the scene file ({SCENE_OPTICS[k]})")
             if k not in names:
                 _fail(k, data[k], f"a known key ({', '.join(names)})")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})
