@@ -17,6 +17,7 @@ import numpy as np
 import scipy.fft as sfft
 from scipy.special import j1
 
+from .errors import PSFError
 from .lens import Lens
 from .propagation import angular_spectrum_tf
 
@@ -56,7 +57,6 @@ def banding_profile(display, lens: Lens | None = None, wavelength_nm: float = 52
 
     positions_um default: 400 samples over two banding periods. Needs a periodic display and d > 0.
     """
-    from .engine import PSFError
     lens = lens or Lens()
     if display is None or not getattr(display, "periodic", True):
         raise PSFError("banding needs a periodic display (a bare lens or randomly rotated tiles have no period)")
