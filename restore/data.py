@@ -96,7 +96,7 @@ def load_packed(capture_dir: Path) -> np.ndarray:
 
 
 def load_gt(item_dir: Path) -> np.ndarray:
-    """[3, H, W] float32 ground truth (gt.exr channels R, G, B)."""
+    """[3, H, W] float32 ground truth (gt.exr channels R, G, B); NaN or ±inf in it is a DataError."""
     import OpenEXR
     path = Path(item_dir) / "gt.exr"
     if not path.is_file():
@@ -104,8 +104,14 @@ def load_gt(item_dir: Path) -> np.ndarray:
     with OpenEXR.File(str(path)) as f:
         ch = f.channels()
         if "RGB" in ch:  # OpenEXR ≥ 3.3 groups R, G, B into one [H, W, 3] channel
-            return np.ascontiguousarray(np.moveaxis(np.asarray(ch["RGB"].pixels, np.float32), -1, 0))
-        return np.stack([np.asarray(ch[c].pixels, np.float32) for c in "RGB"])
+            gt = np.ascontiguousarray(np.moveaxis(np.asarray(ch["RGB"].pixels, np.float32), -1, 0))
+        else:
+            gt = np.stack([np.asarray(ch[c].pixels, np.float32) for c in "RGB"])
+    bad = np.count_nonzero(~np.isfinite(gt))
+    if bad:
+        raise DataError(f"{path}: NaN or infinite values ({bad} of {gt.size}), expected finite linear RGB: "
+                        f"delete {path.parent.name} and re-run `udc-render dataset` to make it again")
+    return gt
 
 
 def load_pair(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
@@ -126,6 +132,12 @@ def dihedral(a: np.ndarray, mode: int) -> np.ndarray:
     return a
 
 
+def largest_crop_px(h: int, w: int) -> int:
+    """The largest square crop of an h × w frame that augment_crop takes whatever the transform: the
+    smaller side less 2 px (room for the shift after a flip), in whole RGGB cells."""
+    return (min(h, w) - 2) // 2 * 2
+
+
 def augment_crop(packed: np.ndarray, gt: np.ndarray, mode: int, crop_px: int | None, rng: np.random.Generator):
     """(packed [4, c/2, c/2], gt [3, c, c]): Bayer-preserving transform `mode`, then a random square
     crop of c = crop_px full-resolution pixels starting on an R site (module doc). A crop larger than
@@ -140,7 +152,7 @@ def augment_crop(packed: np.ndarray, gt: np.ndarray, mode: int, crop_px: int | N
     else:
         if min(H, W) < 4:
             raise DataError(f"image {H} × {W} px: too small for crops (at least 4 × 4)")
-        ch = cw = min(crop_px, (min(H, W) - 2) // 2 * 2)
+        ch = cw = min(crop_px, largest_crop_px(H, W))
     y0 = r_row + 2 * int(rng.integers(0, (H - r_row - ch) // 2 + 1))
     x0 = r_col + 2 * int(rng.integers(0, (W - r_col - cw) // 2 + 1))
     crop = np.ascontiguousarray(mosaic[y0:y0 + ch, x0:x0 + cw])
@@ -151,7 +163,8 @@ class PairDataset(torch.utils.data.Dataset):
     """Random square crops (crop_px full-resolution pixels, 256 by default) of the pairs, `crops_per_pair`
     per pair and epoch, with Bayer-preserving augmentation. Deterministic: the crop and transform
     of index i in epoch e come from SeedSequence([seed, e, i]) (set_epoch), so resumed training
-    sees the same samples. Pairs are read once and kept in memory."""
+    sees the same samples. Every pair is read (and checked, load_pair) when the dataset is made, and kept
+    in memory."""
 
     def __init__(self, pairs: list[Pair], crop_px: int | None = 256, augment: bool = True, seed: int = 0,
                  crops_per_pair: int = 1):
@@ -160,7 +173,8 @@ class PairDataset(torch.utils.data.Dataset):
         if crop_px is not None and (crop_px < 2 or crop_px % 2):
             raise DataError(f"crop_px = {crop_px}: expected an even number ≥ 2 (whole RGGB cells)")
         self.pairs, self.crop_px, self.augment, self.seed = pairs, crop_px, augment, seed
-        self.crops_per_pair, self.epoch, self._cache = crops_per_pair, 0, {}
+        self.crops_per_pair, self.epoch = crops_per_pair, 0
+        self.arrays = [load_pair(p) for p in pairs]
 
     def __len__(self):
         return len(self.pairs) * self.crops_per_pair
@@ -168,13 +182,8 @@ class PairDataset(torch.utils.data.Dataset):
     def set_epoch(self, epoch: int) -> None:
         self.epoch = epoch
 
-    def arrays(self, k: int):
-        if k not in self._cache:
-            self._cache[k] = load_pair(self.pairs[k])
-        return self._cache[k]
-
     def __getitem__(self, i: int):
-        packed, gt = self.arrays(i % len(self.pairs))
+        packed, gt = self.arrays[i % len(self.pairs)]
         rng = np.random.default_rng([self.seed, self.epoch, i])
         mode = int(rng.integers(0, 8)) if self.augment else 0
         x, y = augment_crop(packed, gt, mode, self.crop_px, rng)

@@ -40,12 +40,27 @@ PROTOCOL = (f"daylight-balanced camera RGB, clipped to [0, 1], sRGB-encoded, {BO
             "ms/MP: median restorer wall time per output megapixel")
 
 
+def border_px(h: int, w: int) -> int:
+    """The border cropped from an h × w frame: BORDER_PX, none for frames of 4 · BORDER_PX px or less."""
+    return BORDER_PX if min(h, w) > 4 * BORDER_PX else 0
+
+
 def display_referred(rgb: np.ndarray, balance: np.ndarray) -> np.ndarray:
     """[3, H, W] → the protocol's image [3, H − 2b, W − 2b] in [0, 1] (module doc)."""
     x = np.clip(np.asarray(rgb, np.float64) * balance[:, None, None], 0, 1)
-    b = BORDER_PX if min(x.shape[1:]) > 4 * BORDER_PX else 0
+    b = border_px(*x.shape[1:])
     x = x[:, b:x.shape[1] - b or None, b:x.shape[2] - b or None]
     return encode_srgb(x)
+
+
+def check_frame_size(pair: Pair) -> None:
+    """Refuse a pair whose scored image (border cropped) is smaller than LPIPS's AlexNet takes
+    (restore.lpips.MIN_SIDE_PX: 31 px, so frames of 31 px or more on each side)."""
+    from restore.lpips import MIN_SIDE_PX
+    h, w = load_pair(pair)[1].shape[1:]
+    if min(h, w) - 2 * border_px(h, w) < MIN_SIDE_PX:
+        raise DataError(f"{pair.folder}: frames of {w} × {h} px are too small for LPIPS (AlexNet), which needs "
+                        f"at least {MIN_SIDE_PX} × {MIN_SIDE_PX} px: make the dataset with a larger --sensor-px")
 
 
 def image_metrics(restored: np.ndarray, gt: np.ndarray, balance: np.ndarray, lpips_model) -> dict:
@@ -152,6 +167,7 @@ def evaluate(data_dir: Path, method: str, out: Path, split: str = "test", displa
     for d, pairs in pairs_by_display.items():
         if not pairs:
             raise DataError(f"{data_dir}: split = {split!r} has no items (display {d})")
+        check_frame_size(pairs[0])  # a dataset has one frame size
     restorer = Restorer(method, pairs_by_display, device, denoiser, name, loaded, kernel_px)
     lp, balance = LPIPS().eval(), daylight_balance()
     entry = dict(restorer.describe(), name=restorer.name, split=split, displays={})

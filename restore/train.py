@@ -19,13 +19,14 @@ import hashlib
 import json
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from restore.data import PairDataset, list_pairs, load_pair, read_manifest
+from restore.data import PairDataset, largest_crop_px, list_pairs, load_pair, read_manifest
 from restore.losses import loss_fn
 from restore.models import build_model, model_config
 from udc_render.io.files import atomic_path, csv_text, save_figure, save_json, save_text
@@ -83,13 +84,13 @@ def predict(model: torch.nn.Module, packed: np.ndarray, device: torch.device) ->
 
 
 def validation_psnr(model, pairs, device) -> float | None:
-    """Mean PSNR (dB, linear units clipped to [0, 1], whole frame) over the validation pairs."""
+    """Mean PSNR (dB, linear units clipped to [0, 1], whole frame) over the validation pairs
+    [(packed, gt), ...] (load_pair)."""
     if not pairs:
         return None
     model.eval()
     vals = []
-    for p in pairs:
-        packed, gt = load_pair(p)
+    for packed, gt in pairs:
         err = np.mean((np.clip(predict(model, packed, device), 0, 1) - np.clip(gt, 0, 1)) ** 2)
         vals.append(10 * math.log10(1 / max(err, 1e-20)))
     model.train()
@@ -97,6 +98,7 @@ def validation_psnr(model, pairs, device) -> float | None:
 
 
 def _check_run_folder(out: Path, settings: TrainSettings) -> None:
+    """Refuse a run folder whose train.json records other settings."""
     path = out / "train.json"
     if path.is_file():
         old = json.loads(path.read_text())
@@ -106,9 +108,42 @@ def _check_run_folder(out: Path, settings: TrainSettings) -> None:
             k = diff[0]
             raise TrainError(f"{path}: {k} = {new.get(k)!r} differs from this folder's run ({old.get(k)!r}): "
                              "use another --out or the same settings to resume")
-    else:
-        out.mkdir(parents=True, exist_ok=True)
-        save_json(path, asdict(settings))
+
+
+def _training_data(data_dir: Path, settings: TrainSettings) -> tuple[PairDataset, list]:
+    """(the training crops, the validation pairs as arrays): every pair read and checked (load_pair),
+    and --crop-px checked against the smallest frame."""
+    data = PairDataset(list_pairs(data_dir, "train", [settings.display]), settings.crop_px, augment=True,
+                       seed=settings.seed, crops_per_pair=settings.crops_per_pair)
+    h, w = min((gt.shape[1:] for _, gt in data.arrays), key=min)
+    if settings.crop_px > largest_crop_px(h, w):
+        raise TrainError(f"--crop-px = {settings.crop_px}: too large for the {w} × {h} px frames of {data_dir} "
+                         f"({settings.display}): at most {largest_crop_px(h, w)} (the smaller side less 2 px)")
+    return data, [load_pair(p) for p in list_pairs(data_dir, "val", [settings.display])]
+
+
+@contextmanager
+def checkpoint_errors(path: Path, advice: str):
+    """Any failure while reading `path` or loading it into a model (a truncated or damaged file,
+    another program's file) as one TrainError line ending in `advice`."""
+    try:
+        yield
+    except Exception as exc:
+        reason = str(exc).partition("\n")[0].split(". ")[0]
+        raise TrainError(f"{path}: damaged, truncated or not a udc-render checkpoint "
+                         f"({type(exc).__name__}: {reason}); {advice}") from None
+
+
+def _resume(path: Path, model, opt, dev) -> tuple[int, int, list]:
+    """(epochs done, steps, log) of the checkpoint at `path`, its state loaded into model and opt;
+    (0, 0, []) when there is none."""
+    if not path.is_file():
+        return 0, 0, []
+    with checkpoint_errors(path, "delete it to train from the start, or use another --out"):
+        state = torch.load(path, map_location=dev, weights_only=False)
+        model.load_state_dict(state["model"])
+        opt.load_state_dict(state["optimizer"])
+        return state["epoch"], state["step"], state["log"]
 
 
 def _save_checkpoint(out: Path, model, opt, epoch: int, step: int, log: list, settings: TrainSettings) -> None:
@@ -142,28 +177,21 @@ def plot_loss(log: list, path: Path) -> None:
 
 def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "auto", checkpoint_s: float = 60.0,
           val_every: int = 10, progress: bool = True) -> dict:
-    """Train (or resume) in `out`; returns a summary (epochs, final loss, validation PSNR, seconds)."""
+    """Train (or resume) in `out`; returns a summary (epochs, final loss, validation PSNR, seconds).
+    Nothing is written in `out` before the settings, the run folder and every pair have been checked."""
     from tqdm import tqdm
     data_dir, out = Path(data_dir), Path(out)
     if settings.epochs < 1 or settings.batch < 1:
         raise TrainError(f"epochs = {settings.epochs}, batch = {settings.batch}: expected integers ≥ 1")
     loss_of = loss_fn(settings.loss)
-    pairs = list_pairs(data_dir, "train", [settings.display])
-    val_pairs = list_pairs(data_dir, "val", [settings.display])
     _check_run_folder(out, settings)
     dev = pick_device(device)
+    data, val_pairs = _training_data(data_dir, settings)
     torch.manual_seed(settings.seed)
     model = build_model(settings.model).to(dev)
     opt = torch.optim.Adam(model.parameters(), lr=settings.lr, betas=(0.9, 0.999), eps=1e-8)
-    start_epoch, step, log = 0, 0, []
-    ckpt = out / "checkpoint.pt"
-    if ckpt.is_file():
-        state = torch.load(ckpt, map_location=dev, weights_only=False)
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
-        start_epoch, step, log = state["epoch"], state["step"], state["log"]
-    data = PairDataset(pairs, settings.crop_px, augment=True, seed=settings.seed,
-                       crops_per_pair=settings.crops_per_pair)
+    save_json(out / "train.json", asdict(settings))  # everything above checked: the run folder is used now
+    start_epoch, step, log = _resume(out / "checkpoint.pt", model, opt, dev)
     t_start, t_ckpt = time.perf_counter(), time.perf_counter()
     model.train()
     bar = tqdm(range(start_epoch, settings.epochs), initial=start_epoch, total=settings.epochs, unit="epoch",
@@ -201,7 +229,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
         torch.save(final, tmp)
     summary = {"epochs": settings.epochs, "steps": step, "final_loss": log[-1]["loss"] if log else None,
                "val_psnr_db": next((r["val_psnr_db"] for r in reversed(log) if r["val_psnr_db"] is not None), None),
-               "train_pairs": len(pairs), "val_pairs": len(val_pairs), "device": str(dev),
+               "train_pairs": len(data.pairs), "val_pairs": len(val_pairs), "device": str(dev),
                "seconds_this_run": round(time.perf_counter() - t_start, 1)}
     save_json(out / "train_summary.json", summary)
     return summary
@@ -213,12 +241,10 @@ def load_model(path: Path, device: str = "auto") -> tuple[torch.nn.Module, dict]
     if not path.is_file():
         raise TrainError(f"--model = {str(path)!r}: no such checkpoint file (expected model.pt or checkpoint.pt "
                          "from `udc-render train`, or dep)")
-    try:
+    with checkpoint_errors(path, "expected model.pt or checkpoint.pt from `udc-render train`"):
         state = torch.load(path, map_location="cpu", weights_only=False)
         cfg = state["model_config"]
         weights = state["state_dict"] if "state_dict" in state else state["model"]
-    except Exception as exc:  # any unreadable or foreign file
-        raise TrainError(f"{path}: not a udc-render checkpoint ({type(exc).__name__}: {str(exc).splitlines()[0]})") from None
     model = build_model(cfg, source=str(path))
     model.load_state_dict(weights)
     dev = pick_device(device)

@@ -7,6 +7,7 @@ import torch
 
 from restore.data import DataError, PairDataset, augment_crop, dihedral, list_pairs, load_pair
 from restore.losses import loss_fn, ssim
+from udc_render.io.exr import read_exr, save_exr
 from udc_render.sensor import mosaic_of
 from udc_render.sensor import pack_rggb
 
@@ -64,6 +65,10 @@ def test_bad_data_gives_one_line_errors(tmp_path, pairs_dir):
         PairDataset(list_pairs(pairs_dir, "train", ["blur"]), crop_px=15)
     with pytest.raises(DataError, match="empty"):
         PairDataset([], crop_px=16)
+    gt = list_pairs(pairs_dir, "train", ["blur"])[2].folder / "gt.exr"
+    save_exr(gt, {c: np.where(a > 0.5, np.inf, a) for c, a in read_exr(gt).items()})
+    with pytest.raises(DataError, match="item_000002/gt.exr: NaN or infinite"):
+        PairDataset(list_pairs(pairs_dir, "train", ["blur"]), crop_px=16)
     (pairs_dir / list_pairs(pairs_dir, "test", ["blur"])[0].folder / "gt.exr").unlink()
     with pytest.raises(DataError, match="gt.exr: missing"):
         load_pair(list_pairs(pairs_dir, "test", ["blur"])[0])

@@ -71,7 +71,7 @@ def test_resumed_training_gives_the_uninterrupted_weights(tmp_path, monkeypatch)
 
 def test_learning_rate_is_halved_at_half_the_schedule(tmp_path):
     data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
-    s = TrainSettings(model=TINY_RESNET, display="blur", epochs=4, batch=2, crop_px=16, lr=1e-3)
+    s = TrainSettings(model=TINY_RESNET, display="blur", epochs=4, batch=2, crop_px=14, lr=1e-3)
     train(data, tmp_path / "run", s, progress=False)
     log = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=False)["log"]
     assert [r["lr"] for r in log] == [1e-3, 1e-3, 5e-4, 5e-4]
@@ -81,11 +81,11 @@ def test_learning_rate_is_halved_at_half_the_schedule(tmp_path):
 
 def test_a_different_run_in_the_same_folder_is_refused(tmp_path):
     data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
-    s = TrainSettings(model=TINY_RESNET, display="blur", epochs=1, batch=2, crop_px=16)
+    s = TrainSettings(model=TINY_RESNET, display="blur", epochs=1, batch=2, crop_px=14)
     train(data, tmp_path / "run", s, progress=False)
     with pytest.raises(TrainError, match="lr = 0.001 differs"):
         train(data, tmp_path / "run", TrainSettings(model=TINY_RESNET, display="blur", epochs=1, batch=2,
-                                                    crop_px=16, lr=1e-3), progress=False)
+                                                    crop_px=14, lr=1e-3), progress=False)
 
 
 def test_train_and_evaluate_commands(tmp_path, capsys):
@@ -132,9 +132,57 @@ def test_command_errors_are_one_line(tmp_path, capsys):
          "not a udc-render checkpoint"),
     ]
     for argv, message in cases:
-        assert main(argv) == 2, argv
-        err = capsys.readouterr().err.strip()
-        assert message in err and len(err.splitlines()) == 1 and "Traceback" not in err
+        _assert_one_line_error(capsys, argv, message)
+
+
+def _assert_one_line_error(capsys, argv, *words) -> str:
+    assert main(argv) == 2, argv
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err and all(w in err for w in words), err
+    return err
+
+
+def _train_argv(data, out, *more):
+    return ["train", "--data", str(data), "--model", "resnet", "--display", "blur", "--out", str(out),
+            "--epochs", "1", "--quiet", *more]
+
+
+def test_a_truncated_checkpoint_is_a_one_line_error(tmp_path, capsys):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(32, 32))
+    cfg = tmp_path / "tiny.toml"
+    cfg.write_text('type = "resnet"\nfeatures = 4\nblocks = 1\n')
+    argv = _train_argv(data, tmp_path / "run", "--config", str(cfg), "--crop-px", "16")
+    assert main(argv) == 0
+    ckpt = tmp_path / "run" / "checkpoint.pt"
+    ckpt.write_bytes(ckpt.read_bytes()[:100])
+    _assert_one_line_error(capsys, argv, str(ckpt), "damaged, truncated", "delete it", "another --out")
+
+
+def test_frames_too_small_for_lpips_are_refused_before_any_model_runs(tmp_path, capsys, monkeypatch):
+    import restore.evaluate as E
+    data = write_pairs(tmp_path / "pairs", splits=(("test", 1),), size_px=(16, 32))
+    monkeypatch.setattr(E.Restorer, "restore", lambda *a: pytest.fail("a model ran"))
+    _assert_one_line_error(capsys, ["evaluate", "--data", str(data), "--model", "input", "--display", "blur",
+                                    "--out", str(tmp_path / "e"), "--quiet"],
+                           "32 × 16 px", "LPIPS", "at least 31 × 31 px", "--sensor-px")
+
+
+def test_nan_in_the_ground_truth_is_refused_before_anything_is_written(tmp_path, capsys):
+    from udc_render.io.exr import read_exr, save_exr
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(32, 32))
+    gt = list_pairs(data, "train", ["blur"])[1].folder / "gt.exr"
+    channels = read_exr(gt)
+    channels["G"][3, 4] = np.nan
+    save_exr(gt, channels)
+    _assert_one_line_error(capsys, _train_argv(data, tmp_path / "run", "--crop-px", "16"), str(gt), "NaN")
+    assert not any((tmp_path / "run").iterdir())
+
+
+def test_a_crop_larger_than_the_frames_is_refused_before_anything_is_written(tmp_path, capsys):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 1),), size_px=(32, 64))
+    _assert_one_line_error(capsys, _train_argv(data, tmp_path / "run", "--crop-px", "4096"),
+                           "--crop-px = 4096", "64 × 32 px", "at most 30")
+    assert not any((tmp_path / "run").iterdir())
 
 
 def test_metric_protocol_on_identical_and_shifted_images():
