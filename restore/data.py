@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from udc_render.io import capture as capture_files
 from udc_render.sensor import pack_rggb, unpack_rggb
 from udc_render.errors import UdcError
 
@@ -83,32 +84,22 @@ def list_pairs(data_dir: Path, split: str, displays: list[str]) -> list[Pair]:
 
 
 def load_packed(capture_dir: Path) -> np.ndarray:
-    """[4, h, w] float32 packed RAW in units of the white level: (DN − black) / range."""
-    import tifffile
-    capture_dir = Path(capture_dir)
+    """[4, h, w] float32 packed RAW in units of the white level (udc_render.io.capture.load_packed)."""
     try:
-        sensor = json.loads((capture_dir / "capture.json").read_text())["sensor"]
-        dn = tifffile.imread(capture_dir / "packed.tiff")
-    except FileNotFoundError as exc:
-        raise DataError(f"{exc.filename}: missing (is the dataset complete? re-run `udc-render dataset`)") from None
-    black, white = float(sensor["black_level_dn"]), float(sensor["white_level_dn"])
-    return ((dn.astype(np.float32) - black) / (white - black)).astype(np.float32)
+        return capture_files.load_packed(capture_dir)
+    except capture_files.CaptureFileError as exc:
+        raise DataError(str(exc)) from None
 
 
 def load_gt(item_dir: Path) -> np.ndarray:
-    """[3, H, W] float32 ground truth (gt.exr channels R, G, B); NaN or ±inf in it is a DataError."""
-    import OpenEXR
-    path = Path(item_dir) / "gt.exr"
-    if not path.is_file():
-        raise DataError(f"{path}: missing (is the dataset complete? re-run `udc-render dataset`)")
-    with OpenEXR.File(str(path)) as f:
-        ch = f.channels()
-        if "RGB" in ch:  # OpenEXR ≥ 3.3 groups R, G, B into one [H, W, 3] channel
-            gt = np.ascontiguousarray(np.moveaxis(np.asarray(ch["RGB"].pixels, np.float32), -1, 0))
-        else:
-            gt = np.stack([np.asarray(ch[c].pixels, np.float32) for c in "RGB"])
+    """[3, H, W] float32 ground truth (udc_render.io.capture.load_gt); NaN or ±inf in it is a DataError."""
+    try:
+        gt = capture_files.load_gt(item_dir)
+    except capture_files.CaptureFileError as exc:
+        raise DataError(str(exc)) from None
     bad = np.count_nonzero(~np.isfinite(gt))
     if bad:
+        path = Path(item_dir) / "gt.exr"
         raise DataError(f"{path}: NaN or infinite values ({bad} of {gt.size}), expected finite linear RGB: "
                         f"delete {path.parent.name} and re-run `udc-render dataset` to make it again")
     return gt
