@@ -67,9 +67,9 @@ def optics_cases(repeats: int) -> list[dict]:
     ones = np.ones(K)
     flat = KernelSet(_kernels(rng, K), wl, 1.55, 0 * ones, ones, ones, {"distance_mm": 0.0})
     field = KernelSet(flat.kernels, wl, 1.55, 0 * ones, ones, ones,
-                      {"distance_mm": 1.0, "image_distance_um": 6028.0, "display": {"pitch_x_um": 60.0, "pitch_y_um": 60.0}},
-                      field_kernels=_kernels(rng, K, 4), field_power=np.ones((K, 4, 4)),
-                      field_shifts_um=np.stack(np.meshgrid(np.arange(4) * 15.0, np.arange(4) * 15.0), -1))
+                      {"distance_mm": 1.0}, field_kernels=_kernels(rng, K, 4), field_power=np.ones((K, 4, 4)),
+                      field_shifts_um=np.stack(np.meshgrid(np.arange(4) * 15.0, np.arange(4) * 15.0), -1),
+                      period_um=(60.0, 60.0), distance_mm=1.0, image_distance_um=6028.0)
     rgb = bands[:3]
     rows = []
 

@@ -17,7 +17,7 @@ import numpy as np
 
 from .engine import KernelSet
 
-ENGINE_VERSION = "psf-1"
+ENGINE_VERSION = "psf-2"  # psf-2: KernelSet.period_um, distance_mm, image_distance_um
 
 
 def cache_dir() -> Path:
@@ -42,6 +42,8 @@ def load(key: str, folder: Path | None = None) -> KernelSet | None:
             for f in fields(KernelSet):
                 if f.name in ("params", "notes"):
                     values[f.name] = json.loads(str(z[f.name]))
+                elif f.name == "period_um" and f.name in z.files:
+                    values[f.name] = tuple(float(v) for v in z[f.name])
                 elif f.name in z.files:
                     values[f.name] = z[f.name] if z[f.name].ndim else z[f.name].item()
                 else:

@@ -44,6 +44,8 @@ class KernelSet:
     field_power        [K, P, P]  transmitted power per phase / its mean (the banding samples)
     field_shifts_um    [P, P, 2]  mask shift (x, y) of each phase; image position = shift · z_i / d
                                   (see field_shifts: a whole period, or the part the sensor sees)
+    period_um          (x, y)     the display's period (None: bare lens)
+    distance_mm, image_distance_um   the display-to-lens gap d and the lens-to-sensor distance z_i
     """
     kernels: np.ndarray
     wavelengths_nm: np.ndarray
@@ -56,6 +58,9 @@ class KernelSet:
     field_power: np.ndarray | None = None
     field_shifts_um: np.ndarray | None = None
     notes: list = field(default_factory=list)
+    period_um: tuple[float, float] | None = None
+    distance_mm: float = 0.0
+    image_distance_um: float = math.nan
 
     @property
     def size_px(self) -> int:
@@ -145,6 +150,182 @@ def _window(display, lens: Lens, n_pupil: int, wl: np.ndarray, d_um: float, mask
     return grid, mask, kappa
 
 
+@dataclass(frozen=True)
+class _Plan:
+    """Everything fixed for one compute_kernels call: the request, the pupil window and mask, the
+    field phases (d > 0) and the mask spectrum they are shifted from."""
+    display: object
+    lens: Lens
+    wl: np.ndarray
+    pixel_um: float
+    size_px: int
+    d_um: float
+    method: str
+    cdtype: type
+    pixel_integration: bool
+    deapodize: bool
+    n_pupil: int
+    grid: object
+    mask: np.ndarray | None
+    kappa: float
+    pgrid: object
+    sy: slice
+    sx: slice
+    aperture: np.ndarray
+    use_field: bool
+    exact_power: bool
+    phases: int
+    shifts: np.ndarray
+    mask_spec: np.ndarray | None
+    fx: np.ndarray | None
+    fy: np.ndarray | None
+
+
+def _check_alias(plan: _Plan) -> None:
+    """Warn when the kernel window reaches past the alias-free field λz/δ of the pupil raster."""
+    lens, wl, pg = plan.lens, plan.wl, plan.pgrid
+    window = plan.size_px * plan.pixel_um
+    for axis, step in (("x", pg.dx_um), ("y", pg.dy_um)):
+        free = float(wl.min()) * 1e-3 * lens.image_distance_um / step
+        if window > free and plan.method != "paper":
+            need = auto_pupil_samples(lens, float(wl.min()), plan.pixel_um, plan.size_px)
+            warnings.warn(f"kernel window {window:.0f} µm exceeds the alias-free field λz/δ{axis} = {free:.0f} µm "
+                          f"at {wl.min():g} nm (pupil_samples={plan.n_pupil}); need pupil_samples ≥ {need}",
+                          AliasingWarning, stacklevel=3)
+            break
+
+
+def _plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, method, pupil_samples, precision,
+          pixel_integration, mask_raster, sensor_um, notes: list) -> _Plan:
+    """The pupil window and mask, the aperture, the field phases; notes on what was skipped."""
+    cdtype = PRECISIONS[precision]
+    n_pupil = pupil_samples or auto_pupil_samples(lens, float(wl.min()), pixel_um, size_px)
+    d_um = distance_mm * 1000.0
+    grid, mask, kappa = _window(display, lens, n_pupil, wl, d_um, mask_raster)
+    sy, sx = aperture_slices(grid, lens.aperture_um)
+    pgrid = grid.crop(sy, sx)
+    use_field = d_um > 0 and display is not None
+    if d_um > 0 and display is None:
+        notes.append("distance_mm > 0 with a bare lens: nothing to propagate, principal-plane result")
+    if not use_field and field_phases is not None and field_phases > 1:
+        notes.append("field phases skipped: the PSF is field-independent when d = 0 or without a display")
+    phases = (field_phases or DEFAULT_FIELD_PHASES) if use_field else 1
+    shifts = (field_shifts(display.period_um, d_um, lens.image_distance_um, phases, sensor_um) if use_field
+              else np.zeros((1, 1, 2)))
+    mask_spec = sfft.fft2(mask.astype(cdtype), workers=fourier.WORKERS) if use_field else None
+    fx, fy = (frequencies(grid.nx, grid.dx_um), frequencies(grid.ny, grid.dy_um)) if use_field else (None, None)
+    # De-apodise where the pupil's spectrum is box-filtered: an area-weighted mask or a bare aperture
+    # (not with defocus: its phase is point-sampled, not box-filtered). Transmitted power: the exact
+    # series of psf.banding for periodic displays; the raster sum (× κ) for aperiodic tiles.
+    return _Plan(display, lens, wl, float(pixel_um), size_px, d_um, method, cdtype, pixel_integration,
+                 display is None or mask_raster == "area", n_pupil, grid, mask, kappa, pgrid, sy, sx,
+                 lens.aperture_area_fraction(pgrid.x_edges_um, pgrid.y_edges_um), use_field,
+                 display is not None and getattr(display, "periodic", True), phases, shifts, mask_spec, fx, fy)
+
+
+def _pupil_mask(plan: _Plan, tf, shift) -> np.ndarray:
+    """The display's amplitude over the aperture: propagated by d and shifted (d > 0), else as rastered."""
+    if plan.use_field:
+        spec = plan.mask_spec * (tf * shift_ramp(plan.fx, plan.fy, *shift)).astype(plan.cdtype)
+        return sfft.ifft2(spec, workers=fourier.WORKERS)[plan.sy, plan.sx]
+    if plan.mask is not None:
+        return plan.mask[plan.sy, plan.sx]
+    return np.ones(plan.aperture.shape)
+
+
+def _one_kernel(plan: _Plan, m, defocus, lam_nm: float, state: dict) -> np.ndarray:
+    """The (unnormalised) kernel of the pupil field m · aperture [· defocus] at λ, by the chosen method.
+    With d = 0 and no defocus the pupil is the same at every wavelength: its autocorrelation is kept
+    in state['R'] and the field is not rebuilt."""
+    pg, lam, z, S = plan.pgrid, lam_nm * 1e-3, plan.lens.image_distance_um, plan.size_px
+    reuse = plan.pixel_integration and plan.method != "paper" and not plan.use_field and defocus is None
+    if not (reuse and state.get("R") is not None):
+        g = (m * plan.aperture).astype(plan.cdtype)
+        if defocus is not None:
+            g = g * defocus.astype(plan.cdtype)
+    deapodize = plan.deapodize and defocus is None
+    if plan.method == "paper":
+        kern, r_used = fourier.paper_kernel(g, pg.dx_um, pg.dy_um, lam, z, plan.pixel_um, S)
+        if r_used < 1 and not state.get("warned_r"):
+            warnings.warn(f"paper recipe under-sampled at {lam_nm:g} nm: r = {r_used:.3g} < 1, the DFT grid is "
+                          f"coarser than the {plan.pixel_um} µm pixel", UnderSamplingWarning, stacklevel=4)
+            state["warned_r"] = True
+        return kern
+    if not plan.pixel_integration:
+        return fourier.point_kernel(g, pg.x_um, pg.y_um, pg.dx_um, pg.dy_um, lam, z, plan.pixel_um, S, plan.method,
+                                    plan.cdtype, deapodize)
+    if reuse and state.get("R") is not None:
+        R = state["R"]
+    else:
+        R = fourier.autocorrelation_half(g, pg.dx_um, pg.dy_um)
+        state["R"] = R if reuse else None
+    return fourier.pixel_kernel(R, pg.dx_um, pg.dy_um, lam, z, plan.pixel_um, S, plan.method, True, plan.cdtype,
+                                deapodize)
+
+
+def _wavelength(plan: _Plan, lam_nm: np.float64, state: dict, progress) -> tuple:
+    """(kernel [S, S], energy outside, transmittance, field kernels [P, P, S, S] | None, field power
+    [P, P] | None) at one wavelength: the power-weighted sum over the field phases."""
+    lens, P, S = plan.lens, plan.phases, plan.size_px
+    lam = lam_nm * 1e-3
+    defocus = lens.pupil_phase(plan.pgrid.x_um, plan.pgrid.y_um, lam)
+    tf = angular_spectrum_tf(plan.fx, plan.fy, lam, plan.d_um) if plan.use_field else None
+    series = PowerSeries(plan.display, lens, lam, plan.d_um) if plan.exact_power else None
+    field_k = np.zeros((P, P, S, S)) if plan.use_field else None
+    field_p = np.zeros((P, P)) if plan.use_field else None
+    acc, acc_power, acc_window = np.zeros((S, S)), 0.0, 0.0
+    for j in range(P):
+        for i in range(P):
+            m = _pupil_mask(plan, tf, plan.shifts[j, i])
+            if series is not None:
+                power = float(series(plan.shifts[j, i]))
+            else:
+                power = plan.kappa * float(np.sum(np.abs(m) ** 2 * plan.aperture)) * plan.pgrid.dx_um * plan.pgrid.dy_um
+            kern = _one_kernel(plan, m, defocus, lam_nm, state)
+            window = float(kern.sum())
+            if not (np.all(np.isfinite(kern)) and window > 0):
+                raise PSFError(f"kernel at {lam_nm:g} nm is not finite or carries no energy "
+                               f"(window sum {window}); check the display and lens")
+            acc += kern
+            acc_power += power
+            acc_window += window
+            if plan.use_field:
+                field_k[j, i] = kern / window
+                field_p[j, i] = power
+            if progress:
+                progress(1)
+    if plan.use_field:
+        field_p /= field_p.mean()
+    bare_power = math.pi * lens.aperture_um ** 2 / 4
+    return acc / acc_window, 1.0 - acc_window / acc_power, acc_power / P ** 2 / bare_power, field_k, field_p
+
+
+def _assemble(plan: _Plan, results: list, precision: str, mask_raster: str, sensor_um, notes: list) -> KernelSet:
+    """The KernelSet of the per-wavelength results, with every parameter recorded."""
+    lens, wl, pg = plan.lens, plan.wl, plan.pgrid
+    kernels = np.stack([r[0] for r in results])
+    outside, trans = np.array([r[1] for r in results]), np.array([r[2] for r in results])
+    ratio = lens.aperture_um * plan.pixel_um / (wl * 1e-3 * lens.focal_length_um)
+    if trans.max() < 1e-6:
+        notes.append(f"almost nothing is transmitted (transmittance {trans.max():.2e}): the aperture sees "
+                     f"little or no display opening; kernels are normalised all the same")
+    out_dtype = np.float32 if precision == "float32" else np.float64
+    params = {"display": plan.display.describe() if plan.display is not None else {"kind": "none"},
+              "lens": lens.describe(), "wavelengths_nm": wl.tolist(), "pixel_um": plan.pixel_um,
+              "size_px": int(plan.size_px), "distance_mm": plan.d_um / 1000.0, "field_phases": int(plan.phases),
+              "method": plan.method, "pupil_samples": int(plan.n_pupil), "precision": precision,
+              "pixel_integration": bool(plan.pixel_integration), "mask_raster": mask_raster,
+              "deapodize": bool(plan.deapodize), "pupil_pitch_um": [pg.dx_um, pg.dy_um], "pupil_shape": [pg.ny, pg.nx],
+              "image_distance_um": lens.image_distance_um, "sensor_um": list(sensor_um),
+              "model": "finite-distance" if plan.use_field else "principal-plane"}
+    field_k = np.stack([r[3] for r in results]).astype(out_dtype) if plan.use_field else None
+    field_p = np.stack([r[4] for r in results]) if plan.use_field else None
+    period = None if plan.display is None else tuple(float(v) for v in plan.display.period_um)
+    return KernelSet(kernels.astype(out_dtype), wl, plan.pixel_um, outside, trans, ratio, params, field_k, field_p,
+                     plan.shifts if plan.use_field else None, notes, period, plan.d_um / 1000.0,
+                     lens.image_distance_um)
+
+
 def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.0, 520.0, 640.0),
                     pixel_um: float = 3.1, size_px: int = 255, distance_mm: float = 0.0,
                     field_phases: int | None = None, method: str = "mft", pupil_samples: int | None = None,
@@ -162,138 +343,16 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     mask_raster: 'band_limited' (exact Fourier series, default) or 'area' (area-weighted, then
         de-apodised); see pupil.cell_raster. The aperture is always area-weighted.
     progress: optional callable(n) called after each kernel (for progress bars).
+
+    Steps: _plan (window, mask, phases) ─► _wavelength per λ (_pupil_mask, _one_kernel per phase) ─► _assemble.
     """
     lens = lens or Lens()
     wl = _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples,
                    mask_raster)
-    cdtype = PRECISIONS[precision]
-    n_pupil = pupil_samples or auto_pupil_samples(lens, float(wl.min()), pixel_um, size_px)
-    z = lens.image_distance_um
-    # De-apodise where the pupil's spectrum is box-filtered: an area-weighted mask or a bare aperture
-    # (not with defocus: its phase is point-sampled, not box-filtered).
-    deapodize = display is None or mask_raster == "area"
-    d_um = distance_mm * 1000.0
-    notes = []
-
-    grid, mask, kappa = _window(display, lens, n_pupil, wl, d_um, mask_raster)
-    period = display.period_um if display is not None else None
-
-    sy, sx = aperture_slices(grid, lens.aperture_um)
-    pgrid = grid.crop(sy, sx)
-    aperture = lens.aperture_area_fraction(pgrid.x_edges_um, pgrid.y_edges_um)
-    bare_power = math.pi * lens.aperture_um ** 2 / 4
-
-    # Alias check: the window must fit inside the alias-free field λz/δ of the pupil raster.
-    window = size_px * pixel_um
-    for axis, step in (("x", pgrid.dx_um), ("y", pgrid.dy_um)):
-        free = float(wl.min()) * 1e-3 * z / step
-        if window > free and method != "paper":
-            need = auto_pupil_samples(lens, float(wl.min()), pixel_um, size_px)
-            warnings.warn(f"kernel window {window:.0f} µm exceeds the alias-free field λz/δ{axis} = {free:.0f} µm "
-                          f"at {wl.min():g} nm (pupil_samples={n_pupil}); need pupil_samples ≥ {need}",
-                          AliasingWarning, stacklevel=2)
-            break
-
-    use_field = d_um > 0 and display is not None
-    # Transmitted power: the exact series of psf.banding for periodic displays; for a bare lens
-    # the exact disc area; for aperiodic tiles the raster sum, corrected by κ for raster losses.
-    exact_power = display is not None and getattr(display, "periodic", True)
-    if d_um > 0 and display is None:
-        notes.append("distance_mm > 0 with a bare lens: nothing to propagate, principal-plane result")
-    if not use_field and field_phases is not None and field_phases > 1:
-        notes.append("field phases skipped: the PSF is field-independent when d = 0 or without a display")
-    phases = (field_phases or DEFAULT_FIELD_PHASES) if use_field else 1
-    shifts = field_shifts(period, d_um, z, phases, sensor_um) if use_field else np.zeros((1, 1, 2))
-
-    if use_field:
-        mask_spec = sfft.fft2(mask.astype(cdtype), workers=fourier.WORKERS)
-        fx, fy = frequencies(grid.nx, grid.dx_um), frequencies(grid.ny, grid.dy_um)
-
-    K, S = wl.size, size_px
-    kernels = np.zeros((K, S, S))
-    field_k = np.zeros((K, phases, phases, S, S)) if use_field else None
-    field_p = np.zeros((K, phases, phases)) if use_field else None
-    outside = np.zeros(K)
-    trans = np.zeros(K)
-    ratio = np.zeros(K)
-    cache_R = None
-    warned_r = False
-
-    for k, lam_nm in enumerate(wl):
-        lam = lam_nm * 1e-3
-        ratio[k] = lens.aperture_um * pixel_um / (lam * lens.focal_length_um)
-        defocus = lens.pupil_phase(pgrid.x_um, pgrid.y_um, lam)
-        tf = angular_spectrum_tf(fx, fy, lam, d_um) if use_field else None
-        series = PowerSeries(display, lens, lam, d_um) if exact_power else None
-        acc, acc_power, acc_window = np.zeros((S, S)), 0.0, 0.0
-        for j in range(phases):
-            for i in range(phases):
-                if use_field:
-                    spec = mask_spec * (tf * shift_ramp(fx, fy, *shifts[j, i])).astype(cdtype)
-                    m = sfft.ifft2(spec, workers=fourier.WORKERS)[sy, sx]
-                elif mask is not None:
-                    m = mask[sy, sx]
-                else:
-                    m = np.ones(aperture.shape)
-                if series is not None:
-                    power = float(series(shifts[j, i]))
-                else:
-                    power = kappa * float(np.sum(np.abs(m) ** 2 * aperture)) * pgrid.dx_um * pgrid.dy_um
-                # With d = 0 and no defocus the pupil is the same at every wavelength: its
-                # autocorrelation is computed once and the field is not rebuilt.
-                reuse = pixel_integration and method != "paper" and not use_field and defocus is None
-                if not (reuse and cache_R is not None):
-                    g = (m * aperture).astype(cdtype)
-                    if defocus is not None:
-                        g = g * defocus.astype(cdtype)
-                if method == "paper":
-                    kern, r_used = fourier.paper_kernel(g, pgrid.dx_um, pgrid.dy_um, lam, z, pixel_um, S)
-                    if r_used < 1 and not warned_r:
-                        warnings.warn(f"paper recipe under-sampled at {lam_nm:g} nm: r = {r_used:.3g} < 1, the "
-                                      f"DFT grid is coarser than the {pixel_um} µm pixel", UnderSamplingWarning,
-                                      stacklevel=2)
-                        warned_r = True
-                elif not pixel_integration:
-                    kern = fourier.point_kernel(g, pgrid.x_um, pgrid.y_um, pgrid.dx_um, pgrid.dy_um, lam, z,
-                                                pixel_um, S, method, cdtype, deapodize and defocus is None)
-                else:
-                    if reuse and cache_R is not None:
-                        R = cache_R
-                    else:
-                        R = fourier.autocorrelation_half(g, pgrid.dx_um, pgrid.dy_um)
-                        cache_R = R if reuse else None
-                    kern = fourier.pixel_kernel(R, pgrid.dx_um, pgrid.dy_um, lam, z, pixel_um, S, method,
-                                                True, cdtype, deapodize and defocus is None)
-                window = float(kern.sum())
-                if not (np.all(np.isfinite(kern)) and window > 0):
-                    raise PSFError(f"kernel at {lam_nm:g} nm is not finite or carries no energy "
-                                   f"(window sum {window}); check the display and lens")
-                acc += kern
-                acc_power += power
-                acc_window += window
-                if use_field:
-                    field_k[k, j, i] = kern / window
-                    field_p[k, j, i] = power
-                if progress:
-                    progress(1)
-        kernels[k] = acc / acc_window
-        outside[k] = 1.0 - acc_window / acc_power
-        trans[k] = acc_power / phases ** 2 / bare_power
-        if use_field:
-            field_p[k] /= field_p[k].mean()
-
-    if trans.max() < 1e-6:
-        notes.append(f"almost nothing is transmitted (transmittance {trans.max():.2e}): the aperture sees "
-                     f"little or no display opening; kernels are normalised all the same")
-    out_dtype = np.float32 if precision == "float32" else np.float64
-    params = {"display": display.describe() if display is not None else {"kind": "none"},
-              "lens": lens.describe(), "wavelengths_nm": wl.tolist(), "pixel_um": pixel_um,
-              "size_px": int(size_px), "distance_mm": distance_mm, "field_phases": int(phases),
-              "method": method, "pupil_samples": int(n_pupil), "precision": precision,
-              "pixel_integration": bool(pixel_integration), "mask_raster": mask_raster,
-              "deapodize": bool(deapodize),
-              "pupil_pitch_um": [pgrid.dx_um, pgrid.dy_um], "pupil_shape": [pgrid.ny, pgrid.nx],
-              "image_distance_um": z, "sensor_um": list(sensor_um), "model": "finite-distance" if use_field else "principal-plane"}
-    return KernelSet(kernels.astype(out_dtype), wl, float(pixel_um), outside, trans, ratio, params,
-                     field_k.astype(out_dtype) if use_field else None, field_p,
-                     shifts if use_field else None, notes)
+    notes: list = []
+    plan = _plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, method, pupil_samples, precision,
+                 pixel_integration, mask_raster, sensor_um, notes)
+    _check_alias(plan)
+    state: dict = {}
+    results = [_wavelength(plan, lam_nm, state, progress) for lam_nm in wl]  # np.float64: keeps float64 products (NEP 50)
+    return _assemble(plan, results, precision, mask_raster, sensor_um, notes)

@@ -49,7 +49,7 @@ def combine(ks: KernelSet, weights: np.ndarray, centres_nm, extra_params: dict) 
                      1.0 - ww.sum(axis=1) / wt.sum(axis=1), wt.sum(axis=1) / w.sum(axis=1),
                      np.einsum("ck,k->c", w, ks.ratio_r) / w.sum(axis=1), params,
                      None if field_k is None else field_k.astype(ks.kernels.dtype), field_p,
-                     ks.field_shifts_um, list(ks.notes))
+                     ks.field_shifts_um, list(ks.notes), ks.period_um, ks.distance_mm, ks.image_distance_um)
 
 
 def auto_step_nm(lo_nm: float, size_px: int) -> float:

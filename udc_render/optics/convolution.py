@@ -230,17 +230,12 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
 # ---------------------------------------------------------------------------- the stage
 
 
-def _display_period_um(params: dict, period_um):
-    if period_um is not None:
-        p = tuple(float(v) for v in np.broadcast_to(np.asarray(period_um, dtype=float), (2,)))
-    else:
-        disp = params.get("display", {})
-        if "pitch_x_um" in disp:
-            p = (float(disp["pitch_x_um"]), float(disp["pitch_y_um"]))
-        elif "shape" in disp and "pixel_um" in disp:  # micrograph tile: shape [ny, nx] × pixel_um
-            p = (disp["shape"][1] * disp["pixel_um"], disp["shape"][0] * disp["pixel_um"])
-        else:
-            raise OpticsError("field kernels need the display period: pass period_um (x, y) in µm")
+def _display_period_um(kernel_set, period_um) -> tuple[float, float]:
+    """The display period (x, y) in µm: the override, else the KernelSet's own."""
+    p = period_um if period_um is not None else kernel_set.period_um
+    if p is None:
+        raise OpticsError("field kernels need the display period: pass period_um (x, y) in µm")
+    p = tuple(float(v) for v in np.broadcast_to(np.asarray(p, dtype=float), (2,)))
     if not all(v > 0 and math.isfinite(v) for v in p):
         raise OpticsError(f"period_um must be > 0, got {p}")
     return p
@@ -263,7 +258,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (module doc).
     transmission: T(λ_k), None (= 1, T-OLED flat or glass), a scalar, or [K].
     field: use field kernels when the KernelSet has them (d > 0); False forces the mean kernel.
-    distance_mm, image_distance_um, period_um (x, y): override kernel_set.params (d, z_i, display pitch).
+    distance_mm, image_distance_um, period_um (x, y): override the KernelSet's d, z_i and display period.
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -291,8 +286,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     t = _transmission(transmission, K)
     gains = t * np.asarray(kernel_set.transmittance, float) * (1.0 - np.asarray(kernel_set.energy_outside, float))
 
-    params = kernel_set.params or {}
-    d_mm = float(params.get("distance_mm", 0.0) if distance_mm is None else distance_mm)
+    d_mm = float(kernel_set.distance_mm if distance_mm is None else distance_mm)
     applied = {"convolution": "linear, FFT (scipy.fft rfft2), margin cropped", "precision": precision,
                "fft_shape": list(fft_shape((H, W), S, m)), "margin_px": m, "kernel_px": S,
                "gain": "T · transmittance · (1 − energy_outside)", "distance_mm": d_mm, "workers": workers}
@@ -303,8 +297,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         applied.update(model="field-independent", skipped=[f"field-dependent blur ({why})"])
         images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers)
     else:
-        z = float(params["image_distance_um"] if image_distance_um is None else image_distance_um)
-        px, py = _display_period_um(params, period_um)
+        z = float(kernel_set.image_distance_um if image_distance_um is None else image_distance_um)
+        px, py = _display_period_um(kernel_set, period_um)
         shifts = np.asarray(kernel_set.field_shifts_um, dtype=np.float64)
         sx, sy = shifts[0, :, 0], shifts[:, 0, 1]
         per_x, per_y = _axis_is_periodic(sx, px), _axis_is_periodic(sy, py)
