@@ -28,6 +28,8 @@ PRECISIONS = {"float32": np.complex64, "float64": np.complex128}
 DEFAULT_PUPIL_SAMPLES = 1024
 DEFAULT_FIELD_PHASES = 4  # per axis; study: mean kernel 2.3e-4 L1, banding within 15 % of its amplitude
 ALIAS_GUARD = 1.05
+WAVELENGTH_RANGE_NM = (200.0, 2000.0)  # scalar optics of visible/NIR cameras; sensitivities end well inside
+MAX_PUPIL_WINDOW_SAMPLES = 8192 ** 2  # ≈ 0.5 GB per complex64 copy: beyond it a kernel set takes many minutes
 
 
 @dataclass
@@ -73,6 +75,10 @@ def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, meth
     if wl.ndim != 1 or wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
         raise PSFError(f"wavelengths_nm must be positive finite numbers, got "
                        f"{[float(v) for v in np.ravel(np.asarray(wavelengths_nm, dtype=float))]}")
+    lo, hi = WAVELENGTH_RANGE_NM
+    if wl.min() < lo or wl.max() > hi:
+        bad = float(wl.min() if wl.min() < lo else wl.max())
+        raise PSFError(f"wavelengths_nm = {bad:g}: expected {lo:g} to {hi:g} nm")
     if not (isinstance(size_px, (int, np.integer)) and size_px >= 3 and size_px % 2 == 1):
         raise PSFError(f"size_px must be an odd integer ≥ 3 (kernel centred at size//2), got {size_px}")
     if not (pixel_um > 0 and math.isfinite(pixel_um)):
@@ -143,6 +149,10 @@ def _window(display, lens: Lens, n_pupil: int, wl: np.ndarray, d_um: float, mask
                            f"{margin / 1000:.1f} mm of padding; allowed ≤ {20 * lens.aperture_um / 1000:.1f} mm "
                            f"(use a periodic display or a smaller distance)")
     grid, cell_n, tiles = display_grid(period, lens, n_pupil, margin)
+    if grid.nx * grid.ny > MAX_PUPIL_WINDOW_SAMPLES:
+        raise PSFError(f"the pupil window needs {grid.nx} × {grid.ny} samples (display period {max(period):g} µm "
+                       f"at δ = aperture / {n_pupil} = {lens.aperture_um / n_pupil:.3g} µm); allowed ≤ "
+                       f"{MAX_PUPIL_WINDOW_SAMPLES:.3g}: use fewer pupil_samples or an aperture of several periods")
     try:
         mask, kappa = tile_mask(display, cell_n, tiles, mask_raster)
     except ValueError as exc:

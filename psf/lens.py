@@ -30,6 +30,10 @@ class Lens:
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and v > 0 and not math.isnan(v)):
                 raise LensError(f"lens: {key} must be a positive number, got {v}")
+        if self.aperture_um > 2 * self.focal_length_um:
+            raise LensError(f"lens: aperture_um = {self.aperture_um:g} is more than twice the focal length "
+                            f"({self.focal_length_um:g} µm): f-number {self.focal_length_um / self.aperture_um:.3g} "
+                            f"< 0.5, impossible for a lens in air (N ≥ 1 / (2 NA), NA ≤ 1)")
         if self.focus_distance_mm * 1000 <= self.focal_length_um:
             raise LensError(f"lens: focus_distance_mm ({self.focus_distance_mm}) must exceed the focal "
                             f"length ({self.focal_length_um / 1000} mm)")
