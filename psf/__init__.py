@@ -4,7 +4,7 @@
     ks = compute_kernels(layouts.toled(), Lens(), wavelengths_nm=[450, 520, 640])
     ks.kernels  # [3, 255, 255], unit sum, centred at 127
 
-numpy and scipy only; see README.md and docs/PHYSICS.md  for the model.
+numpy and scipy only; see README.md and docs/PHYSICS.md for the model.
 """
 from . import layouts
 from .engine import (AliasingWarning, KernelSet, PSFError, UnderSamplingWarning, compute_kernels,

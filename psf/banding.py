@@ -21,6 +21,8 @@ from .errors import PSFError
 from .lens import Lens
 from .propagation import angular_spectrum_tf
 
+__all__ = ["PowerSeries", "banding_profile"]
+
 
 class PowerSeries:
     """P(s) for one display, lens, wavelength and distance, evaluated at any mask shift s."""

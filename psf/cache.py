@@ -2,20 +2,22 @@
 
 The key is the SHA-256 of the canonical JSON of (engine version, call name, all arguments,
 the display's full description including a micrograph's pixel hash). Entries are .npz files
-written atomically. Location: $UDC_RENDER_CACHE, else ~/.cache/udc-render/psf.
+written atomically by psf.kernel_io. Location: the `cache_dir` argument of cached(), else
+$UDC_RENDER_CACHE, else ~/.cache/udc-render/psf (read, never written: psf sets no environment).
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import os
-import tempfile
-from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 
 from .engine import KernelSet
+from .kernel_io import load_kernels, save_kernels
+
+__all__ = ["ENGINE_VERSION", "cache_dir", "cache_key", "entry_path", "load", "store", "cached"]
 
 ENGINE_VERSION = "psf-2"  # psf-2: KernelSet.period_um, distance_mm, image_distance_um
 
@@ -32,41 +34,25 @@ def cache_key(name: str, display, lens, **kwargs) -> str:
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
-def load(key: str, folder: Path | None = None) -> KernelSet | None:
-    path = Path(folder or cache_dir()) / f"{key}.npz"
+def entry_path(key: str, folder: Path | str | None = None) -> Path:
+    """The .npz file of a cache key in `folder` (None: cache_dir())."""
+    return Path(folder or cache_dir()) / f"{key}.npz"
+
+
+def load(key: str, folder: Path | str | None = None) -> KernelSet | None:
+    """The cached KernelSet of `key`, or None when absent or damaged (then it is recomputed)."""
+    path = entry_path(key, folder)
     if not path.is_file():
         return None
     try:
-        with np.load(path, allow_pickle=False) as z:
-            values = {}
-            for f in fields(KernelSet):
-                if f.name in ("params", "notes"):
-                    values[f.name] = json.loads(str(z[f.name]))
-                elif f.name == "period_um" and f.name in z.files:
-                    values[f.name] = tuple(float(v) for v in z[f.name])
-                elif f.name in z.files:
-                    values[f.name] = z[f.name] if z[f.name].ndim else z[f.name].item()
-                else:
-                    values[f.name] = None
-        return KernelSet(**values)
+        return load_kernels(path)
     except (OSError, ValueError, KeyError):
-        return None  # a damaged entry is recomputed
+        return None
 
 
-def store(key: str, ks: KernelSet, folder: Path | None = None) -> None:
-    folder = Path(folder or cache_dir())
-    folder.mkdir(parents=True, exist_ok=True)
-    arrays = {f.name: getattr(ks, f.name) for f in fields(KernelSet) if getattr(ks, f.name) is not None}
-    arrays["params"] = np.array(json.dumps(ks.params))
-    arrays["notes"] = np.array(json.dumps(ks.notes))
-    fd, tmp = tempfile.mkstemp(prefix=f".{key}.", suffix=".npz", dir=folder)
-    os.close(fd)
-    try:
-        np.savez(tmp, **arrays)
-        os.replace(tmp, folder / f"{key}.npz")
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+def store(key: str, ks: KernelSet, folder: Path | str | None = None) -> None:
+    """Write `ks` as the entry of `key` (atomic: psf.kernel_io.save_kernels)."""
+    save_kernels(entry_path(key, folder), ks)
 
 
 def cached(fn, name: str, display, lens, use_cache: bool = True, *, cache_dir: Path | str | None = None,

@@ -23,6 +23,10 @@ from .lens import Lens
 from .propagation import angular_spectrum_tf, frequencies, shift_ramp
 from .pupil import MASK_RASTERS, aperture_slices, display_grid, lens_grid, tile_mask
 
+__all__ = ["METHODS", "PRECISIONS", "DEFAULT_PUPIL_SAMPLES", "DEFAULT_FIELD_PHASES", "ALIAS_GUARD",
+           "WAVELENGTH_RANGE_NM", "MAX_PUPIL_WINDOW_SAMPLES", "PAPER_SENSOR_UM", "KernelSet", "auto_pupil_samples",
+           "field_shifts", "compute_kernels", "PSFError", "AliasingWarning", "UnderSamplingWarning"]
+
 METHODS = ("mft", "czt", "paper")
 PRECISIONS = {"float32": np.complex64, "float64": np.complex128}
 DEFAULT_PUPIL_SAMPLES = 1024

@@ -1,5 +1,7 @@
 """The psf package's error and warnings (one module, imported by the engine and banding alike)."""
 
+__all__ = ["PSFError", "AliasingWarning", "UnderSamplingWarning"]
+
 
 class PSFError(ValueError):
     """Parameters the engine cannot honour (message is one line for the user)."""

@@ -14,6 +14,9 @@ import numpy as np
 import scipy.fft as sfft
 from scipy.signal import czt
 
+__all__ = ["WORKERS", "LAG_TRANSFORMS", "autocorrelation_half", "pixel_kernel", "lag_transform", "point_kernel",
+           "point_field", "paper_kernel"]
+
 WORKERS = -1  # scipy.fft threads: all cores
 
 
@@ -55,15 +58,7 @@ def pixel_kernel(R_half: np.ndarray, dx_um: float, dy_um: float, wavelength_um: 
         c *= np.sinc(pixel_um * lag_x * dx_um / scale)[None, :].astype(c.real.dtype)
     c[:, 0] *= 0.5
     u = (np.arange(size_px) - size_px // 2) * pixel_um
-    if method == "mft":
-        ey = _phase_matrix(u, lag_y, dy_um, scale, dtype)
-        ex = _phase_matrix(u, lag_x, dx_um, scale, dtype)
-        k = ey @ c @ ex.T
-    elif method == "czt":
-        k = _czt_lags(c, lag_y, dy_um, u, scale, axis=0)
-        k = _czt_lags(k, lag_x, dx_um, u, scale, axis=1)
-    else:
-        raise ValueError(f"method must be 'mft' or 'czt', got '{method}'")
+    k = lag_transform(c, lag_y, lag_x, dy_um, dx_um, u, scale, method, dtype)
     k = 2.0 * k.real.astype(np.float64) * (pixel_um / scale) ** 2 * dx_um * dy_um
     return _deapodize(k, u, dx_um, dy_um, scale) if deapodize else k
 
@@ -77,8 +72,17 @@ def _deapodize(k: np.ndarray, u_um: np.ndarray, dx_um: float, dy_um: float, scal
     return k / np.outer(wy, wx)
 
 
-def _czt_lags(c: np.ndarray, lags: np.ndarray, step_um: float, u_um: np.ndarray, scale_um: float, axis: int):
-    """Σ_m c_m exp(−2πi m·step·u_j/scale) along `axis` for uniform u_j, by Bluestein's chirp-z.
+def _mft_lags(c: np.ndarray, lags: np.ndarray, step_um: float, u_um: np.ndarray, scale_um: float, axis: int,
+              dtype=np.complex128) -> np.ndarray:
+    """Σ_m c_m exp(−2πi m·step·u_j/scale) along `axis` by a matrix product with E_jm (N·S² operations)."""
+    e = _phase_matrix(u_um, lags, step_um, scale_um, dtype)
+    return e @ c if axis == 0 else c @ e.T
+
+
+def _czt_lags(c: np.ndarray, lags: np.ndarray, step_um: float, u_um: np.ndarray, scale_um: float, axis: int,
+              dtype=np.complex128) -> np.ndarray:
+    """Σ_m c_m exp(−2πi m·step·u_j/scale) along `axis` for uniform u_j, by Bluestein's chirp-z
+    (N log N operations; dtype unused: scipy's czt keeps the input's precision).
 
     lags is any arithmetic progression of unit step (integers, or pupil coordinates / δ)."""
     alpha = step_um * (u_um[1] - u_um[0]) / scale_um
@@ -92,6 +96,19 @@ def _czt_lags(c: np.ndarray, lags: np.ndarray, step_um: float, u_um: np.ndarray,
     return out * post.reshape(shape).astype(out.dtype)
 
 
+# One signature: (c, lags, step_um, u_um, scale_um, axis, dtype) → c transformed along `axis` to u_um.
+LAG_TRANSFORMS = {"mft": _mft_lags, "czt": _czt_lags}
+
+
+def lag_transform(c: np.ndarray, lags_y: np.ndarray, lags_x: np.ndarray, dy_um: float, dx_um: float,
+                  u_um: np.ndarray, scale_um: float, method: str, dtype=np.complex128) -> np.ndarray:
+    """F[j, i] = Σ_{m,n} c[m, n] exp(−2πi (m·δy·u_j + n·δx·u_i)/scale): rows (y) first, then columns (x)."""
+    if method not in LAG_TRANSFORMS:
+        raise ValueError(f"method must be one of {', '.join(LAG_TRANSFORMS)}, got '{method}'")
+    transform = LAG_TRANSFORMS[method]
+    return transform(transform(c, lags_y, dy_um, u_um, scale_um, 0, dtype), lags_x, dx_um, u_um, scale_um, 1, dtype)
+
+
 def point_kernel(g: np.ndarray, x_um: np.ndarray, y_um: np.ndarray, dx_um: float, dy_um: float,
                  wavelength_um: float, distance_um: float, pixel_um: float, size_px: int, method: str = "mft",
                  dtype=np.complex128, deapodize: bool = True) -> np.ndarray:
@@ -103,12 +120,7 @@ def point_kernel(g: np.ndarray, x_um: np.ndarray, y_um: np.ndarray, dx_um: float
     scale = wavelength_um * distance_um
     u = (np.arange(size_px) - size_px // 2) * pixel_um
     g = g.astype(dtype, copy=False)
-    if method == "mft":
-        U = _phase_matrix(u, y_um / dy_um, dy_um, scale, dtype) @ g @ _phase_matrix(u, x_um / dx_um, dx_um, scale, dtype).T
-    elif method == "czt":
-        U = _czt_lags(_czt_lags(g, y_um / dy_um, dy_um, u, scale, axis=0), x_um / dx_um, dx_um, u, scale, axis=1)
-    else:
-        raise ValueError(f"method must be 'mft' or 'czt', got '{method}'")
+    U = lag_transform(g, y_um / dy_um, x_um / dx_um, dy_um, dx_um, u, scale, method, dtype)
     k = (np.abs(U) ** 2).astype(np.float64) * (dx_um * dy_um / scale) ** 2 * pixel_um ** 2
     return _deapodize(k, u, dx_um, dy_um, scale) if deapodize else k
 

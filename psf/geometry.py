@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+__all__ = ["interval_overlap", "unit_disc_cell_areas", "ellipse_areas", "rect_areas"]
+
 
 def interval_overlap(edges: np.ndarray, lo: float, hi: float) -> np.ndarray:
     """Length of [lo, hi] ∩ [edges[i], edges[i+1]] for every cell i (same unit as `edges`)."""

@@ -20,6 +20,8 @@ from scipy.special import j1
 
 from .geometry import ellipse_areas, rect_areas
 
+__all__ = ["LayoutError", "Rect", "Ellipse", "PeriodicLayout", "toled", "poled", "slit_grating", "BUILTIN"]
+
 
 class LayoutError(ValueError):
     """A display layout that cannot be built or read (message is one line for the user)."""

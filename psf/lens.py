@@ -8,6 +8,8 @@ import numpy as np
 
 from .geometry import ellipse_areas
 
+__all__ = ["Lens", "LensError"]
+
 
 class LensError(ValueError):
     """Lens parameters out of range (message is one line for the user)."""

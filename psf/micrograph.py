@@ -17,6 +17,8 @@ import numpy as np
 
 from .layouts import LayoutError
 
+__all__ = ["SUFFIXES", "MicrographLayout", "read_transmission_image"]
+
 SUFFIXES = {".png", ".tif", ".tiff", ".exr"}
 
 

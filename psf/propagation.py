@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
+__all__ = ["frequencies", "angular_spectrum_tf", "fresnel_tf", "shift_ramp", "propagate"]
+
 
 def frequencies(n: int, d_um: float) -> np.ndarray:
     """FFT sample frequencies (cycles/µm) of n samples spaced d_um."""

@@ -13,6 +13,8 @@ import numpy as np
 
 from .lens import Lens
 
+__all__ = ["MASK_RASTERS", "PupilGrid", "aperture_slices", "lens_grid", "display_grid", "cell_raster", "tile_mask"]
+
 
 @dataclass(frozen=True)
 class PupilGrid:

@@ -18,6 +18,9 @@ import numpy as np
 
 from .engine import KernelSet, PSFError, compute_kernels
 
+__all__ = ["CAMERAS", "band_samples", "combine", "auto_step_nm", "band_kernels", "load_sensitivities", "load_weight",
+           "channel_kernels"]
+
 CAMERAS = ("Nikon 5100 (NPL)", "Sigma SDMerill (NPL)")
 
 
