@@ -6,13 +6,13 @@ with the display at the principal plane (d = 0: a display at d > 0 makes the blu
 which DeP does not model), sampled at the packed plane's pitch (2 × the sensor pitch), the R kernel
 for R, the G kernel for Gr and Gb, B for B. Cached on disk like every kernel (psf.cache).
 
-γ: what the paper's calibration measures (docs/PHYSICS.md §2: a white square with and without the
-display), computed from the display: γ_c = gain · T̄_c · τ_c (1 − o_c), with T̄_c the display's
-T(λ) averaged over the monitor white seen by camera channel c, τ_c the pixel grid's transmittance
-and o_c the energy outside the kernel window, both channel-weighted (psf.spectral.combine). The
-glass's own τ⁰(1 − o⁰) is taken as 1 (its window loses < 0.1 %). `udc-render calibrate` recovers
-this γ within 0.1 % (T-OLED). measured_gamma_rggb gives the data's own ratio of sums, which on
-small frames reads low: the wide kernels carry light out of the frame.
+γ: the γ that made the capture, by the one definition (udc_render.optics.gamma, what the paper's
+calibration measures): for the spectral form, band-wise from the display's and the bare lens's band
+kernels on the synthesis grid recorded in synth.json (loaded from the kernel cache the synthesis
+filled), weighted by the rendered monitor white; for the per-channel form, the γ recorded in
+capture.json. `udc-render calibrate` recovers it within 0.1 % (T-OLED). measured_gamma_rggb gives
+the data's own ratio of sums, which on small frames reads low: the wide kernels carry light out of
+the frame.
 """
 from __future__ import annotations
 
@@ -25,9 +25,11 @@ from psf import Lens
 from psf.cache import cached
 from psf.spectral import channel_kernels
 from restore.data import DataError, Pair, load_pair
-from udc_render.sensor import mosaic_of
-from udc_render.optics.displays import load_display, preset, white_weights
-from udc_render.sensor import pack_rggb
+from udc_render.optics.displays import load_display, preset
+from udc_render.optics.gamma import display_gamma
+from udc_render.pipeline import SynthConfig, band_kernel_set
+from udc_render.scene.geometry import RenderGrid
+from udc_render.sensor import mosaic_of, pack_rggb, rgb_to_rggb
 
 
 def capture_display(pair: Pair):
@@ -61,16 +63,25 @@ def known_kernels_rggb(pair: Pair, size_px: int | None = None, use_cache: bool =
     return np.stack([k[0], k[1], k[1], k[2]]).astype(np.float32)
 
 
-def known_gamma_rggb(pair: Pair, size_px: int | None = None, use_cache: bool = True) -> np.ndarray:
-    """[4] γ per packed channel R, Gr, Gb, B of the pair's display (module doc)."""
+def known_gamma_rggb(pair: Pair, use_cache: bool = True) -> np.ndarray:
+    """[4] γ per packed channel R, Gr, Gb, B of the pair's display: the γ that made the capture
+    (module doc)."""
     display = capture_display(pair)
-    sensor = json.loads((pair.folder / pair.display / "capture.json").read_text())["sensor"]
-    ks = _channel_kernels(pair, size_px, use_cache)
-    edges = np.arange(400.0, 701.0, 5.0)
-    w = white_weights(edges, sensor["camera"])
-    t_c = (w @ display.transmission.band_means(edges)) / w.sum(axis=1)
-    g = display.gain * t_c * ks.transmittance * (1 - ks.energy_outside)
-    return np.array([g[0], g[1], g[1], g[2]])
+    capture = json.loads((pair.folder / pair.display / "capture.json").read_text())
+    if "gamma_rgb" in capture:  # the per-channel form scaled by this γ
+        return np.array(rgb_to_rggb(capture["gamma_rgb"]), float)
+    synth = json.loads((pair.folder / "synth.json").read_text())
+    render = synth["render"]
+    edges = np.asarray(render["band_edges_nm"], float)
+    grid = RenderGrid(float(synth["kernel_pixel_um"]), (int(synth["kernel_size_px"]) - 1) // 2, tuple(edges))
+    s = render["sensor"]
+    frame_um = (s["width_px"] * s["pitch_um"], s["height_px"] * s["pitch_um"])
+    lens, cfg = Lens(**synth["lens"]), SynthConfig(kernel_precision=synth["kernel_precision"], use_cache=use_cache)
+    ks = band_kernel_set(display.layout, lens, grid, display.distance_mm, frame_um, cfg)
+    glass = band_kernel_set(None, lens, grid, 0.0, frame_um, cfg)
+    matrix = render.get("band_matrix")
+    white = np.asarray(matrix, float).sum(axis=0) if matrix is not None else np.ones(edges.size - 1)
+    return np.array(rgb_to_rggb(display_gamma(display, ks, glass, edges, capture["sensor"]["camera"], white)))
 
 
 def measured_gamma_rggb(pairs: list[Pair]) -> np.ndarray:

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from udc_render.optics import displays as D
+from udc_render.optics import gamma as G
 from udc_render.sensor import demosaic_bilinear, mosaic_of
 from udc_render.io.images import load_raw_png
 from udc_render.metrics import psnr_db
@@ -55,9 +56,9 @@ def test_presets_reproduce_the_papers_gammas():
         ks, _ = cached(compute_kernels, "mono", lay, lens, True, wavelengths_nm=wl, pixel_um=1.55, size_px=511,
                        sensor_um=(2048 * 1.55, 1024 * 1.55))
         g[name] = ks.transmittance * (1 - ks.energy_outside)
-    w = D.white_weights(edges, "Nikon 5100 (NPL)")
-    gt = D.channel_gamma(w, D.preset("toled"), g["toled"], g["glass"], edges)
-    gp = D.channel_gamma(w, D.preset("poled"), g["poled"], g["glass"], edges)
+    w = G.white_weights(edges, "Nikon 5100 (NPL)")
+    gt = G.channel_gamma(w, D.preset("toled"), g["toled"], g["glass"], edges)
+    gp = G.channel_gamma(w, D.preset("poled"), g["poled"], g["glass"], edges)
     assert gt[1] == pytest.approx(0.97, rel=2e-3)
     assert np.all(np.abs(gt / 0.97 - 1) < 0.02)  # flat T: channels differ only by the kernels' lost energy
     assert gp[0] == pytest.approx(0.34, rel=2e-3) and gp[2] == pytest.approx(0.20, rel=2e-3)
@@ -285,3 +286,27 @@ def test_the_scene_is_the_one_source_of_the_optics(tmp_path):
     cfg.write_text("f_number = 2.8\n")
     with pytest.raises(SensorError, match="comes from the scene file"):
         SensorConfig.from_toml(cfg)
+
+
+def test_deps_known_gamma_is_the_gamma_that_made_the_capture(udc, tmp_path, render_cache):
+    """One γ (optics.gamma): restore.known reads it back from a synth folder, and it equals the level
+    ratio display / glass of a noise-free white field (spectral form), and the recorded paper γ
+    (per-channel form)."""
+    from restore.data import Pair
+    from restore.known import known_gamma_rggb
+    from udc_render.cli import main
+    scene = tmp_path / "white.toml"
+    _scene(udc, scene)
+    for form in ("spectral", "per_channel"):
+        out = tmp_path / form
+        assert main(["synth", str(scene), "--display", "toled,poled", "--noise-model", "none", "--form", form,
+                     "--quiet", "--out", str(out)]) == 0
+        from udc_render.io.images import load_raw_png
+        glass = pack_rggb(_centre(load_raw_png(out / "glass" / "raw.png").astype(float))).reshape(4, -1).mean(1)
+        for name in ("toled", "poled"):
+            level = pack_rggb(_centre(load_raw_png(out / name / "raw.png").astype(float))).reshape(4, -1).mean(1)
+            known = known_gamma_rggb(Pair(0, "test", out, name, "white"))
+            assert level / glass == pytest.approx(known, rel=0.01), (form, name)
+            if form == "per_channel":
+                g = D.PAPER_GAMMA[name]
+                assert list(known) == [g[0], g[1], g[1], g[2]]

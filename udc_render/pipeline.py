@@ -14,7 +14,7 @@ One render serves every display (the scene does not change); per display:
 - form 'per_channel' (the paper's y = γ x ⊗ k + n): x is the un-blurred camera RGB of the render,
   blurred with the three channel-effective kernels (psf.spectral.channel_kernels, weighted by the
   camera and D65) and scaled by the display's γ (the paper's values for the presets, the analytic
-  γ of displays.channel_gamma for a display file).
+  γ of optics.gamma for a display file).
 
 Ground truth ('gt'): what the clean capture would record without noise and without the mosaic: the
 render through the glass panel (bare-lens kernels, gain 1), every camera channel at every pixel, in
@@ -49,7 +49,8 @@ from psf.engine import DEFAULT_FIELD_PHASES
 from psf.spectral import channel_kernels
 from udc_render.errors import UdcError
 from udc_render.optics import apply_kernels, convolve_bands
-from udc_render.optics.displays import PAPER_GAMMA, Display, channel_gamma
+from udc_render.optics import gamma
+from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.render import BandImage, render_scene
 from udc_render.scene import Scene
 from udc_render.scene.geometry import RenderGrid, psf_lens, render_grid
@@ -104,23 +105,30 @@ class Kernels:
     channel: dict[str, KernelSet] = field(default_factory=dict)
 
 
-def display_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
-                    progress: bool = False) -> KernelSet:
-    """psf.KernelSet at the band centres of `grid` for `display` (field phases when d > 0)."""
+def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um: tuple[float, float],
+                    cfg: SynthConfig, label: str = "", progress: bool = False) -> KernelSet:
+    """psf.KernelSet at the band centres of `grid` (field phases when d > 0), through the kernel cache."""
     from tqdm import tqdm
-    frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
     size = grid.kernel_size_px
     if size < 3:
         raise SynthError(f"render margin {grid.margin_px} px leaves no room for a kernel: raise render.margin_um")
-    d_mm = display.distance_mm if display.layout is not None else 0.0
+    d_mm = distance_mm if layout is not None else 0.0
     phases = (cfg.field_phases or DEFAULT_FIELD_PHASES) ** 2 if d_mm > 0 else 1
-    with tqdm(total=phases * grid.centres_nm.size, desc=f"kernels {display.name}", unit="kernel",
+    with tqdm(total=phases * grid.centres_nm.size, desc=f"kernels {label}", unit="kernel",
               disable=not progress, leave=False) as bar:  # ticks only when the kernels are not cached
-        ks, _ = cached(compute_kernels, "mono", display.layout, psf_lens(scene), cfg.use_cache,
-                       cache_dir=cfg.kernel_cache, wavelengths_nm=grid.centres_nm, pixel_um=grid.pitch_um,
-                       size_px=size, distance_mm=d_mm, field_phases=cfg.field_phases, precision=cfg.kernel_precision,
-                       sensor_um=frame_um, progress=bar.update)
+        ks, _ = cached(compute_kernels, "mono", layout, lens, cfg.use_cache, cache_dir=cfg.kernel_cache,
+                       wavelengths_nm=grid.centres_nm, pixel_um=grid.pitch_um, size_px=size, distance_mm=d_mm,
+                       field_phases=cfg.field_phases, precision=cfg.kernel_precision, sensor_um=frame_um,
+                       progress=bar.update)
     return ks
+
+
+def display_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
+                    progress: bool = False) -> KernelSet:
+    """The band kernels of `display` for `scene` (its lens and frame) on `grid`."""
+    frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
+    return band_kernel_set(display.layout, psf_lens(scene), grid, display.distance_mm, frame_um, cfg, display.name,
+                           progress)
 
 
 def display_channel_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig) -> KernelSet:
@@ -267,16 +275,14 @@ def _spectral_capture(band_image: BandImage, d: Display, kernels: Kernels, cfg: 
 
 
 def display_gamma(d: Display, band_image: BandImage, kernels: Kernels, sensor: SensorConfig) -> tuple:
-    """γ (R, G, B) of a display relative to glass: the paper's value for a preset, else analytic."""
+    """γ (R, G, B) of a display relative to glass: the paper's value for a preset, else optics.gamma's
+    for the scene's white (a flat spectrum when the scene has no monitor)."""
     if d.source == "preset":
         return PAPER_GAMMA[d.name], "the paper's γ for this preset"
-    ks, glass_ks = kernels.band[d.name], kernels.band["glass"]
     white = band_image.white_bands()
-    spectrum = white if white is not None else np.ones(band_image.edges_nm.size - 1)
-    w = band_electron_weights(band_image.edges_nm, replace(sensor, exposure_s=1.0)) * spectrum[None, :]
-    g = channel_gamma(w, d, ks.transmittance * (1 - ks.energy_outside),
-                      glass_ks.transmittance * (1 - glass_ks.energy_outside), band_image.edges_nm)
-    return tuple(float(x) for x in g), "analytic γ of the display file (displays.channel_gamma)"
+    white = white if white is not None else np.ones(band_image.edges_nm.size - 1)
+    g = gamma.display_gamma(d, kernels.band[d.name], kernels.band["glass"], band_image.edges_nm, sensor.camera, white)
+    return tuple(float(x) for x in g), "γ of the display file (optics.gamma)"
 
 
 def _per_channel_capture(band_image, rgb, d: Display, kernels: Kernels, cfg: SynthConfig, base_sensor, rng):

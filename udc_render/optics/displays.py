@@ -31,6 +31,7 @@ import numpy as np
 from psf import MicrographLayout, layouts
 from udc_render.errors import UdcError
 from udc_render.io.files import read_toml
+from udc_render.optics.gamma import channel_gamma, white_weights
 
 PAPER_GAMMA = {"glass": (1.0, 1.0, 1.0), "toled": (0.97, 0.97, 0.97), "poled": (0.34, 0.34, 0.20)}
 PAPER_GAIN = {"glass": 1.0, "toled": 6.0, "poled": 25.0}
@@ -255,37 +256,12 @@ def _transmission_csv(path: Path, file) -> Transmission:
     return Transmission("csv", table_nm=tuple(a[:, 0]), table_t=tuple(a[:, 1]), source=str(fp))
 
 
-# ---------------------------------------------------------------- γ of a display (analytic)
-
-
-def channel_gamma(band_weights: np.ndarray, display: Display, display_gain_k: np.ndarray,
-                  glass_gain_k: np.ndarray, edges_nm) -> np.ndarray:
-    """γ per camera channel (R, G, B) of a flat field, relative to the glass capture at gain 1:
-
-        γ_c = gain · Σ_k W_ck T_k τ_k (1 − o_k) / Σ_k W_ck τ⁰_k (1 − o⁰_k)
-
-    band_weights W [3, K]: electrons per band of the field through the bare lens (e.g. white
-    radiance × photon weights × Δλ); display_gain_k = τ_k (1 − o_k) of the display's kernels,
-    glass_gain_k the bare lens's; T_k the display's band-mean transmission.
-    """
-    t = display.transmission.band_means(edges_nm)
-    num = band_weights @ (t * display_gain_k)
-    den = band_weights @ glass_gain_k
-    return display.gain * num / den
-
-
-def white_weights(edges_nm, camera: str, white_point: str = "D65") -> np.ndarray:
-    """[3, K] electrons per band and camera channel of the monitor's white (relative units)."""
-    from udc_render.content import spectra
-    from udc_render.sensor import photon_weights
-    prim, _ = spectra.monitor_primaries("Apple Studio Display", 300.0, None, white_point)
-    white = spectra.band_means(prim.sum(axis=0), edges_nm)
-    return photon_weights(edges_nm, camera) * white[None, :] * np.diff(np.asarray(edges_nm, float))[None, :]
+# ---------------------------------------------------------------- the presets' T(λ) fitted to the paper's γ
 
 
 def fit_toled_transmission(display_gain_k, glass_gain_k, edges_nm, camera="Nikon 5100 (NPL)",
                            target=PAPER_GAMMA["toled"][1], gain=PAPER_GAIN["toled"]) -> float:
-    """Flat T giving γ_G = target (γ is linear in T)."""
+    """Flat T giving γ_G = target (γ is linear in T; optics.gamma)."""
     w = white_weights(edges_nm, camera)
     unit = Display("t", layouts.toled(), Transmission("flat", 1.0), gain)
     return float(target / channel_gamma(w, unit, display_gain_k, glass_gain_k, edges_nm)[1])
