@@ -10,7 +10,7 @@ One render serves every display (the scene does not change); per display:
 
 - form 'spectral' (default, physically based): the K band images are blurred with the K band
   kernels (psf at the band centres), multiplied by T(λ_k) · transmittance_k · (1 − energy
-  outside_k), and integrated by the camera's sensitivities into an RGGB mosaic (sensor.py).
+  outside_k), and integrated by the camera's sensitivities into an RGGB mosaic (udc_render.sensor).
 - form 'per_channel' (the paper's y = γ x ⊗ k + n): x is the un-blurred camera RGB of the render,
   blurred with the three channel-effective kernels (psf.spectral.channel_kernels, weighted by the
   camera and D65) and scaled by the display's γ (the paper's values for the presets, the analytic

@@ -2,7 +2,7 @@
 
 Layout of one synthesis (one scene, several displays) in a folder:
 
-    gt.exr               linear camera RGB ground truth, float32 channels R, G, B (synth.py: units)
+    gt.exr               linear camera RGB ground truth, float32 channels R, G, B (pipeline.py: units)
     gt_preview.png       its sRGB preview (daylight white balance, see preview_srgb)
     <display>/raw.png    RAW mosaic, 16-bit grey PNG (lossless), RGGB, DN
     <display>/packed.tiff  packed RAW, uint16 [4, H/2, W/2] (R, Gr, Gb, B), zlib, planar

@@ -17,7 +17,7 @@ synthesize() for that display with the kernels computed (cache off: ``kernel_s``
 - ``phases``: field phases P = 1, 2, 3, 4, 6 per axis at d = 1 mm (T-OLED, 6 bands of 50 nm) vs P = 8.
 - ``precision``: float32 vs float64 optics FFTs and kernels (T-OLED, 10 nm bands).
 - ``supersample``: render.supersample s = 1, 2 vs 3 (T-OLED and glass, 6 bands): the render pixel's
-  box and the kernel's pixel integration count the sensor pixel twice at s = 1 (synth.py).
+  box and the kernel's pixel integration count the sensor pixel twice at s = 1 (pipeline.py).
 
 Outputs: study_capture.csv, study_capture.md (tables and the defaults they justify), study_capture.png.
 ``quick``: 128 × 64 px of 6.2 µm, fewer settings (a smoke run, about 70 s on 2 cores).
