@@ -1,37 +1,32 @@
 """Scoring restorers on a dataset split: PSNR, SSIM, LPIPS, size, MACs and run time, one protocol.
 
-Metric protocol (every number in the tables): the restored image and the ground truth are linear
-camera RGB in units of the white level; both are multiplied by the camera's daylight balance
-(capture_io.daylight_balance: D65 neutral), clipped to [0, 1], sRGB-encoded (IEC 61966-2-1, no
-colour matrix) and cropped by BORDER_PX pixels on each side. PSNR: peak 1. SSIM: Wang et al.
-(Gaussian window σ = 1.5, data range 1, population statistics, mean over R, G, B; skimage). LPIPS:
-AlexNet v0.1 (restore.lpips) on the same images. Values are means over the split's images; the run
-time is the median over images of the restorer's wall time (models: forward pass only, data on the
-device) per megapixel of output.
+Image metrics: restore.metrics (display-referred sRGB, border cropped; PSNR peak 1, SSIM, LPIPS).
+Values are means over the split's images; the run time is the median over images of the restorer's
+wall time (models: forward pass only, data on the device) per megapixel of output.
 
-Methods: 'input' (the degraded capture, bilinear demosaic ÷ γ: the identity baseline, with γ the
-split's own ratio of sums, restore.known.measured_gamma_rggb), 'dep' (restore.dep with the
-display's known kernels and γ, restore.known), or a checkpoint from
-`udc-render train`. Each run merges its rows into <out>/results.json and rewrites results.md and
-results.csv, the layout of the paper's pipeline comparison (rows: methods; columns: displays).
+Methods (RESTORERS): 'input' (the degraded capture, bilinear demosaic ÷ γ: the identity baseline,
+with γ the split's own ratio of sums, restore.known.measured_gamma_rggb), 'dep' (restore.dep with
+the display's known kernels and γ, restore.known), or a checkpoint from `udc-render train`. Each run
+merges its rows into <out>/results.json and rewrites results.md and results.csv, the layout of the
+paper's pipeline comparison (rows: methods; columns: displays).
 """
 from __future__ import annotations
 
 import json
-import math
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from restore.data import DataError, Pair, dataset_displays, list_pairs, load_pair
+from restore.metrics import BORDER_PX, border_px, image_metrics
 from udc_render.io.previews import encode_srgb
 from udc_render.io.previews import daylight_balance
 from udc_render.sensor import demosaic_bilinear
 from udc_render.io.files import csv_text, save_figure, save_json, save_text
 from udc_render.sensor import unpack_rggb
 
-BORDER_PX = 16
 MAC_INPUT_SHAPE = (1, 4, 512, 1024)  # the paper's: 512 × 1024 × 4 packed RAW
 ROW_ORDER = ("input", "dep", "resnet", "unet")
 DISPLAY_TITLES = {"toled": "T-OLED", "poled": "P-OLED"}
@@ -40,17 +35,18 @@ PROTOCOL = (f"daylight-balanced camera RGB, clipped to [0, 1], sRGB-encoded, {BO
             "ms/MP: median restorer wall time per output megapixel")
 
 
-def border_px(h: int, w: int) -> int:
-    """The border cropped from an h × w frame: BORDER_PX, none for frames of 4 · BORDER_PX px or less."""
-    return BORDER_PX if min(h, w) > 4 * BORDER_PX else 0
-
-
-def display_referred(rgb: np.ndarray, balance: np.ndarray) -> np.ndarray:
-    """[3, H, W] → the protocol's image [3, H − 2b, W − 2b] in [0, 1] (module doc)."""
-    x = np.clip(np.asarray(rgb, np.float64) * balance[:, None, None], 0, 1)
-    b = border_px(*x.shape[1:])
-    x = x[:, b:x.shape[1] - b or None, b:x.shape[2] - b or None]
-    return encode_srgb(x)
+@dataclass(frozen=True)
+class EvalSettings:
+    """How a method is scored: the split, displays (None: a checkpoint's own, else all of the dataset's),
+    the row name (None: the method or model type), torch device, previews per display, DeP's denoiser
+    (None: restore.dep's default) and DeP's kernel size (None: restore.known's default)."""
+    split: str = "test"
+    displays: tuple[str, ...] | None = None
+    name: str | None = None
+    device: str = "auto"
+    previews: int = 4
+    denoiser: str | None = None
+    kernel_px: int | None = None
 
 
 def check_frame_size(pair: Pair) -> None:
@@ -63,74 +59,88 @@ def check_frame_size(pair: Pair) -> None:
                         f"at least {MIN_SIDE_PX} × {MIN_SIDE_PX} px: make the dataset with a larger --sensor-px")
 
 
-def image_metrics(restored: np.ndarray, gt: np.ndarray, balance: np.ndarray, lpips_model) -> dict:
-    """PSNR (dB), SSIM and LPIPS of one restored image against its ground truth (module doc)."""
-    import torch
-    from skimage.metrics import structural_similarity
-    a, b = display_referred(restored, balance), display_referred(gt, balance)
-    mse = float(np.mean((a - b) ** 2))
-    psnr = math.inf if mse == 0 else 10 * math.log10(1 / mse)
-    ssim = float(structural_similarity(a, b, channel_axis=0, data_range=1.0, gaussian_weights=True, sigma=1.5,
-                                       use_sample_covariance=False))
-    with torch.inference_mode():
-        lp = float(lpips_model(torch.from_numpy(a[None]).float(), torch.from_numpy(b[None]).float())[0])
-    return {"psnr_db": psnr, "ssim": ssim, "lpips": lp}
+class InputRestorer:
+    """'input': the degraded capture, bilinear demosaic ÷ the split's measured γ (module doc)."""
 
+    def __init__(self, method: str, settings: EvalSettings):
+        self.method, self.settings, self.name, self.gamma = method, settings, settings.name or method, {}
 
-class Restorer:
-    """A method under test: restore(packed, pair) -> [3, H, W] and its description."""
+    def displays(self, data_dir: Path) -> list[str]:
+        return dataset_displays(data_dir)
 
-    def __init__(self, method: str, pairs_by_display: dict, device: str = "auto", denoiser: str | None = None,
-                 name: str | None = None, loaded: tuple | None = None, kernel_px: int | None = None):
-        self.method, self.device = method, device
-        self.model, self.record, self.known = None, {}, {}
-        if method in ("input", "dep"):
-            from restore.known import known_gamma_rggb, known_kernels_rggb, measured_gamma_rggb
-            self.name = name or method
-            for d, pairs in pairs_by_display.items():
-                self.known[d] = ({"gamma": known_gamma_rggb(pairs[0]),
-                                  "kernels": known_kernels_rggb(pairs[0], kernel_px)}
-                                 if method == "dep" else {"gamma": measured_gamma_rggb(pairs), "kernels": None})
-            self.denoiser = denoiser
-        else:
-            from restore.train import load_model
-            self.model, self.record = loaded or load_model(Path(method), device)
-            self.name = name or self.record["model_config"]["type"]
+    def prepare(self, pairs_by_display: dict) -> None:
+        from restore.known import measured_gamma_rggb
+        self.gamma = {d: measured_gamma_rggb(pairs) for d, pairs in pairs_by_display.items()}
 
     def restore(self, packed: np.ndarray, pair: Pair) -> tuple[np.ndarray, float, dict]:
-        """(restored [3, H, W], seconds, notes)."""
-        if self.model is not None:
-            import torch
-            from restore.train import predict
-            dev = next(self.model.parameters()).device
-            t0 = time.perf_counter()
-            out = predict(self.model, packed, dev)
-            if dev.type == "cuda":
-                torch.cuda.synchronize()
-            return out, time.perf_counter() - t0, {}
-        k = self.known[pair.display]
         t0 = time.perf_counter()
-        if self.method == "input":
-            g = k["gamma"][:, None, None]
-            out = demosaic_bilinear(unpack_rggb(packed / g)).astype(np.float32)
-            return out, time.perf_counter() - t0, {}
+        g = self.gamma[pair.display][:, None, None]
+        out = demosaic_bilinear(unpack_rggb(packed / g)).astype(np.float32)
+        return out, time.perf_counter() - t0, {}
+
+    def describe(self) -> dict:
+        return {"method": self.method, "params": None, "macs_g": None,
+                "gamma_rggb": {d: g.tolist() for d, g in self.gamma.items()}}
+
+
+class DepRestorer(InputRestorer):
+    """'dep': restore.dep with the display's known kernels and γ (restore.known)."""
+
+    def prepare(self, pairs_by_display: dict) -> None:
+        from restore.known import known_gamma_rggb, known_kernels_rggb
+        self.gamma, self.kernels = {}, {}
+        for d, pairs in pairs_by_display.items():
+            self.gamma[d] = known_gamma_rggb(pairs[0])
+            self.kernels[d] = known_kernels_rggb(pairs[0], self.settings.kernel_px)
+
+    def restore(self, packed: np.ndarray, pair: Pair) -> tuple[np.ndarray, float, dict]:
         from restore.dep import dep_restore
-        kwargs = {} if self.denoiser is None else {"denoiser": self.denoiser}
-        res = dep_restore(packed, k["gamma"], k["kernels"], rng=np.random.default_rng(pair.item), **kwargs)
+        kwargs = {} if self.settings.denoiser is None else {"denoiser": self.settings.denoiser}
+        t0 = time.perf_counter()
+        res = dep_restore(packed, self.gamma[pair.display], self.kernels[pair.display],
+                          rng=np.random.default_rng(pair.item), **kwargs)
         return res.rgb, time.perf_counter() - t0, {"denoiser": res.denoiser}
 
     def describe(self) -> dict:
-        if self.model is None:
-            d = {"method": self.method, "params": None, "macs_g": None,
-                 "gamma_rggb": {k: v["gamma"].tolist() for k, v in self.known.items()}}
-            if self.method == "dep":
-                d["kernel_px"] = {k: int(v["kernels"].shape[-1]) for k, v in self.known.items()}
-            return d
+        return dict(super().describe(), kernel_px={d: int(k.shape[-1]) for d, k in self.kernels.items()})
+
+
+class ModelRestorer:
+    """A checkpoint from `udc-render train` (`method` is its path), loaded on settings.device."""
+
+    def __init__(self, method: str, settings: EvalSettings):
+        from restore.train import load_model
+        self.method = method
+        self.model, self.record = load_model(Path(method), settings.device)
+        self.name = settings.name or self.record["model_config"]["type"]
+
+    def displays(self, data_dir: Path) -> list[str]:
+        return [self.record["display"]]
+
+    def prepare(self, pairs_by_display: dict) -> None:
+        pass
+
+    def restore(self, packed: np.ndarray, pair: Pair) -> tuple[np.ndarray, float, dict]:
+        import torch
+        from restore.train import predict
+        dev = next(self.model.parameters()).device
+        t0 = time.perf_counter()
+        out = predict(self.model, packed, dev)
+        if dev.type == "cuda":
+            torch.cuda.synchronize()
+        return out, time.perf_counter() - t0, {}
+
+    def describe(self) -> dict:
         from restore.counting import count_macs, count_parameters
         cfg = self.record["model_config"]
         return {"method": self.method, "model_config": cfg, "params": count_parameters(self.model),
                 "macs_g": count_macs(cfg, MAC_INPUT_SHAPE) / 1e9, "trained_on": self.record["display"],
                 "train_settings": self.record["settings"], "device": self.record["device"]}
+
+
+# method → factory(method, settings) of a restorer: `name`, `displays(data_dir)` (its default displays),
+# `prepare(pairs_by_display)`, `restore(packed, pair)` -> (restored [3, H, W], seconds, notes), `describe()`
+RESTORERS = {"input": InputRestorer, "dep": DepRestorer, "model": ModelRestorer}
 
 
 def preview_panel(panels: list[tuple[str, np.ndarray]], balance: np.ndarray, path: Path, title: str) -> None:
@@ -150,51 +160,55 @@ def preview_panel(panels: list[tuple[str, np.ndarray]], balance: np.ndarray, pat
     plt.close(fig)
 
 
-def evaluate(data_dir: Path, method: str, out: Path, split: str = "test", displays: list[str] | None = None,
-             name: str | None = None, device: str = "auto", previews: int = 4, denoiser: str | None = None,
-             progress: bool = True, kernel_px: int | None = None) -> dict:
-    """Score `method` on `split` for `displays`; merge into <out>/results.json; returns its entry."""
-    from tqdm import tqdm
+def evaluate(data_dir: Path, method: str, out: Path, settings: EvalSettings = EvalSettings(),
+             progress: bool = True) -> dict:
+    """Score `method` ('input', 'dep' or a checkpoint path) as `settings` say; merge into
+    <out>/results.json and rewrite the tables; returns its entry."""
     from restore.lpips import LPIPS
     data_dir, out = Path(data_dir), Path(out)
-    loaded = None
-    if method not in ("input", "dep"):
-        from restore.train import load_model
-        loaded = load_model(Path(method), device)
-    if displays is None:
-        displays = [loaded[1]["display"]] if loaded else dataset_displays(data_dir)
-    pairs_by_display = {d: list_pairs(data_dir, split, [d]) for d in displays}
+    restorer = RESTORERS[method if method in ("input", "dep") else "model"](method, settings)
+    displays = restorer.displays(data_dir) if settings.displays is None else settings.displays
+    pairs_by_display = {d: list_pairs(data_dir, settings.split, [d]) for d in displays}
     for d, pairs in pairs_by_display.items():
         if not pairs:
-            raise DataError(f"{data_dir}: split = {split!r} has no items (display {d})")
+            raise DataError(f"{data_dir}: split = {settings.split!r} has no items (display {d})")
         check_frame_size(pairs[0])  # a dataset has one frame size
-    restorer = Restorer(method, pairs_by_display, device, denoiser, name, loaded, kernel_px)
-    lp, balance = LPIPS().eval(), daylight_balance()
-    entry = dict(restorer.describe(), name=restorer.name, split=split, displays={})
-    folder = out / restorer.name
+    restorer.prepare(pairs_by_display)
+    lp = LPIPS()
+    entry = dict(restorer.describe(), name=restorer.name, split=settings.split, displays={})
     for d, pairs in pairs_by_display.items():
-        rows, notes = [], {}
-        for i, p in enumerate(tqdm(pairs, desc=f"evaluate {restorer.name} {d}", unit="image", disable=not progress)):
-            packed, gt = load_pair(p)
-            restored, seconds, notes = restorer.restore(packed, p)
-            if not np.all(np.isfinite(restored)):
-                raise DataError(f"{restorer.name} on {p.folder}/{d}: the restored image is not finite")
-            m = image_metrics(restored, gt, balance, lp)
-            rows.append({"item": p.item, "image": p.image, **m, "ms_per_mp": 1e3 * seconds / (gt[0].size / 1e6)})
-            if i < previews:
-                degraded = demosaic_bilinear(unpack_rggb(packed))
-                preview_panel([("captured (linear, not scaled)", degraded), (restorer.name, restored),
-                               ("ground truth", gt)], balance, folder / "previews" / f"{d}_{p.name}.png",
-                              f"{DISPLAY_TITLES.get(d, d)} · {p.image} · PSNR {m['psnr_db']:.2f} dB, "
-                              f"SSIM {m['ssim']:.4f}, LPIPS {m['lpips']:.4f}")
-        save_text(folder / f"metrics_{d}.csv", csv_text(rows, ["item", "image", "psnr_db", "ssim", "lpips", "ms_per_mp"]))
-        entry["displays"][d] = {"images": len(rows), **{k: float(np.mean([r[k] for r in rows]))
-                                                         for k in ("psnr_db", "ssim", "lpips")},
-                                "ms_per_mp": float(np.median([r["ms_per_mp"] for r in rows])), **notes}
+        entry["displays"][d] = _score_display(restorer, d, pairs, lp, out / restorer.name, settings.previews,
+                                              progress)
     results = merge_results(out, entry)
     save_text(out / "results.md", results_markdown(results))
     save_text(out / "results.csv", results_csv(results))
     return entry
+
+
+def _score_display(restorer, display: str, pairs: list[Pair], lp, folder: Path, previews: int,
+                   progress: bool) -> dict:
+    """Score one display's pairs (`lp`: the LPIPS model): <folder>/metrics_<display>.csv and the first
+    `previews` previews; returns the display's entry (metric means, median ms/MP, the restorer's notes)."""
+    from tqdm import tqdm
+    balance, rows, notes = daylight_balance(), [], {}
+    bar = tqdm(pairs, desc=f"evaluate {restorer.name} {display}", unit="image", disable=not progress)
+    for i, p in enumerate(bar):
+        packed, gt = load_pair(p)
+        restored, seconds, notes = restorer.restore(packed, p)
+        if not np.all(np.isfinite(restored)):
+            raise DataError(f"{restorer.name} on {p.folder}/{display}: the restored image is not finite")
+        m = image_metrics(restored, gt, balance, lp)
+        rows.append({"item": p.item, "image": p.image, **m, "ms_per_mp": 1e3 * seconds / (gt[0].size / 1e6)})
+        if i < previews:
+            degraded = demosaic_bilinear(unpack_rggb(packed))
+            preview_panel([("captured (linear, not scaled)", degraded), (restorer.name, restored),
+                           ("ground truth", gt)], balance, folder / "previews" / f"{display}_{p.name}.png",
+                          f"{DISPLAY_TITLES.get(display, display)} · {p.image} · PSNR {m['psnr_db']:.2f} dB, "
+                          f"SSIM {m['ssim']:.4f}, LPIPS {m['lpips']:.4f}")
+    save_text(folder / f"metrics_{display}.csv",
+              csv_text(rows, ["item", "image", "psnr_db", "ssim", "lpips", "ms_per_mp"]))
+    return {"images": len(rows), **{k: float(np.mean([r[k] for r in rows])) for k in ("psnr_db", "ssim", "lpips")},
+            "ms_per_mp": float(np.median([r["ms_per_mp"] for r in rows])), **notes}
 
 
 def merge_results(out: Path, entry: dict) -> dict:

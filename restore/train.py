@@ -31,6 +31,7 @@ from restore.losses import loss_fn
 from restore.models import build_model, model_config
 from udc_render.io.files import atomic_path, csv_text, save_figure, save_json, save_text
 from udc_render.errors import UdcError
+from udc_render.metrics import psnr_db
 
 LOG_COLUMNS = ["epoch", "step", "lr", "loss", "val_psnr_db", "seconds"]
 
@@ -89,10 +90,8 @@ def validation_psnr(model, pairs, device) -> float | None:
     if not pairs:
         return None
     model.eval()
-    vals = []
-    for packed, gt in pairs:
-        err = np.mean((np.clip(predict(model, packed, device), 0, 1) - np.clip(gt, 0, 1)) ** 2)
-        vals.append(10 * math.log10(1 / max(err, 1e-20)))
+    vals = [psnr_db(np.clip(predict(model, packed, device), 0, 1), np.clip(gt, 0, 1), peak=1.0)
+            for packed, gt in pairs]
     model.train()
     return float(np.mean(vals))
 

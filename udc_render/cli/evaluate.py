@@ -27,11 +27,12 @@ def register(sub) -> None:
 
 def run(args) -> int:
     out_dir(args.out)
-    from restore.evaluate import evaluate
+    from restore.evaluate import EvalSettings, evaluate
     set_threads(args.threads)
-    displays = args.display.split(",") if args.display else None
-    entry = evaluate(args.data, args.model, args.out, args.split, displays, args.name, args.device,
-                     args.previews, args.denoiser, progress=not args.quiet, kernel_px=args.kernel_px)
+    settings = EvalSettings(split=args.split, displays=tuple(args.display.split(",")) if args.display else None,
+                            name=args.name, device=args.device, previews=args.previews, denoiser=args.denoiser,
+                            kernel_px=args.kernel_px)
+    entry = evaluate(args.data, args.model, args.out, settings, progress=not args.quiet)
     for d, r in entry["displays"].items():
         print(f"{entry['name']} {d}: PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.4f}, LPIPS {r['lpips']:.4f}, "
               f"{r['ms_per_mp']:.0f} ms/MP over {r['images']} images")
