@@ -54,7 +54,7 @@ from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.render import BandImage, render_scene
 from udc_render.scene import Scene
 from udc_render.scene.geometry import RenderGrid, psf_lens, render_grid
-from udc_render.sensor import SensorConfig, band_electron_weights, capture, electrons_rgb, rgb_to_rggb
+from udc_render.sensor import Capture, SensorConfig, band_electron_weights, capture, electrons_rgb, rgb_to_rggb
 
 FORMS = ("spectral", "per_channel")
 EXPOSURE_FILL = 0.8
@@ -86,12 +86,14 @@ class SynthConfig:
             raise SynthError(f"exposure_s = {self.exposure_s!r}: expected a positive number of seconds or auto")
 
 
-@dataclass
+@dataclass(frozen=True)
 class SynthResult:
+    """What synthesize hands to the file writer (io.capture.write_synthesis): the arrays, and the
+    records that become the JSON sidecars."""
     gt: np.ndarray  # [3, H, W] float32, linear camera RGB / white level (module doc)
-    captures: dict  # display name -> Capture
-    meta: dict  # shared: scene, render, exposure, seeds
-    display_meta: dict  # display name -> dict (display, optics, kernels, γ)
+    captures: dict[str, Capture]  # by display name
+    meta: dict  # synth.json: scene, render, exposure, seeds
+    display_meta: dict[str, dict]  # <display>/capture.json additions: display, optics, kernels, γ
     timing: dict = field(default_factory=dict)  # seconds; kept out of the files (identical runs, identical bytes)
 
 
