@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 # Lowest first. A module belongs to the longest prefix that matches it ("udc_render" alone: the
 # package's own __init__, a docstring and the version).

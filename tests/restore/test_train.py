@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import write_pairs
+from tests.conftest import write_pairs
 from restore.data import list_pairs, load_pair
 from restore.train import TrainError, TrainSettings, load_model, predict, train
 from udc_render.sensor import demosaic_bilinear
