@@ -7,7 +7,8 @@ paper's pitch, so kernels are the real 513 px; the camera is placed to fit the m
 smaller frame). Noise off: every error is the approximation's alone. Error = ‖y − y_ref‖₂ / ‖y_ref‖₂
 of the noise-free RAW mosaic (clean_dn) over the frame, for each display; time = seconds of
 synthesize() for that display with the kernels computed (cache off: ``kernel_s``) and applied
-(``apply_s``: optics + sensor, kernels loaded from the cache; each run has its own empty cache). Knobs, each against its own reference:
+(``apply_s``: optics + sensor, kernels loaded from the cache; each run has its own empty cache).
+Knobs, each against its own reference:
 
 - ``bands``: K bands of step 50, 30, 20, 10 nm vs a 5 nm reference (60 bands), T-OLED and P-OLED,
   d = 0. The render is the same RGB render turned into bands by the primaries matrix (exact), so
@@ -31,11 +32,11 @@ from pathlib import Path
 import numpy as np
 
 from udc_render.optics import displays as D
-from udc_render.io.files import csv_text, save_figure, save_text
 from udc_render.render import render_scene
 from udc_render.scene import Bands, load_scene
 from udc_render.sensor import SensorConfig
-from udc_render.pipeline import SynthConfig, synthesize
+from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
+from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
 
 COLUMNS = ["study", "display", "setting", "reference", "rel_error", "kernel_s", "apply_s"]
 FULL = {"sensor": (512, 256, 1.55), "steps": (50, 30, 20, 10), "ref_step": 5, "phases": (1, 2, 3, 4, 6),
@@ -54,7 +55,6 @@ def _scene(cfg, step_nm: float, supersample: int = 1):
 def _run(scene, band_image, display, synth_cfg):
     """(clean mosaic, kernel seconds, apply seconds) of one display: the kernels computed without a
     cache (timed), then the synthesis with them (timed)."""
-    from udc_render.pipeline import plan_kernels
     t0 = time.perf_counter()
     kernels = plan_kernels(scene, [display], replace(synth_cfg, use_cache=False))
     t_kernels = time.perf_counter() - t0
@@ -73,94 +73,115 @@ def _as_file(d: D.Display) -> D.Display:
     return replace(d, source="study")
 
 
+class _Runs:
+    """The renders (one per band step and supersampling) and the references, each made once."""
+
+    def __init__(self, cfg: dict):
+        self.cfg = cfg
+        self.base = SynthConfig(sensor=SensorConfig(noise="none"), exposure_s=0.03)
+        self.renders: dict = {}
+        self.refs: dict = {}
+
+    def render(self, step_nm: float, supersample: int = 1):
+        """(scene, BandImage) at step_nm bands and render.supersample."""
+        if (step_nm, supersample) not in self.renders:
+            sc = _scene(self.cfg, step_nm, supersample)
+            self.renders[(step_nm, supersample)] = (sc, render_scene(sc, progress=False))
+        return self.renders[(step_nm, supersample)]
+
+    def reference(self, key: tuple, label: str, make) -> tuple:
+        """(clean mosaic, label) of reference `key`, made by make() → _run(...) the first time."""
+        if key not in self.refs:
+            self.refs[key] = (make()[0], label)
+        return self.refs[key]
+
+    def _bands_reference(self, d: D.Display) -> tuple:
+        return self.reference(("bands", d.name), f"{self.cfg['ref_step']} nm bands",
+                              lambda: _run(*self.render(self.cfg["ref_step"]), d, self.base))
+
+    def bands(self, d: D.Display, step_nm: float):
+        """K bands of step_nm against the ref_step bands."""
+        ref = self._bands_reference(d)
+        sc, bi = self.render(step_nm)
+        return ref, _run(sc, bi, d, self.base), f"{step_nm} nm ({len(bi.centres_nm)} bands)"
+
+    def channel(self, d: D.Display, _setting=None):
+        """The per-channel form (3 kernels, the analytic γ) of 10 nm bands against the ref_step bands."""
+        ref = self._bands_reference(d)
+        sc, bi = self.render(10)
+        return (ref, _run(sc, bi, _as_file(d), replace(self.base, form="per_channel")),
+                "3 channel kernels, analytic γ")
+
+    def phases(self, d: D.Display, p: int):
+        """P field phases per axis at d = 1 mm against ref_phases."""
+        sc, bi = self.render(50)
+        dd = d.with_distance(1.0)
+        ref_p = self.cfg["ref_phases"]
+        ref = self.reference(("phases", ref_p), f"P = {ref_p}",
+                             lambda: _run(sc, bi, dd, replace(self.base, field_phases=ref_p)))
+        return ref, _run(sc, bi, dd, replace(self.base, field_phases=p)), f"P = {p} (d = 1 mm)"
+
+    def precision(self, d: D.Display, precision: str):
+        """Optics FFTs and kernels in `precision` against float64."""
+        sc, bi = self.render(10)
+        ref = self.reference(("precision",), "float64 kernels and FFTs",
+                             lambda: _run(sc, bi, d, replace(self.base, precision="float64",
+                                                             kernel_precision="float64")))
+        return ref, _run(sc, bi, d, replace(self.base, precision=precision, kernel_precision=precision)), precision
+
+    def supersample(self, d: D.Display, s: int):
+        """render.supersample s against ref_supersample (6 bands of 50 nm)."""
+        ref_s = self.cfg["ref_supersample"]
+        ref = self.reference(("supersample", d.name), f"s = {ref_s}",
+                             lambda: _run(*self.render(50, ref_s), d, self.base))
+        return ref, _run(*self.render(50, s), d, self.base), f"s = {s}"
+
+
+def _jobs(cfg: dict) -> list[tuple]:
+    """(study, display, setting) in run order."""
+    toled, poled, glass = D.preset("toled"), D.preset("poled"), D.preset("glass")
+    jobs = [("bands", d, s) for d in (toled, poled) for s in cfg["steps"]]
+    jobs += [("channel", d, None) for d in (toled, poled)]
+    jobs += [("phases", toled, p) for p in cfg["phases"]] + [("precision", toled, p) for p in ("float32", "float64")]
+    return jobs + [("supersample", d, s) for d in (toled, glass) for s in cfg["supersample"]]
+
+
 def run_study(out_dir, quick: bool = False, progress: bool = True) -> list[dict]:
+    """Run every knob against its reference, write study_capture.{csv,md,png} into out_dir, return the rows."""
     from tqdm import tqdm
     cfg = QUICK if quick else FULL
     out = Path(out_dir)
-    base = SynthConfig(sensor=SensorConfig(noise="none"), exposure_s=0.03)
+    runs = _Runs(cfg)
+    jobs = _jobs(cfg)
     rows: list[dict] = []
-    renders = {}
-
-    def render(step, ss=1):
-        if (step, ss) not in renders:
-            sc = _scene(cfg, step, ss)
-            renders[(step, ss)] = (sc, render_scene(sc, progress=False))
-        return renders[(step, ss)]
-
-    toled, poled, glass = D.preset("toled"), D.preset("poled"), D.preset("glass")
-    jobs = [("bands", d, s) for d in (toled, poled) for s in cfg["steps"]] + [("channel", d, None) for d in (toled, poled)]
-    jobs += [("phases", toled, p) for p in cfg["phases"]] + [("precision", toled, p) for p in ("float32", "float64")]
-    jobs += [("supersample", d, s) for d in (toled, glass) for s in cfg["supersample"]]
-    bar = tqdm(total=len(jobs), desc="study capture", unit="run", disable=not progress)
-    refs = {}
-    for study, d, setting in jobs:
-        if study in ("bands", "channel"):
-            ref_key = ("bands", d.name)
-            if ref_key not in refs:
-                sc, bi = render(cfg["ref_step"])
-                refs[ref_key] = (_run(sc, bi, d, base)[0], f"{cfg['ref_step']} nm bands")
-            if study == "bands":
-                sc, bi = render(setting)
-                y, tk, ta = _run(sc, bi, d, base)
-                label = f"{setting} nm ({len(bi.centres_nm)} bands)"
-            else:
-                sc, bi = render(10)
-                y, tk, ta = _run(sc, bi, _as_file(d), replace(base, form="per_channel"))
-                label = "3 channel kernels, analytic γ"
-        elif study == "phases":
-            sc, bi = render(50)
-            dd = d.with_distance(1.0)
-            ref_key = ("phases", cfg["ref_phases"])
-            if ref_key not in refs:
-                refs[ref_key] = (_run(sc, bi, dd, replace(base, field_phases=cfg["ref_phases"]))[0],
-                                 f"P = {cfg['ref_phases']}")
-            y, tk, ta = _run(sc, bi, dd, replace(base, field_phases=setting))
-            label = f"P = {setting} (d = 1 mm)"
-        elif study == "precision":
-            sc, bi = render(10)
-            ref_key = ("precision",)
-            if ref_key not in refs:
-                refs[ref_key] = (_run(sc, bi, d, replace(base, precision="float64", kernel_precision="float64"))[0],
-                                 "float64 kernels and FFTs")
-            y, tk, ta = _run(sc, bi, d, replace(base, precision=setting, kernel_precision=setting))
-            label = setting
-        else:
-            ref_key = ("supersample", d.name)
-            if ref_key not in refs:
-                sc, bi = render(50, cfg["ref_supersample"])
-                refs[ref_key] = (_run(sc, bi, d, base)[0], f"s = {cfg['ref_supersample']}")
-            sc, bi = render(50, setting)
-            y, tk, ta = _run(sc, bi, d, base)
-            label = f"s = {setting}"
-        ref, ref_label = refs[ref_key]
+    for study, d, setting in tqdm(jobs, desc="study capture", unit="run", disable=not progress):
+        (ref, ref_label), (y, tk, ta), label = getattr(runs, study)(d, setting)
         rows.append({"study": study, "display": d.name, "setting": label, "reference": ref_label,
                      "rel_error": _err(y, ref), "kernel_s": round(tk, 3), "apply_s": round(ta, 3)})
-        bar.update()
-    bar.close()
     out.mkdir(parents=True, exist_ok=True)
-    save_text(out / "study_capture.csv", csv_text(rows, COLUMNS))
-    save_text(out / "study_capture.md", markdown(rows, cfg))
+    write_tables(out, "study_capture", rows, COLUMNS, markdown(rows, cfg))
     plot(rows, out / "study_capture.png")
     return rows
 
 
 def markdown(rows: list[dict], cfg: dict) -> str:
+    """study_capture.md: the set-up and one table row per run."""
     w, h, p = cfg["sensor"]
     lines = ["# Capture synthesis: error against run time", "",
              f"Default rig, astronaut, {w} × {h} px of {p} µm, noise off. Error: relative L2 of the noise-free "
              "RAW against each study's reference; kernel_s: computing the kernels (cache off); apply_s: "
-             "optics + sensor with cached kernels. Regenerate with `udc-render study capture --out DIR`.", "",
-             "| study | display | setting | reference | rel. error | kernel s | apply s |", "|---|---|---|---|---|---|---|"]
-    for r in rows:
-        lines.append(f"| {r['study']} | {r['display']} | {r['setting']} | {r['reference']} | {r['rel_error']:.2e} | "
-                     f"{r['kernel_s']:.2f} | {r['apply_s']:.2f} |")
+             "optics + sensor with cached kernels. Regenerate with `udc-render study capture --out DIR`.", ""]
+    lines += md_table(rows, [("study", "study"), ("display", "display"), ("setting", "setting"),
+                             ("reference", "reference"), ("rel_error", "rel. error"), ("kernel_s", "kernel s"),
+                             ("apply_s", "apply s")],
+                      {"rel_error": lambda v: f"{v:.2e}", "kernel_s": lambda v: f"{v:.2f}",
+                       "apply_s": lambda v: f"{v:.2f}"})
     return "\n".join(lines) + "\n"
 
 
 def plot(rows: list[dict], path: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    """study_capture.png: RAW error vs kernel + apply seconds, one log-log panel per study."""
+    plt = pyplot()
     studies = list(dict.fromkeys(r["study"] for r in rows))
     fig, axes = plt.subplots(1, len(studies), figsize=(4.2 * len(studies), 3.8), squeeze=False)
     for ax, st in zip(axes[0], studies):
@@ -170,11 +191,11 @@ def plot(rows: list[dict], path: Path) -> None:
             e = [max(r["rel_error"], 1e-9) for r in rs]
             ax.loglog(t, e, "o-", label=disp)
             for ti, ei, r in zip(t, e, rs):
-                ax.annotate(r["setting"].split(" (")[0], (ti, ei), fontsize=7, textcoords="offset points", xytext=(3, 3))
+                ax.annotate(r["setting"].split(" (")[0], (ti, ei), fontsize=7, textcoords="offset points",
+                            xytext=(3, 3))
         ax.set_title(st)
         ax.set_xlabel("seconds (kernels + apply)")
         ax.set_ylabel("relative L2 error of the RAW")
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
-    save_figure(fig, path)
-    plt.close(fig)
+    save_plot(fig, path)

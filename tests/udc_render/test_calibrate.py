@@ -11,7 +11,11 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from udc_render.calibration import Rig
+from udc_render.calibration import mtf as cal_mtf
+from udc_render.calibration import noise as cal_noise
 from udc_render.calibration import protocols as cal
+from udc_render.calibration import psf as cal_psf
 from udc_render.cli import main
 from udc_render.optics.displays import load_display
 from udc_render.pipeline import SynthConfig
@@ -68,7 +72,7 @@ def test_noise_lambdas_within_10_percent_poisson(toled_run, poled):
 
 def test_noise_lambdas_within_10_percent_gaussian(tmp_path):
     cfg = SynthConfig(sensor=replace(SynthConfig().sensor, noise="gaussian"))  # λ_read 1e-6, λ_shot 1e-3
-    res = cal.calibrate_noise(cal.Rig(load_display("poled"), True, cfg, tmp_path))
+    res = cal_noise.calibrate_noise(Rig(load_display("poled"), True, cfg, tmp_path))
     assert np.allclose(res["truth_read"], 1e-6) and np.allclose(res["truth_shot"], 1e-3)
     for f in res["fits"]:
         assert abs(f["lambda_read"] / 1e-6 - 1) < 0.10 and abs(f["lambda_shot"] / 1e-3 - 1) < 0.10, f
@@ -78,13 +82,13 @@ def test_noise_fit_handles_the_black_clip():
     rng = np.random.default_rng(3)
     w = rng.uniform(0, 0.5, 200_000) ** 2
     y = np.clip(np.rint((w + rng.standard_normal(w.size) * np.sqrt(2e-6 + 1e-3 * w)) * 65535), 0, 65535) / 65535
-    f = cal.noise_fit(w, y - w)
+    f = cal_noise.noise_fit(w, y - w)
     assert abs(f["lambda_read"] / 2e-6 - 1) < 0.1 and abs(f["lambda_shot"] / 1e-3 - 1) < 0.02
 
 
 def test_psf_recovered_matches_configured_kernel(toled_run, poled):
     for p in (toled_run[3]["psf"], poled["psf"]):
-        assert p["ncc"] > cal.PSF_NCC_MIN
+        assert p["ncc"] > cal_psf.PSF_NCC_MIN
         assert p["max_order_shift_um"] == 0.0
     # T-OLED first orders along x at λ z / p = 0.65 · 6008 / 60 ≈ 65 µm
     orders = toled_run[3]["psf"]["orders"]
@@ -104,7 +108,7 @@ def test_toled_mtf_dips_along_x(toled_run):
 def test_poled_mtf_has_no_nulls(poled):
     m = poled["mtf"]
     for axis in ("x", "y"):
-        assert m[axis]["relative_G"].min() > cal.POLED_MIN_MTF
+        assert m[axis]["relative_G"].min() > cal_mtf.POLED_MIN_MTF
     assert poled["mtf"]["checks"][0]["pass"]
 
 
