@@ -5,32 +5,27 @@ The rgb_matrix render is linear in the drive levels, so one render of the square
 scaled by the decoded level (exact); every level gets its own noisy capture. Honest measurement: the
 square is as tall as the panel and the region's side is at most square − (kernel size − 1), so every
 region pixel collects the whole kernel window (light the PSF sends beyond its window is lost, as in
-the truth). Truth: displays.channel_gamma with the kernels' transmittance · (1 − energy outside).
+the truth). Truth: optics.gamma.display_gamma, the project's one γ.
 """
 from __future__ import annotations
-
-from dataclasses import replace
 
 import numpy as np
 
 from udc_render.calibration.rig import CHANNELS, Rig, check
 from udc_render.content.monitor_image import decode
-from udc_render.optics.displays import channel_gamma
+from udc_render.optics.gamma import display_gamma
 from udc_render.pipeline import SynthError
-from udc_render.sensor import band_electron_weights, pack_rggb
+from udc_render.sensor import pack_rggb, rgb_to_rggb
 
 GAMMA_LEVELS = tuple(range(0, 256, 10))
 GAMMA_TOL = 0.02
 
 
 def true_gamma(rig: Rig, band_image) -> np.ndarray:
-    """Analytic γ (R, Gr, Gb, B) of the display relative to glass for the monitor's white (flat field)."""
-    w = band_electron_weights(band_image.edges_nm, replace(rig.sensors[rig.glass.name], exposure_s=1.0))
-    w = w * band_image.white_bands()[None, :]
-    kd, kg = rig.kernels[rig.display.name], rig.kernels[rig.glass.name]
-    g = channel_gamma(w, rig.display, kd.transmittance * (1 - kd.energy_outside),
-                      kg.transmittance * (1 - kg.energy_outside), band_image.edges_nm)
-    return np.array([g[0], g[1], g[1], g[2]])
+    """The truth: γ (R, Gr, Gb, B) of the display for the rendered monitor white (optics.gamma)."""
+    g = display_gamma(rig.display, rig.kernels[rig.display.name], rig.kernels[rig.glass.name], band_image.edges_nm,
+                      rig.sensors[rig.glass.name].camera, band_image.white_bands())
+    return np.array(rgb_to_rggb(g))
 
 
 def _region_px(rig: Rig, side: float) -> int:
