@@ -24,7 +24,7 @@ from .propagation import angular_spectrum_tf, frequencies, shift_ramp
 from .pupil import MASK_RASTERS, aperture_slices, display_grid, lens_grid, tile_mask
 
 __all__ = ["METHODS", "PRECISIONS", "DEFAULT_PUPIL_SAMPLES", "DEFAULT_FIELD_PHASES", "ALIAS_GUARD",
-           "WAVELENGTH_RANGE_NM", "MAX_PUPIL_WINDOW_SAMPLES", "PAPER_SENSOR_UM", "KernelSet", "auto_pupil_samples",
+           "WAVELENGTH_RANGE_NM", "MAX_PUPIL_WINDOW_SAMPLES", "MAX_PUPIL_WINDOW_SAMPLES_D0", "PAPER_SENSOR_UM", "KernelSet", "auto_pupil_samples",
            "field_shifts", "compute_kernels", "PSFError", "AliasingWarning", "UnderSamplingWarning"]
 
 METHODS = ("mft", "czt", "paper")
@@ -33,7 +33,11 @@ DEFAULT_PUPIL_SAMPLES = 1024
 DEFAULT_FIELD_PHASES = 4  # per axis; study: mean kernel 2.3e-4 L1, banding within 15 % of its amplitude
 ALIAS_GUARD = 1.05
 WAVELENGTH_RANGE_NM = (200.0, 2000.0)  # scalar optics of visible/NIR cameras; sensitivities end well inside
-MAX_PUPIL_WINDOW_SAMPLES = 8192 ** 2  # ≈ 0.5 GB per complex64 copy: beyond it a kernel set takes many minutes
+# Pupil windows larger than this are refused at once: at d > 0 every field phase and wavelength FFTs the
+# whole window (8192² ≈ 0.5 GB per complex64 copy, minutes per kernel set beyond it); at d = 0 only the
+# aperture crop is transformed and the bound is the window's memory (16384²: 2 GB per copy).
+MAX_PUPIL_WINDOW_SAMPLES = 8192 ** 2
+MAX_PUPIL_WINDOW_SAMPLES_D0 = 16384 ** 2
 
 
 @dataclass
@@ -153,10 +157,11 @@ def _window(display, lens: Lens, n_pupil: int, wl: np.ndarray, d_um: float, mask
                            f"{margin / 1000:.1f} mm of padding; allowed ≤ {20 * lens.aperture_um / 1000:.1f} mm "
                            f"(use a periodic display or a smaller distance)")
     grid, cell_n, tiles = display_grid(period, lens, n_pupil, margin)
-    if grid.nx * grid.ny > MAX_PUPIL_WINDOW_SAMPLES:
+    limit = MAX_PUPIL_WINDOW_SAMPLES if d_um > 0 else MAX_PUPIL_WINDOW_SAMPLES_D0
+    if grid.nx * grid.ny > limit:
         raise PSFError(f"the pupil window needs {grid.nx} × {grid.ny} samples (display period {max(period):g} µm "
-                       f"at δ = aperture / {n_pupil} = {lens.aperture_um / n_pupil:.3g} µm); allowed ≤ "
-                       f"{MAX_PUPIL_WINDOW_SAMPLES:.3g}: use fewer pupil_samples or an aperture of several periods")
+                       f"at δ = aperture / {n_pupil} = {lens.aperture_um / n_pupil:.3g} µm); allowed ≤ {limit:.3g} "
+                       f"at d {'>' if d_um > 0 else '='} 0: use fewer pupil_samples or an aperture of several periods")
     try:
         mask, kappa = tile_mask(display, cell_n, tiles, mask_raster)
     except ValueError as exc:
