@@ -11,32 +11,9 @@ Conventions
   units, where x = 1 at γ = 1 fills the full well (and, at gain 1 with the default conversion gain,
   the white level).
 
-Radiometry (spectral form), per pixel p of colour c(p):
-
-    E_k   = π L_k / (4 N²) · cos⁴θ            image-side irradiance (on-axis, object at infinity;
-                                              cos⁴θ only when ``cos4_falloff``; tan θ = r / f)
-    e(p)  = Σ_k E_k · A · t · Δλ_k · q_ck       electrons, A = pitch², t = exposure
-    q_ck  = (1/Δλ_k) ∫_band QE_c(λ) λ/(h c) dλ  photon-weighted band mean of the quantum efficiency
-    QE_c  = peak_qe · S_c(λ) / max_{c,λ} S      (S: camera sensitivities, linearly interpolated,
-                                              0 outside their table)
-
-q_ck is integrated exactly for the piecewise-linear S (Simpson on each sub-interval, exact for
-the quadratic S·λ), so a band-constant radiance gives the exact electron count.
-
-Signal chain, with R = white − black (DN) and g = gain · conversion_gain (DN per e⁻):
-
-    noise = "poisson":  DN = black + g · min(Poisson(e) + N(0, σ_read²), FW)
-    noise = "gaussian": w = g · e / R,   DN = black + R · min(w + N(0, λ_read + λ_shot · w), g FW / R)
-    noise = "none":     DN = black + g · min(e, FW)
-
-(noise is drawn around the unsaturated signal and the full well then caps the read-out signal, as
-in Yang & Sankaranarayanan 2021, so a saturated pixel reads exactly black + g · FW: the white level
-at gain 1 with the default conversion gain)
-then DN is rounded to an integer, clipped to [0, white] (never wraps) and stored as uint16; dead
-pixels are set to the black level and hot pixels to the white level. The clean mosaic is
-black + g · min(e, FW) clipped to [0, white], unquantised (float32).
-Brooks et al. 2019 ("Unprocessing images for learned raw denoising") sampling, natural logs:
-    log λ_shot ~ U(log 1e-4, log 1.2e-2),  log λ_read ~ N(2.18 log λ_shot + 1.20, 0.26²).
+    radiance L_k ──► electrons e(p) = Σ_k π L_k / (4 N²) [cos⁴θ] · A · t · Δλ_k · q_ck   (radiometry.py)
+    electrons ──► DN: Poisson + read noise (or heteroscedastic Gaussian), full well, quantise,
+                  black and white levels, dead and hot pixels                          (noise.py)
 
 Modules: config (SensorConfig), bayer (the RGGB convention, packing, bilinear demosaic), radiometry
 (radiance ──► electrons), noise (electrons ──► DN), capture (the whole chain).
