@@ -145,9 +145,8 @@ RESTORERS = {"input": InputRestorer, "dep": DepRestorer, "model": ModelRestorer}
 
 def preview_panel(panels: list[tuple[str, np.ndarray]], balance: np.ndarray, path: Path, title: str) -> None:
     """Side-by-side sRGB previews (degraded | restored | ground truth) with labels."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from udc_render.io.plots import pyplot
+    plt = pyplot()
     h, w = panels[0][1].shape[1:]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.2 * h / w + 0.5))
     for ax, (label, img) in zip(axes, panels):

@@ -155,9 +155,8 @@ def _save_checkpoint(out: Path, model, opt, epoch: int, step: int, log: list, se
 
 
 def plot_loss(log: list, path: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from udc_render.io.plots import pyplot
+    plt = pyplot()
     if not log:
         return
     fig, ax = plt.subplots(figsize=(6, 3.5))

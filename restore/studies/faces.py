@@ -45,9 +45,8 @@ def chart_boxes_on_sensor(boxes: np.ndarray, meta: dict, chart_px=CHART_PX) -> n
 
 
 def _overlay(panels: list, path: Path) -> None:
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from udc_render.io.plots import pyplot
+    plt = pyplot()
     from matplotlib.patches import Rectangle
     cols = 3
     rows = -(-len(panels) // cols)

@@ -15,6 +15,7 @@ from typing import Callable
 import numpy as np
 
 from udc_render.io.files import atomic_path, csv_text, save_figure, save_text
+from udc_render.io.plots import pyplot
 
 # ----------------------------------------------------------------------------------------------
 # Formatting
@@ -120,14 +121,6 @@ def write_tables(out_dir: Path, stem: str, rows: list[dict], columns: list[str],
     """out_dir/stem.csv (the rows, `columns`) and out_dir/stem.md, each written atomically."""
     save_text(out_dir / f"{stem}.csv", csv_text(rows, columns))
     save_text(out_dir / f"{stem}.md", markdown)
-
-
-def pyplot():
-    """matplotlib.pyplot on the Agg backend (files only, no display)."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
 
 
 def save_plot(fig, path: Path, tight_bbox: bool = True) -> None:
