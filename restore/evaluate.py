@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from restore.data import DataError, Pair, dataset_displays, list_pairs, load_pair
-from restore.metrics import BORDER_PX, border_px, image_metrics
-from udc_render.io.previews import encode_srgb
+from restore.metrics import image_metrics
+from udc_render.metrics import BORDER_PX, border_px
+from udc_render.metrics import encode_srgb
 from udc_render.io.previews import daylight_balance
 from udc_render.sensor import demosaic_bilinear
 from udc_render.io.files import csv_text, save_figure, save_json, save_text

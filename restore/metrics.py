@@ -11,24 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from udc_render.io.previews import encode_srgb
-from udc_render.metrics import psnr_db
-
-BORDER_PX = 16
-
-
-def border_px(h: int, w: int) -> int:
-    """The border cropped from an h × w frame: BORDER_PX, none for frames of 4 · BORDER_PX px or less."""
-    return BORDER_PX if min(h, w) > 4 * BORDER_PX else 0
-
-
-def display_referred(rgb: np.ndarray, balance: np.ndarray) -> np.ndarray:
-    """[3, H, W] → the protocol's image [3, H − 2b, W − 2b] in [0, 1], float64 (module doc)."""
-    x = np.clip(np.asarray(rgb, np.float64) * balance[:, None, None], 0, 1)
-    b = border_px(*x.shape[1:])
-    x = x[:, b:x.shape[1] - b or None, b:x.shape[2] - b or None]
-    return encode_srgb(x)
-
+from udc_render.metrics import display_referred, psnr_db
 
 def ssim(a: np.ndarray, b: np.ndarray) -> float:
     """SSIM of two [3, H, W] images in [0, 1] (module doc)."""

@@ -1,12 +1,56 @@
-"""Image-quality figures shared by capture summaries, DeP and the restorers (one definition each)."""
+"""Image-quality figures and the two metric protocols, one definition each (capture summaries,
+DeP, the restorers' evaluation).
+
+Protocols (every table names the one it uses):
+
+- ``paper``: what the paper measured (16-bit RAW, l.456; γ includes the camera gain, l.261): linear
+  camera values in [0, 1] of the white level, no white balance, no tone curve. A capture is scored
+  on its packed RAW [4, H/2, W/2] against the ground truth's RGGB samples; a restored image as
+  linear camera RGB against the ground truth.
+- ``srgb``: for perceptual comparisons: camera RGB × the daylight balance (D65 neutral), clipped to
+  [0, 1], sRGB-encoded (no colour matrix), BORDER_PX cropped on each side (display_referred).
+
+PSNR = 10 log10(peak² / MSE) with peak 1 in both.
+"""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
+BORDER_PX = 16
+PROTOCOLS = {
+    "paper": "linear camera values in [0, 1] of the white level, no white balance, no tone curve "
+             "(captures: packed RAW against the ground truth's RGGB samples)",
+    "srgb": f"daylight-balanced camera RGB, clipped to [0, 1], sRGB-encoded, {BORDER_PX}-px border cropped",
+}
+
+
+def encode_srgb(linear: np.ndarray) -> np.ndarray:
+    """IEC 61966-2-1 sRGB encoding of linear values clipped to [0, 1] (the srgb protocol and every preview)."""
+    x = np.clip(linear, 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
 
 def psnr_db(a: np.ndarray, b: np.ndarray, peak: float = 1.0) -> float:
     """10 log10(peak² / MSE); inf for identical images."""
     mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
     return math.inf if mse == 0 else 10 * math.log10(peak ** 2 / mse)
+
+
+def border_px(h: int, w: int) -> int:
+    """The border cropped from an h × w frame: BORDER_PX, none for frames of 4 · BORDER_PX px or less."""
+    return BORDER_PX if min(h, w) > 4 * BORDER_PX else 0
+
+
+def display_referred(rgb: np.ndarray, balance: np.ndarray) -> np.ndarray:
+    """[3, H, W] → the srgb protocol's image [3, H − 2b, W − 2b] in [0, 1], float64 (module doc)."""
+    x = np.clip(np.asarray(rgb, np.float64) * balance[:, None, None], 0, 1)
+    b = border_px(*x.shape[1:])
+    x = x[:, b:x.shape[1] - b or None, b:x.shape[2] - b or None]
+    return encode_srgb(x)
+
+
+def paper_linear(x: np.ndarray) -> np.ndarray:
+    """The paper protocol's values: linear, clipped to [0, 1] of the white level, float64."""
+    return np.clip(np.asarray(x, np.float64), 0, 1)

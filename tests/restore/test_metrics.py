@@ -9,7 +9,8 @@ import torch
 from torch import nn
 
 from restore.lpips import LPIPS
-from restore.metrics import BORDER_PX, border_px, display_referred, image_metrics, lpips_distance, ssim
+from restore.metrics import image_metrics, lpips_distance, ssim
+from udc_render.metrics import BORDER_PX, border_px, display_referred
 from udc_render.io.previews import daylight_balance
 from udc_render.metrics import psnr_db
 

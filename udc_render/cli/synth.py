@@ -49,12 +49,15 @@ def synth_and_write(scene, displays, cfg, out: Path, quiet: bool, keep_render: b
     summary = write_synthesis(out, result, cfg.sensor.camera)
     print(f"{scene.source}: {band_image.bands.shape[0]} bands, frame {scene.sensor.width_px}x{scene.sensor.height_px}, "
           f"form {cfg.form}, exposure {result.meta['exposure_s'] * 1e3:.2f} ms ({result.meta['exposure_rule']})")
-    print(f"{'view':>10} {'gain':>5} {'mean R':>8} {'mean Gr':>8} {'mean Gb':>8} {'mean B':>8} {'PSNR dB':>8}")
+    print(f"{'view':>10} {'gain':>5} {'mean R':>8} {'mean Gr':>8} {'mean Gb':>8} {'mean B':>8} {'PSNR paper':>10} "
+          f"{'PSNR srgb':>10}")
     for d in displays:
         v = summary["views"][d.name]
         m = v["mean_level"]
         print(f"{d.name:>10} {d.gain:>5g} {m['R']:>8.4f} {m['Gr']:>8.4f} {m['Gb']:>8.4f} {m['B']:>8.4f} "
-              f"{v['psnr_db_vs_gt']:>8.2f}")
+              f"{v['psnr_db_vs_gt']:>10.2f} {v['psnr_db_vs_gt_srgb']:>10.2f}")
+    print("PSNR (dB) against the ground truth: paper = udc_render.metrics protocol 'paper' (packed RAW, linear, "
+          "no white balance); srgb = protocol 'srgb' (daylight balance, sRGB, border cropped)")
     print(f"kernels {t_kernels:.1f} s, render {t_render:.1f} s, captures {t_synth:.1f} s, total "
           f"{time.perf_counter() - t0:.1f} s; wrote {out}/ (gt.exr, <view>/raw.png, packed.tiff, preview.png, "
           "capture.json, side_by_side.png, summary.md)")

@@ -28,7 +28,7 @@ from udc_render.io.exr import read_exr, save_exr
 from udc_render.io.files import save_json, save_text
 from udc_render.io.images import read_packed_tiff, save_packed_tiff, save_raw_png, write_png
 from udc_render.io.previews import daylight_balance, preview_srgb
-from udc_render.metrics import psnr_db
+from udc_render.metrics import PROTOCOLS, display_referred, paper_linear, psnr_db
 from udc_render.sensor import CHANNELS, demosaic_bilinear, mosaic_of, pack_rggb
 
 
@@ -36,13 +36,24 @@ class CaptureFileError(UdcError):
     """A capture or ground-truth file that is missing or unreadable; one line."""
 
 
-def capture_summary(cap, gt: np.ndarray, white_level_dn: int, black_level_dn: int) -> dict:
-    """Mean level per RGGB channel (fraction of the range) and PSNR against the ground truth's mosaic."""
+def capture_psnr_db(packed: np.ndarray, gt: np.ndarray, rgb: np.ndarray, balance: np.ndarray) -> dict:
+    """PSNR of a capture against the ground truth under both protocols: 'paper' on the packed RAW
+    [4, H/2, W/2] (white-level units) against the ground truth's RGGB samples; 'srgb' on its
+    demosaiced camera RGB `rgb` [3, H, W] (white-level units) against the ground truth [3, H, W]."""
+    ref = pack_rggb(paper_linear(mosaic_of(gt)))
+    return {"paper": psnr_db(paper_linear(packed), ref),
+            "srgb": psnr_db(display_referred(rgb, balance), display_referred(gt, balance))}
+
+
+def capture_summary(cap, gt: np.ndarray, rgb: np.ndarray, balance: np.ndarray, white_level_dn: int,
+                    black_level_dn: int) -> dict:
+    """Mean level per RGGB channel (fraction of the range), and PSNR against the ground truth under the
+    paper protocol (packed RAW) and the srgb protocol (the demosaiced `rgb`; udc_render.metrics)."""
     rng_dn = white_level_dn - black_level_dn
     norm = (cap.packed_dn.astype(np.float64) - black_level_dn) / rng_dn
-    ref = pack_rggb(np.clip(mosaic_of(gt), 0, 1))
+    psnr = capture_psnr_db(norm, gt, rgb, balance)
     return {"mean_level": {c: float(norm[i].mean()) for i, c in enumerate(CHANNELS)},
-            "psnr_db_vs_gt": psnr_db(norm, ref),
+            "psnr_db_vs_gt": psnr["paper"], "psnr_db_vs_gt_srgb": psnr["srgb"],
             "saturated_fraction": float((cap.mosaic_dn >= white_level_dn).mean())}
 
 
@@ -53,8 +64,8 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True) -
     balance = daylight_balance(camera)
     save_exr(out / "gt.exr", {c: result.gt[i] for i, c in enumerate("RGB")})
     write_png(out / "gt_preview.png", preview_srgb(result.gt, balance))
-    summary = {"views": {}, "units": "mean_level: fraction of white − black; PSNR on packed RAW in [0, 1] "
-                                     "against the ground truth's RGGB samples clipped to [0, 1]"}
+    summary = {"views": {}, "units": f"mean_level: fraction of white − black; psnr_db_vs_gt: protocol paper "
+                                     f"({PROTOCOLS['paper']}); psnr_db_vs_gt_srgb: protocol srgb ({PROTOCOLS['srgb']})"}
     previews = {}
     for name, cap in result.captures.items():
         d = out / name
@@ -66,7 +77,7 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True) -
         previews[name] = preview_srgb(rgb, balance)
         write_png(d / "preview.png", previews[name])
         save_json(d / "capture.json", {**cap.params, **result.display_meta[name]})
-        summary["views"][name] = capture_summary(cap, result.gt, s["white_level_dn"], s["black_level_dn"])
+        summary["views"][name] = capture_summary(cap, result.gt, rgb, balance, s["white_level_dn"], s["black_level_dn"])
     save_json(out / "synth.json", result.meta)
     save_json(out / "summary.json", summary)
     save_text(out / "summary.md", summary_markdown(summary))
@@ -77,12 +88,12 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True) -
 
 
 def summary_markdown(summary: dict) -> str:
-    lines = ["| view | mean R | mean Gr | mean Gb | mean B | PSNR vs GT (dB) | saturated |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| view | mean R | mean Gr | mean Gb | mean B | PSNR vs GT, paper (dB) | PSNR vs GT, srgb (dB) | saturated |",
+             "|---|---|---|---|---|---|---|---|"]
     for name, v in summary["views"].items():
         m = v["mean_level"]
         lines.append(f"| {name} | {m['R']:.4f} | {m['Gr']:.4f} | {m['Gb']:.4f} | {m['B']:.4f} | "
-                     f"{v['psnr_db_vs_gt']:.2f} | {v['saturated_fraction']:.2%} |")
+                     f"{v['psnr_db_vs_gt']:.2f} | {v['psnr_db_vs_gt_srgb']:.2f} | {v['saturated_fraction']:.2%} |")
     return "\n".join(lines) + f"\n\n{summary['units']}\n"
 
 

@@ -93,7 +93,8 @@ def plot_side_by_side(previews: dict, summary: dict, path: Path) -> None:
     fig, axes = plt.subplots(1, n, figsize=(4.5 * n, 4.5 * h / w + 0.6), squeeze=False)
     for ax, (name, img) in zip(axes[0], previews.items()):
         ax.imshow(img)
-        ax.set_title(f"{name}: PSNR {summary['views'][name]['psnr_db_vs_gt']:.1f} dB")
+        v = summary["views"][name]
+        ax.set_title(f"{name}: PSNR {v['psnr_db_vs_gt']:.1f} dB (paper), {v['psnr_db_vs_gt_srgb']:.1f} dB (srgb)")
         ax.axis("off")
     fig.suptitle("captures (bilinear demosaic, daylight balance, sRGB; RAW levels as recorded)")
     save_figure(fig, path)

@@ -4,17 +4,12 @@ from __future__ import annotations
 import numpy as np
 
 from udc_render.content import spectra
+from udc_render.metrics import encode_srgb
 
 
 XYZ_TO_SRGB = np.array([[3.2404542, -1.5371385, -0.4985314],
                         [-0.9692660, 1.8760108, 0.0415560],
                         [0.0556434, -0.2040259, 1.0572252]])
-
-
-def encode_srgb(linear: np.ndarray) -> np.ndarray:
-    """IEC 61966-2-1 sRGB encoding of linear values clipped to [0, 1]."""
-    x = np.clip(linear, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
 
 
 def preview_rgb(bands: np.ndarray, edges_nm) -> tuple[np.ndarray, float]:
