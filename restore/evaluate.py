@@ -1,6 +1,9 @@
-"""Scoring restorers on a dataset split: PSNR, SSIM, LPIPS, size, MACs and run time, one protocol.
+"""Scoring restorers on a dataset split: PSNR, SSIM, LPIPS, size, MACs and run time, under both
+metric protocols (udc_render.metrics: 'paper' first, the default for comparisons with the paper;
+'srgb' for perceptual comparisons), every table naming its protocol.
 
-Image metrics: restore.metrics (display-referred sRGB, border cropped; PSNR peak 1, SSIM, LPIPS).
+Image metrics: restore.metrics (paper: linear [0, 1], PSNR and SSIM, the input row on its packed
+RAW; srgb: display-referred, PSNR, SSIM and LPIPS; both border cropped).
 Values are means over the split's images; the run time is the median over images of the restorer's
 wall time (models: forward pass only, data on the device) per megapixel of output.
 
@@ -21,7 +24,7 @@ import numpy as np
 
 from restore.data import DataError, Pair, dataset_displays, list_pairs, load_pair
 from restore.metrics import image_metrics
-from udc_render.metrics import BORDER_PX, border_px
+from udc_render.metrics import BORDER_PX, PROTOCOLS, border_px
 from udc_render.metrics import encode_srgb
 from udc_render.io.previews import daylight_balance
 from udc_render.sensor import demosaic_bilinear
@@ -31,9 +34,11 @@ from udc_render.sensor import unpack_rggb
 MAC_INPUT_SHAPE = (1, 4, 512, 1024)  # the paper's: 512 × 1024 × 4 packed RAW
 ROW_ORDER = ("input", "dep", "resnet", "unet")
 DISPLAY_TITLES = {"toled": "T-OLED", "poled": "P-OLED"}
-PROTOCOL = (f"daylight-balanced camera RGB, clipped to [0, 1], sRGB-encoded, {BORDER_PX}-px border cropped; "
-            "PSNR peak 1; SSIM Gaussian σ 1.5; LPIPS AlexNet v0.1; means over images; "
-            "ms/MP: median restorer wall time per output megapixel")
+METRICS = {"paper": ("psnr_db_paper", "ssim_paper"), "srgb": ("psnr_db_srgb", "ssim_srgb", "lpips_srgb")}
+PROTOCOLS_TEXT = {name: f"{text}; {BORDER_PX}-px border cropped; PSNR peak 1; SSIM Gaussian σ 1.5"
+                  + ("; LPIPS AlexNet v0.1" if name == "srgb" else "; the input row on its packed RAW")
+                  + "; means over images; ms/MP: median restorer wall time per output megapixel"
+                  for name, text in PROTOCOLS.items()}
 
 
 @dataclass(frozen=True)
@@ -61,7 +66,9 @@ def check_frame_size(pair: Pair) -> None:
 
 
 class InputRestorer:
-    """'input': the degraded capture, bilinear demosaic ÷ the split's measured γ (module doc)."""
+    """'input': the degraded capture, bilinear demosaic ÷ the split's measured γ (module doc); scored
+    on its packed RAW under the paper protocol."""
+    scores_packed = True
 
     def __init__(self, method: str, settings: EvalSettings):
         self.method, self.settings, self.name, self.gamma = method, settings, settings.name or method, {}
@@ -86,6 +93,7 @@ class InputRestorer:
 
 class DepRestorer(InputRestorer):
     """'dep': restore.dep with the display's known kernels and γ (restore.known)."""
+    scores_packed = False
 
     def prepare(self, pairs_by_display: dict) -> None:
         from restore.known import known_gamma_rggb, known_kernels_rggb
@@ -108,6 +116,7 @@ class DepRestorer(InputRestorer):
 
 class ModelRestorer:
     """A checkpoint from `udc-render train` (`method` is its path), loaded on settings.device."""
+    scores_packed = False
 
     def __init__(self, method: str, settings: EvalSettings):
         from restore.train import load_model
@@ -197,23 +206,26 @@ def _score_display(restorer, display: str, pairs: list[Pair], lp, folder: Path, 
         restored, seconds, notes = restorer.restore(packed, p)
         if not np.all(np.isfinite(restored)):
             raise DataError(f"{restorer.name} on {p.folder}/{display}: the restored image is not finite")
-        m = image_metrics(restored, gt, balance, lp)
+        m = image_metrics(restored, gt, balance, lp, packed if restorer.scores_packed else None)
         rows.append({"item": p.item, "image": p.image, **m, "ms_per_mp": 1e3 * seconds / (gt[0].size / 1e6)})
         if i < previews:
             degraded = demosaic_bilinear(unpack_rggb(packed))
             preview_panel([("captured (linear, not scaled)", degraded), (restorer.name, restored),
                            ("ground truth", gt)], balance, folder / "previews" / f"{display}_{p.name}.png",
-                          f"{DISPLAY_TITLES.get(display, display)} · {p.image} · PSNR {m['psnr_db']:.2f} dB, "
-                          f"SSIM {m['ssim']:.4f}, LPIPS {m['lpips']:.4f}")
-    save_text(folder / f"metrics_{display}.csv",
-              csv_text(rows, ["item", "image", "psnr_db", "ssim", "lpips", "ms_per_mp"]))
-    return {"images": len(rows), **{k: float(np.mean([r[k] for r in rows])) for k in ("psnr_db", "ssim", "lpips")},
+                          f"{DISPLAY_TITLES.get(display, display)} · {p.image} · PSNR {m['psnr_db_paper']:.2f} dB "
+                          f"(paper), {m['psnr_db_srgb']:.2f} dB (srgb), LPIPS {m['lpips_srgb']:.4f}")
+    keys = [k for ks in METRICS.values() for k in ks]
+    save_text(folder / f"metrics_{display}.csv", csv_text(rows, ["item", "image", *keys, "ms_per_mp"]))
+    return {"images": len(rows), **{k: float(np.mean([r[k] for r in rows])) for k in keys},
             "ms_per_mp": float(np.median([r["ms_per_mp"] for r in rows])), **notes}
 
 
 def merge_results(out: Path, entry: dict) -> dict:
     path = out / "results.json"
-    results = json.loads(path.read_text()) if path.is_file() else {"protocol": PROTOCOL, "methods": {}}
+    results = json.loads(path.read_text()) if path.is_file() else {"protocols": PROTOCOLS_TEXT, "methods": {}}
+    if "protocols" not in results:
+        raise DataError(f"{path}: written by an older udc-render (one protocol, no 'protocols'); move it away "
+                        "or use another --out")
     old = results["methods"].get(entry["name"], {"displays": {}})
     merged = dict(entry, displays={**old.get("displays", {}), **entry["displays"]})
     results["methods"][entry["name"]] = merged
@@ -229,12 +241,19 @@ def _ordered(results: dict) -> tuple[list[str], list[str]]:
 
 
 def results_markdown(results: dict) -> str:
-    """The paper's pipeline-comparison layout: Method | Params | MACs | ms/MP | per display PSNR/SSIM, LPIPS."""
+    """The paper's pipeline-comparison layout, one table per protocol (paper first): Method | Params |
+    MACs | ms/MP | per display PSNR/SSIM (and LPIPS under srgb)."""
+    return "\n\n".join(protocol_table(results, name) for name in METRICS) + "\n"
+
+
+def protocol_table(results: dict, protocol: str) -> str:
     names, displays = _ordered(results)
+    psnr, ssim_key, *lpips = METRICS[protocol]
     head = ["Method", "Params", "G MACs (512×1024×4)", "ms/MP"]
     for d in displays:
-        head += [f"{DISPLAY_TITLES.get(d, d)} PSNR/SSIM", f"{DISPLAY_TITLES.get(d, d)} LPIPS"]
-    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        head += [f"{DISPLAY_TITLES.get(d, d)} PSNR/SSIM"] + ([f"{DISPLAY_TITLES.get(d, d)} LPIPS"] if lpips else [])
+    lines = [f"Protocol {protocol}: {results['protocols'][protocol]}.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for n in names:
         m = results["methods"][n]
         times = [m["displays"][d]["ms_per_mp"] for d in displays if d in m["displays"]]
@@ -242,9 +261,12 @@ def results_markdown(results: dict) -> str:
                "—" if m.get("macs_g") is None else f"{m['macs_g']:.2f}", f"{np.median(times):.0f}"]
         for d in displays:
             r = m["displays"].get(d)
-            row += ["—", "—"] if r is None else [f"{r['psnr_db']:.2f}/{r['ssim']:.4f}", f"{r['lpips']:.4f}"]
+            if r is None:
+                row += ["—"] * (1 + len(lpips))
+            else:
+                row += [f"{r[psnr]:.2f}/{r[ssim_key]:.4f}"] + [f"{r[k]:.4f}" for k in lpips]
         lines.append("| " + " | ".join(row) + " |")
-    return "\n".join(lines) + f"\n\nProtocol: {results['protocol']}.\n"
+    return "\n".join(lines)
 
 
 def results_csv(results: dict) -> str:
@@ -256,4 +278,5 @@ def results_csv(results: dict) -> str:
             if d in m["displays"]:
                 rows.append({"method": n, "display": d, "params": m.get("params"), "macs_g": m.get("macs_g"),
                              **m["displays"][d]})
-    return csv_text(rows, ["method", "display", "params", "macs_g", "images", "psnr_db", "ssim", "lpips", "ms_per_mp"])
+    keys = [k for ks in METRICS.values() for k in ks]
+    return csv_text(rows, ["method", "display", "params", "macs_g", "images", *keys, "ms_per_mp"])

@@ -1,20 +1,22 @@
-"""The evaluation protocol's image-quality metrics, one definition each (restore.evaluate's tables).
+"""The evaluation's image-quality metrics under both protocols of udc_render.metrics (restore.evaluate).
 
-The restored image and the ground truth are linear camera RGB in units of the white level; both are
-multiplied by the camera's daylight balance (udc_render.io.previews.daylight_balance: D65 neutral),
-clipped to [0, 1], sRGB-encoded (IEC 61966-2-1, no colour matrix) and cropped by BORDER_PX pixels on
-each side (display_referred). On those images: PSNR with peak 1 (udc_render.metrics.psnr_db); SSIM
-of Wang et al. (Gaussian window σ = 1.5, data range 1, population statistics, mean over R, G, B;
-skimage); LPIPS AlexNet v0.1 (restore.lpips).
+The restored image and the ground truth are linear camera RGB in units of the white level.
+- 'paper' (the default for comparisons with the paper): both clipped to [0, 1], no white balance, no
+  tone curve, BORDER_PX cropped; the input row is scored on its packed RAW against the ground
+  truth's RGGB samples. PSNR and SSIM.
+- 'srgb' (perceptual): both × the camera's daylight balance, clipped, sRGB-encoded, border cropped
+  (display_referred). PSNR, SSIM and LPIPS AlexNet v0.1 (restore.lpips).
+PSNR with peak 1 (udc_render.metrics.psnr_db); SSIM of Wang et al. (Gaussian window σ = 1.5, data
+range 1, population statistics, mean over the channels; skimage).
 """
 from __future__ import annotations
 
 import numpy as np
 
-from udc_render.metrics import display_referred, psnr_db
+from udc_render.metrics import border_px, display_referred, paper_linear, psnr_db
 
 def ssim(a: np.ndarray, b: np.ndarray) -> float:
-    """SSIM of two [3, H, W] images in [0, 1] (module doc)."""
+    """SSIM of two [C, H, W] images in [0, 1] (module doc)."""
     from skimage.metrics import structural_similarity
     return float(structural_similarity(a, b, channel_axis=0, data_range=1.0, gaussian_weights=True, sigma=1.5,
                                        use_sample_covariance=False))
@@ -28,8 +30,25 @@ def lpips_distance(a: np.ndarray, b: np.ndarray, model) -> float:
         return float(model(torch.from_numpy(a[None]).float(), torch.from_numpy(b[None]).float())[0])
 
 
-def image_metrics(restored: np.ndarray, gt: np.ndarray, balance: np.ndarray, lpips_model) -> dict:
-    """PSNR (dB), SSIM and LPIPS (restore.lpips.LPIPS `lpips_model`) of a restored [3, H, W] image against
-    its ground truth (module doc)."""
-    a, b = display_referred(restored, balance), display_referred(gt, balance)  # clipped to [0, 1] there
-    return {"psnr_db": psnr_db(a, b, peak=1.0), "ssim": ssim(a, b), "lpips": lpips_distance(a, b, lpips_model)}
+def _paper_pair(restored: np.ndarray, gt: np.ndarray, packed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """The paper protocol's images: linear, [0, 1] of the white level, border cropped; the packed RAW
+    against the ground truth's RGGB samples when `packed` is given (the input row), else camera RGB."""
+    from udc_render.sensor import mosaic_of, pack_rggb
+    if packed is not None:
+        a, b = paper_linear(packed), pack_rggb(paper_linear(mosaic_of(gt)))
+    else:
+        a, b = paper_linear(restored), paper_linear(gt)
+    k = border_px(*gt.shape[1:]) * a.shape[-1] // gt.shape[-1]  # 16 sensor px = 8 packed px
+    crop = (slice(None), slice(k, a.shape[1] - k or None), slice(k, a.shape[2] - k or None))
+    return a[crop], b[crop]
+
+
+def image_metrics(restored: np.ndarray, gt: np.ndarray, balance: np.ndarray, lpips_model,
+                  packed: np.ndarray | None = None) -> dict:
+    """The scores of a restored [3, H, W] image against its ground truth under both protocols
+    (udc_render.metrics): PSNR and SSIM under 'paper' (on `packed`, the RAW, when given: the input
+    row), PSNR, SSIM and LPIPS (restore.lpips.LPIPS `lpips_model`) under 'srgb'."""
+    a, b = _paper_pair(restored, gt, packed)
+    c, d = display_referred(restored, balance), display_referred(gt, balance)  # clipped to [0, 1] there
+    return {"psnr_db_paper": psnr_db(a, b), "ssim_paper": ssim(a, b),
+            "psnr_db_srgb": psnr_db(c, d), "ssim_srgb": ssim(c, d), "lpips_srgb": lpips_distance(c, d, lpips_model)}

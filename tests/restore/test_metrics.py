@@ -46,15 +46,27 @@ def test_ssim_of_constant_images_is_the_luminance_term():
     assert ssim(a, a) == pytest.approx(1.0, rel=1e-12)
 
 
-def test_image_metrics_use_the_one_psnr_on_display_referred_images():
+def test_image_metrics_use_the_one_psnr_under_both_protocols():
     rng = np.random.default_rng(0)
     gt = rng.random((3, 40, 48)).astype(np.float32)
     restored = gt + rng.normal(0, 0.05, gt.shape).astype(np.float32)
     bal = daylight_balance()
     a, b, lp = display_referred(restored, bal), display_referred(gt, bal), LPIPS()
-    assert image_metrics(restored, gt, bal, lp) == {"psnr_db": psnr_db(a, b), "ssim": ssim(a, b),
-                                                    "lpips": lpips_distance(a, b, lp)}
+    c, d = np.clip(restored.astype(np.float64), 0, 1), np.clip(gt.astype(np.float64), 0, 1)  # paper: linear
+    assert image_metrics(restored, gt, bal, lp) == {"psnr_db_srgb": psnr_db(a, b), "ssim_srgb": ssim(a, b),
+                                                    "lpips_srgb": lpips_distance(a, b, lp),
+                                                    "psnr_db_paper": psnr_db(c, d), "ssim_paper": ssim(c, d)}
     assert lpips_distance(a, a, lp) == 0.0
+
+
+def test_paper_protocol_scores_the_input_on_its_packed_raw():
+    """The input row: packed RAW 0.6 against a ground truth of 0.5: 20 dB whatever the demosaic."""
+    from udc_render.sensor import pack_rggb
+    gt = np.full((3, 96, 128), 0.5)
+    packed = np.full((4, 48, 64), 0.6)
+    m = image_metrics(np.zeros_like(gt), gt, np.ones(3), LPIPS(), packed=packed)
+    assert m["psnr_db_paper"] == pytest.approx(20.0, abs=1e-12)
+    assert pack_rggb(np.zeros((96, 128))).shape == packed.shape
 
 
 def test_metric_protocol_on_identical_and_shifted_images():
@@ -62,11 +74,13 @@ def test_metric_protocol_on_identical_and_shifted_images():
     gt = rng.random((3, 96, 128)).astype(np.float32) * 0.8
     bal = daylight_balance()
     m = image_metrics(gt, gt, bal, LPIPS())
-    assert m["psnr_db"] == math.inf and m["ssim"] == pytest.approx(1.0) and m["lpips"] == pytest.approx(0, abs=1e-6)
+    assert m["psnr_db_srgb"] == m["psnr_db_paper"] == math.inf and m["ssim_srgb"] == pytest.approx(1.0)
+    assert m["ssim_paper"] == pytest.approx(1.0) and m["lpips_srgb"] == pytest.approx(0, abs=1e-6)
     worse = image_metrics(gt * 0.5, gt, bal, LPIPS())
-    assert worse["psnr_db"] < 20 and worse["ssim"] < 1 and worse["lpips"] > 0
+    assert worse["psnr_db_srgb"] < 20 and worse["ssim_srgb"] < 1 and worse["lpips_srgb"] > 0
     # values outside [0, 1] are clipped by the protocol: 10 × white scores like white
-    assert image_metrics(np.full_like(gt, 10), np.full_like(gt, 1), bal, LPIPS())["psnr_db"] == math.inf
+    same = image_metrics(np.full_like(gt, 10), np.full_like(gt, 1), bal, LPIPS())
+    assert same["psnr_db_srgb"] == same["psnr_db_paper"] == math.inf  # both clip at the white level
 
 
 class _Constant(nn.Module):

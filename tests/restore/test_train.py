@@ -106,9 +106,10 @@ def test_train_and_evaluate_commands(tmp_path, capsys):
     assert unet["params"] == sum(p.numel() for p in load_model(tmp_path / "run" / "model.pt", "cpu")[0].parameters())
     assert unet["macs_g"] > 0 and unet["displays"]["blur"]["images"] == 2
     r = results["methods"]["input"]["displays"]["blur"]
-    assert 10 < r["psnr_db"] < 60 and 0 < r["ssim"] < 1 and 0 <= r["lpips"] < 1 and r["ms_per_mp"] > 0
+    assert 10 < r["psnr_db_srgb"] < 60 and 0 < r["ssim_srgb"] < 1 and 0 <= r["lpips_srgb"] < 1 and r["ms_per_mp"] > 0
+    assert 10 < r["psnr_db_paper"] < 80 and 0 < r["ssim_paper"] <= 1
     md = (out / "results.md").read_text()
-    assert md.index("| input |") < md.index("| unet |") and "Protocol:" in md
+    assert md.index("| input |") < md.index("| unet |") and md.index("Protocol paper:") < md.index("Protocol srgb:")
     assert (out / "results.csv").read_text().startswith("method,display,params")
     assert (out / "unet" / "previews" / "blur_item_000003_blur.png").is_file()
 

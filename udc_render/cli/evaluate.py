@@ -34,7 +34,8 @@ def run(args) -> int:
                             kernel_px=args.kernel_px)
     entry = evaluate(args.data, args.model, args.out, settings, progress=not args.quiet)
     for d, r in entry["displays"].items():
-        print(f"{entry['name']} {d}: PSNR {r['psnr_db']:.2f} dB, SSIM {r['ssim']:.4f}, LPIPS {r['lpips']:.4f}, "
+        print(f"{entry['name']} {d}: paper protocol PSNR {r['psnr_db_paper']:.2f} dB, SSIM {r['ssim_paper']:.4f}; "
+              f"srgb protocol PSNR {r['psnr_db_srgb']:.2f} dB, SSIM {r['ssim_srgb']:.4f}, LPIPS {r['lpips_srgb']:.4f}; "
               f"{r['ms_per_mp']:.0f} ms/MP over {r['images']} images")
     print(f"tables: {args.out / 'results.md'}, {args.out / 'results.csv'}")
     return 0
