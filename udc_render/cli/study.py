@@ -5,7 +5,7 @@ from pathlib import Path
 
 from udc_render.cli.args import out_dir
 
-STUDIES = ("psf", "render", "capture")
+STUDIES = ("psf", "render", "capture", "realism")
 
 
 def register(sub) -> None:
@@ -18,7 +18,9 @@ def register(sub) -> None:
 
 def run(args) -> int:
     out = out_dir(args.out)
-    if args.what == "capture":
+    if args.what == "realism":
+        from udc_render.studies.realism import run_study
+    elif args.what == "capture":
         from udc_render.studies.capture_knobs import run_study
     elif args.what == "render":
         from udc_render.studies.render_knobs import run_study
