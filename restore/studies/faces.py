@@ -78,9 +78,8 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
     from restore.train import load_model, predict
     from udc_render.io.capture import write_synthesis
     from udc_render.optics.displays import preset
-    from udc_render.render import render_scene
     from udc_render.scene import load_scene
-    from udc_render.pipeline import SynthConfig, synthesize
+    from udc_render.pipeline import SynthConfig, capture_scene
     out, models = Path(out), models or {}
     out.mkdir(parents=True, exist_ok=True)
     chart, boxes = face_chart(*CHART_PX, seed=seed)
@@ -89,8 +88,8 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
     scene = load_scene("monitor")
     scene = replace(scene, content=replace(scene.content, image=str((out / "chart.png").resolve())),
                     sensor=replace(scene.sensor, width_px=int(sensor_px[0]), height_px=int(sensor_px[1])))
-    result = synthesize(render_scene(scene, progress=progress), scene, [preset(n) for n in ("glass", "toled", "poled")],
-                        SynthConfig(seed=seed), progress=progress)
+    _, result = capture_scene(scene, [preset(n) for n in ("glass", "toled", "poled")],
+                              SynthConfig(seed=seed), progress=progress)
     write_synthesis(out / "capture", result, SynthConfig().sensor.camera, side_by_side=False)
     truth = chart_boxes_on_sensor(boxes, result.meta)
     balance, detector = daylight_balance(), MTCNN()
