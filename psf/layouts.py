@@ -6,8 +6,11 @@ one cell on an nx × ny grid; the PSF engine tiles it (and shifts it by Fourier 
 never by re-rasterising). Transparent openings sit on an opaque background.
 
 Defaults reproduce the paper's open areas (Zhou et al. 2021, §3): T-OLED 21 %, P-OLED 23 %.
-The pitches are not given in the paper; the values below are documented choices of this project
-(60 µm T-OLED cell, as in docs/PHYSICS.md §4; a 64 µm RGBG pentile cell, ≈ 400 ppi).
+The pitches are not given in the paper (no micrograph scale is public); the defaults are chosen by
+`udc-render study realism` against the paper's observables (docs/PHYSICS.md §8): a 317 µm T-OLED
+cell (a 55-inch 4K panel, 3840 columns over 1.21 m; the paper's T-OLED is "4K", and coarser than the
+P-OLED, l.116) and a 64 µm RGBG pentile cell (a square cell holding two logical pixels has side
+√2 × the pixel pitch: 64 µm is a ≈ 560 ppi phone panel).
 """
 from __future__ import annotations
 
@@ -20,7 +23,8 @@ from scipy.special import j1
 
 from .geometry import ellipse_areas, rect_areas
 
-__all__ = ["LayoutError", "Rect", "Ellipse", "PeriodicLayout", "toled", "poled", "slit_grating", "BUILTIN"]
+__all__ = ["LayoutError", "Rect", "Ellipse", "PeriodicLayout", "toled", "poled", "slit_grating", "disordered",
+           "BUILTIN"]
 
 
 class LayoutError(ValueError):
@@ -136,7 +140,7 @@ def _solve_fraction(name: str, open_fraction: float, lo: float, hi: float) -> No
         raise LayoutError(f"layout {name}: open_fraction must be in [{lo}, {hi}], got {open_fraction}")
 
 
-def toled(pitch_um: float = 60.0, open_fraction: float = 0.21, slit_height_fraction: float = 0.9,
+def toled(pitch_um: float = 317.0, open_fraction: float = 0.21, slit_height_fraction: float = 0.9,
           amplitude: float = 1.0) -> PeriodicLayout:
     """T-OLED stripe layout (grating-like): one tall narrow opening per square cell.
 
@@ -180,6 +184,29 @@ def slit_grating(pitch_um: float, opening_um: float, height_um: float | None = N
         raise LayoutError(f"slit grating: opening must be in (0, {pitch_um}) µm, got {opening_um}")
     h = pitch_um if height_um is None else height_um
     return PeriodicLayout("slits", pitch_um, pitch_um, (Rect(pitch_um / 2, pitch_um / 2, opening_um, h),))
+
+
+def disordered(layout: PeriodicLayout, cells: int, position_sd_um: float, size_sd: float,
+               seed: int = 0) -> PeriodicLayout:
+    """A supercell of cells × cells copies of `layout` whose openings are moved by N(0, position_sd_um)
+    along x and y and scaled by 1 + N(0, size_sd): the fabrication disorder of a real panel, periodic
+    at cells × the pitch (so the engine's periodic tiling still holds). Scales are clipped to
+    [0.5, 1.5]; openings must stay disjoint, so keep position_sd_um well below the gaps."""
+    if cells < 1 or position_sd_um < 0 or size_sd < 0:
+        raise LayoutError(f"disordered: cells ≥ 1, position_sd_um ≥ 0 and size_sd ≥ 0 expected, got "
+                          f"{cells}, {position_sd_um}, {size_sd}")
+    rng = np.random.default_rng(seed)
+    out = []
+    for j in range(cells):
+        for i in range(cells):
+            for o in layout.openings:
+                dx, dy = rng.normal(0.0, position_sd_um, 2) if position_sd_um else (0.0, 0.0)
+                k = float(np.clip(1 + rng.normal(0.0, size_sd), 0.5, 1.5)) if size_sd else 1.0
+                cx, cy = o.cx_um + i * layout.pitch_x_um + dx, o.cy_um + j * layout.pitch_y_um + dy
+                out.append(Rect(cx, cy, o.width_um * k, o.height_um * k) if isinstance(o, Rect)
+                           else Ellipse(cx, cy, o.rx_um * k, o.ry_um * k))
+    return PeriodicLayout(f"{layout.name}-disordered", cells * layout.pitch_x_um, cells * layout.pitch_y_um,
+                          tuple(out), layout.amplitude)
 
 
 BUILTIN = {"toled": toled, "poled": poled}

@@ -7,7 +7,7 @@ from psf.banding import banding_profile
 
 
 def test_profile_matches_field_power_ratios():
-    disp, d = layouts.toled(), 1.0
+    disp, d = layouts.toled(pitch_um=60.0), 1.0
     ks = compute_kernels(disp, wavelengths_nm=[520], distance_mm=d, field_phases=4, size_px=15, precision="float64",
                          pupil_samples=512)
     z = Lens().image_distance_um

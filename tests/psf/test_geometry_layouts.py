@@ -117,7 +117,7 @@ def test_rect_areas_exact():
 # ---------------------------------------------------------------------------------------------
 
 def test_builtin_open_fractions_are_the_papers():
-    assert abs(layouts.toled().open_fraction - 0.21) < 1e-15
+    assert abs(layouts.toled(pitch_um=60.0).open_fraction - 0.21) < 1e-15
     assert abs(layouts.poled().open_fraction - 0.23) < 1e-15
     for f in (0.05, 0.3, 0.6):
         assert abs(layouts.toled(open_fraction=f, slit_height_fraction=0.8).open_fraction - f) < 1e-15
@@ -128,7 +128,7 @@ def test_builtin_open_fractions_are_the_papers():
 WRAPPED = PeriodicLayout("wrapped", 40.0, 30.0, (Rect(0.0, 0.0, 13.0, 7.0), Ellipse(39.0, 15.0, 6.0, 4.0)))
 
 
-@pytest.mark.parametrize("layout", [layouts.toled(), layouts.poled(), layouts.slit_grating(50.0, 17.0),
+@pytest.mark.parametrize("layout", [layouts.toled(pitch_um=60.0), layouts.poled(), layouts.slit_grating(50.0, 17.0),
                                     layouts.toled(amplitude=0.6), WRAPPED],
                          ids=["toled", "poled", "slits", "toled-a0.6", "wrapped"])
 @pytest.mark.parametrize("n", [(7, 7), (19, 23), (64, 48)])
@@ -329,13 +329,13 @@ def test_micrograph_rasters_conserve_power(tmp_path):
 
 def test_micrograph_of_the_toled_cell_gives_the_toled_kernels(tmp_path):
     # A 60 × 60 px, 1 µm/px binary picture of the T-OLED cell (opening x ∈ [23, 37], y ∈ [3, 57])
-    # has the same Fourier series as layouts.toled(), hence the same engine output (measured 9e-16 of peak).
+    # has the same Fourier series as layouts.toled(pitch_um=60.0), hence the same engine output (measured 9e-16 of peak).
     img = np.zeros((60, 60), np.uint8)
     img[3:57, 23:37] = 255
     p = tmp_path / "toled.png"
     skio.imsave(p, img, check_contrast=False)
     micro = MicrographLayout.load(p, pixel_um=1.0)
-    ref = layouts.toled()
+    ref = layouts.toled(pitch_um=60.0)
     k = np.arange(-9, 10)
     np.testing.assert_allclose(micro.fourier_coefficients(k, k), ref.fourier_coefficients(k, k), rtol=0, atol=1e-15)
     kw = dict(wavelengths_nm=[520.0], size_px=31, pupil_samples=256, precision="float64")

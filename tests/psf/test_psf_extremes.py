@@ -33,7 +33,7 @@ def _sane(ks, tol=1e-12):
 # ---------------------------------------------------------------------------------------------
 
 def test_distance_zero_is_the_principal_plane_model():
-    ks = compute_kernels(layouts.toled(), LENS, [450.0, 640.0], size_px=63, distance_mm=0.0, field_phases=4,
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), LENS, [450.0, 640.0], size_px=63, distance_mm=0.0, field_phases=4,
                          pupil_samples=256, precision="float64")
     _sane(ks)
     assert ks.field_kernels is None and ks.field_power is None
@@ -45,7 +45,7 @@ def test_distance_far_beyond_talbot_length(psfkit):
     # d = 1 m ≫ Talbot length 2p²/λ = 14 mm (T-OLED, 520 nm). The window holds whole periods, so the
     # FFT propagation stays exact for the infinite periodic display: finite, unit sum, banding equal
     # to the series and small (bounded by the aperture transform at k/p: measured 2.1e-4).
-    lay = layouts.toled()
+    lay = layouts.toled(pitch_um=60.0)
     ks = compute_kernels(lay, LENS, [520.0], size_px=63, distance_mm=1000.0, field_phases=2, pupil_samples=256,
                          precision="float64")
     _sane(ks)
@@ -102,7 +102,7 @@ def test_aperture_smaller_than_one_pitch(case):
         lay = PeriodicLayout("centred", 60.0, 60.0, (Rect(0.0, 30.0, 14.0, 54.0),))
         lens, geometric = Lens(aperture_um=40.0), _disc_band_area(20.0, 0.0, 7.0, 3.0, 57.0)
     else:
-        lay = layouts.toled()
+        lay = layouts.toled(pitch_um=60.0)
         lens, geometric = Lens(aperture_um=56.0), _disc_band_area(28.0, 23.0, 37.0, 3.0, 57.0)
     geometric /= math.pi * (lens.aperture_um / 2) ** 2
     ks = compute_kernels(lay, lens, [520.0], size_px=127, pupil_samples=512, precision="float64")
@@ -115,7 +115,7 @@ def test_aperture_smaller_than_one_pitch(case):
 def test_aperture_between_openings_transmits_nothing_measurable():
     # D = 40 µm on the T-OLED sees only the opaque area between the openings at |x| ≥ 23 µm:
     # geometric transmittance 0; the propagating-order series gives ~1e-6 (measured 8.8e-7).
-    ks = compute_kernels(layouts.toled(), Lens(aperture_um=40.0), [520.0], size_px=63, pupil_samples=256,
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), Lens(aperture_um=40.0), [520.0], size_px=63, pupil_samples=256,
                          precision="float64")
     assert np.all(np.isfinite(ks.kernels))
     assert ks.transmittance[0] < 1e-5
@@ -163,14 +163,14 @@ def test_mft_is_exact_below_r_one(psfkit, integrate):
 def test_extreme_wavelengths(lam_nm):
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # auto pupil sampling must keep the window alias-free
-        ks = compute_kernels(layouts.toled(), LENS, [lam_nm], size_px=255)
+        ks = compute_kernels(layouts.toled(pitch_um=60.0), LENS, [lam_nm], size_px=255)
     _sane(ks, 1e-6)
     assert 0 < ks.energy_outside[0] < 1
     # the auto rule: λ_min z / δ ≥ 1.05 × window
     delta = ks.params["pupil_pitch_um"][0]
     assert lam_nm * 1e-3 * Z / delta >= 255 * 3.1
     with pytest.warns(AliasingWarning, match="need pupil_samples"):
-        compute_kernels(layouts.toled(), LENS, [lam_nm], size_px=255, pupil_samples=256)
+        compute_kernels(layouts.toled(pitch_um=60.0), LENS, [lam_nm], size_px=255, pupil_samples=256)
 
 
 def test_bare_lens_alias_warning():
@@ -183,7 +183,7 @@ def test_bare_lens_alias_warning():
 # precision
 # ---------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("layout", [None, layouts.toled(), layouts.poled()], ids=["bare", "toled", "poled"])
+@pytest.mark.parametrize("layout", [None, layouts.toled(pitch_um=60.0), layouts.poled()], ids=["bare", "toled", "poled"])
 def test_float32_matches_float64(layout):
     # complex64 FFTs and products: measured max difference 5.6e-7 (bare), 3.7e-7 (T-OLED),
     # 5.0e-7 (P-OLED) of the peak at N = 1024; energy_outside within 6e-7.
@@ -320,7 +320,7 @@ def test_bad_inputs_raise_one_line_psf_error(kwargs, word):
     args = dict(wavelengths_nm=[520.0], size_px=15, pupil_samples=64)
     args.update(kwargs)
     with pytest.raises(PSFError) as err:
-        compute_kernels(layouts.toled(), LENS, **args)
+        compute_kernels(layouts.toled(pitch_um=60.0), LENS, **args)
     msg = str(err.value)
     assert "\n" not in msg and word in msg
 
@@ -342,7 +342,7 @@ def test_huge_aperture_keeps_only_the_zero_order_in_a_small_window():
     lens = Lens(aperture_um=12000.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # 1024 samples stay alias-free for a 31-px window
-        ks = compute_kernels(layouts.toled(), lens, [520.0], size_px=31, precision="float64")
+        ks = compute_kernels(layouts.toled(pitch_um=60.0), lens, [520.0], size_px=31, precision="float64")
     assert np.all(np.isfinite(ks.kernels)) and abs(ks.kernels.sum() - 1) < 1e-12
     zero_order_share = 0.21 ** 2 / ks.transmittance[0]
     assert abs((1 - ks.energy_outside[0]) - zero_order_share) < 2e-3
@@ -356,7 +356,7 @@ def test_huge_aperture_keeps_only_the_zero_order_in_a_small_window():
 ])
 def test_wavelengths_outside_the_optical_range_are_refused(kwargs, says):
     with pytest.raises(PSFError, match=says):
-        compute_kernels(layouts.toled(), Lens(), size_px=15, **kwargs)
+        compute_kernels(layouts.toled(pitch_um=60.0), Lens(), size_px=15, **kwargs)
 
 
 @pytest.mark.parametrize("aperture_um", [12000.0 * 1.01, 60000.0])
@@ -370,7 +370,7 @@ def test_tiny_aperture_against_the_display_period_is_refused_at_once_when_d_is_p
     needs 12290² samples, FFT'd per phase and wavelength (minutes); refused in well under a second."""
     t0 = time.perf_counter()
     with pytest.raises(PSFError, match="pupil window needs 12290 × 12290 samples.*at d > 0"):
-        compute_kernels(layouts.toled(), Lens(aperture_um=10.0), [520.0], size_px=15, distance_mm=1.0)
+        compute_kernels(layouts.toled(pitch_um=60.0), Lens(aperture_um=10.0), [520.0], size_px=15, distance_mm=1.0)
     assert time.perf_counter() - t0 < 2.0
 
 
@@ -378,6 +378,6 @@ def test_tiny_aperture_against_the_display_period_is_refused_at_once_when_d_is_p
 def test_tiny_aperture_at_d_zero_finishes():
     """The same aperture at d = 0 transforms only the aperture crop: 10 s and 2.5 GB here; the aperture
     sees a sliver of one slit, so the transmittance is ~1e-7 and the kernel still has unit sum."""
-    ks = compute_kernels(layouts.toled(), Lens(aperture_um=10.0), [520.0], size_px=15)
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), Lens(aperture_um=10.0), [520.0], size_px=15)
     assert np.all(np.isfinite(ks.kernels)) and abs(float(ks.kernels.sum()) - 1) < 1e-5
     assert 0 < ks.transmittance[0] < 1e-5

@@ -207,7 +207,7 @@ def bare_centre_energy():
     return ks.kernels[0, 31, 31] * (1 - ks.energy_outside[0])
 
 
-@pytest.mark.parametrize("layout", [layouts.toled(), layouts.poled(), layouts.slit_grating(20.0, 6.0)],
+@pytest.mark.parametrize("layout", [layouts.toled(pitch_um=60.0), layouts.poled(), layouts.slit_grating(20.0, 6.0)],
                          ids=["toled", "poled", "slits20"])
 def test_zero_order_energy_equals_open_fraction(bare_centre_energy, layout):
     # A binary mask of open fraction F has zero-order amplitude c0 = F, so its zero order carries
@@ -260,7 +260,7 @@ def test_engine_energy_bookkeeping_over_full_alias_period(psfkit):
     # window energy = (1 − energy_outside) × transmittance × A must equal Σ|g|² δ² of the engine's
     # pupil. Measured 5e-15 relative.
     lam, n = 0.52, 48
-    lay = layouts.toled()
+    lay = layouts.toled(pitch_um=60.0)
     pg, g, _ = psfkit.display_pupil(lay, LENS, n)
     assert pg.dx_um == pg.dy_um
     size = 2 * max(pg.nx, pg.ny) + 1
@@ -274,7 +274,7 @@ def test_engine_energy_bookkeeping_over_full_alias_period(psfkit):
     assert abs(window / energy - 1) < 1e-12
 
 
-@pytest.mark.parametrize("layout", [layouts.toled(), layouts.poled()], ids=["toled", "poled"])
+@pytest.mark.parametrize("layout", [layouts.toled(pitch_um=60.0), layouts.poled()], ids=["toled", "poled"])
 def test_transmittance_is_the_propagating_order_series(psfkit, layout):
     # d = 0: power through the aperture = Σ_k b_k Â(k/p) over the propagating orders (independent
     # re-implementation in conftest). The open fraction (0.21 / 0.23) is the same sum over all orders
@@ -304,7 +304,7 @@ def test_talbot_self_imaging(n, periods, raster):
     # for every line including the Nyquist one (sign-symmetric). Only rounding remains (phases up to
     # 2π j² ~ 1e3 rad: ~1e-13). Measured ≤ 7e-14.
     lam, p = 0.55, 60.0
-    amp, _ = cell_raster(layouts.toled(), n, n, raster)
+    amp, _ = cell_raster(layouts.toled(pitch_um=60.0), n, n, raster)
     field = np.tile(amp, (periods, periods)).astype(complex)
     d = p / n
     zt = 2 * p ** 2 / lam
@@ -325,7 +325,7 @@ def test_talbot_needs_whole_periods_in_the_window():
     # The same mask on a window that is 3 samples short of whole periods: spectral lines fall between
     # DFT samples and the self-image is lost — the exactness above is a property of the sampling.
     lam, p, n = 0.55, 60.0, 24
-    amp, _ = cell_raster(layouts.toled(), n, n, "area")
+    amp, _ = cell_raster(layouts.toled(pitch_um=60.0), n, n, "area")
     field = np.tile(amp, (4, 4))[:-3, :-3].astype(complex)
     out = propagate(field, p / n, p / n, lam, 2 * p ** 2 / lam, transfer="fresnel")
     assert np.max(np.abs(out - field)) > 1e-2
@@ -379,7 +379,7 @@ def test_field_phase_is_the_mask_shifted_by_plus_s():
     # (propagation and shift commute; both rasters carry the same orders): measured 4e-16 of peak,
     # power identical. The mask moved by −s gives a different kernel (3e-4 and 1.7e-5 of peak): the direction
     # is tested.
-    base = layouts.toled()
+    base = layouts.toled(pitch_um=60.0)
     o = base.openings[0]
     kw = dict(wavelengths_nm=[520.0], size_px=31, distance_mm=1.0, field_phases=4, pupil_samples=128,
               precision="float64")
@@ -399,10 +399,10 @@ def test_field_phase_is_the_mask_shifted_by_plus_s():
 
 def test_banding_amplitude_small_for_fine_display(psfkit):
     # PHYSICS §4: first harmonic ≈ 2|c1/c0| |2J1(πD/p)/(πD/p)|, of order 1e-3 for D/p ≈ 55.
-    ks = compute_kernels(layouts.toled(), LENS, [520.0], size_px=15, distance_mm=1.0, field_phases=4,
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), LENS, [520.0], size_px=15, distance_mm=1.0, field_phases=4,
                          pupil_samples=128, precision="float64")
     fp = ks.field_power[0]
-    series = psfkit.series_power(layouts.toled(), LENS, 0.52, 1000.0, ks.field_shifts_um).real
+    series = psfkit.series_power(layouts.toled(pitch_um=60.0), LENS, 0.52, 1000.0, ks.field_shifts_um).real
     np.testing.assert_allclose(fp, series / series.mean(), rtol=0, atol=1e-10)
     assert 1e-5 < np.max(np.abs(fp - 1)) < 5e-3
 
@@ -416,13 +416,13 @@ D0_KW = dict(wavelengths_nm=[450.0, 640.0], size_px=63, pupil_samples=256, preci
 
 @pytest.fixture(scope="module")
 def principal_plane():
-    return compute_kernels(layouts.toled(), LENS, **D0_KW)
+    return compute_kernels(layouts.toled(pitch_um=60.0), LENS, **D0_KW)
 
 
 def test_d_to_zero_single_phase_equals_principal_plane(principal_plane):
     # With one field phase (s = 0), d = 1e-6 mm must reproduce the d = 0 model: the angular-spectrum
     # phase at d = 1 nm is ≤ 1e-4 rad. Measured 5e-16 of the peak; 5e-13 in energy_outside.
-    ks = compute_kernels(layouts.toled(), LENS, distance_mm=1e-6, field_phases=1, **D0_KW)
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), LENS, distance_mm=1e-6, field_phases=1, **D0_KW)
     peak = principal_plane.kernels.max()
     assert np.max(np.abs(ks.kernels - principal_plane.kernels)) < 1e-10 * peak
     np.testing.assert_allclose(ks.energy_outside, principal_plane.energy_outside, rtol=0, atol=1e-10)
@@ -434,16 +434,16 @@ def test_d_to_zero_phase_kernels_follow_the_d0_model(psfkit, principal_plane):
     # Each field kernel at d → 0 is the d = 0 PSF of the shifted mask; the s = 0 one is the
     # principal-plane kernel (measured 4e-15 of peak). The per-phase powers tend to the d = 0 series
     # P0(s) = Σ c_k Â(k/p) e^{−2πiks/p} (measured 5.5e-13), which is NOT flat: ~1e-3 for the T-OLED.
-    ks = compute_kernels(layouts.toled(), LENS, distance_mm=1e-6, field_phases=2, **D0_KW)
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), LENS, distance_mm=1e-6, field_phases=2, **D0_KW)
     peak = principal_plane.kernels.max()
     assert np.max(np.abs(ks.field_kernels[:, 0, 0] - principal_plane.kernels)) < 1e-10 * peak
     for k, lam_nm in enumerate(ks.wavelengths_nm):
-        p0 = psfkit.series_power(layouts.toled(), LENS, lam_nm * 1e-3, 0.0, ks.field_shifts_um).real
+        p0 = psfkit.series_power(layouts.toled(pitch_um=60.0), LENS, lam_nm * 1e-3, 0.0, ks.field_shifts_um).real
         np.testing.assert_allclose(ks.field_power[k], p0 / p0.mean(), rtol=0, atol=1e-9)
 
 
 def test_d_to_zero_field_average_equals_principal_plane(principal_plane):
-    ks = compute_kernels(layouts.toled(), LENS, distance_mm=1e-6, field_phases=2, **D0_KW)
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), LENS, distance_mm=1e-6, field_phases=2, **D0_KW)
     peak = principal_plane.kernels.max()
     assert np.max(np.abs(ks.kernels - principal_plane.kernels)) < 1e-9 * peak
     np.testing.assert_allclose(ks.transmittance, principal_plane.transmittance, rtol=1e-9)
@@ -454,7 +454,7 @@ def test_d_to_zero_field_average_equals_principal_plane(principal_plane):
 # 11. Wavelength scaling at d = 0
 # ---------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("layout", [None, layouts.toled()], ids=["bare", "toled"])
+@pytest.mark.parametrize("layout", [None, layouts.toled(pitch_um=60.0)], ids=["bare", "toled"])
 def test_psf_dilates_with_wavelength_point_field(psfkit, layout):
     # d = 0, in focus: the pupil does not depend on λ and U_λ(u) = (1/λz) ∫ g e^{−2πi x·u/(λz)}, so
     # U_λ2(u λ2/λ1) = (λ1/λ2) U_λ1(u) exactly. Measured ≤ 4e-15 of peak.
@@ -476,7 +476,7 @@ def test_psf_dilates_with_wavelength_engine():
     # (1 − energy_outside) × transmittance is also the same (the transmittance alone is not: its
     # evanescent cut-off |ν| < 1/λ does not dilate). Measured ≤ 1.6e-14 of peak.
     l1, l2, rho = 450.0, 640.0, 3.1
-    for layout in (None, layouts.toled()):
+    for layout in (None, layouts.toled(pitch_um=60.0)):
         kw = dict(size_px=63, pupil_samples=512, precision="float64")
         a = compute_kernels(layout, LENS, [l1], pixel_um=rho, **kw)
         b = compute_kernels(layout, LENS, [l2], pixel_um=rho * l2 / l1, **kw)
@@ -500,7 +500,7 @@ def test_toled_otf_has_true_nulls_along_x(psfkit):
     # The T-OLED opening is a = 14 µm wide in a 60 µm cell: for Δx mod p in (a, p − a) shifted
     # openings never overlap, so the OTF R(Δx, 0) = ∫ g(x + Δx) g*(x) dx is exactly 0 there (the
     # "MTF nulls along x" of the paper). The bare lens's OTF (disc overlap) has none.
-    lay = layouts.toled()
+    lay = layouts.toled(pitch_um=60.0)
     p, a = lay.pitch_x_um, lay.openings[0].width_um
     # Area raster: compact support → zeros to rounding. Measured 1.4e-16.
     pg, g, _ = psfkit.display_pupil(lay, LENS, 1024, "area")
@@ -531,7 +531,7 @@ def test_toled_otf_has_true_nulls_along_x(psfkit):
 # 13. Method agreement
 # ---------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("layout", [None, layouts.toled()], ids=["bare", "toled"])
+@pytest.mark.parametrize("layout", [None, layouts.toled(pitch_um=60.0)], ids=["bare", "toled"])
 def test_mft_and_chirp_z_agree(layout):
     # Same sums, two algorithms: measured 1.1e-12 (bare) and 2.6e-12 (T-OLED) of peak at float64
     # (PHYSICS asks ~1e-6); energy_outside within 1.6e-12.

@@ -14,7 +14,7 @@ def test_band_samples_cover_the_band_with_midpoints():
 
 
 def test_single_sample_band_equals_monochromatic_kernel():
-    disp = layouts.toled()
+    disp = layouts.toled(pitch_um=60.0)
     band = band_kernels(disp, Lens(), [(500, 540)], step_nm=40, size_px=63, precision="float64")
     mono = compute_kernels(disp, Lens(), [520], size_px=63, precision="float64")
     np.testing.assert_allclose(band.kernels, mono.kernels, atol=1e-14)
@@ -22,7 +22,7 @@ def test_single_sample_band_equals_monochromatic_kernel():
 
 
 def test_band_kernel_is_power_weighted_mean_and_converges():
-    disp = layouts.toled()
+    disp = layouts.toled(pitch_um=60.0)
     ref = band_kernels(disp, Lens(), [(500, 600)], step_nm=2, size_px=63, pupil_samples=512)
     errs = [np.abs(band_kernels(disp, Lens(), [(500, 600)], step_nm=s, size_px=63, pupil_samples=512).kernels
                    - ref.kernels).sum() for s in (50, 10, 5)]
@@ -31,7 +31,7 @@ def test_band_kernel_is_power_weighted_mean_and_converges():
 
 
 def test_weight_spectrum_shifts_band_towards_its_weight():
-    disp = layouts.toled()
+    disp = layouts.toled(pitch_um=60.0)
     blue = band_kernels(disp, Lens(), [(450, 650)], step_nm=20, size_px=63, weight=lambda l: (l < 500) * 1.0 + 1e-9)
     mono = compute_kernels(disp, Lens(), [475], size_px=63)
     red = band_kernels(disp, Lens(), [(450, 650)], step_nm=20, size_px=63, weight=lambda l: (l > 600) * 1.0 + 1e-9)

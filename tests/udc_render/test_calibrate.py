@@ -11,6 +11,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from psf import layouts
 from udc_render.calibration import Rig
 from udc_render.calibration import mtf as cal_mtf
 from udc_render.calibration import noise as cal_noise
@@ -90,16 +91,17 @@ def test_psf_recovered_matches_configured_kernel(toled_run, poled):
     for p in (toled_run[3]["psf"], poled["psf"]):
         assert p["ncc"] > cal_psf.PSF_NCC_MIN
         assert p["max_order_shift_um"] == 0.0
-    # T-OLED first orders along x at λ z / p = 0.65 · 6008 / 60 ≈ 65 µm
+    # T-OLED first orders along x at λ z / p = 0.65 · 6008 / 317 ≈ 12.3 µm
     orders = toled_run[3]["psf"]["orders"]
     xs = sorted(abs(o["configured_um"][0]) for o in orders if o["configured_um"][1] == 0)
-    assert any(abs(x - 65.1) < 3.2 for x in xs)
+    first = 0.65 * 6008 / layouts.toled().pitch_x_um
+    assert any(abs(x - first) < 1.6 for x in xs)
 
 
 def test_toled_mtf_dips_along_x(toled_run):
     m = toled_run[3]["mtf"]
     f = np.array(m["frequencies"])
-    mid = (f >= 0.01) & (f <= 0.03)
+    mid = (f >= cal_mtf.TOLED_DIP_BAND[0]) & (f <= cal_mtf.TOLED_DIP_BAND[1])
     rx, ry = np.array(m["x"]["relative_G"]), np.array(m["y"]["relative_G"])
     assert np.min(rx[mid] / ry[mid]) < 0.5
     assert ry.min() > 0.8  # along y the stripes barely matter

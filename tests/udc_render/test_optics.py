@@ -155,7 +155,7 @@ def test_glass_uses_bare_aperture_with_unit_transmission():
 @pytest.fixture(scope="module")
 def toled_d1():
     """T-OLED 1 mm in front of the pupil, 8 × 8 field phases, 15 px kernels at 12.4 µm (~4 s)."""
-    return compute_kernels(layouts.toled(), wavelengths_nm=[520.0], pixel_um=PITCH, size_px=15, distance_mm=1.0,
+    return compute_kernels(layouts.toled(pitch_um=60.0), wavelengths_nm=[520.0], pixel_um=PITCH, size_px=15, distance_mm=1.0,
                            field_phases=8, pupil_samples=256, precision="float64")
 
 
@@ -181,7 +181,7 @@ def test_flat_field_banding_period_and_amplitude(toled_d1, blend):
     T-OLED's ±1 orders 4 px away give an MTF of 0.78). Bilinear interpolation over 8 phases keeps
     sinc²(1/8) = 0.95 of the first harmonic."""
     ks = toled_d1
-    z, p, d_um = ks.params["image_distance_um"], layouts.toled().pitch_x_um, 1000.0
+    z, p, d_um = ks.params["image_distance_um"], layouts.toled(pitch_um=60.0).pitch_x_um, 1000.0
     period_px = z * p / d_um / PITCH                      # 360 µm / 12.4 µm = 29.0 px
     r = apply_kernels(flat_field(ks), ks, precision="float64", blend=blend)
     assert r.applied["model"] == "field-dependent" and r.applied["periodic"] == [True, True]
@@ -192,7 +192,7 @@ def test_flat_field_banding_period_and_amplitude(toled_d1, blend):
     assert abs(peak - W / period_px) <= 1.0               # within one FFT bin (expected 8.82)
     x_um = (np.arange(W) - (W - 1) / 2) * PITCH
     mean, a1 = harmonic_fit(row, x_um, period_px * PITCH)
-    _, prof = banding_profile(layouts.toled(), wavelength_nm=520.0, distance_mm=1.0, positions_um=x_um)
+    _, prof = banding_profile(layouts.toled(pitch_um=60.0), wavelength_nm=520.0, distance_mm=1.0, positions_um=x_um)
     pm, pa1 = harmonic_fit(prof, x_um, period_px * PITCH)
     assert pa1 / pm > 1e-4                                # there is banding to see
     expected = pa1 / pm
@@ -209,7 +209,7 @@ def test_output_blend_is_exact_interpolated_power(toled_d1):
     ks = toled_d1
     r = apply_kernels(flat_field(ks), ks, blend="output", precision="float64")
     P = ks.field_power.shape[-1]
-    p, z = layouts.toled().pitch_x_um, ks.params["image_distance_um"]
+    p, z = layouts.toled(pitch_um=60.0).pitch_x_um, ks.params["image_distance_um"]
     H, W = r.images.shape[1:]
     x_um = (np.arange(W) - (W - 1) / 2) * PITCH
     y_um = (np.arange(H) - (H - 1) / 2) * PITCH
@@ -229,7 +229,7 @@ def test_field_source_blend_conserves_energy(toled_d1):
     x[0, m + 10:m + 50, m + 10:m + 80] = np.random.default_rng(6).random((40, 70))
     r = apply_kernels(band_image(x, m, edges=[500.0, 540.0]), ks, precision="float64")
     H, W = x.shape[1:]
-    p, z = layouts.toled().pitch_x_um, ks.params["image_distance_um"]
+    p, z = layouts.toled(pitch_um=60.0).pitch_x_um, ks.params["image_distance_um"]
     wx = phase_weights((np.arange(W) - (W - 1) / 2) * PITCH, ks.field_shifts_um[0, :, 0], 1000.0, z, p, True)
     wy = phase_weights((np.arange(H) - (H - 1) / 2) * PITCH, ks.field_shifts_um[:, 0, 1], 1000.0, z, p, True)
     power = np.einsum("jy,ji,ix->yx", wy, ks.field_power[0], wx)   # P(s(x)) at every source pixel
@@ -239,7 +239,7 @@ def test_field_source_blend_conserves_energy(toled_d1):
 
 
 def test_no_banding_at_zero_distance():
-    ks = compute_kernels(layouts.toled(), wavelengths_nm=[520.0], pixel_um=PITCH, size_px=15, distance_mm=0.0,
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), wavelengths_nm=[520.0], pixel_um=PITCH, size_px=15, distance_mm=0.0,
                          pupil_samples=256)
     assert ks.field_kernels is None
     r = apply_kernels(flat_field(ks), ks)

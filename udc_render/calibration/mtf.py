@@ -11,10 +11,12 @@ import numpy as np
 
 from udc_render.calibration.rig import Rig
 
-TOLED_DIP_BAND = (0.008, 0.03)  # cycles/px where the stripe layout's x-MTF has near-nulls
+# cycles/px where the preset stripe's x-MTF has true nulls: shifts λ z ν / pixel in (w, p − w) with p = 317 µm,
+# w = 74 µm, λ = 520 nm, z = 6 mm, 1.55 µm pixels: 0.037 … 0.12 (docs/PHYSICS.md §8)
+TOLED_DIP_BAND = (0.03, 0.1)
 TOLED_DIP_RATIO = 0.5  # MTF_x / MTF_y must fall below this somewhere in the band
-# P-OLED relative MTF stays above this (no true nulls: its pentile dip near 0.0075 cyc/px reaches ~0.1,
-# the T-OLED's ~3e-4)
+# P-OLED relative MTF stays above this (no true nulls: its pentile dip near 0.0075 cyc/px reaches ~0.1;
+# the T-OLED's nulls ~3e-4)
 POLED_MIN_MTF = 0.05
 
 

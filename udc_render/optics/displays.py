@@ -11,12 +11,16 @@ Presets (docs/PHYSICS.md §2):
   T = 1, gain 1.
 - ``toled``: stripe layout (open area 21 %), flat T, gain 6. T is set so that the virtual γ
   calibration gives the paper's γ = 0.97 in every channel: γ = gain · T · transmittance · (1 −
-  energy outside) relative to glass, so T = 0.97 / (6 · 0.21 · …) ≈ 0.82.
-- ``poled``: pentile layout (open area 23 %), gain 25, and a yellow polyimide substrate that absorbs
-  the blue: T(λ) = scale · (floor + (1 − floor) / (1 + exp(−(λ − edge) / width))), with scale and
-  edge fitted (``fit_poled_transmission``) so that γ = 0.34 (R) and 0.20 (B) as the paper measured.
-  Note the paper's own numbers disagree: 2.9 % transmission at gain 25 would give γ ≈ 0.7; we
-  reproduce the γ values (what the captures show), which imply ≈ 1.4 % transmission.
+  energy outside) relative to glass, so T = 0.97 / (6 · 0.21 · …) ≈ 0.79.
+- ``poled``: pentile layout (open area 23 %), gain 25, and the stack of a flexible OLED (the paper,
+  l.116: "a poly-amide substrate … may make the images … appear yellow"): T(λ) = scale ·
+  10^(−A(λ)) · T_cathode(λ) (``Transmission`` kind 'polyimide'), with scale, the absorbance edge and
+  the cathode thickness fitted (``fit_poled_transmission``) so that γ = 0.34/0.34/0.34/0.20 (R, Gr,
+  Gb, B) exactly, as the paper measured. No monotonic edge alone can do it: bringing B to 0.59 of R
+  also cuts G's blue tail (best 0.344/0.335/0.200); the thin metal cathode, which transmits less
+  towards the red, lifts G against R. The paper's 2.9 % transmission (a spectrophotometer, l.114)
+  disagrees with its own γ and gain (0.029 × 25 = 0.73, not 0.34); we reproduce γ (what the captures
+  show), which implies ≈ 1.4 % through the whole stack (``study realism`` reports it).
 
 A display file (TOML) describes any other display; see ``load_display`` and scenes/README.md.
 """
@@ -36,16 +40,31 @@ from udc_render.optics.gamma import channel_gamma, white_weights
 PAPER_GAMMA = {"glass": (1.0, 1.0, 1.0), "toled": (0.97, 0.97, 0.97), "poled": (0.34, 0.34, 0.20)}
 PAPER_GAIN = {"glass": 1.0, "toled": 6.0, "poled": 25.0}
 PRESETS = ("glass", "toled", "poled")
-TRANSMISSION_TYPES = ("flat", "edge", "csv")
+TRANSMISSION_TYPES = ("flat", "edge", "polyimide", "csv")
 
 # Fitted by fit_toled_transmission / fit_poled_transmission for the default rig (monitor white D65,
 # Nikon 5100 (NPL), 30 bands of 10 nm, 511-px kernels at 1.55 µm); tests/test_displays.py re-fits them.
-TOLED_T = 0.8227
-POLED_SCALE, POLED_EDGE_NM, POLED_WIDTH_NM, POLED_FLOOR = 0.06786, 463.94, 10.0, 0.0
+TOLED_T = 0.78680
+# P-OLED: the Urbach width is not fitted (the γ fix three numbers): 20 nm, the blue edge of a yellow
+# aromatic polyimide film (DuPont Kapton HN data sheet: ~0 at 450 nm to ~0.5 at 550 nm, 25 µm film).
+# Every width from 8 to 30 nm fits the γ exactly (study realism); T(450 nm) then spans 0.1–1.9 %.
+POLED_URBACH_WIDTH_NM = 20.0
+POLED_SCALE, POLED_EDGE_NM, POLED_CATHODE_NM = 0.105223, 443.714, 11.0389
+SILVER_PLASMA_WAVELENGTH_NM = 137.9  # ħω_p = 9.0 eV (Ordal et al., Appl. Opt. 22, 1099, 1983)
+STACK_INDEX = 1.5  # the dielectrics on both sides of the cathode (organic layers, encapsulation)
 
 
 class DisplayError(UdcError):
     """A bad display name or display file; one line naming the file, key, value and what is allowed."""
+
+
+def thin_metal_transmission(wavelength_nm, thickness_nm: float) -> np.ndarray:
+    """Power transmission of a silver film much thinner than the wavelength between two media of index n
+    (Tinkham's thin-film formula, Phys. Rev. 104, 845, 1956): T = |1 + Z0 σ_s / 2n|⁻², with the Drude
+    sheet conductance above the collision rate, Z0 σ_s = i 2π d λ / λ_p² (λ_p: plasma wavelength).
+    It falls towards the red: T(450 nm) = 0.82, T(650 nm) = 0.69 for d = 11 nm."""
+    x = 2.0 * np.pi * thickness_nm * np.asarray(wavelength_nm, float) / SILVER_PLASMA_WAVELENGTH_NM ** 2
+    return 1.0 / (1.0 + (x / (2.0 * STACK_INDEX)) ** 2)
 
 
 @dataclass(frozen=True)
@@ -57,6 +76,8 @@ class Transmission:
     edge_nm: float = 480.0
     width_nm: float = 20.0
     floor: float = 0.0
+    urbach_width_nm: float = POLED_URBACH_WIDTH_NM  # polyimide: scale · 10^(−exp(−(λ − edge_nm)/w)) · T_cathode
+    cathode_nm: float = 0.0
     table_nm: tuple = ()  # csv: wavelengths and values, linear interpolation, ends held
     table_t: tuple = ()
     source: str = ""
@@ -68,6 +89,9 @@ class Transmission:
         if self.kind == "edge":
             logistic = 0.5 * (1.0 + np.tanh(0.5 * (wl - self.edge_nm) / self.width_nm))  # overflow-free
             return self.scale * (self.floor + (1.0 - self.floor) * logistic)
+        if self.kind == "polyimide":
+            absorbance = np.exp(-(wl - self.edge_nm) / self.urbach_width_nm)
+            return self.scale * 10.0 ** (-absorbance) * thin_metal_transmission(wl, self.cathode_nm)
         return np.interp(wl, np.asarray(self.table_nm), np.asarray(self.table_t))
 
     def band_means(self, edges_nm, samples_per_band: int = 16) -> np.ndarray:
@@ -83,6 +107,10 @@ class Transmission:
         if self.kind == "edge":
             return {"type": "edge", "scale": self.scale, "edge_nm": self.edge_nm, "width_nm": self.width_nm,
                     "floor": self.floor, "formula": "scale (floor + (1 - floor) / (1 + exp(-(l - edge) / width)))"}
+        if self.kind == "polyimide":
+            return {"type": "polyimide", "scale": self.scale, "edge_nm": self.edge_nm,
+                    "urbach_width_nm": self.urbach_width_nm, "cathode_nm": self.cathode_nm,
+                    "formula": "scale 10^(-exp(-(l - edge)/w)) / (1 + (pi d l / (n lp^2))^2)"}
         return {"type": "csv", "file": self.source, "wavelength_nm": list(self.table_nm), "t": list(self.table_t)}
 
 
@@ -116,10 +144,15 @@ def preset(name: str) -> Display:
     if name == "toled":
         return Display("toled", layouts.toled(), Transmission("flat", TOLED_T), PAPER_GAIN["toled"])
     if name == "poled":
-        return Display("poled", layouts.poled(),
-                       Transmission("edge", scale=POLED_SCALE, edge_nm=POLED_EDGE_NM, width_nm=POLED_WIDTH_NM,
-                                    floor=POLED_FLOOR), PAPER_GAIN["poled"])
+        return Display("poled", layouts.poled(), poled_transmission(), PAPER_GAIN["poled"])
     raise DisplayError(f"--display = {name!r}: expected one of {', '.join(PRESETS)} or a display file (.toml)")
+
+
+def poled_transmission(scale=POLED_SCALE, edge_nm=POLED_EDGE_NM, cathode_nm=POLED_CATHODE_NM,
+                       urbach_width_nm=POLED_URBACH_WIDTH_NM) -> Transmission:
+    """The P-OLED stack: polyimide Urbach edge × thin silver cathode × a flat rest (module doc)."""
+    return Transmission("polyimide", scale=scale, edge_nm=edge_nm, urbach_width_nm=urbach_width_nm,
+                        cathode_nm=cathode_nm)
 
 
 def load_display(spec: str) -> Display:
@@ -224,6 +257,12 @@ def parse_display(data: dict, path: Path) -> Display:
                              edge_nm=_number(path, t, "edge_nm", p, 200, 1200),
                              width_nm=_number(path, t, "width_nm", p, 0.1, 1000),
                              floor=_number(path, t, "floor", p, 0, 1, 0.0))
+    elif tkind == "polyimide":
+        _check_keys(path, t, ("type", "scale", "edge_nm", "urbach_width_nm", "cathode_nm"), p)
+        trans = poled_transmission(_number(path, t, "scale", p, 0, 1, lo_open=True),
+                                   _number(path, t, "edge_nm", p, 200, 1200),
+                                   _number(path, t, "cathode_nm", p, 0, 100, 0.0),
+                                   _number(path, t, "urbach_width_nm", p, 0.1, 1000, POLED_URBACH_WIDTH_NM))
     else:
         _check_keys(path, t, ("type", "file"), p)
         trans = _transmission_csv(path, t.get("file"))
@@ -268,17 +307,18 @@ def fit_toled_transmission(display_gain_k, glass_gain_k, edges_nm, camera="Nikon
 
 
 def fit_poled_transmission(display_gain_k, glass_gain_k, edges_nm, camera="Nikon 5100 (NPL)",
-                           target=PAPER_GAMMA["poled"], gain=PAPER_GAIN["poled"], width_nm=POLED_WIDTH_NM,
-                           floor=POLED_FLOOR) -> tuple[float, float]:
-    """(scale, edge_nm) giving γ_B/γ_R = target_B/target_R (bisection on the edge) and γ_R = target_R."""
-    from scipy.optimize import brentq
+                           target=PAPER_GAMMA["poled"], gain=PAPER_GAIN["poled"], layout=None,
+                           urbach_width_nm=POLED_URBACH_WIDTH_NM) -> tuple[float, float, float]:
+    """(scale, edge_nm, cathode_nm) of the polyimide T(λ) giving γ (R, G, B) = target (least squares on
+    the relative errors; three numbers, three unknowns: an exact solve where one exists)."""
+    from scipy.optimize import least_squares
     w = white_weights(edges_nm, camera)
+    layout = layout or layouts.poled()
 
-    def gammas(edge, scale=1.0):
-        d = Display("p", layouts.poled(), Transmission("edge", scale=scale, edge_nm=edge, width_nm=width_nm,
-                                                      floor=floor), gain)
-        return channel_gamma(w, d, display_gain_k, glass_gain_k, edges_nm)
+    def rel_error(p):
+        d = Display("p", layout, poled_transmission(p[0], p[1], p[2], urbach_width_nm), gain)
+        return channel_gamma(w, d, display_gain_k, glass_gain_k, edges_nm) / np.asarray(target) - 1.0
 
-    want = target[2] / target[0]
-    edge = brentq(lambda e: gammas(e)[2] / gammas(e)[0] - want, 380.0, 700.0, xtol=1e-4)
-    return float(target[0] / gammas(edge)[0]), float(edge)
+    fit = least_squares(rel_error, [0.1, 450.0, 10.0], bounds=([1e-4, 300.0, 0.0], [1.0, 700.0, 100.0]),
+                        x_scale=[0.1, 10.0, 10.0], xtol=1e-12, ftol=1e-12)
+    return float(fit.x[0]), float(fit.x[1]), float(fit.x[2])
