@@ -18,7 +18,9 @@ One render serves every display (the scene does not change); per display:
 
 Ground truth ('gt'): what the clean capture would record without noise and without the mosaic: the
 render through the glass panel (bare-lens kernels, gain 1), every camera channel at every pixel, in
-units of the white level (1.0 = white at gain 1 = the full well), linear, not clipped.
+units of the white level (1.0 = white at gain 1 = the full well), linear, not clipped, and without
+the sensor's defect pixels (SynthConfig.defects, udc_render.sensor.defects: the same dead and hot
+pixels in every capture, glass included, and never in the ground truth).
 
 Exposure: 'auto' puts the monitor's full white at EXPOSURE_FILL of the full well in the brightest
 channel through glass at gain 1 (a fixed setting for every image, like the paper's rig; behind the
@@ -39,7 +41,7 @@ from __future__ import annotations
 import math
 import time
 import zlib
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
@@ -54,7 +56,8 @@ from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.render import BandImage, render_scene
 from udc_render.scene import Scene
 from udc_render.scene.geometry import RenderGrid, psf_lens, render_grid
-from udc_render.sensor import Capture, SensorConfig, band_electron_weights, capture, electrons_rgb, rgb_to_rggb
+from udc_render.sensor import (Capture, DefectConfig, SensorConfig, band_electron_weights, capture, electrons_rgb,
+                               rgb_to_rggb)
 
 FORMS = ("spectral", "per_channel")
 EXPOSURE_FILL = 0.8
@@ -78,10 +81,16 @@ class SynthConfig:
     seed: int = 0
     use_cache: bool = True
     kernel_cache: str | None = None  # kernel cache folder (None: psf.cache's default); how, not what: not recorded
+    defects: DefectConfig | None = None  # dead and hot pixels of the sensor (None: none)
+    # The profile that chose form, distance and defects (udc_render.profiles.resolve_profile): a JSON
+    # record {name, sets, options, applied}, kept in synth.json; None when no profile was used.
+    profile: dict | None = field(default=None, hash=False)
 
     def __post_init__(self):
         if self.form not in FORMS:
             raise SynthError(f"form = {self.form!r}: expected one of {', '.join(FORMS)}")
+        if self.defects is not None and not isinstance(self.defects, DefectConfig):
+            raise SynthError(f"defects = {self.defects!r}: expected a sensor.defects.DefectConfig or None")
         if self.exposure_s is not None and not (self.exposure_s > 0 and math.isfinite(self.exposure_s)):
             raise SynthError(f"exposure_s = {self.exposure_s!r}: expected a positive number of seconds or auto")
 
@@ -247,8 +256,9 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
         bar.update()
     bar.close()
     meta = {"form": cfg.form, "exposure_s": exposure, "exposure_rule": how, "seed": cfg.seed, "item": item,
-            "gt": "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, / full well "
-                  "(1.0 = white level at gain 1), not clipped", "gt_optics": glass_optics.applied,
+            "gt": "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, "
+                  "/ full well (1.0 = white level at gain 1), not clipped", "gt_optics": glass_optics.applied,
+            "defects": None if cfg.defects is None else asdict(cfg.defects), "profile": cfg.profile,
             "kernel_size_px": kernels.grid.kernel_size_px, "kernel_pixel_um": float(band_image.pitch_um),
             "kernel_precision": cfg.kernel_precision, "lens": psf_lens(scene).describe(),
             "render": {k: v for k, v in band_image.meta.items() if k != "seconds"}}
@@ -272,7 +282,8 @@ def _spectral_capture(band_image: BandImage, d: Display, kernels: Kernels, cfg: 
     else:
         optics = apply_kernels(band_image, kernels.band[d.name], t, cfg.precision, blend=cfg.blend)
     sensor = replace(base_sensor, gain=d.gain, form="spectral")
-    cap = capture(optics.images, band_image.edges_nm, sensor, rng, input_pitch_um=float(band_image.pitch_um))
+    cap = capture(optics.images, band_image.edges_nm, sensor, rng, input_pitch_um=float(band_image.pitch_um),
+                  defects=cfg.defects)
     return cap, {"optics": optics.applied, "optics_gains": optics.gains.tolist(), "transmission_band_means": t.tolist()}
 
 
@@ -295,5 +306,5 @@ def _per_channel_capture(band_image, rgb, d: Display, kernels: Kernels, cfg: Syn
     # DN = gain · (γ/gain) · x · R: the paper's γ includes the display's gain; electrons are γ/gain · x · FW
     sensor = replace(base_sensor, gain=d.gain, form="per_channel",
                      gamma_rggb=tuple(g / d.gain for g in rgb_to_rggb(gamma)))
-    cap = capture(blurred, None, sensor, rng)
+    cap = capture(blurred, None, sensor, rng, defects=cfg.defects)
     return cap, {"gamma_rgb": list(gamma), "gamma_source": why, "channel_kernels": "camera × D65 weighted"}

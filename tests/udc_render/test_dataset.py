@@ -20,7 +20,7 @@ from udc_render.cli import main
 
 pytestmark = pytest.mark.usefixtures("render_cache")
 
-SPLIT = ["--split", "2,1,1", "--shard-size", "1"]
+SPLIT = ["--split", "2,1,1", "--shard-size", "1", "--field-phases", "2"]  # the default profile, d > 0: cheap kernels
 FOLDERS = ["train/shard_0000/item_000000", "train/shard_0001/item_000001", "val/shard_0000/item_000002",
            "test/shard_0000/item_000003"]
 

@@ -18,7 +18,7 @@ LAYERS = [
     ("psf",),
     ("udc_render.errors", "udc_render.io.files", "udc_render.metrics", "udc_render"),
     ("udc_render.scene", "udc_render.scenes", "udc_render.content", "udc_render.render", "udc_render.optics",
-     "udc_render.sensor", "udc_render.io", "udc_render.pipeline", "udc_render.dataset"),
+     "udc_render.sensor", "udc_render.io", "udc_render.pipeline", "udc_render.dataset", "udc_render.profiles"),
     ("restore",),
     ("udc_render.studies", "udc_render.calibration", "restore.studies"),
     ("udc_render.cli",),

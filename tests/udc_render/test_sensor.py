@@ -18,8 +18,8 @@ import numpy as np
 import pytest
 from scipy.stats import chi2, norm
 
-from udc_render.sensor import (CHANNELS, Capture, SensorConfig, SensorError, capture, defect_map,
-                               electrons_spectral, pack_rggb, sample_brooks, sensor_lambdas, unpack_rggb)
+from udc_render.sensor import (CHANNELS, Capture, DefectConfig, SensorConfig, SensorError, capture, electrons_spectral,
+                               pack_rggb, sample_brooks, sensor_lambdas, unpack_rggb)
 
 H_C = 6.62607015e-34 * 299792458.0
 N_SIDE = 256  # flat fields: 256 × 256 mosaic, 16384 pixels per RGGB channel
@@ -293,31 +293,18 @@ def test_odd_sizes_rejected(shape):
 
 @pytest.mark.parametrize("noise,source", [("poisson", "fixed"), ("gaussian", "brooks")])
 def test_determinism_with_a_seed(noise, source):
-    s = SensorConfig(noise=noise, lambda_source=source, dead_fraction=0.01, hot_fraction=0.01)
+    s = SensorConfig(noise=noise, lambda_source=source)
+    defects = DefectConfig(dead_fraction=0.01, hot_fraction=0.01)
     img = np.full((30, 16, 16), 1e-4)
     edges = np.linspace(400, 700, 31)
-    a, b = (capture(img, edges, s, np.random.default_rng(7)) for _ in range(2))
-    c = capture(img, edges, s, np.random.default_rng(8))
+    a, b = (capture(img, edges, s, np.random.default_rng(7), defects=defects) for _ in range(2))
+    c = capture(img, edges, s, np.random.default_rng(8), defects=defects)
     assert np.array_equal(a.mosaic_dn, b.mosaic_dn) and a.params == b.params
     assert not np.array_equal(a.mosaic_dn, c.mosaic_dn)
     # the recorded generator state regenerates the capture
     rng = np.random.default_rng()
     rng.bit_generator.state = a.params["rng_state_before"]
-    assert np.array_equal(capture(img, edges, s, rng).mosaic_dn, a.mosaic_dn)
-
-
-def test_dead_and_hot_pixels():
-    """round(f · H · W) dead pixels at the black level and hot ones at white, the same map for any
-    noise seed (defects belong to the sensor)."""
-    s = SensorConfig(form="per_channel", black_level_dn=256, dead_fraction=0.01, hot_fraction=0.005, defect_seed=9)
-    d = defect_map(64, 64, s)
-    assert (d == 1).sum() == round(0.01 * 4096) and (d == 2).sum() == round(0.005 * 4096)
-    for seed in (1, 2):
-        cap = capture(flat_rgb(0.3, 64), None, s, np.random.default_rng(seed))
-        assert np.all(cap.mosaic_dn[d == 1] == 256) and np.all(cap.mosaic_dn[d == 2] == 65535)
-        good = cap.mosaic_dn[d == 0]
-        assert good.min() > 256 and good.max() < 65535
-        assert cap.params["dead_pixels"] == 41 and cap.params["hot_pixels"] == 20
+    assert np.array_equal(capture(img, edges, s, rng, defects=defects).mosaic_dn, a.mosaic_dn)
 
 
 # ---------------------------------------------------------------- Brooks sampling
@@ -382,7 +369,7 @@ def test_negative_input_rejected_but_round_off_clamped():
     ({"f_number": 0.0}, "f_number"), ({"bit_depth": 17}, "bit_depth"), ({"black_level_dn": 65535}, "black_level_dn"),
     ({"white_level_dn": 5000, "bit_depth": 12}, "white_level_dn"), ({"noise": "salt"}, "noise"),
     ({"camera": "Nokia 3310"}, "camera"), ({"gamma_rggb": (1.0, 1.0, 1.0)}, "gamma_rggb"), ({"gain": True}, "gain"),
-    ({"dead_fraction": 0.6, "hot_fraction": 0.5}, "hot_fraction"), ({"lambda_shot": -1e-3}, "lambda_shot"),
+    ({"white_level_dn": 0}, "white_level_dn"), ({"lambda_shot": -1e-3}, "lambda_shot"),
     ({"peak_qe": 1.5}, "peak_qe"), ({"exposure_s": float("nan")}, "exposure_s")])
 def test_config_errors_name_the_field(kwargs, field):
     with pytest.raises(SensorError) as err:

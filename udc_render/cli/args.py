@@ -120,15 +120,21 @@ def scene_from_args(args):
 
 
 def add_capture_arguments(p: argparse.ArgumentParser) -> None:
-    """Knobs shared by synth, demo and dataset."""
+    """Knobs shared by synth and dataset (demo: the defaults)."""
+    from udc_render.profiles import DEFAULT_PROFILE, PHYSICAL_DISTANCE_MM, PROFILES
     p.add_argument("--display", default="toled",
                    help="comma-separated: glass, toled, poled or display files (.toml); the glass "
                         "capture is always made too [toled]")
+    p.add_argument("--profile", choices=tuple(PROFILES), default=DEFAULT_PROFILE,
+                   help=f"paper: the paper's synthesis (form per_channel, d = 0, no defect pixels); physical: form "
+                        f"spectral, d = {PHYSICAL_DISTANCE_MM:g} mm for the preset displays, dead and hot pixels "
+                        f"(udc_render/profiles.py); --form and --distance-mm override it [{DEFAULT_PROFILE}]")
     p.add_argument("--distance-mm", type=non_negative("--distance-mm"),
-                   help="display-to-lens distance d for every display [each display's own: 0 for the presets]")
-    p.add_argument("--form", choices=("spectral", "per_channel"), default="spectral",
+                   help="display-to-lens distance d for every display [the profile's for the presets, a display "
+                        "file's own]")
+    p.add_argument("--form", choices=("spectral", "per_channel"),
                    help="spectral: K band kernels and camera sensitivities (physical); per_channel: the "
-                        "paper's y = γ x ⊗ k + n with 3 channel kernels [spectral]")
+                        "paper's y = γ x ⊗ k + n with 3 channel kernels [the profile's]")
     add_sensor_arguments(p)
     p.add_argument("--exposure-s", type=positive("--exposure-s"),
                    help="exposure time [auto: the monitor's white at 0.8 of the full well through glass]")
@@ -156,7 +162,18 @@ def synth_config(args):
     if getattr(args, "noise_model", None):
         sensor = replace(sensor, noise=args.noise_model)
     cache = getattr(args, "cache_dir", None)
-    return SynthConfig(form=getattr(args, "form", "spectral"), sensor=sensor,
+    return SynthConfig(form=getattr(args, "form", None) or "spectral", sensor=sensor,
                        exposure_s=getattr(args, "exposure_s", None), precision=getattr(args, "precision", "float32"),
                        field_phases=getattr(args, "field_phases", None), seed=getattr(args, "noise_seed", 0),
                        use_cache=not getattr(args, "no_cache", False), kernel_cache=None if cache is None else str(cache))
+
+
+def capture_setup(args, displays: str | None = None):
+    """(SynthConfig, displays) of a capture command: the capture options under --profile (the default
+    profile when the command has none); --form and --distance-mm win over the profile
+    (udc_render.profiles). `displays`: the comma-separated displays [args.display]."""
+    from udc_render.optics.displays import load_displays
+    from udc_render.profiles import DEFAULT_PROFILE, resolve_profile
+    return resolve_profile(getattr(args, "profile", DEFAULT_PROFILE), synth_config(args),
+                           load_displays(displays if displays is not None else args.display),
+                           form=getattr(args, "form", None), distance_mm=getattr(args, "distance_mm", None))

@@ -1,14 +1,16 @@
 """`udc-render dataset`: many capture pairs (udc_render.dataset has the layout and the guarantees).
 
     udc-render dataset --images DIR | --builtin --display glass,toled,poled --count N --out DIR
-                       [--split 200,40,60] [--shard-size 1000] [--workers N | --scheduler ADDRESS]
+                       [--profile physical|paper] [--split 200,40,60] [--shard-size 1000]
+                       [--workers N | --scheduler ADDRESS]
 """
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
-from udc_render.cli.args import UserError, add_capture_arguments, add_scene_arguments, positive, scene_from_args, synth_config
+from udc_render.cli.args import (UserError, add_capture_arguments, add_scene_arguments, capture_setup, positive,
+                                 scene_from_args)
 
 
 def _split(text: str) -> tuple[int, int, int]:
@@ -55,15 +57,16 @@ def split_counts(count: int | None, split: tuple[int, int, int] | None) -> tuple
 
 def run(args) -> int:
     from udc_render.dataset import DatasetJob, run_dataset
-    from udc_render.optics.displays import load_displays
     from udc_render.cli.args import out_dir
+    from udc_render.profiles import describe
     split = split_counts(args.count, args.split)
-    job = DatasetJob(scene_from_args(args), load_displays(args.display, args.distance_mm), synth_config(args),
-                     out=out_dir(args.out), split=split, images_dir=args.images, shard_size=args.shard_size,
-                     side_by_side=args.side_by_side)
+    cfg, displays = capture_setup(args)
+    job = DatasetJob(scene_from_args(args), displays, cfg, out=out_dir(args.out), split=split, images_dir=args.images,
+                     shard_size=args.shard_size, side_by_side=args.side_by_side)
     s = run_dataset(job, args.workers, args.scheduler, progress=not args.quiet)
     rate = f", {s['wall_s'] / s['made']:.2f} s/item wall" if s["made"] else ""
     stale = f", {s['stale_removed']} stale temporary folders removed" if s["stale_removed"] else ""
+    print(describe(cfg.profile))
     print(f"{s['complete']}/{s['count']} items in {s['out']} ({s['made']} made now{rate}, "
           f"{s['count'] - s['made']} already there{stale}); manifest.jsonl, job.json, timing.jsonl")
     return 0

@@ -1,7 +1,7 @@
 """`udc-render synth` (one scene through one or more displays) and `udc-render demo` (the main job).
 
-    udc-render synth SCENE --display toled[,poled,PATH] [--distance-mm D] --out DIR
-    udc-render demo [--out DIR]
+    udc-render synth SCENE --display toled[,poled,PATH] [--profile physical|paper] [--distance-mm D] --out DIR
+    udc-render demo [--out DIR]   (the default profile)
 """
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import argparse
 import time
 from pathlib import Path
 
-from udc_render.cli.args import (add_capture_arguments, add_scene_arguments, float_pair, out_dir, scene_from_args,
-                                 synth_config)
+from udc_render.cli.args import (add_capture_arguments, add_scene_arguments, capture_setup, float_pair, out_dir,
+                                 scene_from_args)
 
 DEMO_DISPLAYS = "glass,toled,poled"
 
@@ -36,6 +36,7 @@ def synth_and_write(scene, displays, cfg, out: Path, quiet: bool, keep_render: b
     from udc_render.io.band_image import save_band_image
     from udc_render.io.capture import write_synthesis
     from udc_render.pipeline import plan_kernels, synthesize
+    from udc_render.profiles import describe
     from udc_render.render import render_scene
     t0 = time.perf_counter()
     kernels = plan_kernels(scene, displays, cfg, progress=not quiet)
@@ -49,6 +50,7 @@ def synth_and_write(scene, displays, cfg, out: Path, quiet: bool, keep_render: b
     summary = write_synthesis(out, result, cfg.sensor.camera)
     print(f"{scene.source}: {band_image.bands.shape[0]} bands, frame {scene.sensor.width_px}x{scene.sensor.height_px}, "
           f"form {cfg.form}, exposure {result.meta['exposure_s'] * 1e3:.2f} ms ({result.meta['exposure_rule']})")
+    print(describe(cfg.profile))
     print(f"{'view':>10} {'gain':>5} {'mean R':>8} {'mean Gr':>8} {'mean Gb':>8} {'mean B':>8} {'PSNR paper':>10} "
           f"{'PSNR srgb':>10}")
     for d in displays:
@@ -65,19 +67,16 @@ def synth_and_write(scene, displays, cfg, out: Path, quiet: bool, keep_render: b
 
 
 def run_synth(args) -> int:
-    from udc_render.optics.displays import load_displays
     scene = scene_from_args(args)
-    displays = load_displays(args.display, args.distance_mm)
-    cfg = synth_config(args)
+    cfg, displays = capture_setup(args)
     synth_and_write(scene, displays, cfg, out_dir(args.out), args.quiet, args.keep_render)
     return 0
 
 
 def run_demo(args) -> int:
-    from udc_render.optics.displays import load_displays
     from udc_render.scene import load_scene
     from udc_render.scene.overrides import with_overrides
     scene = with_overrides(load_scene("monitor"), image=args.image, sensor_px=args.sensor_px)
-    synth_and_write(scene, load_displays(DEMO_DISPLAYS), synth_config(argparse.Namespace()), out_dir(args.out),
-                    args.quiet)
+    cfg, displays = capture_setup(argparse.Namespace(), DEMO_DISPLAYS)  # the default profile
+    synth_and_write(scene, displays, cfg, out_dir(args.out), args.quiet)
     return 0

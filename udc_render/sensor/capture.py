@@ -1,4 +1,4 @@
-"""One RAW capture: radiance (or the paper's per-channel RGB) ──► electrons ──► RGGB DN."""
+"""One RAW capture: radiance (or the paper's per-channel RGB) ──► electrons ──► RGGB DN ──► defect pixels."""
 from __future__ import annotations
 
 import dataclasses
@@ -8,14 +8,16 @@ import numpy as np
 
 from udc_render.sensor.bayer import pack_rggb
 from udc_render.sensor.config import SensorConfig, SensorError
+from udc_render.sensor.defects import DefectConfig, apply_defects
 from udc_render.sensor.noise import expose
 from udc_render.sensor.radiometry import electrons_per_channel, electrons_spectral, photon_weights
 
 
 @dataclass(frozen=True)
 class Capture:
-    """One synthetic capture. mosaic_dn [H, W] uint16 (RGGB), clean_dn [H, W] float32 (noise-free,
-    unquantised, saturated like the sensor), packed_dn [4, H/2, W/2] uint16 (R, Gr, Gb, B),
+    """One synthetic capture. mosaic_dn [H, W] uint16 (RGGB, with the sensor's defect pixels when
+    there are any), clean_dn [H, W] float32 (noise-free, defect-free, unquantised, saturated like the
+    sensor), packed_dn [4, H/2, W/2] uint16 (R, Gr, Gb, B; packed from mosaic_dn),
     electrons [H, W] float64 (mean collected e⁻ before the full well), params: every setting, the
     derived constants and the sampled noise parameters (JSON-serialisable)."""
     mosaic_dn: np.ndarray
@@ -28,7 +30,7 @@ class Capture:
 
 
 def capture(image: np.ndarray, edges_nm, sensor: SensorConfig, rng: np.random.Generator,
-            input_pitch_um: float | None = None) -> Capture:
+            input_pitch_um: float | None = None, defects: DefectConfig | None = None) -> Capture:
     """Synthesise one RAW capture.
 
     image: [K, H, W] band-mean radiance (W·sr⁻¹·m⁻²·nm⁻¹) with edges_nm [K + 1] when
@@ -36,6 +38,8 @@ def capture(image: np.ndarray, edges_nm, sensor: SensorConfig, rng: np.random.Ge
     'per_channel'. input_pitch_um: the image's pitch when it is the sensor pitch / an integer
     (block-mean binning; spectral form); None: already at the sensor pitch. H, W even.
     rng: the generator for the noise (its state before the draws is recorded in params).
+    defects: dead and hot pixels applied to the quantised mosaic before packing (sensor.defects;
+    None: none); they draw nothing from rng.
     """
     if not isinstance(rng, np.random.Generator):
         raise SensorError(f"rng: {type(rng).__name__}: expected a numpy.random.Generator")
@@ -47,6 +51,9 @@ def capture(image: np.ndarray, edges_nm, sensor: SensorConfig, rng: np.random.Ge
         e = electrons_per_channel(img, sensor)
     clamped = int((img < 0).sum())  # input already checked finite; these were round-off, set to 0
     mosaic, clean, info = expose(e, sensor, rng)
+    defect_info = None
+    if defects is not None:
+        mosaic, defect_info = apply_defects(mosaic, sensor, defects)
     params = {
         "sensor": dataclasses.asdict(sensor),
         "bayer": "RGGB: R (0,0), Gr (0,1), Gb (1,0), B (1,1); packed order R, Gr, Gb, B",
@@ -59,6 +66,7 @@ def capture(image: np.ndarray, edges_nm, sensor: SensorConfig, rng: np.random.Ge
         "negative_values_clamped": clamped,
         "rng_state_before": state,
         **info,
+        "defects": defect_info,
     }
     if sensor.form == "spectral":
         params["photon_weights_e_per_J"] = photon_weights(edges_nm, sensor.camera, sensor.peak_qe).tolist()

@@ -33,6 +33,9 @@ def _num(name, v, lo, hi, lo_open=False, integer=False):
         _fail(name, v, f"{kind} in {rng}")
 
 
+# Defect settings of an earlier version, now sensor.defects.DefectConfig (SynthConfig.defects).
+MOVED_DEFECT_KEYS = ("dead_fraction", "hot_fraction", "defect_seed")
+
 # Optical settings with one source, the scene: the pipeline fills them (pipeline.sensor_for_scene).
 SCENE_OPTICS = {"pitch_um": "[sensor] pitch_um", "f_number": "[lens] f_number",
                 "focal_length_um": "[lens] focal_length_mm"}
@@ -49,9 +52,8 @@ class SensorConfig:
     R / full_well_e, so the full well fills the range at gain 1), noise ('poisson', 'gaussian',
     'none'), read_noise_e, full_well_e, lambda_source ('fixed', 'brooks', 'sensor': the Gaussian λ
     equivalent to the photon model), lambda_read / lambda_shot (scalar or per R, Gr, Gb, B),
-    brooks_per_channel, bit_depth, black_level_dn, white_level_dn (None: 2^bits − 1),
-    dead_fraction, hot_fraction, defect_seed (defects are a property of the sensor: the same map
-    for every capture of the same size).
+    brooks_per_channel, bit_depth, black_level_dn, white_level_dn (None: 2^bits − 1). Dead and hot
+    pixels are not here: sensor.defects.DefectConfig, set by the synthesis (SynthConfig.defects).
     """
     pitch_um: float = 1.55
     f_number: float = 1.8
@@ -74,9 +76,6 @@ class SensorConfig:
     bit_depth: int = 16
     black_level_dn: int = 0
     white_level_dn: int | None = None
-    dead_fraction: float = 0.0
-    hot_fraction: float = 0.0
-    defect_seed: int = 0
 
     def __post_init__(self):
         _num("pitch_um", self.pitch_um, 0, 1000, lo_open=True)
@@ -107,9 +106,6 @@ class SensorConfig:
             object.__setattr__(self, "white_level_dn", top)
         _num("white_level_dn", self.white_level_dn, 1, top, integer=True)
         _num("black_level_dn", self.black_level_dn, 0, self.white_level_dn - 1, integer=True)
-        _num("dead_fraction", self.dead_fraction, 0, 1)
-        _num("hot_fraction", self.hot_fraction, 0, 1 - self.dead_fraction)
-        _num("defect_seed", self.defect_seed, 0, 2 ** 63 - 1, integer=True)
 
     @staticmethod
     def _four(name, v, lo, hi) -> tuple[float, float, float, float]:
@@ -127,6 +123,9 @@ class SensorConfig:
         for k in data:
             if k in SCENE_OPTICS:
                 _fail(k, data[k], f"no value here: {k} comes from the scene file ({SCENE_OPTICS[k]})")
+            if k in MOVED_DEFECT_KEYS:
+                _fail(k, data[k], "no value here: dead and hot pixels are set by the profile (--profile; "
+                                  "udc_render.sensor.defects.DefectConfig)")
             if k not in names:
                 _fail(k, data[k], f"a known key ({', '.join(names)})")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in data.items()})

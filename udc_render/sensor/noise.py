@@ -1,4 +1,4 @@
-"""Noise, full well, quantisation and defects: mean electrons ──► DN.
+"""Noise, full well and quantisation: mean electrons ──► DN (defect pixels: sensor.defects).
 
 
     noise = "poisson":  DN = black + g · min(Poisson(e) + N(0, σ_read²), FW)
@@ -8,9 +8,8 @@
 (noise is drawn around the unsaturated signal and the full well then caps the read-out signal, as
 in Yang & Sankaranarayanan 2021, so a saturated pixel reads exactly black + g · FW: the white level
 at gain 1 with the default conversion gain)
-then DN is rounded to an integer, clipped to [0, white] (never wraps) and stored as uint16; dead
-pixels are set to the black level and hot pixels to the white level. The clean mosaic is
-black + g · min(e, FW) clipped to [0, white], unquantised (float32).
+then DN is rounded to an integer, clipped to [0, white] (never wraps) and stored as uint16. The
+clean mosaic is black + g · min(e, FW) clipped to [0, white], unquantised (float32).
 Brooks et al. 2019 ("Unprocessing images for learned raw denoising") sampling, natural logs:
     log λ_shot ~ U(log 1e-4, log 1.2e-2),  log λ_read ~ N(2.18 log λ_shot + 1.20, 0.26²).
 """
@@ -53,19 +52,6 @@ def noise_lambdas(sensor: SensorConfig, rng: np.random.Generator) -> tuple[tuple
     r, s = sample_brooks(rng, 4 if sensor.brooks_per_channel else 1)
     r, s = (np.repeat(r, 4), np.repeat(s, 4)) if r.size == 1 else (r, s)
     return tuple(float(v) for v in r), tuple(float(v) for v in s)
-
-
-def defect_map(height_px: int, width_px: int, sensor: SensorConfig) -> np.ndarray:
-    """[H, W] int8: 0 good, 1 dead (reads black), 2 hot (reads white); round(f · H · W) of each,
-    drawn without replacement from default_rng(defect_seed), independent of the noise generator."""
-    out = np.zeros((height_px, width_px), np.int8)
-    n = height_px * width_px
-    n_dead, n_hot = round(sensor.dead_fraction * n), round(sensor.hot_fraction * n)
-    if n_dead + n_hot:
-        idx = np.random.default_rng(sensor.defect_seed).choice(n, n_dead + n_hot, replace=False)
-        out.flat[idx[:n_dead]] = 1
-        out.flat[idx[n_dead:]] = 2
-    return out
 
 
 def _to_dn(signal_dn: np.ndarray, sensor: SensorConfig) -> np.ndarray:
@@ -111,11 +97,6 @@ def expose(electrons: np.ndarray, sensor: SensorConfig, rng: np.random.Generator
         info.update(lambda_source=sensor.lambda_source, lambda_read=list(lam_read), lambda_shot=list(lam_shot))
     else:
         sig = black + g * charge
-    mosaic = _to_dn(sig, sensor)
-    defects = defect_map(*mosaic.shape, sensor)
-    mosaic[defects == 1] = black
-    mosaic[defects == 2] = sensor.white_level_dn
-    info.update(dead_pixels=int((defects == 1).sum()), hot_pixels=int((defects == 2).sum()))
-    return mosaic, clean, info
+    return _to_dn(sig, sensor), clean, info
 
 

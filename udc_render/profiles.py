@@ -1,0 +1,124 @@
+"""Profiles: the paper's synthesis, or the physical one with the domain gaps the paper names.
+
+The paper (Zhou et al. 2021, l.412) names what separates its synthetic data from its real captures:
+bands from the display-to-lens distance, an inaccurate transmission, and impulse noise from dead or
+over-exposed pixels. A profile fixes the synthesis choices that decide those gaps:
+
+=========  ============================================  ===========================  ======================
+profile    form                                          display-to-lens distance     sensor defects
+=========  ============================================  ===========================  ======================
+paper      ``per_channel``: the paper's y = γ x ⊗ k + n   0 (the display at the lens's none
+           with 3 channel kernels and its measured γ      principal plane)
+physical   ``spectral``: band kernels, T(λ), the          PHYSICAL_DISTANCE_MM for the dead and hot pixels
+(default)  camera's sensitivities                         preset displays              (sensor.defects defaults)
+=========  ============================================  ===========================  ======================
+
+The transmission gap is the displays' T(λ) (optics.displays), the same under both profiles.
+
+resolve_profile applies a profile to a SynthConfig and the displays; explicit options win: a
+``form`` replaces the profile's form, a ``distance_mm`` replaces the distance of every display (as
+``--distance-mm`` always did). The profile's distance applies to the presets (toled, poled); a
+display file keeps its own ``distance_mm`` (default 0). The per-channel form has no field-dependent
+kernels (its channel kernels are at d = 0): under it the profile's distance is not applied, and an
+explicit distance > 0 is refused. What the profile set and what the options overrode are recorded
+in SynthConfig.profile, hence in synth.json (and a dataset's job.json).
+
+PHYSICAL_DISTANCE_MM = 2 mm, chosen by `udc-render study realism` (banding rows): the paper sees
+"periodic bands" of "low to moderate visibility" in its real data (l.498) from "a small distance"
+between display and lens (l.499). d counts from the lens's principal plane, which lies inside the
+lens, so a display touching the front element is still millimetres away. Through the 317 µm T-OLED
+the bands' Michelson contrast is 1.0–1.3 % for any d from 0.5 to 5 mm (set by the aperture's
+transform at 1/p, not by d); d sets only the period z_i p / d: 2466 px at 0.5 mm (less than one band
+across the 2048-px frame), 616 px at 2 mm (3.3 bands: "bands", plural), 245 px at 5 mm. At 2 mm the
+visibility (contrast / per-pixel noise at mid-grey) is 0.27: "low". The P-OLED's bands are invisible
+at any d (contrast 3e-4). Uncertain from 0.5 to 5 mm: no distance is published.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+
+from udc_render.errors import UdcError
+from udc_render.optics.displays import Display
+from udc_render.pipeline import SynthConfig
+from udc_render.sensor.defects import DefectConfig
+
+PHYSICAL_DISTANCE_MM = 2.0
+
+
+class ProfileError(UdcError):
+    """An unknown profile or options it cannot honour; one line."""
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The synthesis choices a profile fixes (module doc)."""
+    name: str
+    form: str  # pipeline.FORMS
+    distance_mm: float  # display-to-lens distance of the preset displays
+    defects: DefectConfig | None  # sensor defect pixels (None: none)
+    summary: str
+
+    def sets(self) -> dict:
+        """What the profile sets, as plain JSON values."""
+        return {"form": self.form, "distance_mm": self.distance_mm,
+                "defects": None if self.defects is None else asdict(self.defects)}
+
+
+PROFILES = {
+    "paper": Profile("paper", "per_channel", 0.0, None,
+                     "the paper's synthesis: y = γ x ⊗ k + n (3 channel kernels, its γ), display at the lens, "
+                     "no defect pixels"),
+    "physical": Profile("physical", "spectral", PHYSICAL_DISTANCE_MM, DefectConfig(),
+                        "band kernels and T(λ), the preset displays at the display-to-lens distance, "
+                        "dead and hot pixels"),
+}
+DEFAULT_PROFILE = "physical"
+
+
+def get_profile(name: str) -> Profile:
+    if name not in PROFILES:
+        raise ProfileError(f"--profile = {name!r}: expected one of {', '.join(PROFILES)}")
+    return PROFILES[name]
+
+
+def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: str | None = None,
+                    distance_mm: float | None = None) -> tuple[SynthConfig, list[Display]]:
+    """(cfg with the profile's form and defects and its record, the displays with their distance)
+    under profile `name`; `form` and `distance_mm` are explicit options (None: not given), which win
+    over the profile (module doc). `displays` as loaded, without a distance override."""
+    p = get_profile(name)
+    final_form = form if form is not None else p.form
+    options = {k: v for k, v in (("form", form), ("distance_mm", distance_mm)) if v is not None}
+    notes = []
+    if distance_mm is not None:
+        if final_form == "per_channel" and distance_mm > 0:
+            raise ProfileError(f"--distance-mm {distance_mm:g} with form per_channel: the per-channel form (the "
+                               "paper's) puts the display at the lens (d = 0); use --form spectral for d > 0")
+        distance, applies_to = float(distance_mm), "every display (the option)"
+        displays = [d if d.is_glass else d.with_distance(distance) for d in displays]
+    elif final_form == "per_channel":
+        distance, applies_to = 0.0, "the preset displays (display files keep their own distance_mm)"
+        if p.distance_mm > 0:
+            notes.append("the per-channel form has no field-dependent kernels: the profile's distance is not applied")
+    else:
+        distance, applies_to = p.distance_mm, "the preset displays (display files keep their own distance_mm)"
+        displays = [d.with_distance(distance) if d.source == "preset" and not d.is_glass else d for d in displays]
+    record = {"name": p.name, "sets": p.sets(), "options": options,
+              "applied": {"form": final_form, "distance_mm": distance, "distance_applies_to": applies_to,
+                          "defects": p.sets()["defects"]}}
+    if notes:
+        record["notes"] = notes
+    return replace(cfg, form=final_form, defects=p.defects, profile=record), displays
+
+
+def describe(record: dict | None) -> str:
+    """One line for a command's report: the profile and what it set ("(option)": set by an option)."""
+    if not record:
+        return "no profile"
+    a, o = record["applied"], record["options"]
+    d = a["defects"]
+    defects = "none" if d is None else (f"dead {d['dead_fraction']:g}, hot {d['hot_fraction']:g} "
+                                        f"({d['hot_dark_e_per_s']:g} e-/s), seed {d['seed']}")
+    mark = {k: " (option)" if k in o else "" for k in ("form", "distance_mm")}
+    return (f"profile {record['name']}: form {a['form']}{mark['form']}, display-to-lens distance "
+            f"{a['distance_mm']:g} mm{mark['distance_mm']} for {a['distance_applies_to']}, defect pixels: {defects}")
