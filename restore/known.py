@@ -49,18 +49,30 @@ def _channel_kernels(pair: Pair, size_px: int | None, use_cache: bool):
     size = size_px or (synth["kernel_size_px"] // 2) | 1
     if size % 2 == 0:
         raise DataError(f"kernel_px = {size}: expected an odd number of pixels (a centred kernel)")
-    ks, _ = cached(channel_kernels, "channel", capture_display(pair).layout, Lens(**synth["lens"]), use_cache,
-                   camera=sensor["camera"], illuminant="D65", step_nm=None, pixel_um=2 * float(sensor["pitch_um"]),
-                   size_px=size, distance_mm=0.0, precision="float32")
+    return packed_channel_kernels(capture_display(pair).layout, Lens(**synth["lens"]), sensor["camera"],
+                                  float(sensor["pitch_um"]), size, use_cache)
+
+
+def packed_channel_kernels(layout, lens: Lens, camera: str, sensor_pitch_um: float, size_px: int,
+                           use_cache: bool = True):
+    """The channel-effective KernelSet [3] (R, G, B; camera × D65, d = 0) of `layout` at the packed
+    planes' pitch (2 × sensor_pitch_um), size_px odd, through the kernel cache (module doc)."""
+    ks, _ = cached(channel_kernels, "channel", layout, lens, use_cache, camera=camera, illuminant="D65", step_nm=None,
+                   pixel_um=2 * float(sensor_pitch_um), size_px=size_px, distance_mm=0.0, precision="float32")
     return ks
+
+
+def rggb_kernels(kernel_set) -> np.ndarray:
+    """[4, k, k] float32 unit-sum kernels R, Gr, Gb, B from a channel KernelSet [3] (R, G, B)."""
+    k = kernel_set.kernels.astype(np.float64)
+    k = k / k.sum(axis=(1, 2), keepdims=True)
+    return np.stack([k[0], k[1], k[1], k[2]]).astype(np.float32)
 
 
 def known_kernels_rggb(pair: Pair, size_px: int | None = None, use_cache: bool = True) -> np.ndarray:
     """[4, k, k] unit-sum kernels at the packed-plane pitch for R, Gr, Gb, B (module doc).
     size_px: odd; default half the synthesis kernel (the same field of view)."""
-    k = _channel_kernels(pair, size_px, use_cache).kernels.astype(np.float64)
-    k = k / k.sum(axis=(1, 2), keepdims=True)
-    return np.stack([k[0], k[1], k[1], k[2]]).astype(np.float32)
+    return rggb_kernels(_channel_kernels(pair, size_px, use_cache))
 
 
 def known_gamma_rggb(pair: Pair, use_cache: bool = True) -> np.ndarray:

@@ -43,12 +43,19 @@ def _paper_pair(restored: np.ndarray, gt: np.ndarray, packed: np.ndarray | None)
     return a[crop], b[crop]
 
 
+def paper_metrics(restored: np.ndarray | None, gt: np.ndarray, packed: np.ndarray | None = None) -> dict:
+    """PSNR and SSIM under the 'paper' protocol (module doc) of a restored [3, H, W] image, or of the
+    packed RAW `packed` [4, H/2, W/2] (white-level units) when given (the input row; `restored` is
+    then not used), against the ground truth [3, H, W]."""
+    a, b = _paper_pair(restored, gt, packed)
+    return {"psnr_db_paper": psnr_db(a, b), "ssim_paper": ssim(a, b)}
+
+
 def image_metrics(restored: np.ndarray, gt: np.ndarray, balance: np.ndarray, lpips_model,
                   packed: np.ndarray | None = None) -> dict:
     """The scores of a restored [3, H, W] image against its ground truth under both protocols
     (udc_render.metrics): PSNR and SSIM under 'paper' (on `packed`, the RAW, when given: the input
     row), PSNR, SSIM and LPIPS (restore.lpips.LPIPS `lpips_model`) under 'srgb'."""
-    a, b = _paper_pair(restored, gt, packed)
     c, d = display_referred(restored, balance), display_referred(gt, balance)  # clipped to [0, 1] there
-    return {"psnr_db_paper": psnr_db(a, b), "ssim_paper": ssim(a, b),
+    return {**paper_metrics(restored, gt, packed),
             "psnr_db_srgb": psnr_db(c, d), "ssim_srgb": ssim(c, d), "lpips_srgb": lpips_distance(c, d, lpips_model)}

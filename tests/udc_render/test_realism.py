@@ -56,11 +56,12 @@ def test_poled_preset_has_no_mtf_null_below_nyquist():
     assert realism.min_relative_mtf(obs, glass) > realism.NULL_LEVEL
 
 
-def test_quick_study_writes_rows_with_the_papers_values(tmp_path, monkeypatch):
-    monkeypatch.setenv("UDC_RENDER_CACHE", str(tmp_path / "cache"))
+def test_quick_study_writes_rows_with_the_papers_values(tmp_path):
+    """The whole quick study (PSF and capture rows; ~1.5 min with a warm kernel cache, ~5 min cold)."""
     assert main(["study", "realism", "--quick", "--out", str(tmp_path)]) == 0
     md = (tmp_path / "study_realism.md").read_text()
     assert "mostly lost in the mid-band frequency" in md and "no null observed" in md and "P-OLED finer" in md
-    assert (tmp_path / "study_realism.png").stat().st_size > 0
+    assert "γ Gb (white-square regression" in md and "DeP PSNR order" in md and "bands at d = 1 mm" in md
+    assert (tmp_path / "study_realism.png").stat().st_size > 0 and (tmp_path / "study_realism_capture.png").is_file()
     rows = (tmp_path / "study_realism.csv").read_text().splitlines()
     assert rows[0] == ",".join(realism.COLUMNS) and len(rows) > 10

@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 
 from udc_render.calibration.rig import CHANNELS
-from udc_render.studies.report import pyplot, save_plot
+from udc_render.io.plots import pyplot, save_plot
 
 
 def format_table(checks: list) -> str:

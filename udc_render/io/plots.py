@@ -5,7 +5,7 @@ from pathlib import Path
 
 import numpy as np
 
-from udc_render.io.files import save_figure
+from udc_render.io.files import atomic_path, save_figure
 
 
 def pyplot():
@@ -14,6 +14,18 @@ def pyplot():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     return plt
+
+
+def save_plot(fig, path: Path, tight_bbox: bool = True) -> None:
+    """fig as a 110-dpi PNG at `path` (written atomically; bbox 'tight' or the whole figure), then closed."""
+    try:
+        if tight_bbox:
+            save_figure(fig, path)
+        else:
+            with atomic_path(path, ".png") as tmp:
+                fig.savefig(tmp, dpi=110, format="png")
+    finally:
+        pyplot().close(fig)
 
 
 def _labels(ks):

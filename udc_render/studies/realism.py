@@ -229,15 +229,45 @@ def psf_rows(cfg: dict, progress: bool) -> tuple[list[dict], dict]:
     return rows + [pitch_order_row(cfg["configs"])], observed
 
 
+def capture_part(cfg: dict, quick: bool, progress: bool) -> tuple[list[dict], list[dict], list]:
+    """(rows, per-display data, banding sweep) of the capture observables (studies.realism_capture):
+    γ, input/DeP PSNR/SSIM and banding for cfg's capture configurations, DeP's display order, and the
+    presets' banding over the distances d."""
+    from udc_render.studies import realism_capture as rc
+    rows, data = [], []
+    for c in cfg["capture_configs"]:
+        r, d = rc.capture_rows(c.display(), quick=quick, progress=progress, label=c.label, pitch_um=c.pitch_um)
+        rows, data = rows + r, data + [d]
+    presets = {c.kind: r for c in cfg["capture_configs"] if not c.knobs and not c.disorder
+               for r in [[row for row in rows if row["display"] == c.label]]}
+    if "toled" in presets and "poled" in presets:
+        rows.append(rc.dep_order_row(presets["toled"], presets["poled"]))
+    sweep = []
+    for kind in ("toled", "poled"):
+        for d_mm in cfg["distances_mm"]:
+            if d_mm > 0:
+                row, b = rc.banding_row(D.preset(kind).with_distance(d_mm))
+                rows.append(row)
+                sweep.append((f"{kind}", b))
+    rc.clear_render_cache()
+    return rows, data, sweep
+
+
 def run_study(out_dir, quick: bool = False, progress: bool = True) -> list[dict]:
-    """Write study_realism.csv, .md and .png (and study_realism_capture.png) into out_dir; returns the rows."""
+    """Write study_realism.csv, .md, .png and study_realism_capture.png into out_dir; returns the rows."""
+    from udc_render.studies import realism_capture as rc
     cfg, out = (QUICK if quick else FULL), Path(out_dir)
     rows, observed = psf_rows(cfg, progress)
     rows += transmission_fit_rows(cfg["urbach_widths_nm"]) if cfg["urbach_widths_nm"] else []
+    capture, data, sweep = capture_part(cfg, quick, progress)
+    rows += capture
     md = ("# Realism: observables against the paper\n\n"
           f"{'Quick grid. ' if quick else ''}PSF rows: kernels {cfg['kernel_px']} px of {PIXEL_UM} µm, d = 0, "
-          f"mean of {', '.join(f'{w:g}' for w in WAVELENGTHS_NM)} nm. Verdicts: udc_render/studies/realism.py.\n\n"
+          f"mean of {', '.join(f'{w:g}' for w in WAVELENGTHS_NM)} nm. Capture rows: the default monitor scene at "
+          "2048 × 1024, the paper protocol (linear, [0, 1] of the white level; the input on its packed RAW). "
+          "Verdicts: udc_render/studies/realism.py and realism_capture.py.\n\n"
           + "\n".join(md_table(rows, [(k, k.replace("_", " ")) for k in COLUMNS])) + "\n")
     write_tables(out, "study_realism", rows, COLUMNS, md)
     plot(observed, out / "study_realism.png")
+    rc.plot_capture(data, out / "study_realism_capture.png", sweep)
     return rows

@@ -14,8 +14,8 @@ from typing import Callable
 
 import numpy as np
 
-from udc_render.io.files import atomic_path, csv_text, save_figure, save_text
-from udc_render.io.plots import pyplot
+from udc_render.io.files import csv_text, save_text
+from udc_render.io.plots import pyplot, save_plot  # noqa: F401 (re-exported: the studies import them from here)
 
 # ----------------------------------------------------------------------------------------------
 # Formatting
@@ -121,18 +121,6 @@ def write_tables(out_dir: Path, stem: str, rows: list[dict], columns: list[str],
     """out_dir/stem.csv (the rows, `columns`) and out_dir/stem.md, each written atomically."""
     save_text(out_dir / f"{stem}.csv", csv_text(rows, columns))
     save_text(out_dir / f"{stem}.md", markdown)
-
-
-def save_plot(fig, path: Path, tight_bbox: bool = True) -> None:
-    """fig as a 110-dpi PNG at `path` (written atomically; bbox 'tight' or the whole figure), then closed."""
-    try:
-        if tight_bbox:
-            save_figure(fig, path)
-        else:
-            with atomic_path(path, ".png") as tmp:
-                fig.savefig(tmp, dpi=110, format="png")
-    finally:
-        pyplot().close(fig)
 
 
 def annotated_loglog(ax, seconds: list, errors: list, texts: list[str], label: str, lw: float):
