@@ -367,7 +367,8 @@ def banding_row(display: Display, base: dict | None = None, scene=None, sensor=N
 
     def px(p):
         return "—" if p is None else f"{p:.1f}"
-    field_note = " (wider than the frame)" if any(n > f for n, f in zip(b["nominal_period_px"], b["field_px"])) else ""
+    longer = [a for a, n, f in zip("xy", b["nominal_period_px"], b["field_px"]) if n > f]
+    field_note = f" (longer than the frame along {' and '.join(longer)})" if longer else ""
     ours = (f"{px(b['period_px'][0])} / {px(b['period_px'][1])} px{field_note}; C = {b['contrast']:.2%}; "
             f"σ = {b['noise_rel']:.2%}; V = {b['visibility']:.2f}")
     return dict(base, observable=obs, ours=ours, paper=PAPER_BANDING, verdict=b["verdict"], key="banding",
