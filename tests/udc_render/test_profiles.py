@@ -138,3 +138,14 @@ def test_demo_uses_the_default_profile(scene, tmp_path, monkeypatch):
     for view in ("toled", "poled"):
         record = json.loads((tmp_path / view / "capture.json").read_text())
         assert record["display"]["distance_mm"] == PHYSICAL_DISTANCE_MM and record["defects"] is not None
+
+
+def test_demo_takes_the_paper_profile(scene, tmp_path, monkeypatch):
+    """`udc-render demo --profile paper`: the per-channel form at d = 0 without defects."""
+    import udc_render.scene
+    tiny = udc_render.scene.load_scene(scene)
+    monkeypatch.setattr(udc_render.scene, "load_scene", lambda name: tiny)
+    assert main(["demo", "--out", str(tmp_path), "--quiet", "--profile", "paper"]) == 0
+    synth = json.loads((tmp_path / "synth.json").read_text())
+    assert synth["profile"]["name"] == "paper" and synth["defects"] is None
+    assert json.loads((tmp_path / "toled" / "capture.json").read_text())["display"]["distance_mm"] == 0.0

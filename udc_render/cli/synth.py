@@ -1,7 +1,7 @@
 """`udc-render synth` (one scene through one or more displays) and `udc-render demo` (the main job).
 
     udc-render synth SCENE --display toled[,poled,PATH] [--profile physical|paper] [--distance-mm D] --out DIR
-    udc-render demo [--out DIR]   (the default profile)
+    udc-render demo [--out DIR] [--profile physical|paper]   (the default profile: physical)
 """
 from __future__ import annotations
 
@@ -29,6 +29,10 @@ def register(sub) -> None:
     d.add_argument("--image", default=None, help="what the monitor shows [the scene's: builtin:astronaut]")
     d.add_argument("--sensor-px", type=float_pair("--sensor-px"), help="sensor width,height in pixels [2048,1024]")
     d.add_argument("--quiet", action="store_true", help="no progress bar")
+    from udc_render.profiles import DEFAULT_PROFILE, PROFILES
+    d.add_argument("--profile", choices=tuple(PROFILES), default=DEFAULT_PROFILE,
+                   help=f"synthesis profile (udc_render/profiles.py; paper: d = 0, minutes faster on a cold "
+                        f"kernel cache) [{DEFAULT_PROFILE}]")
 
 
 def synth_and_write(scene, displays, cfg, out: Path, quiet: bool, keep_render: bool = False) -> dict:
@@ -77,6 +81,6 @@ def run_demo(args) -> int:
     from udc_render.scene import load_scene
     from udc_render.scene.overrides import with_overrides
     scene = with_overrides(load_scene("monitor"), image=args.image, sensor_px=args.sensor_px)
-    cfg, displays = capture_setup(argparse.Namespace(), DEMO_DISPLAYS)  # the default profile
+    cfg, displays = capture_setup(argparse.Namespace(profile=args.profile), DEMO_DISPLAYS)
     synth_and_write(scene, displays, cfg, out_dir(args.out), args.quiet)
     return 0
