@@ -13,6 +13,7 @@ from psf import compute_kernels, layouts
 from psf.banding import banding_profile
 from psf.engine import KernelSet
 from udc_render.optics import OpticsError, apply_kernels, convolve_bands, fft_shape, phase_weights
+from udc_render.optics.convolution import phase_basis
 from udc_render.render import BandImage
 
 PITCH = 12.4  # µm: 8 × the paper's 1.55 µm, so the banding period (360 µm) is ~29 px
@@ -292,3 +293,37 @@ def test_pitch_mismatch_rejected():
         apply_kernels(bi, synthetic_set(k, [550.0]))
     ok = band_image(np.ones((1, 40, 40)), 7, pitch=PITCH * (1 + 1e-7))  # within 1e-6 relative
     assert apply_kernels(ok, synthetic_set(k, [550.0])).images.shape == (1, 26, 26)
+
+
+@pytest.mark.parametrize("blend", ["source", "output"])
+def test_field_rank_full_is_exact_and_lower_ranks_err_within_their_kernel_residual(toled_d1, blend):
+    """A rank-r basis of the phase kernels: at r = the number of phases it reproduces the exact field
+    blur (float64 round-off); below, the image error stays within a few times the kernel residual it
+    records, and falls as r grows."""
+    m = 7
+    x = np.zeros((1, 60 + 2 * m, 90 + 2 * m))
+    x[0, m:-m, m:-m] = np.random.default_rng(7).random((60, 90))
+    bi = band_image(x, m, edges=[500.0, 540.0])
+    exact = apply_kernels(bi, toled_d1, precision="float64", blend=blend).images.astype(np.float64)
+    full = apply_kernels(bi, toled_d1, precision="float64", blend=blend, field_rank=64)
+    np.testing.assert_allclose(full.images, exact, rtol=1e-5, atol=1e-6 * exact.max())
+    errors = []
+    for r in (1, 2, 4):
+        res = apply_kernels(bi, toled_d1, precision="float64", blend=blend, field_rank=r)
+        err = np.sqrt(np.mean((res.images - exact) ** 2)) / np.sqrt(np.mean(exact ** 2))
+        assert res.applied["field_rank"] == r and err <= 3 * res.applied["field_rank_kernel_residual"] + 1e-7
+        errors.append(err)
+    assert errors[0] > errors[1] > errors[2]
+
+
+def test_phase_basis_reconstructs_its_kernels(toled_d1):
+    rng = np.random.default_rng(3)
+    base = rng.random((3, 9, 9))
+    kernels = np.einsum("qr,rij->qij", rng.random((16, 3)), base)  # rank 3 exactly
+    b, c, residual = phase_basis(kernels, 3)
+    np.testing.assert_allclose(np.einsum("qr,rij->qij", c, b), kernels, rtol=1e-9, atol=1e-12)
+    assert residual < 1e-7
+    _, _, r1 = phase_basis(kernels, 1)
+    assert 0 < r1 < 1
+    with pytest.raises(OpticsError, match="field rank = 0: expected a whole number"):
+        apply_kernels(band_image(np.ones((1, 20, 20)), 7, edges=[500.0, 540.0]), toled_d1, field_rank=0)

@@ -40,6 +40,19 @@ def non_negative(name: str):
     return number(name, float, 0.0, lo_open=False)
 
 
+def field_rank(text):
+    """--field-rank: a whole number ≥ 1, or 'exact' (every phase kernel: None)."""
+    if text == "exact":
+        return None
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"--field-rank = {text!r}: expected a whole number ≥ 1 or 'exact'")
+    return value
+
+
 def float_list(text):
     try:
         values = [float(t) for t in text.split(",") if t.strip()]
@@ -139,6 +152,9 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--exposure-s", type=positive("--exposure-s"),
                    help="exposure time [auto: the monitor's white at 0.8 of the full well through glass]")
     p.add_argument("--field-phases", type=positive("--field-phases", int), help="d > 0: phases per axis [4]")
+    p.add_argument("--field-rank", type=field_rank, default=argparse.SUPPRESS,
+                   help="d > 0: convolve with a rank-R basis of each band's phase kernels (R FFT pairs per band "
+                        "instead of one per phase; the kernel residual is recorded), or 'exact' [2]")
     p.add_argument("--precision", choices=("float32", "float64"), default="float32", help="optics FFTs [float32]")
 
 
@@ -164,7 +180,9 @@ def synth_config(args):
     cache = getattr(args, "cache_dir", None)
     return SynthConfig(form=getattr(args, "form", None) or "spectral", sensor=sensor,
                        exposure_s=getattr(args, "exposure_s", None), precision=getattr(args, "precision", "float32"),
-                       field_phases=getattr(args, "field_phases", None), seed=getattr(args, "noise_seed", 0),
+                       field_phases=getattr(args, "field_phases", None),
+                       field_rank=getattr(args, "field_rank", SynthConfig.field_rank),
+                       seed=getattr(args, "noise_seed", 0),
                        use_cache=not getattr(args, "no_cache", False), kernel_cache=None if cache is None else str(cache))
 
 

@@ -182,18 +182,48 @@ def _axis_is_periodic(shifts: np.ndarray, period_um: float) -> bool:
     return bool(P > 1 and np.allclose(shifts, np.arange(P) * period_um / P, rtol=1e-9, atol=1e-9 * period_um))
 
 
+def phase_basis(kernels: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """Rank-r basis of n phase kernels [n, S, S]: k_q ≈ Σ_r c_qr B_r (truncated SVD through the n × n Gram
+    matrix M Mᵀ = U Σ² Uᵀ; B = Σ⁻¹ Uᵀ M, c = U Σ). Returns (B [r, S, S], c [n, r], relative residual
+    √(Σ_{>r} σ²/Σ σ²), the Frobenius error of the truncated kernels over their norm)."""
+    n, S = kernels.shape[0], kernels.shape[-1]
+    M = kernels.reshape(n, S * S).astype(np.float64)
+    vals, U = np.linalg.eigh(M @ M.T)
+    order = np.argsort(vals)[::-1]
+    vals, U = np.clip(vals[order], 0.0, None), U[:, order]
+    r = max(1, min(int(rank), int(np.count_nonzero(vals > vals[0] * 1e-30))))
+    sigma = np.sqrt(vals[:r])
+    basis = (U[:, :r].T @ M) / sigma[:, None]
+    residual = float(np.sqrt(vals[r:].sum() / vals.sum())) if vals.sum() > 0 else 0.0
+    return basis.reshape(r, S, S), U[:, :r] * sigma[None, :], residual
+
+
+def _basis_map(coeff_r: np.ndarray, live, power: np.ndarray, wy: np.ndarray, wx: np.ndarray, dtype) -> np.ndarray:
+    """W_r(row, col) = Σ_q c_qr P_q wy_j(row) wx_i(col) = wyᵀ C wx, C[j, i] = c_qr P_ji on the live phases."""
+    c = np.zeros((wy.shape[0], wx.shape[0]))
+    for q, (j, i) in enumerate(live):
+        c[j, i] = coeff_r[q] * power[j, i]
+    return (wy.T.astype(np.float64) @ c @ wx.astype(np.float64)).astype(dtype)
+
+
 def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np.ndarray, weights_y: np.ndarray,
                    weights_x: np.ndarray, margin_px: int, gains=None, blend: str = "source",
-                   precision: str = "float32", workers: int = -1) -> np.ndarray:
+                   precision: str = "float32", workers: int = -1, rank: int | None = None) -> tuple[np.ndarray, float]:
     """Field-varying blur: y_k = g_k Σ_{j,i} k_kji ⊗ (w_j(row) w_i(col) P_kji x_k)  (blend='source'),
     or g_k Σ_{j,i} w_j w_i P_kji (k_kji ⊗ x_k) (blend='output'). Frame cropped as convolve_bands.
 
     field_kernels [K, Py, Px, S, S], field_power [K, Py, Px], weights_y [Py, H], weights_x [Px, W]
     (rows/columns of the whole render grid). Phases whose weights vanish everywhere are skipped.
+    rank r (None: every phase kernel, exact): the phase kernels of each band are replaced by their
+    rank-r basis (phase_basis), k_q ≈ Σ_r c_qr B_r, so 'source' is Σ_r B_r ⊗ (W_r x) with the weight
+    maps W_r = Σ_q c_qr P_q w_q: r FFT pairs per band instead of one per phase. Returns (the images,
+    the largest relative kernel residual over the bands; 0 when exact).
     """
     dtype = _precision(precision)
     if blend not in BLENDS:
         raise OpticsError(f"blend must be one of {', '.join(BLENDS)}, got '{blend}'")
+    if rank is not None and (isinstance(rank, bool) or not isinstance(rank, (int, np.integer)) or rank < 1):
+        raise OpticsError(f"field rank = {rank!r}: expected a whole number ≥ 1, or None (every phase kernel)")
     K, H, W = bands.shape
     m = int(margin_px)
     S = field_kernels.shape[-1]
@@ -206,25 +236,33 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
             if wy[j].any() and wx[i].any()]
     out = np.empty((K, H - 2 * m, W - 2 * m), dtype=dtype)
     fy, fx = slice(m, H - m), slice(m, W - m)
+    worst = 0.0
     for k in range(K):
         x = bands[k].astype(dtype, copy=False)
+        if rank is None:
+            terms = ((field_kernels[k, j, i], wy[j][:, None] * wx[i][None, :], dtype(field_power[k, j, i]))
+                     for j, i in live)  # lazily: one weight map in memory at a time
+        else:
+            basis, coeff, residual = phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank)
+            worst = max(worst, residual)
+            terms = ((basis[r], _basis_map(coeff[:, r], live, field_power[k], wy, wx, dtype), dtype(1.0))
+                     for r in range(basis.shape[0]))
         if blend == "source":
             acc = None
-            for j, i in live:
-                src = x * (wy[j][:, None] * wx[i][None, :]) * dtype(field_power[k, j, i])
-                term = sfft.rfft2(src, s=shape, workers=workers)
-                term *= _kernel_spectrum(field_kernels[k, j, i].astype(dtype), shape, dtype, workers)
+            for kern, wmap, power in terms:
+                term = sfft.rfft2(x * wmap * power, s=shape, workers=workers)
+                term *= _kernel_spectrum(kern.astype(dtype), shape, dtype, workers)
                 acc = term if acc is None else acc + term
             y = sfft.irfft2(acc, s=shape, workers=workers)[fy, fx]
         else:
             spec = sfft.rfft2(x, s=shape, workers=workers)
             y = np.zeros((H - 2 * m, W - 2 * m), dtype=dtype)
-            for j, i in live:
-                blur = sfft.irfft2(spec * _kernel_spectrum(field_kernels[k, j, i].astype(dtype), shape, dtype,
-                                                           workers), s=shape, workers=workers)[fy, fx]
-                y += blur * (wy[j][fy, None] * wx[i][None, fx]) * dtype(field_power[k, j, i])
+            for kern, wmap, power in terms:
+                blur = sfft.irfft2(spec * _kernel_spectrum(kern.astype(dtype), shape, dtype, workers), s=shape,
+                                   workers=workers)[fy, fx]
+                y += blur * wmap[fy, fx] * power
         out[k] = y * dtype(gains[k])
-    return out
+    return out, worst
 
 
 # ---------------------------------------------------------------------------- the stage
@@ -252,13 +290,15 @@ def _transmission(transmission, K: int) -> np.ndarray:
 
 def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "float32", workers: int = -1,
                   blend: str = "source", field: bool = True, distance_mm: float | None = None,
-                  image_distance_um: float | None = None, period_um=None) -> OpticsResult:
+                  image_distance_um: float | None = None, period_um=None,
+                  field_rank: int | None = None) -> OpticsResult:
     """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
 
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (module doc).
     transmission: T(λ_k), None (= 1, T-OLED flat or glass), a scalar, or [K].
     field: use field kernels when the KernelSet has them (d > 0); False forces the mean kernel.
     distance_mm, image_distance_um, period_um (x, y): override the KernelSet's d, z_i and display period.
+    field_rank: d > 0: a rank-r basis of each band's phase kernels (convolve_field; None: exact).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -307,8 +347,10 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         y_um = (np.arange(H) - (H - 1) / 2) * pitch
         wx = phase_weights(x_um, sx, d_mm * 1000, z, px, per_x)
         wy = phase_weights(y_um, sy, d_mm * 1000, z, py, per_y)
-        images = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m, gains,
-                                blend, precision, workers)
+        images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
+                                          gains, blend, precision, workers, field_rank)
+        if field_rank is not None:
+            applied.update(field_rank=int(field_rank), field_rank_kernel_residual=residual)
         applied.update(model="field-dependent", blend=blend, phases=[int(sy.size), int(sx.size)],
                        interpolation="bilinear in phase", periodic=[per_y, per_x],
                        banding_period_px=[z * py / (d_mm * 1000) / pitch, z * px / (d_mm * 1000) / pitch],

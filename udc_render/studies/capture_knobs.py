@@ -16,6 +16,9 @@ Knobs, each against its own reference:
 - ``channel``: the paper's per-channel form (3 camera-weighted kernels and the analytic γ of the
   display) vs the per-band reference: the error of collapsing wavelength into 3 channels.
 - ``phases``: field phases P = 1, 2, 3, 4, 6 per axis at d = 1 mm (T-OLED, 6 bands of 50 nm) vs P = 8.
+- ``field_rank``: the field-dependent convolution with a rank-r basis of each band's phase kernels
+  (optics.convolution.phase_basis), r = 1, 2, 3, 4, against every phase (P = 4), at the physical
+  profile's d (T-OLED and P-OLED, 6 bands of 50 nm). apply_s is what the rank saves.
 - ``precision``: float32 vs float64 optics FFTs and kernels (T-OLED, 10 nm bands).
 - ``supersample``: render.supersample s = 1, 2 vs 3 (T-OLED and glass, 6 bands): the render pixel's
   box and the kernel's pixel integration count the sensor pixel twice at s = 1 (pipeline.py).
@@ -40,9 +43,9 @@ from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
 
 COLUMNS = ["study", "display", "setting", "reference", "rel_error", "kernel_s", "apply_s"]
 FULL = {"sensor": (512, 256, 1.55), "steps": (50, 30, 20, 10), "ref_step": 5, "phases": (1, 2, 3, 4, 6),
-        "ref_phases": 8, "supersample": (1, 2), "ref_supersample": 3}
+        "ref_phases": 8, "supersample": (1, 2), "ref_supersample": 3, "ranks": (1, 2, 3, 4)}
 QUICK = {"sensor": (128, 64, 6.2), "steps": (100,), "ref_step": 50, "phases": (1, 2), "ref_phases": 3,
-         "supersample": (1,), "ref_supersample": 2}
+         "supersample": (1,), "ref_supersample": 2, "ranks": (1,)}
 
 
 def _scene(cfg, step_nm: float, supersample: int = 1):
@@ -78,7 +81,8 @@ class _Runs:
 
     def __init__(self, cfg: dict):
         self.cfg = cfg
-        self.base = SynthConfig(sensor=SensorConfig(noise="none"), exposure_s=0.03)
+        # field_rank None (every phase, exact): each knob's error alone
+        self.base = SynthConfig(sensor=SensorConfig(noise="none"), exposure_s=0.03, field_rank=None)
         self.renders: dict = {}
         self.refs: dict = {}
 
@@ -121,6 +125,15 @@ class _Runs:
                              lambda: _run(sc, bi, dd, replace(self.base, field_phases=ref_p)))
         return ref, _run(sc, bi, dd, replace(self.base, field_phases=p)), f"P = {p} (d = 1 mm)"
 
+    def field_rank(self, d: D.Display, rank: int):
+        """A rank-r basis of the phase kernels at the physical profile's d against every phase (P = 4)."""
+        from udc_render.profiles import PHYSICAL_DISTANCE_MM
+        sc, bi = self.render(50)
+        dd = d.with_distance(PHYSICAL_DISTANCE_MM)
+        ref = self.reference(("field_rank", d.name), "every phase (P = 4)", lambda: _run(sc, bi, dd, self.base))
+        return (ref, _run(sc, bi, dd, replace(self.base, field_rank=rank)),
+                f"rank {rank} (d = {PHYSICAL_DISTANCE_MM:g} mm)")
+
     def precision(self, d: D.Display, precision: str):
         """Optics FFTs and kernels in `precision` against float64."""
         sc, bi = self.render(10)
@@ -143,6 +156,7 @@ def _jobs(cfg: dict) -> list[tuple]:
     jobs = [("bands", d, s) for d in (toled, poled) for s in cfg["steps"]]
     jobs += [("channel", d, None) for d in (toled, poled)]
     jobs += [("phases", toled, p) for p in cfg["phases"]] + [("precision", toled, p) for p in ("float32", "float64")]
+    jobs += [("field_rank", d, r) for d in (toled, poled) for r in cfg["ranks"]]
     return jobs + [("supersample", d, s) for d in (toled, glass) for s in cfg["supersample"]]
 
 
