@@ -24,7 +24,7 @@ Knobs, each against its own reference:
   box and the kernel's pixel integration count the sensor pixel twice at s = 1 (pipeline.py).
 
 Outputs: study_capture.csv, study_capture.md (tables and the defaults they justify), study_capture.png.
-``quick``: 128 × 64 px of 6.2 µm, fewer settings (a smoke run, about 70 s on 2 cores).
+``quick``: 128 × 64 px of 6.2 µm, fewer settings (a smoke run, 5 min on 2 cores: every kernel is computed with the cache off).
 """
 from __future__ import annotations
 
