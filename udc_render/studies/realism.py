@@ -163,7 +163,7 @@ def rows_for(c: Config, obs: dict, glass: dict) -> list[dict]:
     return rows
 
 
-def pitch_order_row(configs: list[Config]) -> dict:
+def pitch_order_row() -> dict:
     preset_t, preset_p = layouts.toled().pitch_x_um, layouts.poled().pitch_x_um
     return {"display": "toled vs poled", "pitch_um": None, "observable": "pitch order (the presets)",
             "ours": f"T-OLED {preset_t:g} µm, P-OLED {preset_p:g} µm", "paper": "P-OLED finer (l.116)",
@@ -226,7 +226,7 @@ def psf_rows(cfg: dict, progress: bool) -> tuple[list[dict], dict]:
                                                                disable=not progress)}
     glass = next(o for c, o in observed.items() if c.kind == "glass")
     rows = [r for c, o in observed.items() if c.kind != "glass" for r in rows_for(c, o, glass)]
-    return rows + [pitch_order_row(cfg["configs"])], observed
+    return rows + [pitch_order_row()], observed
 
 
 def capture_part(cfg: dict, quick: bool, progress: bool) -> tuple[list[dict], list[dict], list]:
@@ -238,8 +238,8 @@ def capture_part(cfg: dict, quick: bool, progress: bool) -> tuple[list[dict], li
     for c in cfg["capture_configs"]:
         r, d = rc.capture_rows(c.display(), quick=quick, progress=progress, label=c.label, pitch_um=c.pitch_um)
         rows, data = rows + r, data + [d]
-    presets = {c.kind: r for c in cfg["capture_configs"] if not c.knobs and not c.disorder
-               for r in [[row for row in rows if row["display"] == c.label]]}
+    presets = {c.kind: [row for row in rows if row["display"] == c.label]
+               for c in cfg["capture_configs"] if not c.knobs and not c.disorder}
     if "toled" in presets and "poled" in presets:
         rows.append(rc.dep_order_row(presets["toled"], presets["poled"]))
     sweep = []

@@ -179,21 +179,35 @@ def gamma_rows(display: Display, gamma: dict, base: dict) -> list[dict]:
 # ---------------------------------------------------------------------------------------------- b. PSNR / SSIM
 
 
-def score_image(display: Display, scene, item: int = 0, cfg=None) -> dict:
-    """One image: synthesise the capture through `display` from the (cached) render, score the input,
-    restore with DeP (known kernels and γ) and score it (paper protocol)."""
-    from restore.dep import dep_restore
+def display_models(display: Display, scene, cfg=None) -> tuple:
+    """(the synthesis kernels, DeP's RGGB kernels) of `display` for `scene`'s lens and frame: the same for
+    every image the scene shows, so planned once per display (restore.known's DeP kernels: channel
+    kernels at the packed pitch, half the synthesis kernel's size)."""
     from restore.known import packed_channel_kernels, rggb_kernels
+    from udc_render.pipeline import SynthConfig, plan_kernels
+    from udc_render.scene.geometry import psf_lens
+    cfg = cfg or SynthConfig()
+    kernels = plan_kernels(scene, [display], cfg)
+    size = (kernels.grid.kernel_size_px // 2) | 1  # restore.known's default: the synthesis kernel's field of view
+    dep_kernels = rggb_kernels(packed_channel_kernels(display.layout, psf_lens(scene), cfg.sensor.camera,
+                                                      float(scene.sensor.pitch_um), size, cfg.use_cache))
+    return kernels, dep_kernels
+
+
+def score_image(display: Display, scene, models: tuple, item: int = 0, cfg=None) -> dict:
+    """One image: synthesise the capture through `display` from the (cached) render with `models`
+    (display_models), score the input, restore with DeP (known kernels and γ) and score it (paper
+    protocol)."""
+    from restore.dep import dep_restore
     from restore.metrics import paper_metrics
     from udc_render.optics.gamma import display_gamma
-    from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
-    from udc_render.scene.geometry import psf_lens
+    from udc_render.pipeline import SynthConfig, synthesize
     from udc_render.sensor import rgb_to_rggb
     cfg = cfg or SynthConfig()
+    kernels, dep_kernels = models
     t0 = time.perf_counter()
     band_image = _render(scene)
     t1 = time.perf_counter()
-    kernels = plan_kernels(scene, [display], cfg)
     res = synthesize(band_image, scene, [display], cfg, item=item, kernels=kernels)
     cap = res.captures[display.name]
     s = cap.params["sensor"]
@@ -202,16 +216,13 @@ def score_image(display: Display, scene, item: int = 0, cfg=None) -> dict:
     t2 = time.perf_counter()
     gamma = np.array(rgb_to_rggb(display_gamma(display, kernels.band[display.name], kernels.band["glass"],
                                                band_image.edges_nm, cfg.sensor.camera, band_image.white_bands())))
-    size = (kernels.grid.kernel_size_px // 2) | 1  # restore.known's default: the synthesis kernel's field of view
-    ks = rggb_kernels(packed_channel_kernels(display.layout, psf_lens(scene), cfg.sensor.camera,
-                                             float(s["pitch_um"]), size, cfg.use_cache))
-    dep = dep_restore(packed, gamma, ks, rng=np.random.default_rng(item))
+    dep = dep_restore(packed, gamma, dep_kernels, rng=np.random.default_rng(item))
     t3 = time.perf_counter()
     inp, out = paper_metrics(None, res.gt, packed), paper_metrics(dep.rgb, res.gt)
     return {"input_psnr_db": inp["psnr_db_paper"], "input_ssim": inp["ssim_paper"],
             "dep_psnr_db": out["psnr_db_paper"], "dep_ssim": out["ssim_paper"], "dep_gamma_rggb": gamma,
-            "dep_kernel_px": size, "seconds": {"render": t1 - t0, "synth": t2 - t1, "dep": t3 - t2,
-                                               "metrics": time.perf_counter() - t3}}
+            "dep_kernel_px": dep_kernels.shape[-1], "seconds": {"render": t1 - t0, "synth": t2 - t1, "dep": t3 - t2,
+                                                              "metrics": time.perf_counter() - t3}}
 
 
 def score_rows(display: Display, scores: list[dict], base: dict) -> list[dict]:
@@ -402,9 +413,10 @@ def capture_rows(display: Display, images: tuple[str, ...] | None = None, quick:
     gamma = measure_gamma(display, quick_rig)
     seconds = {"gamma": time.perf_counter() - t0}
     bar.update()
+    models = display_models(display, scene)  # the same for every image: once per display
     scores = []
     for i, image in enumerate(images):
-        scores.append(score_image(display, with_overrides(scene, image=image), item=i))
+        scores.append(score_image(display, with_overrides(scene, image=image), models, item=i))
         bar.update()
     t1 = time.perf_counter()
     band_row, band = banding_row(display, base, scene)
