@@ -50,14 +50,14 @@ from psf.cache import cached
 from psf.engine import DEFAULT_FIELD_PHASES
 from psf.spectral import channel_kernels
 from udc_render.errors import UdcError
-from udc_render.optics import apply_kernels, convolve_bands
+from udc_render.optics import apply_kernels, band_spectra, convolve_bands
 from udc_render.optics import gamma
 from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.render import BandImage, render_scene
 from udc_render.scene import Scene
 from udc_render.scene.geometry import RenderGrid, psf_lens, render_grid
-from udc_render.sensor import (Capture, DefectConfig, SensorConfig, band_electron_weights, capture, electrons_rgb,
-                               rgb_to_rggb)
+from udc_render.sensor import (Capture, DefectConfig, SensorConfig, band_electron_weights, capture, capture_electrons,
+                               cos4_map, electrons_rgb, mosaic_of, rgb_to_rggb)
 
 FORMS = ("spectral", "per_channel")
 EXPOSURE_FILL = 0.8
@@ -200,12 +200,35 @@ def noise_seed(seed: int, item: int, display_name: str) -> np.random.SeedSequenc
     return np.random.SeedSequence([int(seed), int(item), zlib.crc32(display_name.encode())])
 
 
-def ground_truth(band_image: BandImage, glass_kernels, sensor: SensorConfig, cfg: SynthConfig):
+def ground_truth(band_image: BandImage, glass_kernels, sensor: SensorConfig, cfg: SynthConfig, spectra=None):
     """([3, H, W] linear camera RGB of the clean view in units of the full well (1 = white at gain 1),
-    the glass optics result it came from)."""
-    optics = apply_kernels(band_image, glass_kernels, None, cfg.precision)
-    gt = bin_pixels(electrons_rgb(optics.images, band_image.edges_nm, sensor), band_image.pitch_um, sensor.pitch_um)
-    return (gt / sensor.full_well_e).astype(np.float32), optics
+    the glass view's electrons [3, H, W] and the optics record they came from)."""
+    e_rgb, applied = channel_electrons(band_image, glass_kernels, None, sensor, cfg, spectra)
+    return (e_rgb / sensor.full_well_e).astype(np.float32), e_rgb, applied
+
+
+def channel_electrons(band_image: BandImage, kernel_set, transmission, sensor: SensorConfig, cfg: SynthConfig,
+                      spectra=None) -> tuple[np.ndarray, dict]:
+    """Mean electrons [3, H, W] (float64, sensor pitch, cos⁴ included) that an R, G and B pixel would
+    collect through one display: e_c = cos⁴ · bin(Σ_k w_ck g_k (x_k ⊗ k_k)), w = band_electron_weights.
+    The band sum is taken in Fourier space (apply_kernels' channel_weights: three inverse FFTs, not K);
+    blend 'output' sums the K blurred bands instead. Round-off negatives are set to 0 (counted)."""
+    w = band_electron_weights(band_image.edges_nm, sensor)
+    kw = dict(blend=cfg.blend, field_rank=cfg.field_rank)
+    if cfg.blend == "source":
+        optics = apply_kernels(band_image, kernel_set, transmission, cfg.precision, channel_weights=w, spectra=spectra, **kw)
+        e = optics.images.astype(np.float64)
+    else:
+        optics = apply_kernels(band_image, kernel_set, transmission, cfg.precision, **kw)
+        e = np.einsum("ck,khw->chw", w, optics.images, dtype=np.float64, optimize=True)
+    e = bin_pixels(e, band_image.pitch_um, sensor.pitch_um)
+    negative = e < 0
+    e[negative] = 0.0
+    if sensor.cos4_falloff:
+        e *= cos4_map(*e.shape[1:], sensor.pitch_um, sensor.focal_length_um)
+    applied = {**optics.applied, "gains": optics.gains.tolist(), "transmission": optics.transmission.tolist(),
+               "negative_electrons_clamped": int(negative.sum())}
+    return e, applied
 
 
 def bin_pixels(a: np.ndarray, pitch_um: float, sensor_pitch_um: float) -> np.ndarray:
@@ -227,6 +250,16 @@ def check_grid(band_image: BandImage, grid: RenderGrid) -> None:
                          f"{band_image.margin_px} px, {band_image.edges_nm.size - 1} bands: plan them from this scene")
 
 
+def shared_spectra(band_image: BandImage, displays: list[Display], kernels: Kernels, cfg: SynthConfig):
+    """The band images' spectra (optics.band_spectra), computed once when a display besides the ground
+    truth convolves the plain bands too (d = 0, spectral form); else None (each view transforms its own)."""
+    plain = [d for d in displays if cfg.form == "spectral" and kernels.band[d.name].field_kernels is None
+             and not d.is_glass]
+    if not plain:
+        return None
+    return band_spectra(band_image.bands, kernels.grid.kernel_size_px, band_image.margin_px, cfg.precision)
+
+
 def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg: SynthConfig = SynthConfig(),
                item: int = 0, progress: bool = False, kernels: Kernels | None = None) -> SynthResult:
     """The ground truth and one capture per display from one render, with the kernels planned for its
@@ -242,13 +275,14 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     exposure, how = (cfg.exposure_s, "set") if cfg.exposure_s is not None else auto_exposure_s(band_image, optics_sensor)
     base_sensor = replace(optics_sensor, exposure_s=float(exposure))
     bar = tqdm(total=len(displays) + 1, desc="captures", unit="view", disable=not progress, leave=False)
-    gt, glass_optics = ground_truth(band_image, kernels.band["glass"], base_sensor, cfg)
+    spectra = shared_spectra(band_image, displays, kernels, cfg)
+    gt, glass_e, gt_optics = ground_truth(band_image, kernels.band["glass"], base_sensor, cfg, spectra)
     bar.update()
     captures, display_meta, rgb = {}, {}, None
     for d in displays:
         rng = np.random.default_rng(noise_seed(cfg.seed, item, d.name))
         if cfg.form == "spectral":
-            cap, extra = _spectral_capture(band_image, d, kernels, cfg, base_sensor, rng, glass_optics)
+            cap, extra = _spectral_capture(band_image, d, kernels, cfg, base_sensor, rng, (glass_e, gt_optics), spectra)
         else:
             if rgb is None:  # the un-blurred camera RGB of the render grid, shared by every display
                 rgb = (electrons_rgb(band_image.bands, band_image.edges_nm, base_sensor)
@@ -261,7 +295,7 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     bar.close()
     meta = {"form": cfg.form, "exposure_s": exposure, "exposure_rule": how, "seed": cfg.seed, "item": item,
             "gt": "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, "
-                  "/ full well (1.0 = white level at gain 1), not clipped", "gt_optics": glass_optics.applied,
+                  "/ full well (1.0 = white level at gain 1), not clipped", "gt_optics": gt_optics,
             "defects": None if cfg.defects is None else asdict(cfg.defects), "profile": cfg.profile,
             "kernel_size_px": kernels.grid.kernel_size_px, "kernel_pixel_um": float(band_image.pitch_um),
             "kernel_precision": cfg.kernel_precision, "lens": psf_lens(scene).describe(),
@@ -279,17 +313,20 @@ def capture_scene(scene: Scene, displays: list[Display], cfg: SynthConfig = Synt
 
 
 def _spectral_capture(band_image: BandImage, d: Display, kernels: Kernels, cfg: SynthConfig, base_sensor, rng,
-                      glass_optics):
+                      glass_electrons, spectra):
     t = d.transmission.band_means(band_image.edges_nm)
-    if d.is_glass and d.distance_mm == 0 and np.all(t == 1):  # the ground truth's optics exactly
-        optics = glass_optics
+    if d.is_glass and np.all(t == 1):  # the ground truth's optics exactly (a bare lens has no field kernels)
+        e_rgb, applied = glass_electrons
     else:
-        optics = apply_kernels(band_image, kernels.band[d.name], t, cfg.precision, blend=cfg.blend,
-                               field_rank=cfg.field_rank)
+        e_rgb, applied = channel_electrons(band_image, kernels.band[d.name], t, base_sensor, cfg, spectra)
     sensor = replace(base_sensor, gain=d.gain, form="spectral")
-    cap = capture(optics.images, band_image.edges_nm, sensor, rng, input_pitch_um=float(band_image.pitch_um),
-                  defects=cfg.defects)
-    return cap, {"optics": optics.applied, "optics_gains": optics.gains.tolist(), "transmission_band_means": t.tolist()}
+    cap = capture_electrons(mosaic_of(e_rgb), sensor, rng, cfg.defects, {
+        "input_shape": list(band_image.bands.shape), "input_pitch_um": float(band_image.pitch_um),
+        "edges_nm": np.asarray(band_image.edges_nm, float).tolist(),
+        "input": "camera-channel electrons of the blurred bands (pipeline.channel_electrons)"})
+    applied = dict(applied)
+    gains = applied.pop("gains")
+    return cap, {"optics": applied, "optics_gains": gains, "transmission_band_means": t.tolist()}
 
 
 def display_gamma(d: Display, band_image: BandImage, kernels: Kernels, sensor: SensorConfig) -> tuple:

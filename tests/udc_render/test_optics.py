@@ -327,3 +327,42 @@ def test_phase_basis_reconstructs_its_kernels(toled_d1):
     assert 0 < r1 < 1
     with pytest.raises(OpticsError, match="field rank = 0: expected a whole number"):
         apply_kernels(band_image(np.ones((1, 20, 20)), 7, edges=[500.0, 540.0]), toled_d1, field_rank=0)
+
+
+# ------------------------------------------------------------------ channel sums in Fourier space
+
+
+@pytest.mark.parametrize("precision,tol", [("float64", 3e-7), ("float32", 2e-6)])  # images are stored float32
+def test_channel_sums_equal_the_weighted_sum_of_blurred_bands(precision, tol):
+    """channel_weights w [C, K]: Σ_k w_ck y_k summed in Fourier space (C inverse FFTs) equals the sum of
+    the K blurred bands, with the band spectra computed here or shared (band_spectra)."""
+    from udc_render.optics import band_spectra
+    rng = np.random.default_rng(11)
+    K, S, m = 4, 9, 6
+    x = rng.random((K, 40 + 2 * m, 52 + 2 * m))
+    ks = synthetic_set(random_kernels(rng, K, S), [420.0, 500.0, 580.0, 660.0], trans=[0.9, 0.8, 0.7, 0.6])
+    w = rng.random((3, K)) * (rng.random((3, K)) > 0.3)  # some zero weights: skipped terms
+    bi = band_image(x, m)
+    per_band = apply_kernels(bi, ks, 0.5, precision).images.astype(np.float64)
+    want = np.einsum("ck,khw->chw", w, per_band)
+    spectra = band_spectra(bi.bands, S, m, precision)
+    for shared in (None, spectra):
+        got = apply_kernels(bi, ks, 0.5, precision, channel_weights=w, spectra=shared)
+        assert got.images.shape == (3, 40, 52) and got.applied["output"].startswith("channel sums")
+        np.testing.assert_allclose(got.images, want, rtol=0, atol=tol * np.abs(want).max())
+    with pytest.raises(OpticsError, match="channel_weights: shape"):
+        apply_kernels(bi, ks, channel_weights=w[:, :2])
+
+
+def test_field_channel_sums_equal_the_weighted_sum_of_blurred_bands(toled_d1):
+    """The same on the field-dependent path (blend 'source', exact and rank 2); 'output' is refused."""
+    m = 7
+    x = np.random.default_rng(5).random((1, 50 + 2 * m, 70 + 2 * m))
+    bi = band_image(x, m, edges=[500.0, 540.0])
+    w = np.array([[0.2], [1.0], [0.5]])
+    for rank in (None, 2):
+        per_band = apply_kernels(bi, toled_d1, precision="float64", field_rank=rank).images
+        got = apply_kernels(bi, toled_d1, precision="float64", field_rank=rank, channel_weights=w).images
+        np.testing.assert_allclose(got, w[:, :, None, None][:, 0] * per_band, rtol=0, atol=3e-7 * per_band.max())
+    with pytest.raises(OpticsError, match="channel_weights need blend='source'"):
+        apply_kernels(bi, toled_d1, blend="output", channel_weights=w)

@@ -53,7 +53,8 @@ class OpticsError(UdcError):
 class OpticsResult:
     """Irradiance at the sensor per band, sensor frame only.
 
-    images          [K, H, W] float32, same units as the band images × (dimensionless gains)
+    images          [K, H, W] float32, same units as the band images × (dimensionless gains);
+                    [C, H, W] channel sums Σ_k w_ck y_k when apply_kernels was given channel_weights
     pitch_um        sensor-plane pixel pitch of images
     wavelengths_nm  [K] kernel wavelengths
     gains           [K] g_k = transmission_k · transmittance_k · (1 − energy_outside_k)
@@ -115,13 +116,65 @@ def _kernel_spectrum(kernel: np.ndarray, shape, dtype, workers: int) -> np.ndarr
     return sfft.rfft2(buf, workers=workers)
 
 
+def band_spectra(bands: np.ndarray, size_px: int, margin_px: int, precision: str = "float32",
+                 workers: int = -1) -> np.ndarray:
+    """rfft2 of every band [K, H, W] at fft_shape((H, W), size_px, margin_px): [K, Fy, Fx//2 + 1].
+    One render's spectra serve the ground truth and every display of the same kernel size."""
+    dtype = _precision(precision)
+    shape = fft_shape(bands.shape[1:], size_px, margin_px)
+    return np.stack([sfft.rfft2(b.astype(dtype, copy=False), s=shape, workers=workers) for b in bands])
+
+
+def _channel_weights(channel_weights, K: int) -> np.ndarray | None:
+    if channel_weights is None:
+        return None
+    w = np.asarray(channel_weights, dtype=np.float64)
+    if w.ndim != 2 or w.shape[1] != K or not np.all(np.isfinite(w)):
+        raise OpticsError(f"channel_weights: shape {w.shape}: expected finite [C, K={K}]")
+    return w
+
+
+class _Output:
+    """Where per-band blurred spectra Y_k go: each band's frame (irfft2 per band), or, with channel
+    weights w [C, K], the channel sums Σ_k w_ck g_k Y_k accumulated in Fourier space (linearity),
+    so that only C inverse FFTs are made: y_c = g-weighted Σ_k w_ck (x_k ⊗ k_k)."""
+
+    def __init__(self, K, H, W, m, shape, dtype, gains, channel_weights, workers):
+        self.gains, self.w, self.shape, self.dtype, self.workers = gains, channel_weights, shape, dtype, workers
+        self.crop = (slice(m, H - m), slice(m, W - m))
+        n = K if channel_weights is None else channel_weights.shape[0]
+        self.out = np.empty((n, H - 2 * m, W - 2 * m), dtype=dtype)
+        self.acc = None if channel_weights is None else [None] * n
+
+    def add(self, k: int, spec: np.ndarray) -> None:
+        if self.w is None:
+            self.out[k] = sfft.irfft2(spec, s=self.shape, workers=self.workers)[self.crop] * self.dtype(self.gains[k])
+            return
+        for c, wc in enumerate(self.w[:, k] * self.gains[k]):
+            if wc == 0:
+                continue
+            if self.acc[c] is None:
+                self.acc[c] = spec * self.dtype(wc)
+            else:
+                self.acc[c] += spec * self.dtype(wc)
+
+    def result(self) -> np.ndarray:
+        if self.w is not None:
+            for c, a in enumerate(self.acc):
+                self.out[c] = 0 if a is None else sfft.irfft2(a, s=self.shape, workers=self.workers)[self.crop]
+        return self.out
+
+
 def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains=None,
-                   precision: str = "float32", workers: int = -1) -> np.ndarray:
+                   precision: str = "float32", workers: int = -1, channel_weights=None,
+                   spectra: np.ndarray | None = None) -> np.ndarray:
     """Linear convolution per band, cropped to the frame: y_k = g_k · (x_k ⊗ k_k)[m:H−m, m:W−m].
 
     bands [K, H, W], kernels [K, S, S] (odd S, centre S//2), margin_px ≥ S//2. Output [K, H−2m, W−2m]
     in `precision`. A kernel larger than the sensor frame is fine (exact) as long as the margin
     covers its half-width; a kernel larger than the whole grid necessarily fails that check.
+    channel_weights [C, K]: return the channel images Σ_k w_ck y_k [C, H−2m, W−2m] instead (C inverse
+    FFTs, not K). spectra: band_spectra(bands, ...) computed once and shared (no forward FFT here).
     """
     dtype = _precision(precision)
     bands = np.asarray(bands)
@@ -134,13 +187,15 @@ def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains
     _check_margin(m, kernels.shape[-1], (H, W))
     gains = np.ones(K) if gains is None else np.asarray(gains, dtype=np.float64)
     shape = fft_shape((H, W), kernels.shape[-1], m)
-    out = np.empty((K, H - 2 * m, W - 2 * m), dtype=dtype)
+    if spectra is not None and spectra.shape != (K, shape[0], shape[1] // 2 + 1):
+        raise OpticsError(f"band spectra of shape {spectra.shape} do not match {K} bands at FFT shape {shape}")
+    out = _Output(K, H, W, m, shape, dtype, gains, _channel_weights(channel_weights, K), workers)
     for k in range(K):
-        spec = sfft.rfft2(bands[k].astype(dtype, copy=False), s=shape, workers=workers)
+        spec = (sfft.rfft2(bands[k].astype(dtype, copy=False), s=shape, workers=workers) if spectra is None
+                else spectra[k].copy())
         spec *= _kernel_spectrum(kernels[k].astype(dtype, copy=False), shape, dtype, workers)
-        y = sfft.irfft2(spec, s=shape, workers=workers)
-        out[k] = y[m:H - m, m:W - m] * dtype(gains[k])
-    return out
+        out.add(k, spec)
+    return out.result()
 
 
 # ---------------------------------------------------------------------------- field dependence
@@ -198,17 +253,37 @@ def phase_basis(kernels: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray,
     return basis.reshape(r, S, S), U[:, :r] * sigma[None, :], residual
 
 
+_BASES: dict[int, tuple] = {}  # id(field_kernels) -> (weak reference, {(band, rank, live): phase_basis result})
+
+
+def cached_phase_basis(field_kernels: np.ndarray, k: int, live: list, rank: int) -> tuple:
+    """phase_basis of band k's live phase kernels, kept while `field_kernels` lives (one job's kernel
+    set serves every item of a worker: the SVD is made once per band, not once per capture)."""
+    import weakref
+    entry = _BASES.get(id(field_kernels))
+    if entry is None or entry[0]() is not field_kernels:
+        for key in [key for key, (ref, _) in _BASES.items() if ref() is None]:
+            del _BASES[key]
+        entry = _BASES[id(field_kernels)] = (weakref.ref(field_kernels), {})
+    key = (k, int(rank), tuple(live))
+    if key not in entry[1]:
+        basis, coeff, residual = phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank)
+        entry[1][key] = (basis.astype(field_kernels.dtype), coeff, residual)
+    return entry[1][key]
+
+
 def _basis_map(coeff_r: np.ndarray, live, power: np.ndarray, wy: np.ndarray, wx: np.ndarray, dtype) -> np.ndarray:
     """W_r(row, col) = Σ_q c_qr P_q wy_j(row) wx_i(col) = wyᵀ C wx, C[j, i] = c_qr P_ji on the live phases."""
     c = np.zeros((wy.shape[0], wx.shape[0]))
     for q, (j, i) in enumerate(live):
         c[j, i] = coeff_r[q] * power[j, i]
-    return (wy.T.astype(np.float64) @ c @ wx.astype(np.float64)).astype(dtype)
+    return wy.T.astype(dtype, copy=False) @ (c.astype(dtype) @ wx.astype(dtype, copy=False))
 
 
 def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np.ndarray, weights_y: np.ndarray,
                    weights_x: np.ndarray, margin_px: int, gains=None, blend: str = "source",
-                   precision: str = "float32", workers: int = -1, rank: int | None = None) -> tuple[np.ndarray, float]:
+                   precision: str = "float32", workers: int = -1, rank: int | None = None,
+                   channel_weights=None) -> tuple[np.ndarray, float]:
     """Field-varying blur: y_k = g_k Σ_{j,i} k_kji ⊗ (w_j(row) w_i(col) P_kji x_k)  (blend='source'),
     or g_k Σ_{j,i} w_j w_i P_kji (k_kji ⊗ x_k) (blend='output'). Frame cropped as convolve_bands.
 
@@ -216,8 +291,9 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     (rows/columns of the whole render grid). Phases whose weights vanish everywhere are skipped.
     rank r (None: every phase kernel, exact): the phase kernels of each band are replaced by their
     rank-r basis (phase_basis), k_q ≈ Σ_r c_qr B_r, so 'source' is Σ_r B_r ⊗ (W_r x) with the weight
-    maps W_r = Σ_q c_qr P_q w_q: r FFT pairs per band instead of one per phase. Returns (the images,
-    the largest relative kernel residual over the bands; 0 when exact).
+    maps W_r = Σ_q c_qr P_q w_q: r FFT pairs per band instead of one per phase. channel_weights [C, K]
+    (blend 'source' only): the channel images Σ_k w_ck y_k, summed in Fourier space (C inverse FFTs).
+    Returns (the images, the largest relative kernel residual over the bands; 0 when exact).
     """
     dtype = _precision(precision)
     if blend not in BLENDS:
@@ -230,11 +306,14 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     _check_margin(m, S, (H, W))
     gains = np.ones(K) if gains is None else np.asarray(gains, dtype=np.float64)
     shape = fft_shape((H, W), S, m)
+    cw = _channel_weights(channel_weights, K)
+    if cw is not None and blend != "source":
+        raise OpticsError("channel_weights need blend='source' (blend 'output' weights each band after its inverse FFT)")
     wy = weights_y.astype(dtype)
     wx = weights_x.astype(dtype)
     live = [(j, i) for j in range(wy.shape[0]) for i in range(wx.shape[0])
             if wy[j].any() and wx[i].any()]
-    out = np.empty((K, H - 2 * m, W - 2 * m), dtype=dtype)
+    out = _Output(K, H, W, m, shape, dtype, gains, cw, workers)
     fy, fx = slice(m, H - m), slice(m, W - m)
     worst = 0.0
     for k in range(K):
@@ -243,17 +322,22 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
             terms = ((field_kernels[k, j, i], wy[j][:, None] * wx[i][None, :], dtype(field_power[k, j, i]))
                      for j, i in live)  # lazily: one weight map in memory at a time
         else:
-            basis, coeff, residual = phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank)
+            basis, coeff, residual = cached_phase_basis(field_kernels, k, live, rank)
             worst = max(worst, residual)
             terms = ((basis[r], _basis_map(coeff[:, r], live, field_power[k], wy, wx, dtype), dtype(1.0))
                      for r in range(basis.shape[0]))
         if blend == "source":
-            acc = None
+            acc, weighted = None, np.empty_like(x)
             for kern, wmap, power in terms:
-                term = sfft.rfft2(x * wmap * power, s=shape, workers=workers)
-                term *= _kernel_spectrum(kern.astype(dtype), shape, dtype, workers)
-                acc = term if acc is None else acc + term
-            y = sfft.irfft2(acc, s=shape, workers=workers)[fy, fx]
+                np.multiply(x, wmap, out=weighted)
+                weighted *= power
+                term = sfft.rfft2(weighted, s=shape, workers=workers)
+                term *= _kernel_spectrum(kern.astype(dtype, copy=False), shape, dtype, workers)
+                if acc is None:
+                    acc = term
+                else:
+                    acc += term
+            out.add(k, acc)
         else:
             spec = sfft.rfft2(x, s=shape, workers=workers)
             y = np.zeros((H - 2 * m, W - 2 * m), dtype=dtype)
@@ -261,8 +345,8 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
                 blur = sfft.irfft2(spec * _kernel_spectrum(kern.astype(dtype), shape, dtype, workers), s=shape,
                                    workers=workers)[fy, fx]
                 y += blur * wmap[fy, fx] * power
-        out[k] = y * dtype(gains[k])
-    return out, worst
+            out.out[k] = y * dtype(gains[k])
+    return out.result(), worst
 
 
 # ---------------------------------------------------------------------------- the stage
@@ -291,7 +375,7 @@ def _transmission(transmission, K: int) -> np.ndarray:
 def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "float32", workers: int = -1,
                   blend: str = "source", field: bool = True, distance_mm: float | None = None,
                   image_distance_um: float | None = None, period_um=None,
-                  field_rank: int | None = None) -> OpticsResult:
+                  field_rank: int | None = None, channel_weights=None, spectra: np.ndarray | None = None) -> OpticsResult:
     """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
 
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (module doc).
@@ -299,6 +383,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     field: use field kernels when the KernelSet has them (d > 0); False forces the mean kernel.
     distance_mm, image_distance_um, period_um (x, y): override the KernelSet's d, z_i and display period.
     field_rank: d > 0: a rank-r basis of each band's phase kernels (convolve_field; None: exact).
+    channel_weights [C, K]: images are the channel sums Σ_k w_ck y_k [C, H, W] (one inverse FFT per
+    channel; blend 'source'); spectra: band_spectra of the band image, shared between calls (d = 0 path).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -328,6 +414,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
 
     d_mm = float(kernel_set.distance_mm if distance_mm is None else distance_mm)
     applied = {"convolution": "linear, FFT (scipy.fft rfft2), margin cropped", "precision": precision,
+               "output": "bands" if channel_weights is None else "channel sums Σ_k w_ck y_k (Fourier space)",
                "fft_shape": list(fft_shape((H, W), S, m)), "margin_px": m, "kernel_px": S,
                "gain": "T · transmittance · (1 − energy_outside)", "distance_mm": d_mm, "workers": workers}
     use_field = field and kernel_set.field_kernels is not None and d_mm > 0
@@ -335,7 +422,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         why = ("field kernels disabled" if kernel_set.field_kernels is not None and not field
                else "d = 0 or no field kernels: one kernel per band")
         applied.update(model="field-independent", skipped=[f"field-dependent blur ({why})"])
-        images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers)
+        images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra)
     else:
         z = float(kernel_set.image_distance_um if image_distance_um is None else image_distance_um)
         px, py = _display_period_um(kernel_set, period_um)
@@ -348,7 +435,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         wx = phase_weights(x_um, sx, d_mm * 1000, z, px, per_x)
         wy = phase_weights(y_um, sy, d_mm * 1000, z, py, per_y)
         images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
-                                          gains, blend, precision, workers, field_rank)
+                                          gains, blend, precision, workers, field_rank, channel_weights)
         if field_rank is not None:
             applied.update(field_rank=int(field_rank), field_rank_kernel_residual=residual)
         applied.update(model="field-dependent", blend=blend, phases=[int(sy.size), int(sx.size)],

@@ -22,7 +22,7 @@ capture (the whole chain).
 """
 from udc_render.sensor.bayer import (CHANNELS, SITE_COLOUR, SITES, demosaic_bilinear, mosaic_of, pack_rggb, rgb_to_rggb,
                                      site_colour, unpack_rggb)
-from udc_render.sensor.capture import Capture, capture
+from udc_render.sensor.capture import Capture, capture, capture_electrons
 from udc_render.sensor.config import SensorConfig, SensorError
 from udc_render.sensor.defects import DefectConfig, DefectError, apply_defects, defect_map
 from udc_render.sensor.noise import expose, noise_lambdas, sample_brooks, sensor_lambdas
@@ -30,6 +30,6 @@ from udc_render.sensor.radiometry import (band_electron_weights, cos4_map, elect
                                           electrons_spectral, photon_weights)
 
 __all__ = ["CHANNELS", "SITES", "SITE_COLOUR", "Capture", "DefectConfig", "DefectError", "SensorConfig", "SensorError",
-           "apply_defects", "band_electron_weights", "capture", "cos4_map", "defect_map", "demosaic_bilinear",
+           "apply_defects", "band_electron_weights", "capture", "capture_electrons", "cos4_map", "defect_map", "demosaic_bilinear",
            "electrons_per_channel", "electrons_rgb", "electrons_spectral", "expose", "mosaic_of", "noise_lambdas",
            "pack_rggb", "photon_weights", "rgb_to_rggb", "sample_brooks", "sensor_lambdas", "site_colour", "unpack_rggb"]

@@ -41,15 +41,32 @@ def capture(image: np.ndarray, edges_nm, sensor: SensorConfig, rng: np.random.Ge
     defects: dead and hot pixels applied to the quantised mosaic before packing (sensor.defects;
     None: none); they draw nothing from rng.
     """
-    if not isinstance(rng, np.random.Generator):
-        raise SensorError(f"rng: {type(rng).__name__}: expected a numpy.random.Generator")
-    state = rng.bit_generator.state
+    _check_rng(rng)
     img = np.asarray(image)
     if sensor.form == "spectral":
         e = electrons_spectral(img, edges_nm, sensor, input_pitch_um)
     else:
         e = electrons_per_channel(img, sensor)
     clamped = int((img < 0).sum())  # input already checked finite; these were round-off, set to 0
+    return capture_electrons(e, sensor, rng, defects, {
+        "input_shape": list(img.shape), "input_pitch_um": input_pitch_um,
+        "edges_nm": None if edges_nm is None or sensor.form != "spectral" else np.asarray(edges_nm, float).tolist(),
+        "negative_values_clamped": clamped})
+
+
+def _check_rng(rng) -> None:
+    if not isinstance(rng, np.random.Generator):
+        raise SensorError(f"rng: {type(rng).__name__}: expected a numpy.random.Generator")
+
+
+def capture_electrons(electrons: np.ndarray, sensor: SensorConfig, rng: np.random.Generator,
+                      defects: DefectConfig | None = None, input_info: dict | None = None) -> Capture:
+    """The capture of a mosaic of mean collected electrons [H, W] (RGGB sites, cos⁴ included):
+    noise, quantisation, defect pixels, packing (capture's tail; the pipeline's fused optics give
+    the electrons directly). input_info: how the electrons were made, recorded in params."""
+    _check_rng(rng)
+    state = rng.bit_generator.state
+    e = np.asarray(electrons, dtype=np.float64)
     mosaic, clean, info = expose(e, sensor, rng)
     defect_info = None
     if defects is not None:
@@ -58,17 +75,14 @@ def capture(image: np.ndarray, edges_nm, sensor: SensorConfig, rng: np.random.Ge
         "sensor": dataclasses.asdict(sensor),
         "bayer": "RGGB: R (0,0), Gr (0,1), Gb (1,0), B (1,1); packed order R, Gr, Gb, B",
         "form": sensor.form,
-        "input_shape": list(img.shape),
-        "input_pitch_um": input_pitch_um,
-        "edges_nm": None if edges_nm is None or sensor.form != "spectral" else np.asarray(edges_nm, float).tolist(),
+        **(input_info or {}),
         "dn_per_electron": sensor.dn_per_electron,
         "range_dn": sensor.range_dn,
-        "negative_values_clamped": clamped,
         "rng_state_before": state,
         **info,
         "defects": defect_info,
     }
     if sensor.form == "spectral":
-        params["photon_weights_e_per_J"] = photon_weights(edges_nm, sensor.camera, sensor.peak_qe).tolist()
+        params["photon_weights_e_per_J"] = photon_weights(params["edges_nm"], sensor.camera, sensor.peak_qe).tolist()
         params["irradiance"] = "E = pi L / (4 N^2)" + (" cos^4" if sensor.cos4_falloff else "") + " (on-axis)"
     return Capture(mosaic, clean, pack_rggb(mosaic), e, params)
