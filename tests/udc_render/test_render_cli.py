@@ -36,7 +36,7 @@ def test_render_writes_exr_json_and_preview(tmp_path, capsys):
     scene.write_text(MONITOR + "[render]\nspp = 16\n")  # the command line overrides spp, sensor and pitch
     out = tmp_path / "out"
     assert main(["render", str(scene), "--out", str(out), "--spp", "2", "--sensor-px", "64,32",
-                 "--pitch-um", "49.6", "--quiet"]) == 0
+                 "--pitch-um", "49.6", "--path", "rgb_matrix", "--sampler", "independent", "--quiet"]) == 0
     std = capsys.readouterr()
     assert "rendered" in std.out and "rgb_matrix" in std.out and std.err == ""
     for name in ("render.exr", "render.json", "preview.png"):
@@ -44,6 +44,7 @@ def test_render_writes_exr_json_and_preview(tmp_path, capsys):
     meta = json.loads((out / "render.json").read_text())
     assert meta["sensor"] == {"width_px": 64, "height_px": 32, "pitch_um": 49.6}
     assert meta["spp"] == 2 and meta["render_path"] == "rgb_matrix" and meta["scene"] == str(scene)
+    assert meta["sampler"] == "independent"
     m = meta["margin_px"]
     assert m == 8  # ceil(396 µm / 49.6 µm)
     import OpenEXR
@@ -72,7 +73,7 @@ def test_noise_target_from_the_command_line(tmp_path):
     scene = tmp_path / "mon.toml"
     scene.write_text(SENSOR + MONITOR)
     out = tmp_path / "out"
-    assert main(["render", str(scene), "--out", str(out), "--noise", "0.05", "--quiet"]) == 0
+    assert main(["render", str(scene), "--out", str(out), "--noise", "0.05", "--path", "rgb_matrix", "--quiet"]) == 0
     meta = json.loads((out / "render.json").read_text())
     # the astronaut on a 480 × 270 panel: pilot noise ~0.12 at 8 spp → ~50 spp; ±35 % as in test_render
     assert meta["spp_from_noise_target"] == 0.05 and abs(meta["noise_rel"] / 0.05 - 1) < 0.35
@@ -87,7 +88,7 @@ def test_shipped_scenes_render_by_name(tmp_path, name):
     assert main(["render", name, "--out", str(out), "--spp", "1", "--sensor-px", "32,16", "--pitch-um", "99.2",
                  "--bands-nm", "400:700:100", "--quiet"]) == 0
     meta = json.loads((out / "render.json").read_text())
-    assert meta["content"] == name and meta["render_path"] == ("rgb_matrix" if name == "monitor" else "spectral")
+    assert meta["content"] == name and meta["render_path"] == ("analytic" if name == "monitor" else "spectral")
     import OpenEXR
     with OpenEXR.File(str(out / "render.exr")) as f:
         chans = {k: np.asarray(v.pixels) for k, v in f.channels().items()}

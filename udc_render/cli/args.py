@@ -105,7 +105,7 @@ def out_dir(path: Path, option: str = "--out") -> Path:
 def add_scene_arguments(r: argparse.ArgumentParser, scene_option: bool = False) -> None:
     """Overrides of a scene file's settings (applied by scene_from_args); the scene itself is a
     positional argument, or --scene when `scene_option`."""
-    from udc_render.scene import RENDER_PATHS
+    from udc_render.scene import RENDER_PATHS, SAMPLERS
     if scene_option:
         r.add_argument("--scene", default="monitor", help="a monitor scene file or name [monitor]")
     else:
@@ -116,7 +116,9 @@ def add_scene_arguments(r: argparse.ArgumentParser, scene_option: bool = False) 
                          help="target relative RMS noise; spp is chosen from pilot renders (e.g. 0.01)")
     r.add_argument("--bands-nm", help="LOW:HIGH:STEP in nm [the scene's bands, default 400:700:10]")
     r.add_argument("--seed", type=int, help="render seed [the scene's render.seed, 0]")
-    r.add_argument("--path", choices=RENDER_PATHS, help="render path [auto: rgb_matrix for the monitor alone]")
+    r.add_argument("--path", choices=RENDER_PATHS, help="render path [auto: analytic (exact, no Monte Carlo) for the monitor alone through a pinhole]")
+    r.add_argument("--sampler", choices=SAMPLERS, help="Mitsuba's sampler for the Monte Carlo paths [the scene's "
+                   "render.sampler, ldsampler]; each pass is an independent randomisation (study render: samplers)")
     r.add_argument("--image", help="what the monitor shows: an image file, builtin:NAME or pattern:NAME")
     r.add_argument("--sensor-px", type=float_pair("--sensor-px"), help="sensor width,height in pixels")
     r.add_argument("--pitch-um", type=positive("--pitch-um"), help="sensor pixel pitch in µm")
@@ -129,7 +131,7 @@ def scene_from_args(args):
     from udc_render.scene.overrides import with_overrides
     return with_overrides(load_scene(args.scene), spp=args.spp, noise=args.noise, seed=args.seed,
                           path=getattr(args, "path", None), bands_nm=args.bands_nm, image=getattr(args, "image", None),
-                          sensor_px=args.sensor_px, pitch_um=args.pitch_um)
+                          sensor_px=args.sensor_px, pitch_um=args.pitch_um, sampler=args.sampler)
 
 
 def add_capture_arguments(p: argparse.ArgumentParser) -> None:

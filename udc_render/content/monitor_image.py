@@ -37,7 +37,14 @@ class DisplayImageError(UdcError):
 def decode(code: np.ndarray, transfer: str) -> np.ndarray:
     """Code values in [0, 1] to linear drive levels (IEC 61966-2-1 sRGB, pure 2.2 gamma, or linear)."""
     if transfer == "srgb":
-        return np.where(code <= 0.04045, code / 12.92, ((code + 0.055) / 1.055) ** 2.4)
+        c = np.asarray(code, dtype=np.float64)
+        out = np.empty_like(c)
+        np.add(c, 0.055, out=out)
+        out /= 1.055
+        np.power(out, 2.4, out=out)  # in place: the panel holds 25 M values
+        low = c <= 0.04045
+        out[low] = c[low] / 12.92
+        return out
     if transfer == "gamma2.2":
         return code ** 2.2
     return code
@@ -138,16 +145,16 @@ def _read_any(path: Path) -> np.ndarray:
 def fit_to_panel(code: np.ndarray, cols: int, rows: int) -> tuple[np.ndarray, dict]:
     """Rotate (portrait on landscape or vice versa) and resize [r, c, 3] to fit inside the panel,
     centred with black bars. Returns code values [3, rows, cols] and what was done."""
-    from skimage.transform import resize
+    from udc_render.content.resample import resample, resize_matrix
     rotated = (code.shape[0] > code.shape[1]) != (rows > cols) and code.shape[0] != code.shape[1]
     if rotated:
         code = np.rot90(code)  # a quarter turn counter-clockwise
     scale = min(cols / code.shape[1], rows / code.shape[0])
     w, h = max(1, round(code.shape[1] * scale)), max(1, round(code.shape[0] * scale))
-    img = resize(code, (h, w), order=1, anti_aliasing=scale < 1, preserve_range=True)
+    img = resample(code.transpose(2, 0, 1), resize_matrix(code.shape[0], h), resize_matrix(code.shape[1], w))
     out = np.zeros((3, rows, cols))
     y0, x0 = (rows - h) // 2, (cols - w) // 2
-    out[:, y0:y0 + h, x0:x0 + w] = np.clip(img, 0, 1).transpose(2, 0, 1)
+    out[:, y0:y0 + h, x0:x0 + w] = np.clip(img, 0, 1)
     return out, {"rotated": bool(rotated), "shown_px": [w, h], "offset_px": [x0, y0], "scale": scale}
 
 

@@ -1,7 +1,8 @@
 """The render stage: a Scene ──► BandImage (radiance in K bands at the sensor plane, + depth), with
-Mitsuba 3. The only package that imports Mitsuba.
+Mitsuba 3 (the only package that imports it), or exactly where the scene allows (analytic.py).
 
-    job.py            render_scene: paths (rgb_matrix, spectral), passes, noise estimate, depth
+    job.py            render_scene: paths (analytic, rgb_matrix, spectral), passes, samplers, noise estimate, depth
+    analytic.py       the monitor alone: exact pixel-area means of the panel (no Monte Carlo)
     band_image.py     BandImage, band_names
     mitsuba_scene.py  Mitsuba scene dicts of the monitor rig and 3D content
     variants.py       the Mitsuba variant (LLVM probe, scalar fallback)

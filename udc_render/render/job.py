@@ -1,7 +1,9 @@
 """Render a scene to band images: radiance at the sensor in K wavelength bands (+ depth).
 
-Two paths, chosen by what the scene needs and recorded in the metadata:
+Three paths, chosen by what the scene needs and recorded in the metadata:
 
+- ``analytic`` (auto for the monitor alone through a pinhole): the exact pixel-area means of the panel
+  (render.analytic), no Monte Carlo and no Mitsuba; Mitsuba's rgb path converges to it (tests).
 - ``rgb_matrix`` (the monitor alone in a dark room): light transport does not depend on wavelength,
   so one RGB render of the panel's drive levels w_c(x) (c = R, G, B) gives every band exactly:
   L_k(x) = Σ_c w_c(x) · P_ck, with P_ck the band-mean of primary c's radiance over band k.
@@ -13,10 +15,13 @@ Band values are pixel-area means of band-mean radiance, W·sr⁻¹·m⁻²·nm�
 cos⁴ fall-off and no exposure: those belong to the sensor model). The grid covers the sensor plus a
 margin of ``margin_px`` on every side; the sensor frame is ``bands[:, m:-m, m:-m]``.
 
-Samples: ``spp`` split into equal passes with seeds from SeedSequence([seed, group, pass]); the
-spread between passes measures the image's own Monte Carlo noise (relative RMS ‖σ‖₂/‖x‖₂ over
+Samples: ``spp`` split into equal passes with seeds from SeedSequence([seed, group, pass]), each pass
+drawn by ``render.sampler`` (a Mitsuba sampler; its count rounded up as the sampler requires, and
+recorded as rendered). Every pass is an independent randomisation (its own seed), so the
+spread between passes measures the image's own Monte Carlo noise even for correlated samplers (relative RMS ‖σ‖₂/‖x‖₂ over
 all bands and pixels, x the noise-free image), recorded as ``noise_rel``. With a
-noise target, two pilot passes at ``PILOT_SPP`` estimate the noise and spp = ⌈pilot·(σ/target)²⌉.
+noise target, two pilot passes at ``PILOT_SPP`` estimate the noise and spp = ⌈pilot·(σ/target)²⌉
+(the 1/√N law of independent samples: conservative for samplers that converge faster).
 """
 from __future__ import annotations
 
@@ -46,9 +51,21 @@ class RenderError(UdcError):
     """A scene that cannot be rendered as asked; one line."""
 
 
+def analytic_applies(scene: Scene) -> bool:
+    """The monitor alone seen through a pinhole: its render is an exact area integral (render.analytic)."""
+    return isinstance(scene.content, Monitor) and scene.lens.model == "pinhole"
+
+
 def choose_path(scene: Scene) -> str:
+    """The render path: the scene's, or for 'auto' the exact 'analytic' one for the monitor alone through a
+    pinhole, 'rgb_matrix' (one Mitsuba RGB render) for the monitor through a thin lens, else 'spectral'."""
     if scene.render.path != "auto":
+        if scene.render.path == "analytic" and not analytic_applies(scene):
+            raise RenderError(f"{scene.source}: render.path = \"analytic\": needs monitor content and lens.model = "
+                              f"\"pinhole\" (the exact area integral); use \"auto\", \"rgb_matrix\" or \"spectral\"")
         return scene.render.path
+    if analytic_applies(scene):
+        return "analytic"
     return "rgb_matrix" if isinstance(scene.content, Monitor) else "spectral"
 
 
@@ -113,18 +130,9 @@ class _Job:
         self.max_depth = scene.render.max_depth or default_depth
         self.integrator = {"type": "path", "max_depth": self.max_depth}
         if isinstance(content, Monitor):
-            m = content
-            try:
-                self.drive, how = panel_drive(m.image, *m.resolution_px, m.transfer, _base(scene))
-                self.primaries, prim_desc = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, _base(scene),
-                                                                       m.white_point)
-            except (DisplayImageError, spectra.SpectrumError) as e:
-                raise RenderError(f"{scene.source}: {e}") from None
-            self.matrix = spectra.band_means(self.primaries, self.edges)  # [3, K]
-            self.meta.update(display=how, primaries=prim_desc, monitor_size_m=list(m.size_m),
-                             monitor_distance_m=self.geom.focus_distance_m if scene.lens.focus_distance_m is None else None,
-                             band_matrix=self.matrix.tolist())
-            shape = ms.monitor_shape(mi, m.size_m, self.drive, None if path == "rgb_matrix" else self.primaries)
+            self.drive, self.primaries, self.matrix, meta = monitor_content(scene, self.geom)
+            self.meta.update(meta)
+            shape = ms.monitor_shape(mi, content.size_m, self.drive, None if path == "rgb_matrix" else self.primaries)
             self.content = {"type": "scene", "monitor": shape}
         elif isinstance(content, MitsubaXML):
             self.content = None
@@ -144,13 +152,24 @@ class _Job:
         mi, geom = self.mi, self.geom
         a, b = self.groups[g]
         film = ms.rgb_film(geom) if self.path == "rgb_matrix" else ms.band_film(geom, self.edges[a:b + 1])
-        sens = ms.sensor(mi, geom, self.scene.lens, film, {"type": "independent", "sample_count": 1})
+        sens = ms.sensor(mi, geom, self.scene.lens, film, {"type": self.scene.render.sampler, "sample_count": 1})
         if self.content is None:
             built = (self.xml_scene, mi.load_dict(sens), mi.load_dict(self.integrator))
         else:
             built = (mi.load_dict({**self.content, "sensor": sens, "integrator": self.integrator}), None, None)
         self._scenes = {g: built}  # keep one group's scene alive at a time
         return built
+
+    def sample_count(self, spp: int) -> int:
+        """The samples per pixel the scene's sampler takes for a request of `spp` (Mitsuba rounds up:
+        stratified to a square, ldsampler to a power of 4, orthogonal to a prime², multijitter to x·y)."""
+        mi = self.mi
+        level = mi.log_level()
+        mi.set_log_level(mi.LogLevel.Error)
+        try:
+            return int(mi.load_dict({"type": self.scene.render.sampler, "sample_count": int(spp)}).sample_count())
+        finally:
+            mi.set_log_level(level)
 
     def render_group(self, g: int, spp: int, seed: int) -> np.ndarray:
         """Band values [k, H, W] of group g (rgb path: the drive-weighted RGB [3, H, W])."""
@@ -200,6 +219,21 @@ class _Job:
         return np.where(hit, z, np.inf).astype(np.float32)
 
 
+def monitor_content(scene: Scene, geom: CameraGeometry) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
+    """What the panel shows: drive levels [3, rows, cols], primaries, their band means [3, K], metadata."""
+    m = scene.content
+    try:
+        drive, how = panel_drive(m.image, *m.resolution_px, m.transfer, _base(scene))
+        primaries, prim_desc = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, _base(scene), m.white_point)
+    except (DisplayImageError, spectra.SpectrumError) as e:
+        raise RenderError(f"{scene.source}: {e}") from None
+    matrix = spectra.band_means(primaries, np.asarray(scene.bands.edges_nm))  # [3, K]
+    meta = dict(display=how, primaries=prim_desc, monitor_size_m=list(m.size_m),
+                monitor_distance_m=geom.focus_distance_m if scene.lens.focus_distance_m is None else None,
+                band_matrix=matrix.tolist())
+    return drive, primaries, matrix, meta
+
+
 def _base(scene: Scene) -> Path:
     return Path(scene.source).resolve().parent
 
@@ -214,13 +248,41 @@ def _passes(spp: int, path: str) -> tuple[int, int]:
 
 def estimate_spp(job: _Job, target: float, seed: int) -> tuple[int, float]:
     """spp for a relative noise `target`, from two pilot passes; also the pilot's noise."""
-    _, noise = job.render_all(PILOT_SPP, 2, seed, pilot=True)  # noise of the mean: 2·PILOT_SPP samples
+    pilot_spp = job.sample_count(PILOT_SPP)
+    _, noise = job.render_all(pilot_spp, 2, seed, pilot=True)  # noise of the mean: 2·pilot_spp samples
     if noise is None or noise == 0:
         return 1, 0.0
-    spp = math.ceil(2 * PILOT_SPP * (noise / target) ** 2)
+    spp = math.ceil(2 * pilot_spp * (noise / target) ** 2)
     if spp > MAX_SPP:
         warnings.warn(f"noise target {target} needs {spp} spp; capped at {MAX_SPP}", RuntimeWarning, stacklevel=2)
     return int(min(max(spp, 1), MAX_SPP)), noise
+
+
+def render_analytic(scene: Scene) -> BandImage:
+    """The monitor's exact pixel-area means (render.analytic): no Monte Carlo, no Mitsuba, no noise."""
+    from udc_render.render.analytic import monitor_area_means, monitor_depth_m
+    t0 = time.perf_counter()
+    g = camera_geometry(scene)
+    drive, _, matrix, content_meta = monitor_content(scene, g)
+    rgb = monitor_area_means(g, scene.content.size_m, drive)
+    bands = np.einsum("ck,chw->khw", matrix.astype(np.float32), rgb)
+    r = scene.render
+    depth = monitor_depth_m(g, scene.content.size_m) if r.depth else None
+    edges = np.asarray(scene.bands.edges_nm)
+    meta = {
+        "scene": scene.source, "content": scene.content_type, "render_path": "analytic", "variant": None,
+        "backend": "numpy", "backend_reason": "exact pixel-area means of the panel (render.analytic); no Monte Carlo",
+        "spp": None, "passes": 0, "spp_per_pass": None, "seed": r.seed, "sampler": None,
+        "spp_from_noise_target": r.noise, "pilot_noise_rel": None, "pilot_spp": None, "noise_rel": 0.0, "max_depth": None, "bands_per_render": None,
+        "band_edges_nm": edges.tolist(), "band_names": band_names(edges),
+        "units": "band-mean radiance, W sr^-1 m^-2 nm^-1, pixel-area mean (box filter)",
+        "camera": g.describe(), "lens": vars(scene.lens), "sensor": vars(scene.sensor),
+        "supersample": r.supersample, "margin_um": r.margin_um,
+        "depth": "axial distance along the optical axis, m, at pixel centres; inf = no surface" if depth is not None
+        else "not rendered: the monitor is a plane at camera.focus_distance_m", "seconds": None, **content_meta}
+    meta["seconds"] = round(time.perf_counter() - t0, 3)
+    return BandImage(bands=bands, edges_nm=edges, pitch_um=g.pitch_um, margin_px=g.margin_px, depth_m=depth,
+                     meta=meta, primaries_matrix=matrix)
 
 
 def render_scene(scene: Scene, progress: bool = True) -> BandImage:
@@ -228,6 +290,8 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
     from tqdm import tqdm
     t0 = time.perf_counter()
     path = choose_path(scene)
+    if path == "analytic":
+        return render_analytic(scene)
     job = _Job(scene, path)
     r = job.scene.render
     pilot = None
@@ -235,6 +299,7 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
     if spp is None:
         spp, pilot = estimate_spp(job, r.noise, r.seed)
     n_pass, pass_spp = _passes(spp, path)
+    pass_spp = job.sample_count(pass_spp)
     bar = tqdm(total=n_pass * len(job.groups), desc=f"render ({path}, {job.backend.variant('rgb' if path == 'rgb_matrix' else 'spectral')})",
                unit="pass", disable=not progress, leave=False)
     means, noise = job.render_all(pass_spp, n_pass, r.seed, bar=bar)
@@ -248,7 +313,7 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
         "scene": job.scene.source, "content": job.scene.content_type, "render_path": path,
         "variant": job.backend.variant("rgb" if path == "rgb_matrix" else "spectral"),
         "backend": job.backend.kind, "backend_reason": job.backend.reason,
-        "spp": n_pass * pass_spp, "passes": n_pass, "spp_per_pass": pass_spp, "seed": r.seed,
+        "spp": n_pass * pass_spp, "passes": n_pass, "spp_per_pass": pass_spp, "seed": r.seed, "sampler": r.sampler,
         "pass_seeds": "SeedSequence([seed, group, pass]).generate_state(1)[0]",
         "spp_from_noise_target": r.noise, "pilot_noise_rel": pilot, "pilot_spp": 2 * PILOT_SPP if pilot else None,
         "noise_rel": noise, "max_depth": job.max_depth, "bands_per_render": r.bands_per_render if path == "spectral" else None,

@@ -14,7 +14,9 @@ from pathlib import Path
 from udc_render.errors import UdcError
 
 CONTENT_TYPES = ("monitor", "room", "hdr", "mitsuba_xml")
-RENDER_PATHS = ("auto", "rgb_matrix", "spectral")
+RENDER_PATHS = ("auto", "analytic", "rgb_matrix", "spectral")
+# Mitsuba samplers (plugin names); each pass is one independent randomisation (render.job)
+SAMPLERS = ("independent", "stratified", "multijitter", "orthogonal", "ldsampler")
 LENS_MODELS = ("pinhole", "thinlens")
 FRAMINGS = ("fit", "fill")
 TRANSFERS = ("srgb", "gamma2.2", "linear")
@@ -77,6 +79,7 @@ class Render:
     spp: int | None = 16
     noise: float | None = None  # target relative RMS noise; spp is then chosen from pilot renders
     seed: int = 0
+    sampler: str = "independent"  # a Mitsuba sampler (SAMPLERS)
     path: str = "auto"
     max_depth: int | None = None  # None: 2 for direct emission (monitor), 8 for 3D scenes
     margin_um: float = DEFAULT_MARGIN_UM

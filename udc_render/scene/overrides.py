@@ -14,7 +14,8 @@ from udc_render.scene.parse import parse_bands
 
 def with_overrides(scene: Scene, *, spp: int | None = None, noise: float | None = None, seed: int | None = None,
                    path: str | None = None, bands_nm: str | None = None, image: str | None = None,
-                   sensor_px: tuple[float, float] | None = None, pitch_um: float | None = None) -> Scene:
+                   sensor_px: tuple[float, float] | None = None, pitch_um: float | None = None,
+                   sampler: str | None = None) -> Scene:
     """The scene with each given setting replaced (None: the scene's own)."""
     if spp is not None and noise is not None:
         raise SceneError(f"--spp = {spp} and --noise = {noise}: give one of them")
@@ -30,7 +31,12 @@ def with_overrides(scene: Scene, *, spp: int | None = None, noise: float | None 
         if path == "rgb_matrix" and not isinstance(scene.content, Monitor):
             raise SceneError(f"--path rgb_matrix: only for the monitor alone; {scene.source} has "
                              f"{scene.content_type} content")
+        if path == "analytic" and not (isinstance(scene.content, Monitor) and scene.lens.model == "pinhole"):
+            raise SceneError(f"--path analytic: only for the monitor alone through a pinhole lens; {scene.source} has "
+                             f"{scene.content_type} content and lens.model = {scene.lens.model!r}")
         scene = scene.with_render(path=path)
+    if sampler is not None:
+        scene = scene.with_render(sampler=sampler)
     if bands_nm is not None:
         scene = scene.with_bands(parse_bands(bands_nm))
     if image is not None:

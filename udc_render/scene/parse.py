@@ -12,7 +12,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from udc_render.scene.model import (CONTENT_TYPES, FRAMINGS, LENS_MODELS, MITSUBA_RANGE_NM,
-                                    RENDER_PATHS, TRANSFERS, Bands, Camera, HDRRoom, Lens, MitsubaXML, Monitor,
+                                    RENDER_PATHS, SAMPLERS, TRANSFERS, Bands, Camera, HDRRoom, Lens, MitsubaXML, Monitor,
                                     Render, Room, Scene, SceneError, Sensor)
 
 
@@ -170,6 +170,7 @@ def parse_scene(data: dict, source: str) -> Scene:
         spp=t.number("spp", d.spp, 1, 1 << 20, integer=True),
         noise=t.number("noise", d.noise, 0, 1, lo_open=True),
         seed=t.number("seed", d.seed, 0, 2**32 - 1, integer=True),
+        sampler=t.string("sampler", d.sampler, SAMPLERS),
         path=t.string("path", d.path, RENDER_PATHS),
         max_depth=t.number("max_depth", d.max_depth, 1, 1024, integer=True, optional=True),
         margin_um=t.number("margin_um", d.margin_um, 0, 1e5),
@@ -181,6 +182,9 @@ def parse_scene(data: dict, source: str) -> Scene:
         t.fail("noise", render.noise, "either render.spp or render.noise, not both")
     if render.noise is not None:
         render = replace(render, spp=None)
+    if render.path == "analytic" and not (isinstance(content, Monitor) and lens.model == "pinhole"):
+        t.fail("path", render.path, "\"auto\", \"rgb_matrix\" or \"spectral\": \"analytic\" needs monitor content "
+                                    "and lens.model = \"pinhole\"")
     if render.path == "rgb_matrix" and not isinstance(content, Monitor):
         t.fail("path", render.path, "\"spectral\" or \"auto\" for content other than the monitor (its transport depends on wavelength)")
     needs_pose = isinstance(content, (Room, HDRRoom)) or (isinstance(content, MitsubaXML) and not content.use_xml_camera)
