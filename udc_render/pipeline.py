@@ -50,12 +50,13 @@ from psf.cache import cached
 from psf.engine import DEFAULT_FIELD_PHASES
 from psf.spectral import channel_kernels
 from udc_render.errors import UdcError
-from udc_render.optics import apply_kernels, band_spectra, convolve_bands
+from udc_render.optics import (FieldBasis, apply_kernels, band_spectra, convolve_bands, field_basis, field_weights,
+                               live_phases)
 from udc_render.optics import gamma
 from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.render import BandImage, render_scene
 from udc_render.scene import Scene
-from udc_render.scene.geometry import RenderGrid, psf_lens, render_grid
+from udc_render.scene.geometry import RenderGrid, camera_geometry, psf_lens, render_grid
 from udc_render.sensor import (Capture, DefectConfig, SensorConfig, band_electron_weights, capture, capture_electrons,
                                cos4_map, electrons_rgb, mosaic_of, rgb_to_rggb)
 
@@ -118,6 +119,7 @@ class Kernels:
     grid: RenderGrid
     band: dict[str, KernelSet]
     channel: dict[str, KernelSet] = field(default_factory=dict)
+    field_bases: dict[str, FieldBasis] = field(default_factory=dict)  # compact_kernels: rank-r phase bases
 
 
 def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um: tuple[float, float],
@@ -169,6 +171,23 @@ def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progre
     return Kernels(grid, band, channel)
 
 
+def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels:
+    """The kernels with each d > 0 set's phase kernels [K, P, P, S, S] replaced by their rank-r bases on
+    the scene's render grid (optics.field_basis; the same numbers convolve_field would make per call):
+    a dataset worker keeps 2/16 of the memory and makes the SVDs once. Unchanged when the field rank is
+    None (exact: every phase kernel is used)."""
+    if cfg.field_rank is None:
+        return kernels
+    cam = camera_geometry(scene)
+    band, bases = dict(kernels.band), {}
+    for name, ks in kernels.band.items():
+        if ks.field_kernels is not None and ks.distance_mm > 0:
+            wy, wx, _ = field_weights(ks, (cam.height_px, cam.width_px), kernels.grid.pitch_um, ks.distance_mm)
+            bases[name] = field_basis(ks.field_kernels, live_phases(wy, wx), cfg.field_rank)
+            band[name] = replace(ks, field_kernels=None)
+    return replace(kernels, band=band, field_bases=bases)
+
+
 def sensor_for_scene(sensor: SensorConfig, scene: Scene) -> SensorConfig:
     """The sensor with the scene's optics: pitch, f-number (irradiance πL/4N²) and focal length
     (cos⁴ fall-off) come from the scene file, never from the sensor settings."""
@@ -208,13 +227,13 @@ def ground_truth(band_image: BandImage, glass_kernels, sensor: SensorConfig, cfg
 
 
 def channel_electrons(band_image: BandImage, kernel_set, transmission, sensor: SensorConfig, cfg: SynthConfig,
-                      spectra=None) -> tuple[np.ndarray, dict]:
+                      spectra=None, field_basis: FieldBasis | None = None) -> tuple[np.ndarray, dict]:
     """Mean electrons [3, H, W] (float64, sensor pitch, cos⁴ included) that an R, G and B pixel would
     collect through one display: e_c = cos⁴ · bin(Σ_k w_ck g_k (x_k ⊗ k_k)), w = band_electron_weights.
     The band sum is taken in Fourier space (apply_kernels' channel_weights: three inverse FFTs, not K);
     blend 'output' sums the K blurred bands instead. Round-off negatives are set to 0 (counted)."""
     w = band_electron_weights(band_image.edges_nm, sensor)
-    kw = dict(blend=cfg.blend, field_rank=cfg.field_rank)
+    kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=field_basis)
     if cfg.blend == "source":
         optics = apply_kernels(band_image, kernel_set, transmission, cfg.precision, channel_weights=w, spectra=spectra, **kw)
         e = optics.images.astype(np.float64)
@@ -253,8 +272,8 @@ def check_grid(band_image: BandImage, grid: RenderGrid) -> None:
 def shared_spectra(band_image: BandImage, displays: list[Display], kernels: Kernels, cfg: SynthConfig):
     """The band images' spectra (optics.band_spectra), computed once when a display besides the ground
     truth convolves the plain bands too (d = 0, spectral form); else None (each view transforms its own)."""
-    plain = [d for d in displays if cfg.form == "spectral" and kernels.band[d.name].field_kernels is None
-             and not d.is_glass]
+    plain = [d for d in displays if cfg.form == "spectral" and d.name not in kernels.field_bases
+             and kernels.band[d.name].field_kernels is None and not d.is_glass]
     if not plain:
         return None
     return band_spectra(band_image.bands, kernels.grid.kernel_size_px, band_image.margin_px, cfg.precision)
@@ -318,7 +337,8 @@ def _spectral_capture(band_image: BandImage, d: Display, kernels: Kernels, cfg: 
     if d.is_glass and np.all(t == 1):  # the ground truth's optics exactly (a bare lens has no field kernels)
         e_rgb, applied = glass_electrons
     else:
-        e_rgb, applied = channel_electrons(band_image, kernels.band[d.name], t, base_sensor, cfg, spectra)
+        e_rgb, applied = channel_electrons(band_image, kernels.band[d.name], t, base_sensor, cfg, spectra,
+                                           kernels.field_bases.get(d.name))
     sensor = replace(base_sensor, gain=d.gain, form="spectral")
     cap = capture_electrons(mosaic_of(e_rgb), sensor, rng, cfg.defects, {
         "input_shape": list(band_image.bands.shape), "input_pitch_um": float(band_image.pitch_um),

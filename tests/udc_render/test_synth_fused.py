@@ -43,3 +43,20 @@ def test_fused_synthesis_equals_the_per_band_reference(small, distance_mm):
         np.testing.assert_allclose(got, want, rtol=0, atol=TOL * want.max(), err_msg=d.name)
         assert result.display_meta[d.name]["optics"]["model"] == (
             "field-dependent" if distance_mm and not d.is_glass else "field-independent")
+
+
+def test_compact_kernels_give_the_same_bytes(small):
+    """A dataset worker keeps the rank-r phase bases instead of the phase kernels (compact_kernels):
+    the same numbers as the bases convolve_field makes per call, so the captures are byte-identical."""
+    from udc_render.pipeline import compact_kernels
+    scene, band_image = small
+    displays = [preset("glass"), replace(preset("toled"), distance_mm=2.0)]
+    cfg = SynthConfig(field_phases=2, use_cache=False)
+    full = plan_kernels(scene, displays, cfg)
+    compact = compact_kernels(full, scene, cfg)
+    assert compact.band["toled"].field_kernels is None and compact.field_bases["toled"].rank == cfg.field_rank
+    a = synthesize(band_image, scene, displays, cfg, kernels=full)
+    b = synthesize(band_image, scene, displays, cfg, kernels=compact)
+    for name in ("glass", "toled"):
+        assert a.captures[name].mosaic_dn.tobytes() == b.captures[name].mosaic_dn.tobytes()
+    assert compact_kernels(full, scene, replace(cfg, field_rank=None)) is full  # exact: every phase kernel

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import resource
 import shutil
 import socket
 import tempfile
@@ -13,6 +14,7 @@ from itertools import islice
 from pathlib import Path
 
 from udc_render.dataset.plan import DatasetError, Task
+from udc_render.dataset.threads import blas_threads_env, set_worker_threads, threads_per_worker
 from udc_render.dataset.store import TMP_PREFIX, item_record
 from udc_render.optics.displays import Display
 from udc_render.pipeline import Kernels, SynthConfig
@@ -37,12 +39,14 @@ _WORKER_KERNELS: dict[str, Kernels] = {}  # per process: the job's kernels, load
 
 
 def worker_kernels(shared: Shared) -> Kernels:
-    """The job's kernels, loaded from the cache on a worker's first item and kept for the next ones."""
-    from udc_render.pipeline import plan_kernels
+    """The job's kernels, loaded from the cache on a worker's first item and kept for the next ones, the
+    d > 0 phase kernels reduced to their rank-r bases (pipeline.compact_kernels: same numbers, 1/8 the memory)."""
+    from udc_render.pipeline import compact_kernels, plan_kernels
     key = str(shared.out)
     if key not in _WORKER_KERNELS:
         _WORKER_KERNELS.clear()
-        _WORKER_KERNELS[key] = plan_kernels(shared.scene, shared.displays, shared.cfg)
+        _WORKER_KERNELS[key] = compact_kernels(plan_kernels(shared.scene, shared.displays, shared.cfg), shared.scene,
+                                               shared.cfg)
     return _WORKER_KERNELS[key]
 
 
@@ -72,7 +76,8 @@ def make_item(shared: Shared, task: Task) -> dict:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return {"item": task.item, "folder": task.folder, "render_s": round(t1 - t0, 3), "synth_s": round(t2 - t1, 3),
-            "write_s": round(time.perf_counter() - t2, 3), "host": socket.gethostname(), "pid": os.getpid()}
+            "write_s": round(time.perf_counter() - t2, 3), "host": socket.gethostname(), "pid": os.getpid(),
+            "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
 
 
 def _windowed(submit, wait_any, tasks, window: int):
@@ -106,7 +111,11 @@ def executor(workers: int, scheduler: str | None, shared: Shared):
         return
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))  # Dr.Jit threads and fork do not mix
+    threads = threads_per_worker(workers)
+    with blas_threads_env(threads):  # spawn: Dr.Jit threads and fork do not mix
+        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                   initializer=set_worker_threads, initargs=(threads,))
+        [f.result() for f in [pool.submit(os.getpid) for _ in range(workers)]]  # start them inside the env
     try:
         yield lambda tasks: _windowed(lambda t: pool.submit(make_item, shared, t),
                                       lambda fs: wait(fs, return_when=FIRST_COMPLETED), tasks, 2 * workers)

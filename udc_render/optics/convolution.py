@@ -41,6 +41,9 @@ import scipy.fft as sfft
 from udc_render.errors import UdcError
 
 PRECISIONS = {"float32": np.float32, "float64": np.float64}
+# scipy.fft threads when a call does not name its own: all cores (-1); a dataset worker sets its share
+# (udc_render.dataset.threads) so that N workers on N cores do not oversubscribe them.
+FFT_WORKERS = -1
 BLENDS = ("source", "output")
 PITCH_RTOL = 1e-6
 
@@ -92,6 +95,10 @@ def _check_margin(margin_px: int, size_px: int, shape) -> None:
         raise OpticsError(f"margin_px={margin_px} leaves no sensor frame in a {shape[0]}×{shape[1]} px image")
 
 
+def _workers(workers: int | None) -> int:
+    return FFT_WORKERS if workers is None else workers
+
+
 def _precision(precision: str):
     if precision not in PRECISIONS:
         raise OpticsError(f"precision must be one of {', '.join(PRECISIONS)}, got '{precision}'")
@@ -117,10 +124,11 @@ def _kernel_spectrum(kernel: np.ndarray, shape, dtype, workers: int) -> np.ndarr
 
 
 def band_spectra(bands: np.ndarray, size_px: int, margin_px: int, precision: str = "float32",
-                 workers: int = -1) -> np.ndarray:
+                 workers: int | None = None) -> np.ndarray:
     """rfft2 of every band [K, H, W] at fft_shape((H, W), size_px, margin_px): [K, Fy, Fx//2 + 1].
     One render's spectra serve the ground truth and every display of the same kernel size."""
     dtype = _precision(precision)
+    workers = _workers(workers)
     shape = fft_shape(bands.shape[1:], size_px, margin_px)
     return np.stack([sfft.rfft2(b.astype(dtype, copy=False), s=shape, workers=workers) for b in bands])
 
@@ -166,7 +174,7 @@ class _Output:
 
 
 def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains=None,
-                   precision: str = "float32", workers: int = -1, channel_weights=None,
+                   precision: str = "float32", workers: int | None = None, channel_weights=None,
                    spectra: np.ndarray | None = None) -> np.ndarray:
     """Linear convolution per band, cropped to the frame: y_k = g_k · (x_k ⊗ k_k)[m:H−m, m:W−m].
 
@@ -177,6 +185,7 @@ def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains
     FFTs, not K). spectra: band_spectra(bands, ...) computed once and shared (no forward FFT here).
     """
     dtype = _precision(precision)
+    workers = _workers(workers)
     bands = np.asarray(bands)
     kernels = np.asarray(kernels)
     if bands.ndim != 3 or kernels.ndim != 3 or kernels.shape[0] != bands.shape[0] or kernels.shape[1] != kernels.shape[2]:
@@ -253,23 +262,30 @@ def phase_basis(kernels: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray,
     return basis.reshape(r, S, S), U[:, :r] * sigma[None, :], residual
 
 
-_BASES: dict[int, tuple] = {}  # id(field_kernels) -> (weak reference, {(band, rank, live): phase_basis result})
+@dataclass(frozen=True)
+class FieldBasis:
+    """A d > 0 kernel set's phase kernels reduced to rank r on the phases a render grid uses
+    (field_basis): per band k, k_q ≈ Σ_r coeffs[k][q, r] · bases[k][r] over the live phases q. Enough
+    for convolve_field at that rank, at r/P² of the phase kernels' memory (a dataset worker keeps
+    this, not the [K, P, P, S, S] kernels: pipeline.compact_kernels)."""
+    rank: int
+    live: tuple
+    bases: list  # K × [r, S, S]
+    coeffs: list  # K × [n_live, r]
+    residuals: list  # K relative residuals (phase_basis)
 
 
-def cached_phase_basis(field_kernels: np.ndarray, k: int, live: list, rank: int) -> tuple:
-    """phase_basis of band k's live phase kernels, kept while `field_kernels` lives (one job's kernel
-    set serves every item of a worker: the SVD is made once per band, not once per capture)."""
-    import weakref
-    entry = _BASES.get(id(field_kernels))
-    if entry is None or entry[0]() is not field_kernels:
-        for key in [key for key, (ref, _) in _BASES.items() if ref() is None]:
-            del _BASES[key]
-        entry = _BASES[id(field_kernels)] = (weakref.ref(field_kernels), {})
-    key = (k, int(rank), tuple(live))
-    if key not in entry[1]:
-        basis, coeff, residual = phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank)
-        entry[1][key] = (basis.astype(field_kernels.dtype), coeff, residual)
-    return entry[1][key]
+def live_phases(weights_y: np.ndarray, weights_x: np.ndarray) -> tuple:
+    """The (j, i) phases whose interpolation weights are non-zero somewhere on the grid."""
+    return tuple((j, i) for j in range(weights_y.shape[0]) for i in range(weights_x.shape[0])
+                 if weights_y[j].any() and weights_x[i].any())
+
+
+def field_basis(field_kernels: np.ndarray, live: tuple, rank: int) -> FieldBasis:
+    """phase_basis of every band's live phase kernels (stored in the kernels' dtype)."""
+    parts = [phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank) for k in range(field_kernels.shape[0])]
+    return FieldBasis(int(rank), tuple(live), [b.astype(field_kernels.dtype) for b, _, _ in parts],
+                      [c for _, c, _ in parts], [r for _, _, r in parts])
 
 
 def _basis_map(coeff_r: np.ndarray, live, power: np.ndarray, wy: np.ndarray, wx: np.ndarray, dtype) -> np.ndarray:
@@ -282,8 +298,8 @@ def _basis_map(coeff_r: np.ndarray, live, power: np.ndarray, wy: np.ndarray, wx:
 
 def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np.ndarray, weights_y: np.ndarray,
                    weights_x: np.ndarray, margin_px: int, gains=None, blend: str = "source",
-                   precision: str = "float32", workers: int = -1, rank: int | None = None,
-                   channel_weights=None) -> tuple[np.ndarray, float]:
+                   precision: str = "float32", workers: int | None = None, rank: int | None = None,
+                   channel_weights=None, basis: FieldBasis | None = None) -> tuple[np.ndarray, float]:
     """Field-varying blur: y_k = g_k Σ_{j,i} k_kji ⊗ (w_j(row) w_i(col) P_kji x_k)  (blend='source'),
     or g_k Σ_{j,i} w_j w_i P_kji (k_kji ⊗ x_k) (blend='output'). Frame cropped as convolve_bands.
 
@@ -293,16 +309,18 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     rank-r basis (phase_basis), k_q ≈ Σ_r c_qr B_r, so 'source' is Σ_r B_r ⊗ (W_r x) with the weight
     maps W_r = Σ_q c_qr P_q w_q: r FFT pairs per band instead of one per phase. channel_weights [C, K]
     (blend 'source' only): the channel images Σ_k w_ck y_k, summed in Fourier space (C inverse FFTs).
+    basis: the rank-r bases made beforehand (field_basis; field_kernels may then be None).
     Returns (the images, the largest relative kernel residual over the bands; 0 when exact).
     """
     dtype = _precision(precision)
+    workers = _workers(workers)
     if blend not in BLENDS:
         raise OpticsError(f"blend must be one of {', '.join(BLENDS)}, got '{blend}'")
     if rank is not None and (isinstance(rank, bool) or not isinstance(rank, (int, np.integer)) or rank < 1):
         raise OpticsError(f"field rank = {rank!r}: expected a whole number ≥ 1, or None (every phase kernel)")
     K, H, W = bands.shape
     m = int(margin_px)
-    S = field_kernels.shape[-1]
+    S = (field_kernels if basis is None else basis.bases[0]).shape[-1]
     _check_margin(m, S, (H, W))
     gains = np.ones(K) if gains is None else np.asarray(gains, dtype=np.float64)
     shape = fft_shape((H, W), S, m)
@@ -311,8 +329,10 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
         raise OpticsError("channel_weights need blend='source' (blend 'output' weights each band after its inverse FFT)")
     wy = weights_y.astype(dtype)
     wx = weights_x.astype(dtype)
-    live = [(j, i) for j in range(wy.shape[0]) for i in range(wx.shape[0])
-            if wy[j].any() and wx[i].any()]
+    live = live_phases(wy, wx)
+    if basis is not None and (basis.live != live or basis.rank != rank):
+        raise OpticsError(f"field basis of rank {basis.rank} on {len(basis.live)} phases does not fit rank {rank} "
+                          f"on this grid's {len(live)} phases: make it for this grid (field_basis)")
     out = _Output(K, H, W, m, shape, dtype, gains, cw, workers)
     fy, fx = slice(m, H - m), slice(m, W - m)
     worst = 0.0
@@ -322,10 +342,11 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
             terms = ((field_kernels[k, j, i], wy[j][:, None] * wx[i][None, :], dtype(field_power[k, j, i]))
                      for j, i in live)  # lazily: one weight map in memory at a time
         else:
-            basis, coeff, residual = cached_phase_basis(field_kernels, k, live, rank)
+            b_k, coeff, residual = ((basis.bases[k], basis.coeffs[k], basis.residuals[k]) if basis is not None
+                                    else phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank))
             worst = max(worst, residual)
-            terms = ((basis[r], _basis_map(coeff[:, r], live, field_power[k], wy, wx, dtype), dtype(1.0))
-                     for r in range(basis.shape[0]))
+            terms = ((b_k[r], _basis_map(coeff[:, r], live, field_power[k], wy, wx, dtype), dtype(1.0))
+                     for r in range(b_k.shape[0]))
         if blend == "source":
             acc, weighted = None, np.empty_like(x)
             for kern, wmap, power in terms:
@@ -372,10 +393,29 @@ def _transmission(transmission, K: int) -> np.ndarray:
     return t
 
 
-def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "float32", workers: int = -1,
+def field_weights(kernel_set, shape_hw, pitch_um: float, distance_mm: float, image_distance_um: float | None = None,
+                  period_um=None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """The phase interpolation weights [Py, H] and [Px, W] of a render grid of shape (H, W) (pixel
+    centres from the optical axis at the grid centre; phase_weights), and what they assume."""
+    H, W = shape_hw
+    z = float(kernel_set.image_distance_um if image_distance_um is None else image_distance_um)
+    px, py = _display_period_um(kernel_set, period_um)
+    shifts = np.asarray(kernel_set.field_shifts_um, dtype=np.float64)
+    sx, sy = shifts[0, :, 0], shifts[:, 0, 1]
+    per_x, per_y = _axis_is_periodic(sx, px), _axis_is_periodic(sy, py)
+    wx = phase_weights((np.arange(W) - (W - 1) / 2) * pitch_um, sx, distance_mm * 1000, z, px, per_x)
+    wy = phase_weights((np.arange(H) - (H - 1) / 2) * pitch_um, sy, distance_mm * 1000, z, py, per_y)
+    d_um = distance_mm * 1000
+    return wy, wx, {"phases": [int(sy.size), int(sx.size)], "interpolation": "bilinear in phase",
+                    "periodic": [per_y, per_x], "banding_period_px": [z * py / d_um / pitch_um, z * px / d_um / pitch_um],
+                    "image_distance_um": z, "period_um": [px, py]}
+
+
+def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "float32", workers: int | None = None,
                   blend: str = "source", field: bool = True, distance_mm: float | None = None,
                   image_distance_um: float | None = None, period_um=None,
-                  field_rank: int | None = None, channel_weights=None, spectra: np.ndarray | None = None) -> OpticsResult:
+                  field_rank: int | None = None, channel_weights=None, spectra: np.ndarray | None = None,
+                  field_basis: FieldBasis | None = None) -> OpticsResult:
     """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
 
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (module doc).
@@ -385,6 +425,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     field_rank: d > 0: a rank-r basis of each band's phase kernels (convolve_field; None: exact).
     channel_weights [C, K]: images are the channel sums Σ_k w_ck y_k [C, H, W] (one inverse FFT per
     channel; blend 'source'); spectra: band_spectra of the band image, shared between calls (d = 0 path).
+    field_basis: the kernel set's rank-`field_rank` bases for this grid, made once (field_basis).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -417,29 +458,17 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
                "output": "bands" if channel_weights is None else "channel sums Σ_k w_ck y_k (Fourier space)",
                "fft_shape": list(fft_shape((H, W), S, m)), "margin_px": m, "kernel_px": S,
                "gain": "T · transmittance · (1 − energy_outside)", "distance_mm": d_mm, "workers": workers}
-    use_field = field and kernel_set.field_kernels is not None and d_mm > 0
+    has_field = kernel_set.field_kernels is not None or field_basis is not None
+    use_field = field and has_field and d_mm > 0
     if not use_field:
-        why = ("field kernels disabled" if kernel_set.field_kernels is not None and not field
-               else "d = 0 or no field kernels: one kernel per band")
+        why = ("field kernels disabled" if has_field and not field else "d = 0 or no field kernels: one kernel per band")
         applied.update(model="field-independent", skipped=[f"field-dependent blur ({why})"])
         images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra)
     else:
-        z = float(kernel_set.image_distance_um if image_distance_um is None else image_distance_um)
-        px, py = _display_period_um(kernel_set, period_um)
-        shifts = np.asarray(kernel_set.field_shifts_um, dtype=np.float64)
-        sx, sy = shifts[0, :, 0], shifts[:, 0, 1]
-        per_x, per_y = _axis_is_periodic(sx, px), _axis_is_periodic(sy, py)
-        # positions of pixel centres from the optical axis (the frame centre = the grid centre)
-        x_um = (np.arange(W) - (W - 1) / 2) * pitch
-        y_um = (np.arange(H) - (H - 1) / 2) * pitch
-        wx = phase_weights(x_um, sx, d_mm * 1000, z, px, per_x)
-        wy = phase_weights(y_um, sy, d_mm * 1000, z, py, per_y)
+        wy, wx, geometry = field_weights(kernel_set, (H, W), pitch, d_mm, image_distance_um, period_um)
         images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
-                                          gains, blend, precision, workers, field_rank, channel_weights)
+                                          gains, blend, precision, workers, field_rank, channel_weights, field_basis)
         if field_rank is not None:
             applied.update(field_rank=int(field_rank), field_rank_kernel_residual=residual)
-        applied.update(model="field-dependent", blend=blend, phases=[int(sy.size), int(sx.size)],
-                       interpolation="bilinear in phase", periodic=[per_y, per_x],
-                       banding_period_px=[z * py / (d_mm * 1000) / pitch, z * px / (d_mm * 1000) / pitch],
-                       image_distance_um=z, period_um=[px, py])
+        applied.update(model="field-dependent", blend=blend, **geometry)
     return OpticsResult(np.ascontiguousarray(images, dtype=np.float32), pitch, wl.copy(), gains, t, applied)
