@@ -2,10 +2,12 @@
 
     <data>/manifest.jsonl                      one line per item: folder, split, displays
     <data>/<split>/shard_k/item_i/gt.exr       linear camera RGB [3, H, W], units of the white level
-    <data>/<split>/shard_k/item_i/<display>/packed.tiff   uint16 [4, H/2, W/2] (R, Gr, Gb, B)
-    <data>/<split>/shard_k/item_i/<display>/capture.json  black level and range (DN)
+    <data>/<split>/shard_k/item_i/<display>/raw.dng   uint16 RGGB mosaic [H, W] (DN) with its black and
+                                               white levels (udc_render.io.dng), packed on reading
 
-Input x = (DN − black) / (white − black) per packed plane; target y = gt (same units, not clipped).
+Input x = (DN − black) / (white − black) per packed plane [4, H/2, W/2] (R, Gr, Gb, B); target y = gt
+(same units, not clipped). The DNG is uncompressed, so reading and packing it (~1.5 ms at 2048 × 1024)
+is ~20× faster than the zlib packed TIFF it replaced (benchmarks/README.md, "bench_raw_files.py").
 
 Augmentation keeps the Bayer pattern (Liu et al. 2019, docs/PHYSICS.md §7): the 8 flips/transposes are
 applied to the full-resolution mosaic and to the ground truth; a flip along an axis moves R to odd

@@ -204,14 +204,13 @@ def write_pairs(root, splits=(("train", 6), ("val", 1), ("test", 2)), size_px=(6
                 gamma=0.5, blur_px=9, noise=0.01, seed=0):
     """A dataset folder in `udc-render dataset`'s layout with synthetic pairs (no rendering): smooth
     random ground truth (Gaussian blobs), capture = γ · (ground truth ⊗ a 1 × blur_px horizontal box)
-    + Gaussian noise (σ = noise), mosaicked and packed. Returns the folder."""
+    + Gaussian noise (σ = noise), mosaicked and written as raw.dng. Returns the folder."""
     import json
     from pathlib import Path
-    import tifffile
     from scipy.ndimage import gaussian_filter, uniform_filter1d
     from udc_render.sensor import mosaic_of
+    from udc_render.io.dng import save_dng
     from udc_render.io.exr import save_exr
-    from udc_render.sensor import pack_rggb
     root, rng = Path(root), np.random.default_rng(seed)
     h, w = size_px
     lines, item = [], 0
@@ -226,8 +225,7 @@ def write_pairs(root, splits=(("train", 6), ("val", 1), ("test", 2)), size_px=(6
                 blurred = uniform_filter1d(gt, blur_px, axis=2, mode="nearest")
                 raw = np.clip(gamma * mosaic_of(blurred) + rng.normal(0, noise, (h, w)), 0, 1)
                 (root / folder / d).mkdir()
-                tifffile.imwrite(root / folder / d / "packed.tiff", np.round(pack_rggb(raw) * 65535).astype(np.uint16),
-                                 photometric="minisblack")
+                save_dng(root / folder / d / "raw.dng", np.round(raw * 65535).astype(np.uint16), "Nikon 5100 (NPL)", 0, 65535)
                 (root / folder / d / "capture.json").write_text(json.dumps(
                     {"sensor": {"black_level_dn": 0, "white_level_dn": 65535, "pitch_um": 1.55,
                                 "camera": "Nikon 5100 (NPL)"}}))

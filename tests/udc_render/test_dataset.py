@@ -82,7 +82,8 @@ def test_layout_manifest_job_and_timing(reference):
         folder = reference / e["folder"]
         assert e["displays"] == ["glass", "toled"]
         assert e["files"] == sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
-        assert {"gt.exr", "item.json", "synth.json", "glass/raw.png", "toled/raw.png", "toled/packed.tiff"} <= set(e["files"])
+        assert {"gt.exr", "item.json", "synth.json", "glass/raw.dng", "toled/raw.dng", "toled/capture.json"} <= set(e["files"])
+        assert not any(f.endswith(("preview.png", "raw.png", "packed.tiff")) for f in e["files"])  # previews off
         record = json.loads((folder / "item.json").read_text())
         assert record == {k: v for k, v in e.items() if k != "files"}
         assert json.loads((folder / "synth.json").read_text())["item"] == e["item"]  # the noise stream's item
@@ -129,7 +130,7 @@ def test_killed_run_resumes_to_the_same_bytes(scene, reference, tmp_path, capsys
 def test_other_parameters_on_the_same_folder_are_refused(scene, reference, capsys):
     before = tree(reference)
     for extra, key in ((["--display", "poled"], "displays"), (["--noise-seed", "1"], "synth"),
-                       (["--spp", "4"], "scene"), (["--shard-size", "2"], "shard_size")):
+                       (["--spp", "4"], "scene"), (["--shard-size", "2"], "shard_size"), (["--previews"], "previews")):
         assert main(args(scene, reference, *extra)) == 2  # the later option wins
         line = one_error_line(capsys.readouterr().err)
         assert "holds a different job" in line and key in line
@@ -164,8 +165,18 @@ def test_image_folder_is_cycled_with_new_seeds(scene, tmp_path):
     m = manifest(out)
     assert [e["image"] for e in m] == ["b.png", "sub/a.png", "b.png"]
     assert [e["folder"] for e in m] == [f"train/shard_0000/item_{i:06d}" for i in range(3)]
-    raw = [(out / e["folder"] / "glass/raw.png").read_bytes() for e in m]
+    raw = [(out / e["folder"] / "glass/raw.dng").read_bytes() for e in m]
     assert raw[0] != raw[2]  # same image, other render and noise seeds
+
+
+def test_side_by_side_implies_previews(scene, tmp_path):
+    out = tmp_path / "data"
+    assert main(["dataset", "--builtin", "--scene", str(scene), "--display", "glass", "--count", "1", "--out", str(out),
+                 "--quiet", "--side-by-side"]) == 0
+    files = set(manifest(out)[0]["files"])
+    assert {"side_by_side.png", "gt_preview.png", "glass/preview.png", "glass/raw.dng"} <= files
+    job = json.loads((out / "job.json").read_text())
+    assert job["previews"] is True and job["side_by_side"] is True and job["version"] == 2
 
 
 def test_builtin_images_stay_distinct_past_the_list():

@@ -29,4 +29,4 @@ def test_plain_install_runs_the_demo_from_another_folder(tmp_path):
     run = subprocess.run([sys.executable, "-m", "udc_render.cli", "demo", "--sensor-px", "128,64", "--quiet",
                           "--out", str(tmp_path / "demo")], env=env, cwd=tmp_path, capture_output=True, text=True)
     assert run.returncode == 0, run.stderr[-2000:]
-    assert (tmp_path / "demo" / "poled" / "raw.png").is_file() and (tmp_path / "demo" / "summary.md").is_file()
+    assert (tmp_path / "demo" / "poled" / "raw.dng").is_file() and (tmp_path / "demo" / "summary.md").is_file()

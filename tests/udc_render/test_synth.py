@@ -12,7 +12,7 @@ from psf import layouts
 from udc_render.optics import displays as D
 from udc_render.optics import gamma as G
 from udc_render.sensor import demosaic_bilinear, mosaic_of
-from udc_render.io.images import load_raw_png
+from udc_render.io.dng import read_dng_mosaic
 from udc_render.metrics import psnr_db
 from udc_render.render import render_scene
 from udc_render.sensor import SensorConfig, pack_rggb
@@ -226,7 +226,6 @@ def test_banding_period_in_the_capture(udc, tmp_path, render_cache):
 def test_synth_files_round_trip_and_are_byte_identical(udc, tmp_path, render_cache):
     from udc_render.cli import main
     import OpenEXR
-    import tifffile
     scene_file = tmp_path / "img.toml"
     _scene(udc, scene_file, image="builtin:camera", framing="fit")
     outs = [tmp_path / "a", tmp_path / "b"]
@@ -236,14 +235,15 @@ def test_synth_files_round_trip_and_are_byte_identical(udc, tmp_path, render_cac
                      "--quiet"]) == 0
     a, b = outs
     files = sorted(p.relative_to(a) for p in a.rglob("*") if p.is_file())
-    assert {"gt.exr", "toled/raw.png", "toled/packed.tiff", "poled/capture.json", "glass/preview.png",
+    assert {"gt.exr", "gt_preview.png", "toled/raw.dng", "poled/capture.json", "glass/preview.png",
             "side_by_side.png", "summary.md", "synth.json"} <= {str(p) for p in files}
+    assert not {"toled/raw.png", "toled/packed.tiff"} & {str(p) for p in files}
     for p in files:
-        if p.suffix != ".png" or "raw" in p.name:  # matplotlib previews embed a version; RAW/PNG writers do not
+        if p.name != "side_by_side.png":  # matplotlib embeds its version; the other writers do not
             assert (a / p).read_bytes() == (b / p).read_bytes(), p
-    raw = load_raw_png(a / "toled/raw.png")
-    assert raw.dtype == np.uint16 and raw.shape == (64, 128)
-    assert np.array_equal(tifffile.imread(a / "toled/packed.tiff"), pack_rggb(raw))
+    raw = read_dng_mosaic(a / "toled/raw.dng")
+    assert raw.mosaic_dn.dtype == np.uint16 and raw.mosaic_dn.shape == (64, 128)
+    assert (raw.black_level_dn, raw.white_level_dn) == (0, 65535)
     meta = json.loads((a / "toled/capture.json").read_text())
     assert meta["display"]["name"] == "toled" and meta["sensor"]["gain"] == 6.0 and "rng_state_before" in meta
     with OpenEXR.File(str(a / "gt.exr")) as f:
@@ -262,7 +262,7 @@ def test_demo_runs_and_reports(tmp_path, capsys, render_cache):
     assert main(["demo", "--out", str(tmp_path), "--sensor-px", "64,32", "--quiet"]) == 0
     out = capsys.readouterr().out
     for name in ("glass", "toled", "poled"):
-        assert name in out and (tmp_path / name / "raw.png").is_file()
+        assert name in out and (tmp_path / name / "raw.dng").is_file()
     assert (tmp_path / "side_by_side.png").stat().st_size > 1000
 
 
@@ -320,10 +320,9 @@ def test_deps_known_gamma_is_the_gamma_that_made_the_capture(udc, tmp_path, rend
         out = tmp_path / form
         assert main(["synth", str(scene), "--display", "toled,poled", "--noise-model", "none", "--form", form,
                      "--distance-mm", "0", "--quiet", "--out", str(out)]) == 0
-        from udc_render.io.images import load_raw_png
-        glass = pack_rggb(_centre(load_raw_png(out / "glass" / "raw.png").astype(float))).reshape(4, -1).mean(1)
+        glass = pack_rggb(_centre(read_dng_mosaic(out / "glass" / "raw.dng").mosaic_dn.astype(float))).reshape(4, -1).mean(1)
         for name in ("toled", "poled"):
-            level = pack_rggb(_centre(load_raw_png(out / name / "raw.png").astype(float))).reshape(4, -1).mean(1)
+            level = pack_rggb(_centre(read_dng_mosaic(out / name / "raw.dng").mosaic_dn.astype(float))).reshape(4, -1).mean(1)
             known = known_gamma_rggb(Pair(0, "test", out, name, "white"))
             assert level / glass == pytest.approx(known, rel=0.01), (form, name)
             if form == "per_channel":

@@ -2,7 +2,7 @@
 
     udc-render dataset --images DIR | --builtin --display glass,toled,poled --count N --out DIR
                        [--profile physical|paper] [--split 200,40,60] [--shard-size 1000]
-                       [--workers N | --scheduler ADDRESS]
+                       [--workers N | --scheduler ADDRESS] [--previews] [--side-by-side]
 """
 from __future__ import annotations
 
@@ -39,7 +39,10 @@ def register(sub) -> None:
     run_on.add_argument("--workers", type=positive("--workers", int), default=1,
                         help="1: in this process; N > 1: a local pool of N processes [1]")
     run_on.add_argument("--scheduler", help="address of a Dask distributed scheduler (tcp://HOST:PORT) to run items on")
-    p.add_argument("--side-by-side", action="store_true", help="also write each item's side_by_side.png")
+    p.add_argument("--previews", action="store_true",
+                   help="also write each item's sRGB previews (gt_preview.png, <display>/preview.png) [off]")
+    p.add_argument("--side-by-side", action="store_true",
+                   help="also write each item's side_by_side.png (implies --previews)")
     add_scene_arguments(p, scene_option=True)
     add_capture_arguments(p)
 
@@ -62,7 +65,8 @@ def run(args) -> int:
     split = split_counts(args.count, args.split)
     cfg, displays = capture_setup(args)
     job = DatasetJob(scene_from_args(args), displays, cfg, out=out_dir(args.out), split=split, images_dir=args.images,
-                     shard_size=args.shard_size, side_by_side=args.side_by_side)
+                     shard_size=args.shard_size, side_by_side=args.side_by_side,
+                     previews=args.previews or args.side_by_side)
     s = run_dataset(job, args.workers, args.scheduler, progress=not args.quiet)
     rate = f", {s['wall_s'] / s['made']:.2f} s/item wall" if s["made"] else ""
     stale = f", {s['stale_removed']} stale temporary folders removed" if s["stale_removed"] else ""

@@ -65,7 +65,7 @@ def synth_and_write(scene, displays, cfg, out: Path, quiet: bool, keep_render: b
     print("PSNR (dB) against the ground truth: paper = udc_render.metrics protocol 'paper' (packed RAW, linear, "
           "no white balance); srgb = protocol 'srgb' (daylight balance, sRGB, border cropped)")
     print(f"kernels {t_kernels:.1f} s, render {t_render:.1f} s, captures {t_synth:.1f} s, total "
-          f"{time.perf_counter() - t0:.1f} s; wrote {out}/ (gt.exr, <view>/raw.png, packed.tiff, preview.png, "
+          f"{time.perf_counter() - t0:.1f} s; wrote {out}/ (gt.exr, gt_preview.png, <view>/raw.dng, preview.png, "
           "capture.json, side_by_side.png, summary.md)")
     return summary
 

@@ -12,7 +12,10 @@ sensor noise SeedSequence([noise seed, i, crc32(display)]) (pipeline.noise_seed)
     OUT/job.json                 the job's parameters; a re-run with other parameters is refused
     OUT/manifest.jsonl           one line per complete item, by item id (rewritten atomically)
     OUT/timing.jsonl             per-item run times (appended; kept out of the item files)
-    OUT/<split>/shard_<k>/item_<i>/  item.json + io.capture.write_synthesis's files
+    OUT/<split>/shard_<k>/item_<i>/  item.json + io.capture.write_synthesis's files: gt.exr,
+                                 <display>/raw.dng and capture.json, synth.json, summary.json/.md;
+                                 gt_preview.png and <display>/preview.png with previews only,
+                                 side_by_side.png with side_by_side only
 
 Items go to train, val and test in id order; shard k of a split holds its items k·shard_size …
 (k+1)·shard_size − 1 (by position in the split). An item is written into a hidden temporary folder
@@ -43,7 +46,7 @@ from udc_render.optics.displays import Display
 from udc_render.pipeline import SynthConfig, plan_kernels
 from udc_render.scene import Monitor, Scene
 
-JOB_VERSION = 1
+JOB_VERSION = 2  # 2: raw.dng replaces raw.png and packed.tiff; previews optional
 
 __all__ = ["DatasetError", "DatasetJob", "Task", "run_dataset", "SPLITS"]
 
@@ -52,7 +55,8 @@ __all__ = ["DatasetError", "DatasetJob", "Task", "run_dataset", "SPLITS"]
 class DatasetJob:
     """What decides a dataset's bytes: a monitor scene (its render seed is the job's base seed),
     the displays (glass first), the synthesis knobs, the images (None: the built-in list), the split
-    (train, val, test item counts), the shard size, the output folder, and whether to plot."""
+    (train, val, test item counts), the shard size, the output folder, whether to plot (side_by_side.png)
+    and whether to write the sRGB previews (gt_preview.png, <display>/preview.png; the plot draws them either way)."""
     scene: Scene
     displays: list[Display]
     cfg: SynthConfig
@@ -61,6 +65,7 @@ class DatasetJob:
     images_dir: Path | None = None
     shard_size: int = 1000
     side_by_side: bool = False
+    previews: bool = False
 
     def __post_init__(self):
         if not isinstance(self.scene.content, Monitor):
@@ -80,7 +85,8 @@ def job_params(job: DatasetJob, shared: Shared, source: str, images) -> dict:
     params = {"version": JOB_VERSION, "count": job.count, "split": dict(zip(SPLITS, job.split)),
               "shard_size": job.shard_size, "images": {"source": source, "list": [label for _, label in images]},
               "render_seed": job.scene.render.seed, "scene": dataclasses.asdict(shared.scene),
-              "displays": [d.describe() for d in shared.displays], "synth": cfg, "side_by_side": shared.side_by_side}
+              "displays": [d.describe() for d in shared.displays], "synth": cfg, "side_by_side": shared.side_by_side,
+              "previews": shared.previews}
     return json.loads(json.dumps(params, default=str))
 
 
@@ -90,7 +96,7 @@ def _shared(job: DatasetJob, out: Path) -> Shared:
     if cfg.use_cache and cfg.kernel_cache is None:  # workers must load the parent's kernels: pin the folder
         cfg = replace(cfg, kernel_cache=str(cache_dir().resolve()))
     scene = replace(job.scene, content=replace(job.scene.content, image="(per item)"))
-    return Shared(scene, job.displays, cfg, out, job.side_by_side)
+    return Shared(scene, job.displays, cfg, out, job.side_by_side, job.previews)
 
 
 def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None, progress: bool = True) -> dict:

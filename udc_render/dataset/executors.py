@@ -27,12 +27,14 @@ CONNECT_TIMEOUT_S = 10.0  # reaching a Dask scheduler and waiting for its first 
 class Shared:
     """What every item needs: the scene without its image, the displays, the synthesis knobs (with
     the kernel cache folder the parent filled: workers load those kernels and never recompute them,
-    so every worker uses the same bits), the output folder (absolute), and whether to plot."""
+    so every worker uses the same bits), the output folder (absolute), whether to plot and whether to
+    write the sRGB previews."""
     scene: Scene
     displays: list[Display]
     cfg: SynthConfig
     out: Path
     side_by_side: bool
+    previews: bool
 
 
 _WORKER_KERNELS: dict[str, Kernels] = {}  # per process: the job's kernels, loaded once per worker
@@ -68,7 +70,8 @@ def make_item(shared: Shared, task: Task) -> dict:
     final.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}{final.name}-", dir=final.parent))
     try:
-        write_synthesis(tmp, result, shared.cfg.sensor.camera, side_by_side=shared.side_by_side)
+        write_synthesis(tmp, result, shared.cfg.sensor.camera, side_by_side=shared.side_by_side,
+                        previews=shared.previews)
         save_json(tmp / "item.json", item_record(task, [d.name for d in shared.displays], shared.cfg.seed))
         os.chmod(tmp, 0o777 & ~current_umask())  # mkdtemp makes 0700
         os.rename(tmp, final)

@@ -1,15 +1,16 @@
-"""Files of a synthesis: RAW mosaics, packed RAW, ground truth, previews, sidecars, summary.
+"""Files of a synthesis: RAW mosaics (DNG), ground truth, previews, sidecars, summary.
 
 Layout of one synthesis (one scene, several displays) in a folder:
 
     gt.exr               linear camera RGB ground truth, float32 channels R, G, B (pipeline.py: units)
-    gt_preview.png       its sRGB preview (daylight white balance, see preview_srgb)
-    <display>/raw.png    RAW mosaic, 16-bit grey PNG (lossless), RGGB, DN
-    <display>/packed.tiff  packed RAW, uint16 [4, H/2, W/2] (R, Gr, Gb, B), zlib, planar
-    <display>/preview.png  sRGB preview of the bilinear-demosaiced RAW
+    gt_preview.png       its sRGB preview (daylight white balance, see preview_srgb); with previews only
+    <display>/raw.dng    RAW mosaic, DNG 1.4 (uint16, RGGB, DN, black and white levels, colour matrix;
+                         uncompressed: io/dng.py), read by libraw/rawpy and RAW editors; load_packed
+                         reads it for training as [4, H/2, W/2] (R, Gr, Gb, B)
+    <display>/preview.png  sRGB preview of the bilinear-demosaiced RAW; with previews only
     <display>/capture.json every parameter: sensor, display, optics, noise seeds and sampled noise
     synth.json           shared parameters: render, exposure, lens, kernels, forms
-    side_by_side.png     the previews next to each other, with PSNR
+    side_by_side.png     the previews next to each other, with PSNR; with side_by_side only
     summary.json / summary.md  mean level per channel, PSNR of each view against the ground truth
 
 Every file is written atomically and holds nothing that changes between identical runs (no times,
@@ -18,7 +19,6 @@ caller's log.
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +26,8 @@ import numpy as np
 from udc_render.errors import UdcError
 from udc_render.io.exr import read_exr, save_exr
 from udc_render.io.files import save_json, save_text
-from udc_render.io.images import read_packed_tiff, save_packed_tiff, save_raw_png, write_png
+from udc_render.io.dng import DngError, read_dng_mosaic, save_dng
+from udc_render.io.images import write_png
 from udc_render.io.previews import daylight_balance, preview_srgb
 from udc_render.metrics import PROTOCOLS, display_referred, paper_linear, psnr_db
 from udc_render.sensor import CHANNELS, demosaic_bilinear, mosaic_of, pack_rggb
@@ -57,25 +58,29 @@ def capture_summary(cap, gt: np.ndarray, rgb: np.ndarray, balance: np.ndarray, w
             "saturated_fraction": float((cap.mosaic_dn >= white_level_dn).mean())}
 
 
-def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True) -> dict:
-    """Write every file of a synth.SynthResult into `out` (module doc); returns the summary."""
+def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True, previews: bool = True) -> dict:
+    """Write every file of a synth.SynthResult into `out` (module doc); returns the summary. previews:
+    also write gt_preview.png and <display>/preview.png (the summary's PSNRs are computed either way);
+    side_by_side: also plot side_by_side.png (from the previews, made in memory when not written)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     balance = daylight_balance(camera)
     save_exr(out / "gt.exr", {c: result.gt[i] for i, c in enumerate("RGB")})
-    write_png(out / "gt_preview.png", preview_srgb(result.gt, balance))
+    if previews:
+        write_png(out / "gt_preview.png", preview_srgb(result.gt, balance))
     summary = {"views": {}, "units": f"mean_level: fraction of white − black; psnr_db_vs_gt: protocol paper "
                                      f"({PROTOCOLS['paper']}); psnr_db_vs_gt_srgb: protocol srgb ({PROTOCOLS['srgb']})"}
-    previews = {}
+    images = {}
     for name, cap in result.captures.items():
         d = out / name
         d.mkdir(exist_ok=True)
         s = cap.params["sensor"]
-        save_raw_png(d / "raw.png", cap.mosaic_dn)
-        save_packed_tiff(d / "packed.tiff", cap.packed_dn)
+        save_dng(d / "raw.dng", cap.mosaic_dn, s["camera"], s["black_level_dn"], s["white_level_dn"])
         rgb = demosaic_bilinear(cap.mosaic_dn.astype(np.float64) - s["black_level_dn"]) / (s["white_level_dn"] - s["black_level_dn"])
-        previews[name] = preview_srgb(rgb, balance)
-        write_png(d / "preview.png", previews[name])
+        if previews or side_by_side:
+            images[name] = preview_srgb(rgb, balance)
+        if previews:
+            write_png(d / "preview.png", images[name])
         save_json(d / "capture.json", {**cap.params, **result.display_meta[name]})
         summary["views"][name] = capture_summary(cap, result.gt, rgb, balance, s["white_level_dn"], s["black_level_dn"])
     save_json(out / "synth.json", result.meta)
@@ -83,7 +88,7 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True) -
     save_text(out / "summary.md", summary_markdown(summary))
     if side_by_side:
         from udc_render.io.plots import plot_side_by_side
-        plot_side_by_side(previews, summary, out / "side_by_side.png")
+        plot_side_by_side(images, summary, out / "side_by_side.png")
     return summary
 
 
@@ -98,15 +103,17 @@ def summary_markdown(summary: dict) -> str:
 
 
 def load_packed(capture_dir: Path) -> np.ndarray:
-    """[4, h, w] float32 packed RAW in units of the white level: (DN − black) / range."""
-    capture_dir = Path(capture_dir)
+    """[4, h, w] float32 packed RAW (R, Gr, Gb, B) of <capture_dir>/raw.dng in units of the white
+    level: (DN − black) / (white − black), the levels from the DNG's tags."""
+    path = Path(capture_dir) / "raw.dng"
     try:
-        sensor = json.loads((capture_dir / "capture.json").read_text())["sensor"]
-        dn = read_packed_tiff(capture_dir / "packed.tiff")
-    except FileNotFoundError as exc:
-        raise CaptureFileError(f"{exc.filename}: missing (is the dataset complete? re-run `udc-render dataset`)") from None
-    black, white = float(sensor["black_level_dn"]), float(sensor["white_level_dn"])
-    return ((dn.astype(np.float32) - black) / (white - black)).astype(np.float32)
+        raw = read_dng_mosaic(path)
+    except FileNotFoundError:
+        raise CaptureFileError(f"{path}: missing (is the dataset complete? re-run `udc-render dataset`)") from None
+    except DngError as exc:
+        raise CaptureFileError(str(exc)) from None
+    black, white = float(raw.black_level_dn), float(raw.white_level_dn)
+    return ((pack_rggb(raw.mosaic_dn).astype(np.float32) - black) / (white - black)).astype(np.float32)
 
 
 def load_gt(item_dir: Path) -> np.ndarray:

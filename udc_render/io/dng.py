@@ -9,13 +9,22 @@ camera's response to D65, green = 1; the RAW itself is never white balanced), Un
 the same mosaic twice gives the same bytes. libraw opens frames of at least 22 × 22 px only (its own
 limit; tifffile reads any size).
 
-Compression: none, chosen by `benchmarks/bench_raw_files.py --repeats 7` (table in benchmarks/README.md,
-"bench_raw_files.py"): on a 2048 × 1024 capture with the sensor's noise at gain 6 (T-OLED), the
-uncompressed DNG (4.19 MB) writes in 19 ms and reads and packs in 1.4 ms; the packed TIFF with zlib
-(level 6, the old packed.tiff) takes 261 ms and 32 ms for 3.85 MB, the 16-bit PNG 444 ms and 171 ms
-for 3.88 MB: shot noise fills the low bits, so deflate saves 8 % at any gain. DNG deflate
-(compression 8) is not an option: libraw 0.22 (the rawpy 0.28 wheel) decodes it only for
-floating-point DNGs and refuses a uint16 one ("Corrupted data or unexpected EOF").
+Compression: none, chosen from `.venv/bin/python benchmarks/bench_raw_files.py --repeats 7` (2048 × 1024
+capture with the sensor's noise at gain 6, the T-OLED's; medians, ms, on a loaded 2-core machine;
+benchmarks/README.md, "bench_raw_files.py", has the full table and its reading):
+
+    form                                   MB    write   read   read + pack   libraw
+    DNG, uncompressed (this module)        4.19   19.3    0.9      1.4        reads it (13.6)
+    DNG, deflate (8), level 6              3.88  264.4   32.6     36.1        refuses it
+    packed TIFF, zlib level 1              3.86  192.1   35.7     36.9        —
+    packed TIFF, zlib level 6 (old)        3.85  260.8   37.5     31.9        —
+    packed TIFF, uncompressed              4.19   11.9    0.7      0.9        —
+    16-bit PNG, pypng (old raw.png)        3.88  444.2  165.8    171.3        —
+
+Shot noise fills the low bits, so deflate saves 8 % (at gains 1, 6 and 25) for 10–20× the write time
+and 30–40 ms of inflate per read. DNG deflate is not an option anyway: libraw 0.22 (the rawpy 0.28
+wheel) decodes compression 8 only for floating-point DNGs and refuses a uint16 one ("Corrupted data
+or unexpected EOF").
 """
 from __future__ import annotations
 

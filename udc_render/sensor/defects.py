@@ -3,7 +3,7 @@
 The paper names "impulse noise caused by dead pixels or over-exposure in the camera sensors" as one
 of the gaps between its synthetic and its real data (Zhou et al. 2021, l.412). This module adds it
 to a capture's RAW mosaic, in DN, after noise, full well and quantisation (sensor.noise.expose) and
-before packing, so ``raw.png`` and ``packed.tiff`` both carry it (sensor.capture):
+before packing, so ``raw.dng`` and the packed RAW both carry it (sensor.capture):
 
 - a **dead** pixel reads the black level, whatever light it receives;
 - a **hot** pixel collects an extra dark charge q = hot_dark_e_per_s × exposure_s (a dark-current
