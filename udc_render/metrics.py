@@ -29,7 +29,13 @@ PROTOCOLS = {
 def encode_srgb(linear: np.ndarray) -> np.ndarray:
     """IEC 61966-2-1 sRGB encoding of linear values clipped to [0, 1] (the srgb protocol and every preview)."""
     x = np.clip(linear, 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+    low = x <= 0.0031308
+    low_values = 12.92 * x[low]
+    np.power(x, 1 / 2.4, out=x)  # in place: a frame holds millions of values
+    x *= 1.055
+    x -= 0.055
+    x[low] = low_values
+    return x
 
 
 def psnr_db(a: np.ndarray, b: np.ndarray, peak: float = 1.0) -> float:

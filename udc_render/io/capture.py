@@ -37,22 +37,29 @@ class CaptureFileError(UdcError):
     """A capture or ground-truth file that is missing or unreadable; one line."""
 
 
-def capture_psnr_db(packed: np.ndarray, gt: np.ndarray, rgb: np.ndarray, balance: np.ndarray) -> dict:
+def gt_references(gt: np.ndarray, balance: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The ground truth [3, H, W] as each protocol compares it, made once per item: (its RGGB samples
+    packed [4, H/2, W/2] ('paper'), its display-referred image ('srgb'))."""
+    return pack_rggb(paper_linear(mosaic_of(gt))), display_referred(gt, balance)
+
+
+def capture_psnr_db(packed: np.ndarray, gt: np.ndarray | None, rgb: np.ndarray, balance: np.ndarray,
+                    refs: tuple | None = None) -> dict:
     """PSNR of a capture against the ground truth under both protocols: 'paper' on the packed RAW
     [4, H/2, W/2] (white-level units) against the ground truth's RGGB samples; 'srgb' on its
-    demosaiced camera RGB `rgb` [3, H, W] (white-level units) against the ground truth [3, H, W]."""
-    ref = pack_rggb(paper_linear(mosaic_of(gt)))
-    return {"paper": psnr_db(paper_linear(packed), ref),
-            "srgb": psnr_db(display_referred(rgb, balance), display_referred(gt, balance))}
+    demosaiced camera RGB `rgb` [3, H, W] (white-level units) against the ground truth [3, H, W]
+    (refs: gt_references(gt, balance) made once, when several captures share a ground truth)."""
+    refs = refs if refs is not None else gt_references(gt, balance)
+    return {"paper": psnr_db(paper_linear(packed), refs[0]), "srgb": psnr_db(display_referred(rgb, balance), refs[1])}
 
 
-def capture_summary(cap, gt: np.ndarray, rgb: np.ndarray, balance: np.ndarray, white_level_dn: int,
+def capture_summary(cap, refs: tuple, rgb: np.ndarray, balance: np.ndarray, white_level_dn: int,
                     black_level_dn: int) -> dict:
     """Mean level per RGGB channel (fraction of the range), and PSNR against the ground truth under the
     paper protocol (packed RAW) and the srgb protocol (the demosaiced `rgb`; udc_render.metrics)."""
     rng_dn = white_level_dn - black_level_dn
     norm = (cap.packed_dn.astype(np.float64) - black_level_dn) / rng_dn
-    psnr = capture_psnr_db(norm, gt, rgb, balance)
+    psnr = capture_psnr_db(norm, None, rgb, balance, refs)
     return {"mean_level": {c: float(norm[i].mean()) for i, c in enumerate(CHANNELS)},
             "psnr_db_vs_gt": psnr["paper"], "psnr_db_vs_gt_srgb": psnr["srgb"],
             "saturated_fraction": float((cap.mosaic_dn >= white_level_dn).mean())}
@@ -70,7 +77,7 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True, p
         write_png(out / "gt_preview.png", preview_srgb(result.gt, balance))
     summary = {"views": {}, "units": f"mean_level: fraction of white − black; psnr_db_vs_gt: protocol paper "
                                      f"({PROTOCOLS['paper']}); psnr_db_vs_gt_srgb: protocol srgb ({PROTOCOLS['srgb']})"}
-    images = {}
+    images, refs = {}, gt_references(result.gt, balance)
     for name, cap in result.captures.items():
         d = out / name
         d.mkdir(exist_ok=True)
@@ -82,7 +89,7 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True, p
         if previews:
             write_png(d / "preview.png", images[name])
         save_json(d / "capture.json", {**cap.params, **result.display_meta[name]})
-        summary["views"][name] = capture_summary(cap, result.gt, rgb, balance, s["white_level_dn"], s["black_level_dn"])
+        summary["views"][name] = capture_summary(cap, refs, rgb, balance, s["white_level_dn"], s["black_level_dn"])
     save_json(out / "synth.json", result.meta)
     save_json(out / "summary.json", summary)
     save_text(out / "summary.md", summary_markdown(summary))
