@@ -65,17 +65,19 @@ def tmp_module(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def white_spectral(udc, tmp_module):
-    """pattern:white filling the frame, full spectral path: 64 × 32 px, 8 spp, 4 bands per render, no margin."""
+    """pattern:white filling the frame, full spectral path: 64 × 32 px, 8 spp, 4 bands per render, no margin;
+    the independent sampler (the test's z-scores take the pixels as i.i.d. estimates)."""
     s = scene_of(udc, tmp_module, framing="fill", **SMALL,
-                 render={"spp": 8, "path": "spectral", "margin_um": 0, "bands_per_render": 4})
+                 render={"spp": 8, "path": "spectral", "margin_um": 0, "bands_per_render": 4, "sampler": "independent"})
     return s, render_scene(s, progress=False)
 
 
 @pytest.fixture(scope="module")
 def astronaut(udc, tmp_module):
-    """builtin:astronaut (fit), 64 × 32 px, 16 spp: the rgb path (seed 1) and the spectral path (seed 2)."""
+    """builtin:astronaut (fit), 64 × 32 px, 16 spp: the rgb path (seed 1) and the spectral path (seed 2);
+    the independent sampler (the tests below use independent pixels and the 1/√N law)."""
     s = scene_of(udc, tmp_module, image="builtin:astronaut", framing="fit", **SMALL,
-                 render={"spp": 16, "margin_um": 0, "bands_per_render": 4})
+                 render={"spp": 16, "margin_um": 0, "bands_per_render": 4, "sampler": "independent"})
     return (s, render_scene(s.with_render(path="rgb_matrix", seed=1), progress=False),
             render_scene(s.with_render(path="spectral", seed=2), progress=False))
 
@@ -279,7 +281,7 @@ def test_hdr_sky_and_sun_have_their_luminance(spp):
     from udc_render.scene import load_scene, Sensor, Bands
     s = load_scene("hdr")
     s = replace(s, sensor=Sensor(32, 16, 99.2), bands=Bands((400.0, 700.0), 50.0))
-    s = s.with_render(spp=spp, max_depth=1, depth=False, seed=1)
+    s = s.with_render(spp=spp, max_depth=1, depth=False, seed=1, sampler="independent")  # i.i.d. pixels, binomial hits
     b = render_scene(s, progress=False)
     g = rig.camera_geometry(s)
     o = np.asarray(g.origin_m)
@@ -506,7 +508,8 @@ def test_user_xml_scene_renders_spectrally_from_its_own_camera(tmp_path):
     the XML's camera at (0.5, 0.2, 3) looking down −z. The scene file has no camera at all."""
     (tmp_path / "user.xml").write_text(XML)
     doc = {"sensor": {"width_px": 64, "height_px": 32, "pitch_um": 49.6}, "lens": {"focus_distance_m": 3.0},
-           "bands": {"range_nm": [400, 700], "step_nm": 50}, "render": {"spp": 8, "margin_um": 0},
+           "bands": {"range_nm": [400, 700], "step_nm": 50},
+           "render": {"spp": 8, "margin_um": 0, "sampler": "independent"},  # i.i.d. pixels for the z-scores
            "content": {"type": "mitsuba_xml", "file": "user.xml"}}
     s = parse_scene(doc, str(tmp_path / "user.toml"))
     assert s.camera.origin_m is None
@@ -562,7 +565,8 @@ def test_forced_scalar_variants_render_correctly(udc, tmp_path):
     """UDC_RENDER_VARIANT=scalar (what a machine without a working LLVM gets): both paths render with
     scalar_* variants (the spectral one through the Python panel texture) and the white panel still
     gives the analytic band values. A subprocess, because the variant is chosen once per process."""
-    doc = udc.monitor_doc(framing="fill", sensor_px=(32, 16), pitch_um=99.2, render={"spp": 8, "margin_um": 0},
+    doc = udc.monitor_doc(framing="fill", sensor_px=(32, 16), pitch_um=99.2,  # independent: i.i.d. pixels (z-scores)
+                          render={"spp": 8, "margin_um": 0, "sampler": "independent"},
                           bands={"range_nm": [400, 700], "step_nm": 50})
     env = dict(os.environ, UDC_RENDER_VARIANT="scalar", UDC_RENDER_CACHE=str(tmp_path / "cache"))
     r = subprocess.run([sys.executable, "-c", FALLBACK_SCRIPT, json.dumps(doc)], env=env, capture_output=True,

@@ -118,7 +118,7 @@ def add_scene_arguments(r: argparse.ArgumentParser, scene_option: bool = False) 
     r.add_argument("--seed", type=int, help="render seed [the scene's render.seed, 0]")
     r.add_argument("--path", choices=RENDER_PATHS, help="render path [auto: analytic (exact, no Monte Carlo) for the monitor alone through a pinhole]")
     r.add_argument("--sampler", choices=SAMPLERS, help="Mitsuba's sampler for the Monte Carlo paths [the scene's "
-                   "render.sampler, ldsampler]; each pass is an independent randomisation (study render: samplers)")
+                   "render.sampler, multijitter]; each pass is an independent randomisation (study render: samplers)")
     r.add_argument("--image", help="what the monitor shows: an image file, builtin:NAME or pattern:NAME")
     r.add_argument("--sensor-px", type=float_pair("--sensor-px"), help="sensor width,height in pixels")
     r.add_argument("--pitch-um", type=positive("--pitch-um"), help="sensor pixel pitch in µm")

@@ -79,7 +79,7 @@ class Render:
     spp: int | None = 16
     noise: float | None = None  # target relative RMS noise; spp is then chosen from pilot renders
     seed: int = 0
-    sampler: str = "independent"  # a Mitsuba sampler (SAMPLERS)
+    sampler: str = "multijitter"  # a Mitsuba sampler (SAMPLERS); study render: the fastest to a target error in 3D
     path: str = "auto"
     max_depth: int | None = None  # None: 2 for direct emission (monitor), 8 for 3D scenes
     margin_um: float = DEFAULT_MARGIN_UM
