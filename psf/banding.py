@@ -18,14 +18,45 @@ import scipy.fft as sfft
 from scipy.special import j1
 
 from .errors import PSFError
+from .fourier import WORKERS
 from .lens import Lens
 from .propagation import angular_spectrum_tf
 
-__all__ = ["PowerSeries", "banding_profile"]
+__all__ = ["order_autocorrelation", "disc_transform", "PowerSeries", "banding_profile"]
+
+
+def order_autocorrelation(c: np.ndarray) -> np.ndarray:
+    """b_k = Σ_m c_{m+k} c*_m for k_y ∈ [−2my, 2my], k_x ∈ [0, 2mx] of orders c [2my+1, 2mx+1] (exact); the
+    other half is b_{−k} = b_k* (|C|² below is real).
+
+    Zero-padded FFT pair: C = FFT(c) (along x over c's rows only, the padding rows being zero), then
+    b = IFFT(|C|²), whose half k_x ≥ 0 is conj(rfft2(|C|²)) / L²."""
+    ny, nx = c.shape
+    my, mx = ny // 2, nx // 2
+    ly, lx = sfft.next_fast_len(2 * ny - 1), sfft.next_fast_len(2 * nx - 1)
+    C = sfft.fft(sfft.fft(c, n=lx, axis=1, workers=WORKERS), n=ly, axis=0, workers=WORKERS)
+    power = C.real ** 2
+    power += C.imag ** 2
+    half = sfft.rfft2(power, workers=WORKERS)[np.arange(-2 * my, 2 * my + 1) % ly, :2 * mx + 1]
+    np.conj(half, out=half)
+    half /= ly * lx
+    return half
+
+
+def disc_transform(kx: np.ndarray, ky: np.ndarray, period_um, diameter_um: float) -> np.ndarray:
+    """Â(k/p) / Â(0) = 2 J1(q)/q, q = π D |k/p|, on the grid ky[:, None], kx[None, :] with kx ≥ 0 ascending
+    from 0: evaluated over |ky| (the disc is even) and its rows gathered."""
+    qx, qy = kx / period_um[0], np.arange(np.abs(ky).max() + 1) / period_um[1]
+    q = math.pi * diameter_um * np.hypot(qx[None, :], qy[:, None])
+    jinc = np.where(q > 0, 2 * j1(q) / np.where(q > 0, q, 1.0), 1.0)
+    return jinc[np.abs(ky)]
 
 
 class PowerSeries:
-    """P(s) for one display, lens, wavelength and distance, evaluated at any mask shift s."""
+    """P(s) for one display, lens, wavelength and distance, evaluated at any mask shift s.
+
+    Kept as the half k_x ≥ 0 of the weights w_k = b_k Â(k/p) (w_{−k} = w_k*, so P = Re Σ_{k_x ≥ 0} γ w_k
+    e^{−2πi k·s/p} with γ = 2 for k_x > 0); `weights` gives the whole grid [ky, kx]."""
 
     def __init__(self, display, lens: Lens, wavelength_um: float, distance_um: float):
         px, py = display.period_um
@@ -33,24 +64,29 @@ class PowerSeries:
         kx, ky = np.arange(-mx, mx + 1), np.arange(-my, my + 1)
         nux, nuy = kx / px, ky / py
         c = display.fourier_coefficients(kx, ky) * angular_spectrum_tf(nux, nuy, wavelength_um, distance_um)
-        c[nux[None, :] ** 2 + nuy[:, None] ** 2 >= 1.0 / wavelength_um ** 2] = 0.0
-        # b_k = Σ_m c_{m+k} c*_m  (autocorrelation over orders, zero-padded FFT: exact)
-        ly, lx = sfft.next_fast_len(4 * my + 1), sfft.next_fast_len(4 * mx + 1)
-        C = sfft.fft2(c, s=(ly, lx))
-        b = sfft.ifft2(np.abs(C) ** 2)
+        c[np.add.outer(nuy ** 2, nux ** 2) >= 1.0 / wavelength_um ** 2] = 0.0
         self.kx, self.ky = np.arange(-2 * mx, 2 * mx + 1), np.arange(-2 * my, 2 * my + 1)
-        b = b[np.ix_(self.ky % ly, self.kx % lx)]
-        q = math.pi * lens.aperture_um * np.hypot(self.kx[None, :] / px, self.ky[:, None] / py)
-        jinc = np.where(q > 0, 2 * j1(q) / np.where(q > 0, q, 1.0), 1.0)
-        self.weights = b * (math.pi * lens.aperture_um ** 2 / 4) * jinc
         self.period_um = (px, py)
+        half = order_autocorrelation(c)
+        half *= disc_transform(self.kx[2 * mx:], self.ky, (px, py), lens.aperture_um)
+        half *= math.pi * lens.aperture_um ** 2 / 4
+        self._half = half
+
+    @property
+    def weights(self) -> np.ndarray:
+        """w_k on the grid ky[:, None], kx[None, :] (µm²)."""
+        return np.concatenate([np.conj(self._half[::-1, :0:-1]), self._half], axis=1)
 
     def __call__(self, shifts_um: np.ndarray) -> np.ndarray:
-        """Transmitted power (µm² × unit irradiance) at mask shifts [..., 2] (x, y) in µm."""
+        """Transmitted power (µm² × unit irradiance) at mask shifts [..., 2] (x, y) in µm:
+        Re Σ_ky e_y (W γ e_x) over the half k_x ≥ 0, one matrix product over the shifts."""
         s = np.asarray(shifts_um, dtype=np.float64)
-        ex = np.exp(-2j * np.pi * s[..., 0, None] * self.kx / self.period_um[0])  # [..., Kx]
-        ey = np.exp(-2j * np.pi * s[..., 1, None] * self.ky / self.period_um[1])  # [..., Ky]
-        return np.einsum("...y,yx,...x->...", ey, self.weights, ex).real
+        flat = s.reshape(-1, 2)
+        kx = self.kx[self.kx.size // 2:]
+        ex = np.exp(-2j * np.pi * flat[:, 0, None] * kx / self.period_um[0])  # [n, Kx/2]
+        ex[:, 1:] *= 2.0
+        ey = np.exp(-2j * np.pi * flat[:, 1, None] * self.ky / self.period_um[1])  # [n, Ky]
+        return np.sum(ey * (ex @ self._half.T), axis=1).real.reshape(s.shape[:-1])
 
 
 def banding_profile(display, lens: Lens | None = None, wavelength_nm: float = 520.0, distance_mm: float = 1.0,

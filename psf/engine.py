@@ -6,12 +6,21 @@ Pipeline per wavelength (and per field phase when d > 0):
   ─► autocorrelation (OTF) ─► exact pixel integration and MFT / chirp-z to the sensor grid.
 With d = 0 the propagation is skipped, the pupil is wavelength-independent (in focus) and its
 autocorrelation is computed once for all wavelengths; field phases are skipped (no field dependence).
+
+At d > 0 the P² field phases of one wavelength share everything but their own pupil FFT pair
+(docs/PHYSICS.md §4, cost): the propagated mask spectrum (of one display period when the display is
+periodic: the window is its tiling, so each phase is shifted and back-transformed on one period and
+tiled over the aperture), the MFT matrices (fourier.PixelMFT), the power series. Phases that a mirror or
+inner translation of a periodic display maps onto one another (_phase_sources) are computed once and
+reflected: 9 of 16 for the T-OLED, 6 of 16 for the P-OLED. All of this is exact (to rounding);
+phase_rank (optional, off by default) trades error for time with a rank-r basis of the phases
+(_basis_kernels).
 """
 from __future__ import annotations
 
 import math
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.fft as sfft
@@ -20,7 +29,7 @@ from . import fourier
 from .banding import PowerSeries
 from .errors import AliasingWarning, PSFError, UnderSamplingWarning  # noqa: F401 (re-exported)
 from .lens import Lens
-from .propagation import angular_spectrum_tf, frequencies, shift_ramp
+from .propagation import angular_spectrum_tf, frequencies, ramp
 from .pupil import MASK_RASTERS, aperture_slices, display_grid, lens_grid, tile_mask
 
 __all__ = ["METHODS", "PRECISIONS", "DEFAULT_PUPIL_SAMPLES", "DEFAULT_FIELD_PHASES", "ALIAS_GUARD",
@@ -32,10 +41,12 @@ PRECISIONS = {"float32": np.complex64, "float64": np.complex128}
 DEFAULT_PUPIL_SAMPLES = 1024
 DEFAULT_FIELD_PHASES = 4  # per axis; study: mean kernel 2.3e-4 L1, banding within 15 % of its amplitude
 ALIAS_GUARD = 1.05
+SYMMETRY_TOL = 1e-9  # relative: rasters symmetric to this share their field phases' kernels (_phase_sources)
 WAVELENGTH_RANGE_NM = (200.0, 2000.0)  # scalar optics of visible/NIR cameras; sensitivities end well inside
 # Pupil windows larger than this are refused at once: at d > 0 every field phase and wavelength FFTs the
-# whole window (8192² ≈ 0.5 GB per complex64 copy, minutes per kernel set beyond it); at d = 0 only the
-# aperture crop is transformed and the bound is the window's memory (16384²: 2 GB per copy).
+# window (aperiodic tiles) or its display period and the doubled aperture crop (8192² ≈ 0.5 GB per complex64
+# copy, minutes per kernel set beyond it); at d = 0 only the aperture crop is transformed and the bound is
+# the window's memory (16384²: 2 GB per copy).
 MAX_PUPIL_WINDOW_SAMPLES = 8192 ** 2
 MAX_PUPIL_WINDOW_SAMPLES_D0 = 16384 ** 2
 
@@ -78,7 +89,7 @@ class KernelSet:
 
 
 def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples,
-              mask_raster):
+              mask_raster, phase_rank):
     wl = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
     if wl.ndim != 1 or wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
         raise PSFError(f"wavelengths_nm must be positive finite numbers, got "
@@ -95,6 +106,8 @@ def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, meth
         raise PSFError(f"distance_mm must be ≥ 0 and finite, got {distance_mm}")
     if field_phases is not None and not (isinstance(field_phases, (int, np.integer)) and field_phases >= 1):
         raise PSFError(f"field_phases must be an integer ≥ 1, got {field_phases}")
+    if phase_rank is not None and not (isinstance(phase_rank, (int, np.integer)) and phase_rank >= 1):
+        raise PSFError(f"phase_rank must be an integer ≥ 1 or None (exact), got {phase_rank}")
     if method not in METHODS:
         raise PSFError(f"method must be one of {', '.join(METHODS)}, got '{method}'")
     if precision not in PRECISIONS:
@@ -195,9 +208,14 @@ class _Plan:
     exact_power: bool
     phases: int
     shifts: np.ndarray
+    field_raster: np.ndarray | None
     mask_spec: np.ndarray | None
     fx: np.ndarray | None
     fy: np.ndarray | None
+    crop_rows: np.ndarray | None
+    crop_cols: np.ndarray | None
+    phase_rank: int | None
+    sources: tuple = ((0, False, False),)
 
 
 def _check_alias(plan: _Plan) -> None:
@@ -215,7 +233,7 @@ def _check_alias(plan: _Plan) -> None:
 
 
 def _plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, method, pupil_samples, precision,
-          pixel_integration, mask_raster, sensor_um, notes: list) -> _Plan:
+          pixel_integration, mask_raster, sensor_um, phase_rank, notes: list) -> _Plan:
     """The pupil window and mask, the aperture, the field phases; notes on what was skipped."""
     cdtype = PRECISIONS[precision]
     n_pupil = pupil_samples or auto_pupil_samples(lens, float(wl.min()), pixel_um, size_px)
@@ -231,92 +249,227 @@ def _plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, metho
     phases = (field_phases or DEFAULT_FIELD_PHASES) if use_field else 1
     shifts = (field_shifts(display.period_um, d_um, lens.image_distance_um, phases, sensor_um) if use_field
               else np.zeros((1, 1, 2)))
-    mask_spec = sfft.fft2(mask.astype(cdtype), workers=fourier.WORKERS) if use_field else None
-    fx, fy = (frequencies(grid.nx, grid.dx_um), frequencies(grid.ny, grid.dy_um)) if use_field else (None, None)
+    periodic = display is not None and getattr(display, "periodic", True)
+    raster = _field_raster(display, grid, mask) if use_field else None
+    mask_spec = sfft.fft2(raster.astype(cdtype), workers=fourier.WORKERS) if use_field else None
+    ny, nx = raster.shape if use_field else (0, 0)
+    fx, fy = (frequencies(nx, grid.dx_um), frequencies(ny, grid.dy_um)) if use_field else (None, None)
+    rows, cols = (np.arange(sy.start, sy.stop) % ny, np.arange(sx.start, sx.stop) % nx) if use_field else (None, None)
+    basis = use_field and phase_rank is not None
+    if basis and (method == "paper" or not pixel_integration):
+        notes.append("phase_rank unused: the phase basis works on pixel-integrated autocorrelations (method "
+                     "'mft' or 'czt'); every field phase computed exactly")
+    rank = min(phase_rank, phases ** 2) if basis and method != "paper" and pixel_integration else None
     # De-apodise where the pupil's spectrum is box-filtered: an area-weighted mask or a bare aperture
     # (not with defocus: its phase is point-sampled, not box-filtered). Transmitted power: the exact
     # series of psf.banding for periodic displays; the raster sum (× κ) for aperiodic tiles.
-    return _Plan(display, lens, wl, float(pixel_um), size_px, d_um, method, cdtype, pixel_integration,
+    plan = _Plan(display, lens, wl, float(pixel_um), size_px, d_um, method, cdtype, pixel_integration,
                  display is None or mask_raster == "area", n_pupil, grid, mask, kappa, pgrid, sy, sx,
                  lens.aperture_area_fraction(pgrid.x_edges_um, pgrid.y_edges_um), use_field,
-                 display is not None and getattr(display, "periodic", True), phases, shifts, mask_spec, fx, fy)
+                 periodic, phases, shifts, raster, mask_spec, fx, fy, rows, cols, rank)
+    return replace(plan, sources=_phase_sources(plan)) if use_field else plan
 
 
-def _pupil_mask(plan: _Plan, tf, shift) -> np.ndarray:
-    """The display's amplitude over the aperture: propagated by d and shifted (d > 0), else as rastered."""
-    if plan.use_field:
-        spec = plan.mask_spec * (tf * shift_ramp(plan.fx, plan.fy, *shift)).astype(plan.cdtype)
-        return sfft.ifft2(spec, workers=fourier.WORKERS)[plan.sy, plan.sx]
-    if plan.mask is not None:
-        return plan.mask[plan.sy, plan.sx]
-    return np.ones(plan.aperture.shape)
+def _field_raster(display, grid, mask: np.ndarray) -> np.ndarray:
+    """The raster the field phases propagate and shift: one display period of the window's mask when the
+    display is periodic (the window is its tiling, so the window's band-limited shifts are the period's,
+    tiled: the same field from FFTs of one period), else the whole window (with its margin)."""
+    if not getattr(display, "periodic", True):
+        return mask
+    px, py = display.period_um
+    return mask[:round(py / grid.dy_um), :round(px / grid.dx_um)]
 
 
-def _one_kernel(plan: _Plan, m, defocus, lam_nm: float, state: dict) -> np.ndarray:
-    """The (unnormalised) kernel of the pupil field m · aperture [· defocus] at λ, by the chosen method.
-    With d = 0 and no defocus the pupil is the same at every wavelength: its autocorrelation is kept
-    in state['R'] and the field is not rebuilt."""
-    pg, lam, z, S = plan.pgrid, lam_nm * 1e-3, plan.lens.image_distance_um, plan.size_px
-    reuse = plan.pixel_integration and plan.method != "paper" and not plan.use_field and defocus is None
-    if not (reuse and state.get("R") is not None):
-        g = (m * plan.aperture).astype(plan.cdtype)
-        if defocus is not None:
-            g = g * defocus.astype(plan.cdtype)
-    deapodize = plan.deapodize and defocus is None
+def _mirror_symmetries(plan: _Plan) -> list[tuple[bool, bool]]:
+    """The flips (flip_y, flip_x) that leave both the mask raster over the window and the aperture crop
+    unchanged (to SYMMETRY_TOL): reflections x → −x, y → −y about the optical axis (the window and,
+    when the crop is centred in it, the crop are symmetric about the axis)."""
+    centred = (plan.sy.start + plan.sy.stop == plan.grid.ny, plan.sx.start + plan.sx.stop == plan.grid.nx)
+    out = []
+    for flips in ((False, False), (False, True), (True, False), (True, True)):
+        axes = tuple(a for a, f in enumerate(flips) if f)
+        if all(centred[a] for a in axes) and all(
+                np.abs(a - np.flip(a, axes)).max() <= SYMMETRY_TOL * np.abs(a).max() for a in (plan.mask, plan.aperture)):
+            out.append(flips)
+    return out
+
+
+def _translation_test(plan: _Plan):
+    """t ↦ whether the band-limited shift by t (µm, x and y) leaves the mask raster unchanged: its spectrum
+    M carries only frequencies with ν·t ∈ ℤ, |M_ν| · |e^{−2πiν·t} − 1| ≤ SYMMETRY_TOL max |M| (whole periods
+    always; a cell's inner translations, e.g. the pentile's (p/2, p/2))."""
+    spec = np.abs(sfft.fft2(plan.field_raster, workers=fourier.WORKERS))
+    iy, ix = np.nonzero(spec > SYMMETRY_TOL * spec.max())
+    amp, fx, fy, tol = spec[iy, ix], plan.fx[ix], plan.fy[iy], SYMMETRY_TOL * spec.max()
+    return lambda t: bool(np.max(amp * 2 * np.abs(np.sin(np.pi * (fx * t[0] + fy * t[1])))) <= tol)
+
+
+def _phase_sources(plan: _Plan) -> tuple:
+    """(q0, flip_y, flip_x) for each field phase q = j·P + i: its kernel is phase q0's flipped (q0 = q:
+    computed). Phase q repeats q0 when a symmetry σ of the periodic display (a mirror of _mirror_symmetries)
+    and a translation t that leaves the raster unchanged give s_q = σ s_q0 + t: then
+    m(x − s_q) = m(σ(x − s_q0)), the pupil field is phase q0's reflected, and so is its kernel (exact,
+    up to rounding; the transmitted power comes from the series at every phase)."""
+    P = plan.phases
+    flat = plan.shifts.reshape(-1, 2)
+    if not plan.exact_power:
+        return tuple((q, False, False) for q in range(P * P))
+    mirrors, invariant = _mirror_symmetries(plan), _translation_test(plan)
+    sources = []
+    for q, s in enumerate(flat):
+        sources.append(next(((q0, fy, fx) for q0, (r, _, _) in enumerate(sources) if r == q0
+                             for fy, fx in mirrors
+                             if invariant(s - flat[q0] * (-1.0 if fx else 1.0, -1.0 if fy else 1.0))),
+                            (q, False, False)))
+    return tuple(sources)
+
+
+@dataclass(frozen=True)
+class _Wave:
+    """What the field phases of one wavelength share: the pupil weight (aperture [× defocus] in the
+    working precision), the mask spectrum × the angular-spectrum transfer over d (d > 0), the MFT
+    matrices (method 'mft' with pixel integration) and the transmitted-power series (periodic displays)."""
+    lam_nm: float
+    defocus: np.ndarray | None
+    weight: np.ndarray
+    spec: np.ndarray | None
+    mft: fourier.PixelMFT | None
+    series: PowerSeries | None
+
+
+def _wave(plan: _Plan, lam_nm: float) -> _Wave:
+    lens, pg, lam = plan.lens, plan.pgrid, lam_nm * 1e-3
+    defocus = lens.pupil_phase(pg.x_um, pg.y_um, lam)
+    weight = (plan.aperture.astype(np.finfo(plan.cdtype).dtype) if defocus is None
+              else (plan.aperture * defocus).astype(plan.cdtype))
+    spec = (plan.mask_spec * angular_spectrum_tf(plan.fx, plan.fy, lam, plan.d_um).astype(plan.cdtype)
+            if plan.use_field else None)
+    mft = (fourier.PixelMFT((2 * pg.ny - 1, pg.nx), pg.dx_um, pg.dy_um, lam, lens.image_distance_um, plan.pixel_um,
+                            plan.size_px, True, plan.cdtype, plan.deapodize and defocus is None)
+           if plan.method == "mft" and plan.pixel_integration else None)
+    series = PowerSeries(plan.display, lens, lam, plan.d_um) if plan.exact_power else None
+    return _Wave(lam_nm, defocus, weight, spec, mft, series)
+
+
+def _field_masks(plan: _Plan, wave: _Wave, phases: list[int]):
+    """(q, the display's amplitude over the aperture) for the field phases q = j·P + i listed: at d > 0 the
+    field raster's spectrum propagated over d and shifted by s = (x_i, y_j) (ramp(fy, y_j) ⊗ ramp(fx, x_i)),
+    back-transformed and gathered over the aperture crop (a periodic display's period tiled); at d = 0 the
+    mask as rastered (a bare lens: ones)."""
+    if not plan.use_field:
+        yield 0, plan.mask[plan.sy, plan.sx] if plan.mask is not None else np.ones(plan.aperture.shape)
+        return
+    P = plan.phases
+    for q in phases:
+        x_um, y_um = plan.shifts[q // P, q % P]
+        ramps = np.outer(ramp(plan.fy, y_um), ramp(plan.fx, x_um)).astype(plan.cdtype)
+        field = sfft.ifft2(wave.spec * ramps, workers=fourier.WORKERS)
+        yield q, field.take(plan.crop_rows, axis=0).take(plan.crop_cols, axis=1)
+
+
+def _flip(a: np.ndarray, flip_y: bool, flip_x: bool, spectrum: bool = False) -> np.ndarray:
+    """a[..., y, x] reflected about the centre (a kernel), or at frequency −k mod L (a spectrum: |G|² of the
+    reflected pupil field)."""
+    axes = tuple(ax for ax, f in ((-2, flip_y), (-1, flip_x)) if f)
+    out = np.flip(a, axes)
+    return np.roll(out, (1,) * len(axes), axes) if spectrum else out
+
+
+def _kernel_of_power(plan: _Plan, wave: _Wave, power: np.ndarray) -> np.ndarray:
+    """The pixel-integrated kernel of a padded pupil power spectrum |G|² (PixelMFT, or chirp-z of its lags)."""
+    pg = plan.pgrid
+    if wave.mft is not None:
+        return wave.mft.of_power(power, pg.dx_um, pg.dy_um)
+    R = fourier.lags_from_power(power, (pg.ny, pg.nx), pg.dx_um, pg.dy_um)
+    return fourier.pixel_kernel(R, pg.dx_um, pg.dy_um, wave.lam_nm * 1e-3, plan.lens.image_distance_um,
+                                plan.pixel_um, plan.size_px, plan.method, True, plan.cdtype,
+                                plan.deapodize and wave.defocus is None)
+
+
+def _one_kernel(plan: _Plan, wave: _Wave, g: np.ndarray, state: dict) -> np.ndarray:
+    """The (unnormalised) kernel of the pupil field g at λ, by the chosen method.
+    With d = 0 and no defocus the pupil is the same at every wavelength: its power spectrum is kept
+    in state['power']."""
+    pg, lam, z, S = plan.pgrid, wave.lam_nm * 1e-3, plan.lens.image_distance_um, plan.size_px
+    deapodize = plan.deapodize and wave.defocus is None
     if plan.method == "paper":
         kern, r_used = fourier.paper_kernel(g, pg.dx_um, pg.dy_um, lam, z, plan.pixel_um, S)
         if r_used < 1 and not state.get("warned_r"):
-            warnings.warn(f"paper recipe under-sampled at {lam_nm:g} nm: r = {r_used:.3g} < 1, the DFT grid is "
+            warnings.warn(f"paper recipe under-sampled at {wave.lam_nm:g} nm: r = {r_used:.3g} < 1, the DFT grid is "
                           f"coarser than the {plan.pixel_um} µm pixel", UnderSamplingWarning, stacklevel=4)
             state["warned_r"] = True
         return kern
     if not plan.pixel_integration:
         return fourier.point_kernel(g, pg.x_um, pg.y_um, pg.dx_um, pg.dy_um, lam, z, plan.pixel_um, S, plan.method,
                                     plan.cdtype, deapodize)
-    if reuse and state.get("R") is not None:
-        R = state["R"]
-    else:
-        R = fourier.autocorrelation_half(g, pg.dx_um, pg.dy_um)
-        state["R"] = R if reuse else None
-    return fourier.pixel_kernel(R, pg.dx_um, pg.dy_um, lam, z, plan.pixel_um, S, plan.method, True, plan.cdtype,
-                                deapodize)
+    if plan.use_field or wave.defocus is not None:
+        power = fourier.power_spectrum(g)
+    else:  # the same pupil at every wavelength
+        power = state.get("power")
+        if power is None:
+            power = state["power"] = fourier.power_spectrum(g)
+    return _kernel_of_power(plan, wave, power)
+
+
+def _basis_kernels(plan: _Plan, wave: _Wave, spectra: np.ndarray) -> np.ndarray:
+    """Kernels [Q, S, S] of Q phases' power spectra |G_q|² [Q, ly, lx] (overwritten) through a rank-r basis:
+    the mean spectrum and the r − 1 leading principal components of the deviations D_q = |G_q|² − mean
+    (eigenvectors V of the Q × Q Gram matrix D Dᵀ, components B_k = Σ_q V_qk D_q: a truncated SVD), so
+        K_q = T(mean) + Σ_k V_qk T(B_k),  T = the power spectrum's kernel (rfft2, pixel MFT: linear),
+    with r transforms instead of Q. The phase-summed kernel (hence the mean kernel and energy_outside)
+    is exact at any rank; r = Q reproduces every phase to rounding."""
+    mean = spectra.mean(axis=0)
+    spectra -= mean
+    flat = spectra.reshape(len(spectra), -1)
+    vecs = np.linalg.eigh((flat @ flat.T).astype(np.float64))[1][:, ::-1][:, :plan.phase_rank - 1]  # leading first
+    parts = [mean] + list((vecs.T.astype(flat.dtype) @ flat).reshape((-1,) + mean.shape))
+    kernels = np.array([_kernel_of_power(plan, wave, part) for part in parts])
+    return kernels[0] + np.tensordot(vecs, kernels[1:], axes=1)
 
 
 def _wavelength(plan: _Plan, lam_nm: np.float64, state: dict, progress) -> tuple:
     """(kernel [S, S], energy outside, transmittance, field kernels [P, P, S, S] | None, field power
     [P, P] | None) at one wavelength: the power-weighted sum over the field phases."""
     lens, P, S = plan.lens, plan.phases, plan.size_px
-    lam = lam_nm * 1e-3
-    defocus = lens.pupil_phase(plan.pgrid.x_um, plan.pgrid.y_um, lam)
-    tf = angular_spectrum_tf(plan.fx, plan.fy, lam, plan.d_um) if plan.use_field else None
-    series = PowerSeries(plan.display, lens, lam, plan.d_um) if plan.exact_power else None
-    field_k = np.zeros((P, P, S, S)) if plan.use_field else None
-    field_p = np.zeros((P, P)) if plan.use_field else None
-    acc, acc_power, acc_window = np.zeros((S, S)), 0.0, 0.0
-    for j in range(P):
-        for i in range(P):
-            m = _pupil_mask(plan, tf, plan.shifts[j, i])
-            if series is not None:
-                power = float(series(plan.shifts[j, i]))
+    wave = _wave(plan, lam_nm)
+    pg = plan.pgrid
+    Q, basis = P * P, plan.phase_rank is not None
+    kernels = np.zeros((Q, S, S))
+    if basis:
+        spectra = np.empty((Q,) + fourier.padded_shape((pg.ny, pg.nx)), np.finfo(plan.cdtype).dtype)
+    power = wave.series(plan.shifts) if wave.series is not None else np.zeros((P, P))
+    computed = [q for q, (q0, _, _) in enumerate(plan.sources) if q0 == q]
+    for q, m in _field_masks(plan, wave, computed):
+        g = (m * wave.weight).astype(plan.cdtype, copy=False)
+        if wave.series is None:
+            power[q // P, q % P] = plan.kappa * float(np.sum(np.abs(m) ** 2 * plan.aperture)) * pg.dx_um * pg.dy_um
+        if basis:
+            spectra[q] = fourier.power_spectrum(g)
+        else:
+            kernels[q] = _one_kernel(plan, wave, g, state)
+        if progress:
+            progress(1)
+    for q, (q0, fy, fx) in enumerate(plan.sources):
+        if q0 != q:  # a reflected copy of an earlier phase (_phase_sources)
+            if basis:
+                spectra[q] = _flip(spectra[q0], fy, fx, spectrum=True)
             else:
-                power = plan.kappa * float(np.sum(np.abs(m) ** 2 * plan.aperture)) * plan.pgrid.dx_um * plan.pgrid.dy_um
-            kern = _one_kernel(plan, m, defocus, lam_nm, state)
-            window = float(kern.sum())
-            if not (np.all(np.isfinite(kern)) and window > 0):
-                raise PSFError(f"kernel at {lam_nm:g} nm is not finite or carries no energy "
-                               f"(window sum {window}); check the display and lens")
-            acc += kern
-            acc_power += power
-            acc_window += window
-            if plan.use_field:
-                field_k[j, i] = kern / window
-                field_p[j, i] = power
-            if progress:
-                progress(1)
-    if plan.use_field:
-        field_p /= field_p.mean()
+                kernels[q] = _flip(kernels[q0], fy, fx)
+    if progress and Q > len(computed):
+        progress(Q - len(computed))
+    if basis:
+        kernels = _basis_kernels(plan, wave, spectra)
+    kernels = kernels.reshape(P, P, S, S)
+    windows = kernels.sum(axis=(-1, -2))
+    if not (np.all(np.isfinite(kernels)) and np.all(windows > 0)):
+        raise PSFError(f"kernel at {lam_nm:g} nm is not finite or carries no energy "
+                       f"(window sums {windows.min():g} … {windows.max():g}); check the display and lens")
+    acc_window, acc_power = float(windows.sum()), float(power.sum())
+    mean_kernel = kernels.sum(axis=(0, 1)) / acc_window
     bare_power = math.pi * lens.aperture_um ** 2 / 4
-    return acc / acc_window, 1.0 - acc_window / acc_power, acc_power / P ** 2 / bare_power, field_k, field_p
+    field_k = kernels / windows[..., None, None] if plan.use_field else None
+    field_p = power / power.mean() if plan.use_field else None
+    return mean_kernel, 1.0 - acc_window / acc_power, acc_power / P ** 2 / bare_power, field_k, field_p
 
 
 def _assemble(plan: _Plan, results: list, precision: str, mask_raster: str, sensor_um, notes: list) -> KernelSet:
@@ -332,6 +485,7 @@ def _assemble(plan: _Plan, results: list, precision: str, mask_raster: str, sens
     params = {"display": plan.display.describe() if plan.display is not None else {"kind": "none"},
               "lens": lens.describe(), "wavelengths_nm": wl.tolist(), "pixel_um": plan.pixel_um,
               "size_px": int(plan.size_px), "distance_mm": plan.d_um / 1000.0, "field_phases": int(plan.phases),
+              "phase_rank": plan.phase_rank,
               "method": plan.method, "pupil_samples": int(plan.n_pupil), "precision": precision,
               "pixel_integration": bool(plan.pixel_integration), "mask_raster": mask_raster,
               "deapodize": bool(plan.deapodize), "pupil_pitch_um": [pg.dx_um, pg.dy_um], "pupil_shape": [pg.ny, pg.nx],
@@ -349,7 +503,8 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                     pixel_um: float = 3.1, size_px: int = 255, distance_mm: float = 0.0,
                     field_phases: int | None = None, method: str = "mft", pupil_samples: int | None = None,
                     precision: str = "float32", pixel_integration: bool = True,
-                    mask_raster: str = "band_limited", sensor_um=PAPER_SENSOR_UM, progress=None) -> KernelSet:
+                    mask_raster: str = "band_limited", sensor_um=PAPER_SENSOR_UM,
+                    phase_rank: int | None = None, progress=None) -> KernelSet:
     """PSF kernels at the sensor for a display (None: bare lens) in front of a lens.
 
     display: a layout (psf.layouts, psf.micrograph: period_um, fourier_coefficients, cell_raster)
@@ -361,16 +516,22 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     precision: 'float32' (complex64 FFTs and products) or 'float64'.
     mask_raster: 'band_limited' (exact Fourier series, default) or 'area' (area-weighted, then
         de-apodised); see pupil.cell_raster. The aperture is always area-weighted.
-    progress: optional callable(n) called after each kernel (for progress bars).
+    phase_rank: None (default): every field phase exact. r ≥ 1 (d > 0, pixel-integrated methods): the
+        phases' kernels through a rank-r basis of their power spectra (the mean + r − 1 components, r
+        transforms per wavelength instead of one per phase; _basis_kernels); the mean kernel,
+        energy_outside, transmittance and field_power stay exact, the field kernels carry the measured
+        truncation error (docs/PHYSICS.md §4: T-OLED at 405–695 nm, L1 1.9e-2 at r = 4, 4.9e-3 at 12).
+    progress: optional callable(n) called with the number of kernels done (for progress bars).
 
-    Steps: _plan (window, mask, phases) ─► _wavelength per λ (_pupil_mask, _one_kernel per phase) ─► _assemble.
+    Steps: _plan (window, mask, phases, their symmetries) ─► _wavelength per λ (_wave shared by the phases,
+    _field_masks, _one_kernel or _basis_kernels) ─► _assemble.
     """
     lens = lens or Lens()
     wl = _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples,
-                   mask_raster)
+                   mask_raster, phase_rank)
     notes: list = []
     plan = _plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, method, pupil_samples, precision,
-                 pixel_integration, mask_raster, sensor_um, notes)
+                 pixel_integration, mask_raster, sensor_um, phase_rank, notes)
     _check_alias(plan)
     state: dict = {}
     results = [_wavelength(plan, lam_nm, state, progress) for lam_nm in wl]  # np.float64: keeps float64 products (NEP 50)

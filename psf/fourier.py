@@ -14,10 +14,35 @@ import numpy as np
 import scipy.fft as sfft
 from scipy.signal import czt
 
-__all__ = ["WORKERS", "LAG_TRANSFORMS", "autocorrelation_half", "pixel_kernel", "lag_transform", "point_kernel",
+__all__ = ["WORKERS", "LAG_TRANSFORMS", "padded_shape", "power_spectrum", "lags_from_power", "autocorrelation_half",
+           "PixelMFT", "pixel_kernel", "lag_transform", "point_kernel",
            "point_field", "paper_kernel"]
 
 WORKERS = -1  # scipy.fft threads: all cores
+
+
+def padded_shape(shape: tuple[int, int]) -> tuple[int, int]:
+    """FFT size holding every lag of an [ny, nx] field's autocorrelation without wrap: ≥ 2n − 1 per axis."""
+    ny, nx = shape
+    return sfft.next_fast_len(2 * ny - 1), sfft.next_fast_len(2 * nx - 1)
+
+
+def power_spectrum(g: np.ndarray) -> np.ndarray:
+    """|G|² of g zero-padded to padded_shape (real, g's precision). The FFT along x runs over g's
+    ny rows only (the padding rows are zero), then along y over every column."""
+    ly, lx = padded_shape(g.shape)
+    G = sfft.fft(sfft.fft(g, n=lx, axis=1, workers=WORKERS), n=ly, axis=0, workers=WORKERS)
+    return G.real ** 2 + G.imag ** 2
+
+
+def lags_from_power(power: np.ndarray, shape: tuple[int, int], dx_um: float, dy_um: float) -> np.ndarray:
+    """R(Δ) δxδy, Δy = −(ny−1)…(ny−1), Δx = 0…(nx−1), of a power spectrum on padded_shape(shape):
+    R = conj(rfft2(|G|²)) δxδy / L² (one real-input FFT)."""
+    ny, nx = shape
+    ly, lx = power.shape
+    R = np.conj(sfft.rfft2(power, workers=WORKERS)) * (dx_um * dy_um / (ly * lx))
+    rows = np.arange(-(ny - 1), ny) % ly
+    return R[rows, :nx]
 
 
 def autocorrelation_half(g: np.ndarray, dx_um: float, dy_um: float) -> np.ndarray:
@@ -25,13 +50,7 @@ def autocorrelation_half(g: np.ndarray, dx_um: float, dy_um: float) -> np.ndarra
 
     One FFT of the zero-padded pupil, |·|², and one real-input FFT (R = conj(FFT(|G|²)) / L²).
     """
-    ny, nx = g.shape
-    ly, lx = sfft.next_fast_len(2 * ny - 1), sfft.next_fast_len(2 * nx - 1)
-    G = sfft.fft2(g, s=(ly, lx), workers=WORKERS)
-    power = (G.real ** 2 + G.imag ** 2)
-    R = np.conj(sfft.rfft2(power, workers=WORKERS)) * (dx_um * dy_um / (ly * lx))
-    rows = np.arange(-(ny - 1), ny) % ly
-    return R[rows, :nx]
+    return lags_from_power(power_spectrum(g), g.shape, dx_um, dy_um)
 
 
 def _phase_matrix(coords_um: np.ndarray, lags: np.ndarray, step_um: float, scale_um: float, dtype):
@@ -47,7 +66,11 @@ def pixel_kernel(R_half: np.ndarray, dx_um: float, dy_um: float, wavelength_um: 
     deapodize divides by sinc²(δx u/λz) sinc²(δy v/λz): an area-weighted raster is the box-filtered
     mask sampled at δ, whose spectrum is the true one times sinc(δν); this restores the high
     diffraction orders to first order (evaluated at the pixel centre, error ~ (ρδ/λz)²).
+    method 'mft' runs PixelMFT (build it once to reuse its matrices over many R); 'czt' chirp-z.
     """
+    if method == "mft":
+        return PixelMFT(R_half.shape, dx_um, dy_um, wavelength_um, distance_um, pixel_um, size_px,
+                        pixel_integration, dtype, deapodize)(R_half)
     nyl, nx = R_half.shape
     ny = (nyl + 1) // 2
     lag_x, lag_y = np.arange(nx), np.arange(-(ny - 1), ny)
@@ -61,6 +84,72 @@ def pixel_kernel(R_half: np.ndarray, dx_um: float, dy_um: float, wavelength_um: 
     k = lag_transform(c, lag_y, lag_x, dy_um, dx_um, u, scale, method, dtype)
     k = 2.0 * k.real.astype(np.float64) * (pixel_um / scale) ** 2 * dx_um * dy_um
     return _deapodize(k, u, dx_um, dy_um, scale) if deapodize else k
+
+
+def _folded_matrices(u_um: np.ndarray, n: int, step_um: float, scale_um: float, pixel_um: float, rdtype):
+    """cos(θ_j m) w_m and sin(θ_j m) w_m, θ_j = 2π step u_j / scale, lags m = 0…n−1, w_m the pixel
+    sinc(ρ m step / scale) (pixel_um = 0: w = 1): [len(u), n] each."""
+    m = np.arange(n)
+    theta = 2 * np.pi * np.outer(u_um, m * step_um) / scale_um
+    w = np.sinc(pixel_um * m * step_um / scale_um)
+    return (np.cos(theta) * w).astype(rdtype), (np.sin(theta) * w).astype(rdtype)
+
+
+def _real_matmul(a: np.ndarray, z: np.ndarray) -> np.ndarray:
+    """a @ z for real a and complex z, as one real matrix product over z's interleaved (re, im) columns."""
+    z = np.ascontiguousarray(z)
+    return (a @ z.view(a.dtype)).view(z.dtype)
+
+
+class PixelMFT:
+    """pixel_kernel's MFT at one wavelength, its matrices built once and applied to any number of
+    half autocorrelations [2ny−1, nx] (the field phases of one λ share them).
+
+    Folded over the symmetric lags and pixel centres (u_{−j} = −u_j, θ_j = 2π δ u_j / λz):
+        Σ_m c_m e^{∓iθ_j m} = Σ_{m≥0} cos(θ_j m) e_m ∓ i Σ_{m>0} sin(θ_j m) o_m,  e_m, o_m = c_m ± c_{−m},
+    along y, then K(v, ±u) = 2 Re(A e^{∓iθ n}) = 2 (Re A · cos ± Im A · sin) along x: real matrix
+    products over u ≥ 0 only, a quarter of the operations of the complex MFT, same result.
+    """
+
+    def __init__(self, lag_shape: tuple[int, int], dx_um: float, dy_um: float, wavelength_um: float,
+                 distance_um: float, pixel_um: float, size_px: int, pixel_integration: bool = True,
+                 dtype=np.complex128, deapodize: bool = True):
+        nyl, nx = lag_shape
+        scale = wavelength_um * distance_um
+        rdtype = np.empty(0, dtype).real.dtype
+        u = np.arange(size_px // 2 + 1) * pixel_um
+        rho = pixel_um if pixel_integration else 0.0
+        self.cos_y, self.sin_y = _folded_matrices(u, (nyl + 1) // 2, dy_um, scale, rho, rdtype)
+        self.cos_x, self.sin_x = _folded_matrices(u, nx, dx_um, scale, rho, rdtype)
+        self.cos_x[:, 0] *= 0.5  # the Δx = 0 column counts once in K = 2 Re(·)
+        self.factor = 2.0 * (pixel_um / scale) ** 2 * dx_um * dy_um
+        full = (np.arange(size_px) - size_px // 2) * pixel_um
+        self.deapodize = (lambda k: _deapodize(k, full, dx_um, dy_um, scale)) if deapodize else None
+
+    def __call__(self, R_half: np.ndarray) -> np.ndarray:
+        ny = self.cos_y.shape[1]
+        return self._folded(R_half[ny - 1:ny], R_half[ny:], R_half[ny - 2::-1], 1.0, False)
+
+    def of_power(self, power: np.ndarray, dx_um: float, dy_um: float) -> np.ndarray:
+        """The kernel of a padded power spectrum |G|² (power_spectrum), from F = rfft2(|G|²) as it stands:
+        R(m) = conj(F_m) δxδy / L², the conjugate and the scale applied after the (real) matrix products."""
+        ly, lx = power.shape
+        ny, nx = self.cos_y.shape[1], self.cos_x.shape[1]
+        F = sfft.rfft2(power, workers=WORKERS)
+        return self._folded(F[:1, :nx], F[1:ny, :nx], F[ly - 1:ly - ny:-1, :nx], dx_um * dy_um / (ly * lx), True)
+
+    def _folded(self, zero, pos, neg, scale: float, conj: bool) -> np.ndarray:
+        """The kernel of lags 0, +m and −m (rows, m = 1…ny−1; their conjugates when conj) × scale."""
+        t1 = _real_matmul(self.cos_y, np.concatenate([zero, pos + neg]))  # [h+1, nx], rows u ≥ 0
+        t2 = _real_matmul(self.sin_y[:, 1:], pos - neg)
+        if conj:
+            t1, t2 = np.conj(t1), np.conj(t2)
+        back = slice(-1, 0, -1)                                          # rows u = hρ … ρ, for −u
+        re = np.concatenate([t1.real[back] - t2.imag[back], t1.real + t2.imag])
+        im = np.concatenate([t1.imag[back] + t2.real[back], t1.imag - t2.real])
+        c, s = re @ self.cos_x.T, im @ self.sin_x.T                      # [S, h+1]
+        k = np.concatenate([(c - s)[:, back], c + s], axis=1).astype(np.float64) * (self.factor * scale)
+        return self.deapodize(k) if self.deapodize else k
 
 
 def _deapodize(k: np.ndarray, u_um: np.ndarray, dx_um: float, dy_um: float, scale_um: float) -> np.ndarray:

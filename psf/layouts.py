@@ -22,6 +22,7 @@ import numpy as np
 from scipy.special import j1
 
 from .geometry import ellipse_areas, rect_areas
+from .propagation import ramp
 
 __all__ = ["LayoutError", "Rect", "Ellipse", "PeriodicLayout", "toled", "poled", "slit_grating", "disordered",
            "BUILTIN"]
@@ -49,8 +50,8 @@ class Rect:
 
     def spectrum(self, nu_x, nu_y):
         """∫ rect · exp(−2πi ν·x) dx (µm²) at frequencies nu_y[:, None], nu_x[None, :] (1/µm)."""
-        return (self.area_um2 * np.outer(np.sinc(nu_y * self.height_um), np.sinc(nu_x * self.width_um))
-                * np.exp(-2j * np.pi * (nu_y[:, None] * self.cy_um + nu_x[None, :] * self.cx_um)))
+        return self.area_um2 * np.outer(np.sinc(nu_y * self.height_um) * ramp(nu_y, self.cy_um),
+                                        np.sinc(nu_x * self.width_um) * ramp(nu_x, self.cx_um))
 
 
 @dataclass(frozen=True)
@@ -73,8 +74,7 @@ class Ellipse:
         """∫ ellipse · exp(−2πi ν·x) dx = π rx ry · 2 J1(2πq)/(2πq), q = |(rx νx, ry νy)|."""
         q = 2 * np.pi * np.hypot(nu_y[:, None] * self.ry_um, nu_x[None, :] * self.rx_um)
         jinc = np.where(q > 0, 2 * j1(q) / np.where(q > 0, q, 1.0), 1.0)
-        return (self.area_um2 * jinc
-                * np.exp(-2j * np.pi * (nu_y[:, None] * self.cy_um + nu_x[None, :] * self.cx_um)))
+        return self.area_um2 * jinc * np.outer(ramp(nu_y, self.cy_um), ramp(nu_x, self.cx_um))
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.fft as sfft
 
-__all__ = ["frequencies", "angular_spectrum_tf", "fresnel_tf", "shift_ramp", "propagate"]
+__all__ = ["frequencies", "angular_spectrum_tf", "fresnel_tf", "ramp", "shift_ramp", "propagate"]
 
 
 def frequencies(n: int, d_um: float) -> np.ndarray:
@@ -21,12 +21,17 @@ def frequencies(n: int, d_um: float) -> np.ndarray:
 def angular_spectrum_tf(fx, fy, wavelength_um: float, distance_um: float) -> np.ndarray:
     """Angular-spectrum transfer function on the grid fy[:, None], fx[None, :] (complex128)."""
     k2 = 1.0 / wavelength_um ** 2
-    nu2 = fx[None, :] ** 2 + fy[:, None] ** 2
-    prop = nu2 <= k2
+    nu2 = np.add.outer(fy ** 2, fx ** 2)
     root = np.sqrt(np.abs(k2 - nu2))
+    prop = nu2 <= k2
     phase = np.where(prop, -nu2 / (1.0 / wavelength_um + root), -1.0 / wavelength_um)
-    amplitude = np.where(prop, 1.0, np.exp(-2 * np.pi * distance_um * root))
-    return amplitude * np.exp(2j * np.pi * distance_um * phase)
+    phase *= 2 * np.pi * distance_um
+    out = np.empty(phase.shape, np.complex128)
+    np.cos(phase, out=out.real)
+    np.sin(phase, out=out.imag)
+    if not prop.all():
+        out[~prop] *= np.exp(-2 * np.pi * distance_um * root[~prop])
+    return out
 
 
 def fresnel_tf(fx, fy, wavelength_um: float, distance_um: float) -> np.ndarray:
@@ -34,9 +39,15 @@ def fresnel_tf(fx, fy, wavelength_um: float, distance_um: float) -> np.ndarray:
     return np.exp(-1j * np.pi * wavelength_um * distance_um * (fx[None, :] ** 2 + fy[:, None] ** 2))
 
 
+def ramp(f, shift_um: float) -> np.ndarray:
+    """exp(−2πi f s) along one axis: the 1-D factor of shift_ramp."""
+    return np.exp(-2j * np.pi * np.asarray(f) * shift_um)
+
+
 def shift_ramp(fx, fy, shift_x_um: float, shift_y_um: float) -> np.ndarray:
-    """exp(−2πi ν·s): multiplying a spectrum by it shifts the field by +s (band-limited shift)."""
-    return np.exp(-2j * np.pi * (fx[None, :] * shift_x_um + fy[:, None] * shift_y_um))
+    """exp(−2πi ν·s) = ramp(fy, s_y) ⊗ ramp(fx, s_x): multiplying a spectrum by it shifts the field by +s
+    (band-limited shift)."""
+    return np.outer(ramp(fy, shift_y_um), ramp(fx, shift_x_um))
 
 
 def propagate(field: np.ndarray, dx_um: float, dy_um: float, wavelength_um: float, distance_um: float,

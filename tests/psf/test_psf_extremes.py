@@ -377,7 +377,10 @@ def test_tiny_aperture_against_the_display_period_is_refused_at_once_when_d_is_p
 @pytest.mark.slow
 def test_tiny_aperture_at_d_zero_finishes():
     """The same aperture at d = 0 transforms only the aperture crop: 10 s and 2.5 GB here; the aperture
-    sees a sliver of one slit, so the transmittance is ~1e-7 and the kernel still has unit sum."""
-    ks = compute_kernels(layouts.toled(pitch_um=60.0), Lens(aperture_um=10.0), [520.0], size_px=15)
+    sees a sliver of one slit, so the transmittance is ~1e-7 and the kernel still has unit sum. float64:
+    the window's energy is |∫g|² of a field that nearly cancels (1e-16 of its power), below float32's
+    rounding (a float32 kernel was 29× its peak off, then its window sum came out ≤ 0: PSFError)."""
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), Lens(aperture_um=10.0), [520.0], size_px=15,
+                         precision="float64")
     assert np.all(np.isfinite(ks.kernels)) and abs(float(ks.kernels.sum()) - 1) < 1e-5
     assert 0 < ks.transmittance[0] < 1e-5
