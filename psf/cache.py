@@ -1,35 +1,25 @@
 """On-disk cache of kernel sets, keyed by every parameter that makes them.
 
 The key is the SHA-256 of the canonical JSON of (engine version, call name, all arguments,
-the display's full description including a micrograph's pixel hash, and compute_kernels' defaults:
-band and channel kernels pass their arguments on to it, so a changed default, e.g. phase_rank, gives
-new keys). Entries are .npz files
+the display's full description including a micrograph's pixel hash). Entries are .npz files
 written atomically by psf.kernel_io. Location: the `cache_dir` argument of cached(), else
 $UDC_RENDER_CACHE, else ~/.cache/udc-render/psf (read, never written: psf sets no environment).
 """
 from __future__ import annotations
 
 import hashlib
-import inspect
 import json
 import os
 from pathlib import Path
 
 import numpy as np
 
-from .engine import DEFAULT_FIELD_PHASES, DEFAULT_PUPIL_SAMPLES, KernelSet, compute_kernels
+from .engine import KernelSet
 from .kernel_io import load_kernels, save_kernels
 
-__all__ = ["ENGINE_VERSION", "engine_defaults", "cache_dir", "cache_key", "entry_path", "load", "store", "cached"]
+__all__ = ["ENGINE_VERSION", "cache_dir", "cache_key", "entry_path", "load", "store", "cached"]
 
-ENGINE_VERSION = "psf-3"  # psf-2: KernelSet.period_um, distance_mm, image_distance_um; psf-3: phase_rank
-
-
-def engine_defaults() -> dict:
-    """compute_kernels' default arguments (not display, lens, progress) and the constants its None defaults stand for."""
-    params = inspect.signature(compute_kernels).parameters.values()
-    out = {p.name: p.default for p in params if p.name not in ("display", "lens", "progress")}
-    return out | {"DEFAULT_FIELD_PHASES": DEFAULT_FIELD_PHASES, "DEFAULT_PUPIL_SAMPLES": DEFAULT_PUPIL_SAMPLES}
+ENGINE_VERSION = "psf-2"  # psf-2: KernelSet.period_um, distance_mm, image_distance_um
 
 
 def cache_dir() -> Path:
@@ -37,7 +27,7 @@ def cache_dir() -> Path:
 
 
 def cache_key(name: str, display, lens, **kwargs) -> str:
-    desc = {"engine": ENGINE_VERSION, "defaults": engine_defaults(), "call": name,
+    desc = {"engine": ENGINE_VERSION, "call": name,
             "display": display.describe() if display is not None else None,
             "lens": lens.describe(), "args": kwargs}
     blob = json.dumps(desc, sort_keys=True, default=lambda o: o.tolist() if isinstance(o, np.ndarray) else str(o))

@@ -12,9 +12,7 @@ At d > 0 the P² field phases of one wavelength share everything but their own p
 periodic: the window is its tiling, so each phase is shifted and back-transformed on one period and
 tiled over the aperture), the MFT matrices (fourier.PixelMFT), the power series. Phases that a mirror or
 inner translation of a periodic display maps onto one another (_phase_sources) are computed once and
-reflected: 9 of 16 for the T-OLED, 6 of 16 for the P-OLED. All of this is exact (to rounding);
-phase_rank (optional, off by default) trades error for time with a rank-r basis of the phases
-(_basis_kernels).
+reflected: 9 of 16 for the T-OLED, 6 of 16 for the P-OLED. All of this is exact (to rounding).
 """
 from __future__ import annotations
 
@@ -89,7 +87,7 @@ class KernelSet:
 
 
 def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples,
-              mask_raster, phase_rank):
+              mask_raster):
     wl = np.atleast_1d(np.asarray(wavelengths_nm, dtype=np.float64))
     if wl.ndim != 1 or wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
         raise PSFError(f"wavelengths_nm must be positive finite numbers, got "
@@ -106,8 +104,6 @@ def _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, meth
         raise PSFError(f"distance_mm must be ≥ 0 and finite, got {distance_mm}")
     if field_phases is not None and not (isinstance(field_phases, (int, np.integer)) and field_phases >= 1):
         raise PSFError(f"field_phases must be an integer ≥ 1, got {field_phases}")
-    if phase_rank is not None and not (isinstance(phase_rank, (int, np.integer)) and phase_rank >= 1):
-        raise PSFError(f"phase_rank must be an integer ≥ 1 or None (exact), got {phase_rank}")
     if method not in METHODS:
         raise PSFError(f"method must be one of {', '.join(METHODS)}, got '{method}'")
     if precision not in PRECISIONS:
@@ -214,7 +210,6 @@ class _Plan:
     fy: np.ndarray | None
     crop_rows: np.ndarray | None
     crop_cols: np.ndarray | None
-    phase_rank: int | None
     sources: tuple = ((0, False, False),)
 
 
@@ -233,7 +228,7 @@ def _check_alias(plan: _Plan) -> None:
 
 
 def _plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, method, pupil_samples, precision,
-          pixel_integration, mask_raster, sensor_um, phase_rank, notes: list) -> _Plan:
+          pixel_integration, mask_raster, sensor_um, notes: list) -> _Plan:
     """The pupil window and mask, the aperture, the field phases; notes on what was skipped."""
     cdtype = PRECISIONS[precision]
     n_pupil = pupil_samples or auto_pupil_samples(lens, float(wl.min()), pixel_um, size_px)
@@ -255,18 +250,13 @@ def _plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, metho
     ny, nx = raster.shape if use_field else (0, 0)
     fx, fy = (frequencies(nx, grid.dx_um), frequencies(ny, grid.dy_um)) if use_field else (None, None)
     rows, cols = (np.arange(sy.start, sy.stop) % ny, np.arange(sx.start, sx.stop) % nx) if use_field else (None, None)
-    basis = use_field and phase_rank is not None
-    if basis and (method == "paper" or not pixel_integration):
-        notes.append("phase_rank unused: the phase basis works on pixel-integrated autocorrelations (method "
-                     "'mft' or 'czt'); every field phase computed exactly")
-    rank = min(phase_rank, phases ** 2) if basis and method != "paper" and pixel_integration else None
     # De-apodise where the pupil's spectrum is box-filtered: an area-weighted mask or a bare aperture
     # (not with defocus: its phase is point-sampled, not box-filtered). Transmitted power: the exact
     # series of psf.banding for periodic displays; the raster sum (× κ) for aperiodic tiles.
     plan = _Plan(display, lens, wl, float(pixel_um), size_px, d_um, method, cdtype, pixel_integration,
                  display is None or mask_raster == "area", n_pupil, grid, mask, kappa, pgrid, sy, sx,
                  lens.aperture_area_fraction(pgrid.x_edges_um, pgrid.y_edges_um), use_field,
-                 periodic, phases, shifts, raster, mask_spec, fx, fy, rows, cols, rank)
+                 periodic, phases, shifts, raster, mask_spec, fx, fy, rows, cols)
     return replace(plan, sources=_phase_sources(plan)) if use_field else plan
 
 
@@ -367,12 +357,9 @@ def _field_masks(plan: _Plan, wave: _Wave, phases: list[int]):
         yield q, field.take(plan.crop_rows, axis=0).take(plan.crop_cols, axis=1)
 
 
-def _flip(a: np.ndarray, flip_y: bool, flip_x: bool, spectrum: bool = False) -> np.ndarray:
-    """a[..., y, x] reflected about the centre (a kernel), or at frequency −k mod L (a spectrum: |G|² of the
-    reflected pupil field)."""
-    axes = tuple(ax for ax, f in ((-2, flip_y), (-1, flip_x)) if f)
-    out = np.flip(a, axes)
-    return np.roll(out, (1,) * len(axes), axes) if spectrum else out
+def _flip(kernel: np.ndarray, flip_y: bool, flip_x: bool) -> np.ndarray:
+    """kernel [S, S] reflected about its centre pixel along y and/or x."""
+    return np.flip(kernel, tuple(ax for ax, f in ((0, flip_y), (1, flip_x)) if f))
 
 
 def _kernel_of_power(plan: _Plan, wave: _Wave, power: np.ndarray) -> np.ndarray:
@@ -411,54 +398,28 @@ def _one_kernel(plan: _Plan, wave: _Wave, g: np.ndarray, state: dict) -> np.ndar
     return _kernel_of_power(plan, wave, power)
 
 
-def _basis_kernels(plan: _Plan, wave: _Wave, spectra: np.ndarray) -> np.ndarray:
-    """Kernels [Q, S, S] of Q phases' power spectra |G_q|² [Q, ly, lx] (overwritten) through a rank-r basis:
-    the mean spectrum and the r − 1 leading principal components of the deviations D_q = |G_q|² − mean
-    (eigenvectors V of the Q × Q Gram matrix D Dᵀ, components B_k = Σ_q V_qk D_q: a truncated SVD), so
-        K_q = T(mean) + Σ_k V_qk T(B_k),  T = the power spectrum's kernel (rfft2, pixel MFT: linear),
-    with r transforms instead of Q. The phase-summed kernel (hence the mean kernel and energy_outside)
-    is exact at any rank; r = Q reproduces every phase to rounding."""
-    mean = spectra.mean(axis=0)
-    spectra -= mean
-    flat = spectra.reshape(len(spectra), -1)
-    vecs = np.linalg.eigh((flat @ flat.T).astype(np.float64))[1][:, ::-1][:, :plan.phase_rank - 1]  # leading first
-    parts = [mean] + list((vecs.T.astype(flat.dtype) @ flat).reshape((-1,) + mean.shape))
-    kernels = np.array([_kernel_of_power(plan, wave, part) for part in parts])
-    return kernels[0] + np.tensordot(vecs, kernels[1:], axes=1)
-
-
 def _wavelength(plan: _Plan, lam_nm: np.float64, state: dict, progress) -> tuple:
     """(kernel [S, S], energy outside, transmittance, field kernels [P, P, S, S] | None, field power
     [P, P] | None) at one wavelength: the power-weighted sum over the field phases."""
     lens, P, S = plan.lens, plan.phases, plan.size_px
     wave = _wave(plan, lam_nm)
     pg = plan.pgrid
-    Q, basis = P * P, plan.phase_rank is not None
+    Q = P * P
     kernels = np.zeros((Q, S, S))
-    if basis:
-        spectra = np.empty((Q,) + fourier.padded_shape((pg.ny, pg.nx)), np.finfo(plan.cdtype).dtype)
     power = wave.series(plan.shifts) if wave.series is not None else np.zeros((P, P))
     computed = [q for q, (q0, _, _) in enumerate(plan.sources) if q0 == q]
     for q, m in _field_masks(plan, wave, computed):
         g = (m * wave.weight).astype(plan.cdtype, copy=False)
         if wave.series is None:
             power[q // P, q % P] = plan.kappa * float(np.sum(np.abs(m) ** 2 * plan.aperture)) * pg.dx_um * pg.dy_um
-        if basis:
-            spectra[q] = fourier.power_spectrum(g)
-        else:
-            kernels[q] = _one_kernel(plan, wave, g, state)
+        kernels[q] = _one_kernel(plan, wave, g, state)
         if progress:
             progress(1)
     for q, (q0, fy, fx) in enumerate(plan.sources):
         if q0 != q:  # a reflected copy of an earlier phase (_phase_sources)
-            if basis:
-                spectra[q] = _flip(spectra[q0], fy, fx, spectrum=True)
-            else:
-                kernels[q] = _flip(kernels[q0], fy, fx)
+            kernels[q] = _flip(kernels[q0], fy, fx)
     if progress and Q > len(computed):
         progress(Q - len(computed))
-    if basis:
-        kernels = _basis_kernels(plan, wave, spectra)
     kernels = kernels.reshape(P, P, S, S)
     windows = kernels.sum(axis=(-1, -2))
     if not (np.all(np.isfinite(kernels)) and np.all(windows > 0)):
@@ -485,7 +446,6 @@ def _assemble(plan: _Plan, results: list, precision: str, mask_raster: str, sens
     params = {"display": plan.display.describe() if plan.display is not None else {"kind": "none"},
               "lens": lens.describe(), "wavelengths_nm": wl.tolist(), "pixel_um": plan.pixel_um,
               "size_px": int(plan.size_px), "distance_mm": plan.d_um / 1000.0, "field_phases": int(plan.phases),
-              "phase_rank": plan.phase_rank,
               "method": plan.method, "pupil_samples": int(plan.n_pupil), "precision": precision,
               "pixel_integration": bool(plan.pixel_integration), "mask_raster": mask_raster,
               "deapodize": bool(plan.deapodize), "pupil_pitch_um": [pg.dx_um, pg.dy_um], "pupil_shape": [pg.ny, pg.nx],
@@ -503,8 +463,7 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
                     pixel_um: float = 3.1, size_px: int = 255, distance_mm: float = 0.0,
                     field_phases: int | None = None, method: str = "mft", pupil_samples: int | None = None,
                     precision: str = "float32", pixel_integration: bool = True,
-                    mask_raster: str = "band_limited", sensor_um=PAPER_SENSOR_UM,
-                    phase_rank: int | None = None, progress=None) -> KernelSet:
+                    mask_raster: str = "band_limited", sensor_um=PAPER_SENSOR_UM, progress=None) -> KernelSet:
     """PSF kernels at the sensor for a display (None: bare lens) in front of a lens.
 
     display: a layout (psf.layouts, psf.micrograph: period_um, fourier_coefficients, cell_raster)
@@ -516,22 +475,17 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     precision: 'float32' (complex64 FFTs and products) or 'float64'.
     mask_raster: 'band_limited' (exact Fourier series, default) or 'area' (area-weighted, then
         de-apodised); see pupil.cell_raster. The aperture is always area-weighted.
-    phase_rank: None (default): every field phase exact. r ≥ 1 (d > 0, pixel-integrated methods): the
-        phases' kernels through a rank-r basis of their power spectra (the mean + r − 1 components, r
-        transforms per wavelength instead of one per phase; _basis_kernels); the mean kernel,
-        energy_outside, transmittance and field_power stay exact, the field kernels carry the measured
-        truncation error (docs/PHYSICS.md §4: T-OLED at 405–695 nm, L1 1.9e-2 at r = 4, 4.9e-3 at 12).
     progress: optional callable(n) called with the number of kernels done (for progress bars).
 
     Steps: _plan (window, mask, phases, their symmetries) ─► _wavelength per λ (_wave shared by the phases,
-    _field_masks, _one_kernel or _basis_kernels) ─► _assemble.
+    _field_masks, _one_kernel per distinct phase) ─► _assemble.
     """
     lens = lens or Lens()
     wl = _validate(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples,
-                   mask_raster, phase_rank)
+                   mask_raster)
     notes: list = []
     plan = _plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, method, pupil_samples, precision,
-                 pixel_integration, mask_raster, sensor_um, phase_rank, notes)
+                 pixel_integration, mask_raster, sensor_um, notes)
     _check_alias(plan)
     state: dict = {}
     results = [_wavelength(plan, lam_nm, state, progress) for lam_nm in wl]  # np.float64: keeps float64 products (NEP 50)
