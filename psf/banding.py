@@ -22,7 +22,7 @@ from .fourier import WORKERS
 from .lens import Lens
 from .propagation import angular_spectrum_tf
 
-__all__ = ["order_autocorrelation", "disc_transform", "PowerSeries", "banding_profile"]
+__all__ = ["order_autocorrelation", "orders", "disc_quadrant", "PowerSeries", "banding_profile"]
 
 
 def order_autocorrelation(c: np.ndarray) -> np.ndarray:
@@ -43,13 +43,18 @@ def order_autocorrelation(c: np.ndarray) -> np.ndarray:
     return half
 
 
-def disc_transform(kx: np.ndarray, ky: np.ndarray, period_um, diameter_um: float) -> np.ndarray:
-    """Â(k/p) / Â(0) = 2 J1(q)/q, q = π D |k/p|, on the grid ky[:, None], kx[None, :] with kx ≥ 0 ascending
-    from 0: evaluated over |ky| (the disc is even) and its rows gathered."""
-    qx, qy = kx / period_um[0], np.arange(np.abs(ky).max() + 1) / period_um[1]
+def orders(period_um, wavelength_um: float) -> tuple[int, int]:
+    """(mx, my) = ⌊p / λ⌋: the propagating orders |m| ≤ m of the display at λ."""
+    return int(period_um[0] / wavelength_um), int(period_um[1] / wavelength_um)
+
+
+def disc_quadrant(period_um, diameter_um: float, wavelength_um: float) -> np.ndarray:
+    """Â(k/p) / Â(0) = 2 J1(q)/q, q = π D |k/p|, for k_y = 0…2my, k_x = 0…2mx with (mx, my) the orders at
+    λ: the lags of the power series at λ and at every longer wavelength (the disc is even in each axis)."""
+    mx, my = orders(period_um, wavelength_um)
+    qx, qy = np.arange(2 * mx + 1) / period_um[0], np.arange(2 * my + 1) / period_um[1]
     q = math.pi * diameter_um * np.hypot(qx[None, :], qy[:, None])
-    jinc = np.where(q > 0, 2 * j1(q) / np.where(q > 0, q, 1.0), 1.0)
-    return jinc[np.abs(ky)]
+    return np.where(q > 0, 2 * j1(q) / np.where(q > 0, q, 1.0), 1.0)
 
 
 class PowerSeries:
@@ -58,9 +63,11 @@ class PowerSeries:
     Kept as the half k_x ≥ 0 of the weights w_k = b_k Â(k/p) (w_{−k} = w_k*, so P = Re Σ_{k_x ≥ 0} γ w_k
     e^{−2πi k·s/p} with γ = 2 for k_x > 0); `weights` gives the whole grid [ky, kx]."""
 
-    def __init__(self, display, lens: Lens, wavelength_um: float, distance_um: float):
+    def __init__(self, display, lens: Lens, wavelength_um: float, distance_um: float, disc: np.ndarray | None = None):
+        """disc: disc_quadrant for this display and lens at this or a shorter wavelength (shared between
+        wavelengths; None: computed)."""
         px, py = display.period_um
-        mx, my = int(px / wavelength_um), int(py / wavelength_um)
+        mx, my = orders((px, py), wavelength_um)
         kx, ky = np.arange(-mx, mx + 1), np.arange(-my, my + 1)
         nux, nuy = kx / px, ky / py
         c = display.fourier_coefficients(kx, ky) * angular_spectrum_tf(nux, nuy, wavelength_um, distance_um)
@@ -68,7 +75,8 @@ class PowerSeries:
         self.kx, self.ky = np.arange(-2 * mx, 2 * mx + 1), np.arange(-2 * my, 2 * my + 1)
         self.period_um = (px, py)
         half = order_autocorrelation(c)
-        half *= disc_transform(self.kx[2 * mx:], self.ky, (px, py), lens.aperture_um)
+        disc = disc_quadrant((px, py), lens.aperture_um, wavelength_um) if disc is None else disc
+        half *= disc[np.abs(self.ky), :2 * mx + 1]
         half *= math.pi * lens.aperture_um ** 2 / 4
         self._half = half
 

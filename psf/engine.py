@@ -24,7 +24,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from . import fourier
-from .banding import PowerSeries
+from .banding import PowerSeries, disc_quadrant
 from .errors import AliasingWarning, PSFError, UnderSamplingWarning  # noqa: F401 (re-exported)
 from .lens import Lens
 from .propagation import angular_spectrum_tf, frequencies, ramp
@@ -210,6 +210,7 @@ class _Plan:
     fy: np.ndarray | None
     crop_rows: np.ndarray | None
     crop_cols: np.ndarray | None
+    disc: np.ndarray | None
     sources: tuple = ((0, False, False),)
 
 
@@ -250,13 +251,14 @@ def _plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, metho
     ny, nx = raster.shape if use_field else (0, 0)
     fx, fy = (frequencies(nx, grid.dx_um), frequencies(ny, grid.dy_um)) if use_field else (None, None)
     rows, cols = (np.arange(sy.start, sy.stop) % ny, np.arange(sx.start, sx.stop) % nx) if use_field else (None, None)
+    disc = disc_quadrant(display.period_um, lens.aperture_um, float(wl.min()) * 1e-3) if periodic else None
     # De-apodise where the pupil's spectrum is box-filtered: an area-weighted mask or a bare aperture
     # (not with defocus: its phase is point-sampled, not box-filtered). Transmitted power: the exact
     # series of psf.banding for periodic displays; the raster sum (× κ) for aperiodic tiles.
     plan = _Plan(display, lens, wl, float(pixel_um), size_px, d_um, method, cdtype, pixel_integration,
                  display is None or mask_raster == "area", n_pupil, grid, mask, kappa, pgrid, sy, sx,
                  lens.aperture_area_fraction(pgrid.x_edges_um, pgrid.y_edges_um), use_field,
-                 periodic, phases, shifts, raster, mask_spec, fx, fy, rows, cols)
+                 periodic, phases, shifts, raster, mask_spec, fx, fy, rows, cols, disc)
     return replace(plan, sources=_phase_sources(plan)) if use_field else plan
 
 
@@ -337,7 +339,7 @@ def _wave(plan: _Plan, lam_nm: float) -> _Wave:
     mft = (fourier.PixelMFT((2 * pg.ny - 1, pg.nx), pg.dx_um, pg.dy_um, lam, lens.image_distance_um, plan.pixel_um,
                             plan.size_px, True, plan.cdtype, plan.deapodize and defocus is None)
            if plan.method == "mft" and plan.pixel_integration else None)
-    series = PowerSeries(plan.display, lens, lam, plan.d_um) if plan.exact_power else None
+    series = PowerSeries(plan.display, lens, lam, plan.d_um, plan.disc) if plan.exact_power else None
     return _Wave(lam_nm, defocus, weight, spec, mft, series)
 
 
@@ -428,7 +430,7 @@ def _wavelength(plan: _Plan, lam_nm: np.float64, state: dict, progress) -> tuple
     acc_window, acc_power = float(windows.sum()), float(power.sum())
     mean_kernel = kernels.sum(axis=(0, 1)) / acc_window
     bare_power = math.pi * lens.aperture_um ** 2 / 4
-    field_k = kernels / windows[..., None, None] if plan.use_field else None
+    field_k = (kernels / windows[..., None, None]).astype(np.finfo(plan.cdtype).dtype) if plan.use_field else None
     field_p = power / power.mean() if plan.use_field else None
     return mean_kernel, 1.0 - acc_window / acc_power, acc_power / P ** 2 / bare_power, field_k, field_p
 
@@ -451,7 +453,7 @@ def _assemble(plan: _Plan, results: list, precision: str, mask_raster: str, sens
               "deapodize": bool(plan.deapodize), "pupil_pitch_um": [pg.dx_um, pg.dy_um], "pupil_shape": [pg.ny, pg.nx],
               "image_distance_um": lens.image_distance_um, "sensor_um": list(sensor_um),
               "model": "finite-distance" if plan.use_field else "principal-plane"}
-    field_k = np.stack([r[3] for r in results]).astype(out_dtype) if plan.use_field else None
+    field_k = np.stack([r[3] for r in results]).astype(out_dtype, copy=False) if plan.use_field else None
     field_p = np.stack([r[4] for r in results]) if plan.use_field else None
     period = None if plan.display is None else tuple(float(v) for v in plan.display.period_um)
     return KernelSet(kernels.astype(out_dtype), wl, plan.pixel_um, outside, trans, ratio, params, field_k, field_p,

@@ -32,7 +32,9 @@ def power_spectrum(g: np.ndarray) -> np.ndarray:
     ny rows only (the padding rows are zero), then along y over every column."""
     ly, lx = padded_shape(g.shape)
     G = sfft.fft(sfft.fft(g, n=lx, axis=1, workers=WORKERS), n=ly, axis=0, workers=WORKERS)
-    return G.real ** 2 + G.imag ** 2
+    power = G.real ** 2
+    power += G.imag ** 2
+    return power
 
 
 def lags_from_power(power: np.ndarray, shape: tuple[int, int], dx_um: float, dy_um: float) -> np.ndarray:
@@ -140,7 +142,10 @@ class PixelMFT:
 
     def _folded(self, zero, pos, neg, scale: float, conj: bool) -> np.ndarray:
         """The kernel of lags 0, +m and −m (rows, m = 1…ny−1; their conjugates when conj) × scale."""
-        t1 = _real_matmul(self.cos_y, np.concatenate([zero, pos + neg]))  # [h+1, nx], rows u ≥ 0
+        even = np.empty((pos.shape[0] + 1, pos.shape[1]), pos.dtype)
+        even[0] = zero[0]
+        np.add(pos, neg, out=even[1:])
+        t1 = _real_matmul(self.cos_y, even)                              # [h+1, nx], rows u ≥ 0
         t2 = _real_matmul(self.sin_y[:, 1:], pos - neg)
         if conj:
             t1, t2 = np.conj(t1), np.conj(t2)

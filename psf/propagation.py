@@ -19,9 +19,13 @@ def frequencies(n: int, d_um: float) -> np.ndarray:
 
 
 def angular_spectrum_tf(fx, fy, wavelength_um: float, distance_um: float) -> np.ndarray:
-    """Angular-spectrum transfer function on the grid fy[:, None], fx[None, :] (complex128)."""
+    """Angular-spectrum transfer function on the grid fy[:, None], fx[None, :] (complex128).
+
+    H depends on fx², fy² only: it is evaluated over the distinct |fx|, |fy| and gathered."""
+    ux, ix = np.unique(np.abs(fx), return_inverse=True)
+    uy, iy = np.unique(np.abs(fy), return_inverse=True)
     k2 = 1.0 / wavelength_um ** 2
-    nu2 = np.add.outer(fy ** 2, fx ** 2)
+    nu2 = np.add.outer(uy ** 2, ux ** 2)
     root = np.sqrt(np.abs(k2 - nu2))
     prop = nu2 <= k2
     phase = np.where(prop, -nu2 / (1.0 / wavelength_um + root), -1.0 / wavelength_um)
@@ -31,7 +35,7 @@ def angular_spectrum_tf(fx, fy, wavelength_um: float, distance_um: float) -> np.
     np.sin(phase, out=out.imag)
     if not prop.all():
         out[~prop] *= np.exp(-2 * np.pi * distance_um * root[~prop])
-    return out
+    return out[np.ix_(iy.ravel(), ix.ravel())]
 
 
 def fresnel_tf(fx, fy, wavelength_um: float, distance_um: float) -> np.ndarray:
