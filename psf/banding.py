@@ -18,7 +18,7 @@ import scipy.fft as sfft
 from scipy.special import j1
 
 from .errors import PSFError
-from .fourier import WORKERS
+from . import fourier
 from .lens import Lens
 from .propagation import angular_spectrum_tf
 
@@ -34,10 +34,10 @@ def order_autocorrelation(c: np.ndarray) -> np.ndarray:
     ny, nx = c.shape
     my, mx = ny // 2, nx // 2
     ly, lx = sfft.next_fast_len(2 * ny - 1), sfft.next_fast_len(2 * nx - 1)
-    C = sfft.fft(sfft.fft(c, n=lx, axis=1, workers=WORKERS), n=ly, axis=0, workers=WORKERS)
+    C = sfft.fft(sfft.fft(c, n=lx, axis=1, workers=fourier.WORKERS), n=ly, axis=0, workers=fourier.WORKERS)
     power = C.real ** 2
     power += C.imag ** 2
-    half = sfft.rfft2(power, workers=WORKERS)[np.arange(-2 * my, 2 * my + 1) % ly, :2 * mx + 1]
+    half = sfft.rfft2(power, workers=fourier.WORKERS)[np.arange(-2 * my, 2 * my + 1) % ly, :2 * mx + 1]
     np.conj(half, out=half)
     half /= ly * lx
     return half
@@ -87,14 +87,17 @@ class PowerSeries:
 
     def __call__(self, shifts_um: np.ndarray) -> np.ndarray:
         """Transmitted power (µm² × unit irradiance) at mask shifts [..., 2] (x, y) in µm:
-        Re Σ_ky e_y (W γ e_x) over the half k_x ≥ 0, one matrix product over the shifts."""
+        Re Σ_ky e_y Σ_kx W γ e_x, evaluated on the grid of the distinct x and y shifts (two matrix products;
+        a field-phase grid or a line of shifts costs one pass over W) and gathered."""
         s = np.asarray(shifts_um, dtype=np.float64)
-        flat = s.reshape(-1, 2)
+        xs, ix = np.unique(s[..., 0], return_inverse=True)
+        ys, iy = np.unique(s[..., 1], return_inverse=True)
         kx = self.kx[self.kx.size // 2:]
-        ex = np.exp(-2j * np.pi * flat[:, 0, None] * kx / self.period_um[0])  # [n, Kx/2]
-        ex[:, 1:] *= 2.0
-        ey = np.exp(-2j * np.pi * flat[:, 1, None] * self.ky / self.period_um[1])  # [n, Ky]
-        return np.sum(ey * (ex @ self._half.T), axis=1).real.reshape(s.shape[:-1])
+        ex = np.exp(-2j * np.pi * np.outer(kx, xs) / self.period_um[0])  # [Kx/2, nx]
+        ex[1:] *= 2.0
+        ey = np.exp(-2j * np.pi * np.outer(ys, self.ky) / self.period_um[1])  # [ny, Ky]
+        grid = (ey @ (self._half @ ex)).real                                 # [ny, nx]
+        return grid[iy.reshape(s.shape[:-1]), ix.reshape(s.shape[:-1])]
 
 
 def banding_profile(display, lens: Lens | None = None, wavelength_nm: float = 520.0, distance_mm: float = 1.0,

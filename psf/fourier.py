@@ -7,6 +7,8 @@ Pixel integration is exact through the autocorrelation R(Δ) = ∫ g(x+Δ) g*(x)
 R from one zero-padded FFT pair, the last sum by a matrix Fourier transform (MFT: two matrix
 products, any output pitch, i.e. any non-integer r, no resampling) or by chirp-z. R is
 Hermitian, so only lags Δx ≥ 0 are transformed and K = 2 Re(·) with the Δx = 0 column halved.
+PixelMFT folds the MFT over the symmetric lags and pixel centres into real products (a quarter of the
+operations) and keeps its matrices for every R of one wavelength.
 """
 from __future__ import annotations
 
