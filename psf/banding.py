@@ -17,12 +17,12 @@ import numpy as np
 import scipy.fft as sfft
 from scipy.special import j1
 
-from .errors import PSFError
 from . import fourier
+from .errors import PSFError
 from .lens import Lens
 from .propagation import angular_spectrum_tf
 
-__all__ = ["order_autocorrelation", "orders", "disc_quadrant", "PowerSeries", "banding_profile"]
+__all__ = ["order_autocorrelation", "even_order_autocorrelation", "orders", "disc_quadrant", "PowerSeries", "banding_profile"]
 
 
 def order_autocorrelation(c: np.ndarray) -> np.ndarray:
@@ -41,6 +41,31 @@ def order_autocorrelation(c: np.ndarray) -> np.ndarray:
     np.conj(half, out=half)
     half /= ly * lx
     return half
+
+
+def even_order_autocorrelation(c: np.ndarray) -> np.ndarray:
+    """order_autocorrelation's b for orders even in each axis (c[−ky, kx] = c[ky, −kx] = c[ky, kx], a display
+    symmetric about its cell's centre lines): b is then real and even, returned for k_y = 0…2my, k_x = 0…2mx.
+
+    The FFTs of even sequences of even length L are DCT-Is of their first L/2 + 1 samples,
+    F_k = f_0 + (−1)^k f_{L/2} + 2 Σ_{0<n<L/2} f_n cos(2πkn/L): C = DCT-I(c) and b = DCT-I(|C|²) / L² on the
+    quadrant, a quarter of the data of the complex FFTs."""
+    ny, nx = c.shape
+    my, mx = ny // 2, nx // 2
+    hy, hx = sfft.next_fast_len(2 * my + 1), sfft.next_fast_len(2 * mx + 1)  # L/2 ≥ 2m + 1: no wrap
+    q = np.zeros((hy + 1, hx + 1), c.dtype)
+    q[:my + 1, :mx + 1] = c[my:, mx:]
+    C = sfft.dct(sfft.dct(q, type=1, axis=1, workers=fourier.WORKERS), type=1, axis=0, workers=fourier.WORKERS)
+    power = C.real ** 2
+    power += C.imag ** 2
+    b = sfft.dct(sfft.dct(power, type=1, axis=1, workers=fourier.WORKERS), type=1, axis=0, workers=fourier.WORKERS)
+    return b[:2 * my + 1, :2 * mx + 1] / (4 * hy * hx)
+
+
+def _even(c: np.ndarray) -> bool:
+    """Whether orders c [2my+1, 2mx+1] are even in each axis (to 1e-12 of their largest)."""
+    tol = 1e-12 * np.abs(c).max()
+    return bool(np.abs(c - c[::-1]).max() <= tol and np.abs(c - c[:, ::-1]).max() <= tol)
 
 
 def orders(period_um, wavelength_um: float) -> tuple[int, int]:
@@ -74,11 +99,14 @@ class PowerSeries:
         c[np.add.outer(nuy ** 2, nux ** 2) >= 1.0 / wavelength_um ** 2] = 0.0
         self.kx, self.ky = np.arange(-2 * mx, 2 * mx + 1), np.arange(-2 * my, 2 * my + 1)
         self.period_um = (px, py)
-        half = order_autocorrelation(c)
         disc = disc_quadrant((px, py), lens.aperture_um, wavelength_um) if disc is None else disc
-        half *= disc[np.abs(self.ky), :2 * mx + 1]
-        half *= math.pi * lens.aperture_um ** 2 / 4
-        self._half = half
+        area = math.pi * lens.aperture_um ** 2 / 4
+        if _even(c):
+            self._half = (even_order_autocorrelation(c) * disc[:2 * my + 1, :2 * mx + 1] * area)[np.abs(self.ky)]
+        else:
+            self._half = order_autocorrelation(c)
+            self._half *= disc[np.abs(self.ky), :2 * mx + 1]
+            self._half *= area
 
     @property
     def weights(self) -> np.ndarray:

@@ -120,7 +120,7 @@ class PixelMFT:
                  dtype=np.complex128, deapodize: bool = True):
         nyl, nx = lag_shape
         scale = wavelength_um * distance_um
-        rdtype = np.empty(0, dtype).real.dtype
+        rdtype = np.finfo(dtype).dtype
         u = np.arange(size_px // 2 + 1) * pixel_um
         rho = pixel_um if pixel_integration else 0.0
         self.cos_y, self.sin_y = _folded_matrices(u, (nyl + 1) // 2, dy_um, scale, rho, rdtype)
@@ -131,6 +131,7 @@ class PixelMFT:
         self.deapodize = (lambda k: _deapodize(k, full, dx_um, dy_um, scale)) if deapodize else None
 
     def __call__(self, R_half: np.ndarray) -> np.ndarray:
+        """The kernel of a half autocorrelation [2ny−1, nx] (autocorrelation_half)."""
         ny = self.cos_y.shape[1]
         return self._folded(R_half[ny - 1:ny], R_half[ny:], R_half[ny - 2::-1], 1.0, False)
 

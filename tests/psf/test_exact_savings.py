@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from psf import Lens, MicrographLayout, compute_kernels, fourier, layouts
-from psf.banding import order_autocorrelation
+from psf.banding import even_order_autocorrelation, order_autocorrelation
 from psf.engine import PAPER_SENSOR_UM
 
 GOLDEN = Path(__file__).parent / "golden" / "kernels_v1.npz"
@@ -99,6 +99,19 @@ def test_order_autocorrelation_is_the_direct_sum():
             direct = sum(c[my + ky, mx + kx] * np.conj(c[my, mx]) for my in range(5) for mx in range(7)
                          if 0 <= my + ky < 5 and 0 <= mx + kx < 7)
             assert abs(b[ky + 4, kx] - direct) < 1e-13
+
+
+def test_even_order_autocorrelation_is_the_general_one():
+    # Orders even in each axis (a display symmetric about its cell's centre lines): the DCT-I route gives
+    # the general FFT route's b on the quadrant, real.
+    rng = np.random.default_rng(6)
+    q = rng.standard_normal((4, 6)) + 1j * rng.standard_normal((4, 6))
+    c = np.concatenate([q[:0:-1], q])                 # even in y: rows −3…3
+    c = np.concatenate([c[:, :0:-1], c], axis=1)      # even in x: columns −5…5
+    general = order_autocorrelation(c)                # k_y = −6…6, k_x = 0…10
+    even = even_order_autocorrelation(c)              # k_y = 0…6, k_x = 0…10
+    np.testing.assert_allclose(even, general[6:].real, rtol=0, atol=1e-12 * np.abs(general).max())
+    assert np.abs(general.imag).max() < 1e-12 * np.abs(general).max()
 
 
 # ---------------------------------------------------------------------------------------------
