@@ -33,7 +33,6 @@ import os
 import shutil
 import statistics
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -50,26 +49,18 @@ def dataset_args(profile: str, display: str, count: int, workers: int, out: Path
 
 
 def setup(argv: list[str]):
-    """(DatasetJob, SynthConfig) exactly as the CLI builds them."""
+    """(DatasetJob, SynthConfig) exactly as the CLI builds them (cli.dataset.dataset_job)."""
     from udc_render.cli import build_parser
-    from udc_render.cli.args import capture_setup, scene_from_args
-    from udc_render.cli.dataset import split_counts
-    from udc_render.dataset import DatasetJob
-    args = build_parser().parse_args(argv)
-    cfg, displays = capture_setup(args)
-    job = DatasetJob(scene_from_args(args), displays, cfg, out=args.out, split=split_counts(args.count, args.split),
-                     images_dir=None)
-    return job, cfg
+    from udc_render.cli.dataset import dataset_job
+    job = dataset_job(build_parser().parse_args(argv))
+    return job, job.cfg
 
 
 def median_time(fn, repeats: int = 5) -> float:
+    """Median wall seconds of `repeats` runs after one warm-up (studies.report.timed)."""
+    from udc_render.studies.report import timed
     fn()
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return statistics.median(times)
+    return statistics.median(timed(fn, repeats).seconds)
 
 
 def fft_count(job, kernels) -> int:

@@ -59,6 +59,7 @@ from udc_render.scene import Scene
 from udc_render.scene.geometry import RenderGrid, camera_geometry, psf_lens, render_grid
 from udc_render.sensor import (Capture, DefectConfig, SensorConfig, band_electron_weights, capture, capture_electrons,
                                cos4_map, electrons_rgb, mosaic_of, rgb_to_rggb)
+from udc_render.sensor.radiometry import checked_nonnegative
 
 FORMS = ("spectral", "per_channel")
 EXPOSURE_FILL = 0.8
@@ -231,7 +232,8 @@ def channel_electrons(band_image: BandImage, kernel_set, transmission, sensor: S
     """Mean electrons [3, H, W] (float64, sensor pitch, cos⁴ included) that an R, G and B pixel would
     collect through one display: e_c = cos⁴ · bin(Σ_k w_ck g_k (x_k ⊗ k_k)), w = band_electron_weights.
     The band sum is taken in Fourier space (apply_kernels' channel_weights: three inverse FFTs, not K);
-    blend 'output' sums the K blurred bands instead. Round-off negatives are set to 0 (counted)."""
+    blend 'output' sums the K blurred bands instead. Round-off negatives are set to 0 (counted), larger ones
+    refused, as the sensor does for band radiance (sensor.radiometry.checked_nonnegative)."""
     w = band_electron_weights(band_image.edges_nm, sensor)
     kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=field_basis)
     if cfg.blend == "source":
@@ -240,13 +242,11 @@ def channel_electrons(band_image: BandImage, kernel_set, transmission, sensor: S
     else:
         optics = apply_kernels(band_image, kernel_set, transmission, cfg.precision, **kw)
         e = np.einsum("ck,khw->chw", w, optics.images, dtype=np.float64, optimize=True)
-    e = bin_pixels(e, band_image.pitch_um, sensor.pitch_um)
-    negative = e < 0
-    e[negative] = 0.0
+    e, clamped = checked_nonnegative(bin_pixels(e, band_image.pitch_um, sensor.pitch_um), "channel electrons")
     if sensor.cos4_falloff:
         e *= cos4_map(*e.shape[1:], sensor.pitch_um, sensor.focal_length_um)
     applied = {**optics.applied, "gains": optics.gains.tolist(), "transmission": optics.transmission.tolist(),
-               "negative_electrons_clamped": int(negative.sum())}
+               "negative_electrons_clamped": clamped}
     return e, applied
 
 

@@ -58,15 +58,22 @@ def split_counts(count: int | None, split: tuple[int, int, int] | None) -> tuple
     return split
 
 
-def run(args) -> int:
-    from udc_render.dataset import DatasetJob, run_dataset
+def dataset_job(args):
+    """The DatasetJob that the parsed `udc-render dataset` arguments describe (also benchmarks/bench_dataset.py)."""
+    from udc_render.dataset import DatasetJob
     from udc_render.cli.args import out_dir
-    from udc_render.profiles import describe
     split = split_counts(args.count, args.split)
     cfg, displays = capture_setup(args)
-    job = DatasetJob(scene_from_args(args), displays, cfg, out=out_dir(args.out), split=split, images_dir=args.images,
-                     shard_size=args.shard_size, side_by_side=args.side_by_side,
-                     previews=args.previews or args.side_by_side)
+    return DatasetJob(scene_from_args(args), displays, cfg, out=out_dir(args.out), split=split, images_dir=args.images,
+                      shard_size=args.shard_size, side_by_side=args.side_by_side,
+                      previews=args.previews or args.side_by_side)
+
+
+def run(args) -> int:
+    from udc_render.dataset import run_dataset
+    from udc_render.profiles import describe
+    job = dataset_job(args)
+    cfg = job.cfg
     s = run_dataset(job, args.workers, args.scheduler, progress=not args.quiet)
     rate = f", {s['wall_s'] / s['made']:.2f} s/item wall" if s["made"] else ""
     stale = f", {s['stale_removed']} stale temporary folders removed" if s["stale_removed"] else ""

@@ -258,6 +258,18 @@ def estimate_spp(job: _Job, target: float, seed: int) -> tuple[int, float]:
     return int(min(max(spp, 1), MAX_SPP)), noise
 
 
+def _grid_meta(scene: Scene, geom: CameraGeometry, edges: np.ndarray, depth) -> dict:
+    """What every render path records about its grid, bands, units, camera and depth."""
+    r = scene.render
+    return {"band_edges_nm": edges.tolist(), "band_names": band_names(edges),
+            "units": "band-mean radiance, W sr^-1 m^-2 nm^-1, pixel-area mean (box filter)",
+            "camera": geom.describe(), "lens": vars(scene.lens), "sensor": vars(scene.sensor),
+            "supersample": r.supersample, "margin_um": r.margin_um,
+            "depth": "axial distance along the optical axis, m, at pixel centres; inf = no surface" if depth is not None
+            else ("not rendered: the monitor is a plane at camera.focus_distance_m" if isinstance(scene.content, Monitor)
+                  else "not rendered")}
+
+
 def render_analytic(scene: Scene) -> BandImage:
     """The monitor's exact pixel-area means (render.analytic): no Monte Carlo, no Mitsuba, no noise."""
     from udc_render.render.analytic import monitor_area_means, monitor_depth_m
@@ -275,12 +287,7 @@ def render_analytic(scene: Scene) -> BandImage:
         "backend": "numpy", "backend_reason": "exact pixel-area means of the panel (render.analytic); no Monte Carlo",
         "spp": None, "passes": 0, "spp_per_pass": None, "seed": r.seed, "sampler": None,
         "spp_from_noise_target": r.noise, "pilot_noise_rel": None, "pilot_spp": None, "noise_rel": 0.0, "max_depth": None, "bands_per_render": None,
-        "band_edges_nm": edges.tolist(), "band_names": band_names(edges),
-        "units": "band-mean radiance, W sr^-1 m^-2 nm^-1, pixel-area mean (box filter)",
-        "camera": g.describe(), "lens": vars(scene.lens), "sensor": vars(scene.sensor),
-        "supersample": r.supersample, "margin_um": r.margin_um,
-        "depth": "axial distance along the optical axis, m, at pixel centres; inf = no surface" if depth is not None
-        else "not rendered: the monitor is a plane at camera.focus_distance_m", "seconds": None, **content_meta}
+        **_grid_meta(scene, g, edges, depth), "seconds": None, **content_meta}
     meta["seconds"] = round(time.perf_counter() - t0, 3)
     return BandImage(bands=bands, edges_nm=edges, pitch_um=g.pitch_um, margin_px=g.margin_px, depth_m=depth,
                      meta=meta, primaries_matrix=matrix)
@@ -318,13 +325,7 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
         "pass_seeds": "SeedSequence([seed, group, pass]).generate_state(1)[0]",
         "spp_from_noise_target": r.noise, "pilot_noise_rel": pilot, "pilot_spp": 2 * PILOT_SPP if pilot else None,
         "noise_rel": noise, "max_depth": job.max_depth, "bands_per_render": r.bands_per_render if path == "spectral" else None,
-        "band_edges_nm": job.edges.tolist(), "band_names": band_names(job.edges),
-        "units": "band-mean radiance, W sr^-1 m^-2 nm^-1, pixel-area mean (box filter)",
-        "camera": g.describe(), "lens": vars(job.scene.lens), "sensor": vars(job.scene.sensor),
-        "supersample": r.supersample, "margin_um": r.margin_um,
-        "depth": "axial distance along the optical axis, m, at pixel centres; inf = no surface" if depth is not None
-        else ("not rendered: the monitor is a plane at camera.focus_distance_m" if isinstance(job.scene.content, Monitor) else "not rendered"),
-        "seconds": None, **job.meta,
+        **_grid_meta(job.scene, g, job.edges, depth), "seconds": None, **job.meta,
     }
     meta["seconds"] = round(time.perf_counter() - t0, 3)
     return BandImage(bands=bands.astype(np.float32), edges_nm=job.edges, pitch_um=g.pitch_um, margin_px=g.margin_px,

@@ -64,7 +64,7 @@ def photon_weights(edges_nm, camera: str = "Nikon 5100 (NPL)", peak_qe: float = 
     return out * peak_qe * 1e-9 / (H_PLANCK_J_S * C_LIGHT_M_S)
 
 
-def _check_finite(a: np.ndarray, what: str) -> tuple[np.ndarray, int]:
+def checked_nonnegative(a: np.ndarray, what: str) -> tuple[np.ndarray, int]:
     """Reject NaN/inf and real negatives; clamp round-off negatives. Returns (array, n_clamped)."""
     bad = ~np.isfinite(a)
     if bad.any():
@@ -118,7 +118,7 @@ def electrons_rgb(radiance_bands: np.ndarray, edges_nm, sensor: SensorConfig) ->
     """[3, H, W] mean electrons that an R, G and B pixel would collect at every pixel (the
     demosaic-free camera RGB used as ground truth; no noise, no full well, cos⁴ if enabled)."""
     L = np.asarray(radiance_bands)
-    L, _ = _check_finite(L, "radiance_bands")
+    L, _ = checked_nonnegative(L, "radiance_bands")
     w = band_electron_weights(edges_nm, sensor)
     e = np.einsum("ck,khw->chw", w, L, dtype=np.float64, optimize=True)
     if sensor.cos4_falloff:
@@ -136,7 +136,7 @@ def electrons_spectral(radiance_bands: np.ndarray, edges_nm, sensor: SensorConfi
         raise SensorError(f"radiance_bands: shape {L.shape} with {edges.size} edges: expected [K, H, W] and K + 1 edges")
     if not (np.all(np.isfinite(edges)) and np.all(edges > 0) and np.all(np.diff(edges) > 0)):
         raise SensorError(f"edges_nm = {edges.tolist()}: expected increasing positive finite wavelengths")
-    L, _ = _check_finite(L, "radiance_bands")
+    L, _ = checked_nonnegative(L, "radiance_bands")
     L, _ = _bin(L, input_pitch_um, sensor.pitch_um, "radiance_bands")
     check_even(L.shape, "radiance_bands")
     w = band_electron_weights(edges, sensor)
@@ -157,7 +157,7 @@ def electrons_per_channel(rgb: np.ndarray, sensor: SensorConfig) -> np.ndarray:
     x = np.asarray(rgb)
     if x.ndim != 3 or x.shape[0] != 3:
         raise SensorError(f"rgb: shape {x.shape}: expected [3, H, W] (R, G, B) for the per-channel form")
-    x, _ = _check_finite(x, "rgb")
+    x, _ = checked_nonnegative(x, "rgb")
     check_even(x.shape, "rgb")
     per_e = sensor.dn_per_electron / sensor.gain / sensor.range_dn  # normalised units per e⁻ at gain 1
     e = np.empty(x.shape[1:])
