@@ -1,15 +1,16 @@
-"""`udc-render study {psf,render,capture} --out DIR [--quick]`: error-versus-run-time studies."""
+"""`udc-render study {psf,render,capture,realism,defocus,banding} --out DIR [--quick]`: error-versus-run-time
+studies of the approximation knobs, and the defocus and banding studies users run."""
 from __future__ import annotations
 
 from pathlib import Path
 
 from udc_render.cli.args import out_dir
 
-STUDIES = ("psf", "render", "capture", "realism")
+STUDIES = ("psf", "render", "capture", "realism", "defocus", "banding")
 
 
 def register(sub) -> None:
-    s = sub.add_parser("study", help="error-versus-run-time studies of the approximation knobs")
+    s = sub.add_parser("study", help="error-versus-run-time studies of the approximation knobs; defocus and banding studies")
     s.set_defaults(run=run)
     s.add_argument("what", choices=STUDIES)
     s.add_argument("--out", type=Path, default=Path("out/study"))
@@ -20,6 +21,10 @@ def run(args) -> int:
     out = out_dir(args.out)
     if args.what == "realism":
         from udc_render.studies.realism import run_study
+    elif args.what == "defocus":
+        from udc_render.studies.defocus import run_study
+    elif args.what == "banding":
+        from udc_render.studies.banding import run_study
     elif args.what == "capture":
         from udc_render.studies.capture_knobs import run_study
     elif args.what == "render":
