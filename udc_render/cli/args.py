@@ -126,12 +126,15 @@ def add_scene_arguments(r: argparse.ArgumentParser, scene_option: bool = False) 
 
 
 def scene_from_args(args):
-    """The scene file with the command line's overrides applied (scene.overrides)."""
+    """The scene file with the command line's overrides applied (scene.overrides), and a Mitsuba XML
+    scene's camera taken from its file (render.resolve_xml_camera: once, before kernels and render)."""
+    from udc_render.render import resolve_xml_camera
     from udc_render.scene import load_scene
     from udc_render.scene.overrides import with_overrides
-    return with_overrides(load_scene(args.scene), spp=args.spp, noise=args.noise, seed=args.seed,
-                          path=getattr(args, "path", None), bands_nm=args.bands_nm, image=getattr(args, "image", None),
-                          sensor_px=args.sensor_px, pitch_um=args.pitch_um, sampler=args.sampler)
+    return resolve_xml_camera(with_overrides(
+        load_scene(args.scene), spp=args.spp, noise=args.noise, seed=args.seed, path=getattr(args, "path", None),
+        bands_nm=args.bands_nm, image=getattr(args, "image", None), sensor_px=args.sensor_px, pitch_um=args.pitch_um,
+        sampler=args.sampler))
 
 
 def add_capture_arguments(p: argparse.ArgumentParser) -> None:

@@ -28,16 +28,17 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from dataclasses import replace
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
 from udc_render.content import spectra
 from udc_render.content.monitor_image import DisplayImageError, panel_drive
-from udc_render.errors import UdcError
 from udc_render.render import mitsuba_scene as ms
 from udc_render.render.band_image import BandImage, band_names
+from udc_render.render.errors import RenderError
+from udc_render.render.xml_camera import load_xml, resolve_xml_camera
 from udc_render.render.variants import set_variant
 from udc_render.scene import Monitor, MitsubaXML, Scene
 from udc_render.scene.geometry import CameraGeometry, axial_depth_m, camera_geometry
@@ -45,10 +46,6 @@ from udc_render.scene.geometry import CameraGeometry, axial_depth_m, camera_geom
 PILOT_SPP = 4
 MAX_SPP = 1 << 14
 PASS_SPP = {"rgb_matrix": 64, "spectral": 8}  # largest pass; progress ticks once per pass (a 3D pass is ~1 min at full size)
-
-
-class RenderError(UdcError):
-    """A scene that cannot be rendered as asked; one line."""
 
 
 def analytic_applies(scene: Scene) -> bool:
@@ -107,23 +104,10 @@ class _Job:
         mi = self.mi
         self.meta: dict = {}
         content = scene.content
-        if isinstance(content, MitsubaXML):
-            xml = scene.resolve(content.file)
-            if not xml.exists():
-                raise RenderError(f"{scene.source}: content.file = {content.file!r}: no such file {xml}")
-            try:
-                self.xml_scene = mi.load_file(str(xml))
-            except Exception as e:  # Mitsuba raises RuntimeError with a long message
-                first = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
-                raise RenderError(f"{scene.source}: content.file = {content.file!r}: Mitsuba cannot load {xml}: {first}") from None
-            if content.use_xml_camera:
-                pose = ms.camera_pose(self.xml_scene)
-                if pose is None:
-                    raise RenderError(f"{scene.source}: content.use_xml_camera = true but {xml} has no sensor")
-                scene = replace(scene, camera=replace(scene.camera, origin_m=pose[0], target_m=pose[1], up=pose[2]))
-                if scene.lens.focus_distance_m is None:  # the pose has no target distance: focus at infinity
-                    scene = replace(scene, lens=replace(scene.lens, focus_distance_m=math.inf))
-                self.scene = scene
+        if isinstance(content, MitsubaXML):  # the pose is the scene's: resolve_xml_camera took the XML's
+            self.xml_scene = load_xml(scene, mi)
+            self.meta["xml_camera"] = (asdict(content.xml_camera) if content.xml_camera is not None else
+                                       "not used (content.use_xml_camera = false): the scene file's [camera]")
         self.geom: CameraGeometry = camera_geometry(scene)
         self.matrix: np.ndarray | None = None  # [3, K] monitor primaries' band means (monitor content only)
         default_depth = 2 if isinstance(content, Monitor) else 8
@@ -300,7 +284,7 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
     path = choose_path(scene)
     if path == "analytic":
         return render_analytic(scene)
-    job = _Job(scene, path)
+    job = _Job(resolve_xml_camera(scene), path)  # unchanged when resolved already (or not XML)
     r = job.scene.render
     pilot = None
     spp = r.spp

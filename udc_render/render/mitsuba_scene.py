@@ -220,11 +220,3 @@ def hdr_room(mi, content: HDRRoom, camera_origin_m) -> dict:
                                    emitter={"type": "area", "radiance": spectrum(spectra.scaled_to_luminance(spectra.illuminant("A"), content.room_light_luminance_cd_m2))})
     return d
 
-
-def camera_pose(scene) -> tuple | None:
-    """(origin, target at unit distance, up) of the first sensor of a loaded Mitsuba scene, or None."""
-    if not scene.sensors():
-        return None
-    m = np.array(scene.sensors()[0].world_transform().matrix, dtype=float).reshape(4, 4)
-    origin = m[:3, 3]
-    return tuple(origin), tuple(origin + m[:3, 2]), tuple(m[:3, 1])

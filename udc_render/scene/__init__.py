@@ -6,8 +6,8 @@
     geometry.py   facts derived from a scene: camera pose, render grid, the psf lens
 """
 from udc_render.scene.model import (Bands, Camera, HDRRoom, Lens, MitsubaXML, Monitor, Render, Room, Scene,
-                                    SceneError, Sensor, RENDER_PATHS, SAMPLERS)
+                                    SceneError, Sensor, XMLCamera, RENDER_PATHS, SAMPLERS)
 from udc_render.scene.parse import load_scene, parse_bands, parse_scene, scenes_dir
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "parse_bands", "scenes_dir", "Monitor", "Room",
-           "HDRRoom", "MitsubaXML", "Camera", "Lens", "Sensor", "Bands", "Render", "RENDER_PATHS", "SAMPLERS"]
+           "HDRRoom", "MitsubaXML", "XMLCamera", "Camera", "Lens", "Sensor", "Bands", "Render", "RENDER_PATHS", "SAMPLERS"]

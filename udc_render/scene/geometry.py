@@ -56,7 +56,9 @@ def camera_geometry(scene: Scene) -> CameraGeometry:
         origin, target, up = (0.0, 0.0, dist), (0.0, 0.0, 0.0), (0.0, 1.0, 0.0)
     else:
         if scene.camera.origin_m is None:
-            raise SceneError(f"{scene.source}: camera.origin_m is required for content.type = {scene.content_type}")
+            how = (" (a Mitsuba XML scene's own camera: resolve it first with udc_render.render.resolve_xml_camera)"
+                   if getattr(scene.content, "use_xml_camera", False) else "")
+            raise SceneError(f"{scene.source}: camera.origin_m is required for content.type = {scene.content_type}{how}")
         origin, target, up = scene.camera.origin_m, scene.camera.target_m, scene.camera.up
         dist = float(np.linalg.norm(np.subtract(target, origin)))
     focus = lens.focus_distance_m or dist

@@ -123,9 +123,28 @@ class HDRRoom:
 
 
 @dataclass(frozen=True)
+class XMLCamera:
+    """The pose taken from a Mitsuba XML file's first sensor (udc_render.render.resolve_xml_camera): only
+    the pose and the focus distance; the scene's [lens] and [sensor] keep the focal length, f-number,
+    sensor size and pitch, hence the field of view. The XML's own field of view and a thin lens's
+    aperture are recorded here and not used."""
+    file: str
+    sensor: str  # the plugin: perspective or thinlens
+    sensor_id: str
+    origin_m: tuple[float, float, float]
+    target_m: tuple[float, float, float]  # the lookat's target, or at 1 m along the axis when not readable
+    up: tuple[float, float, float]
+    focus_distance_m: float  # as rendered (inf: at infinity)
+    focus_from: str  # "lens.focus_distance_m", "thinlens focus_distance", "lookat target" or "infinity"
+    xml_fov_x_deg: float | None = None  # not used: the field of view is the scene's sensor and lens
+    xml_aperture_radius_m: float | None = None  # thinlens: not used (defocus: the wave optics, from depth)
+
+
+@dataclass(frozen=True)
 class MitsubaXML:
     file: str = ""
     use_xml_camera: bool = True  # take the pose from the file's first sensor
+    xml_camera: XMLCamera | None = None  # the pose taken (set by render.resolve_xml_camera; None: not yet)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,197 @@
+"""A user's Mitsuba 3 XML scene through `udc-render synth` with the camera pose of its own sensor
+(render.resolve_xml_camera), and the one-line refusals of what it cannot take."""
+import json
+
+import numpy as np
+import pytest
+
+from udc_render.cli import main
+from udc_render.render import resolve_xml_camera
+from udc_render.scene import load_scene
+
+ORIGIN, TARGET, UP = (0.0, 1.0, 3.9), (0.1, 0.9, 0.0), (0.0, 1.0, 0.0)
+
+SENSOR = """  <sensor type="{type}" id="cam">{extra}
+    <transform name="to_world">{transform}</transform>
+    <film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="32"/></film>
+  </sensor>
+"""
+LOOKAT = '<lookat origin="{}" target="{}" up="{}"/>'.format(*(", ".join(f"{v:g}" for v in p) for p in (ORIGIN, TARGET, UP)))
+
+
+def wall(name, rgb, transform):
+    return (f'  <shape type="rectangle" id="{name}">\n    <transform name="to_world">{transform}</transform>\n'
+            f'    <bsdf type="diffuse"><rgb name="reflectance" value="{rgb}"/></bsdf>\n  </shape>\n')
+
+
+# the standard Cornell box: 2 m cube (x in [-1, 1], y in [0, 2], z in [-1, 1]) open towards +z, red left
+# and green right walls, a square area light under the ceiling, a white sphere on the floor
+CBOX = ('<scene version="3.0.0">\n{sensor}'
+        + wall("floor", "0.725, 0.71, 0.68", '<rotate x="1" angle="-90"/>')
+        + wall("ceiling", "0.725, 0.71, 0.68", '<rotate x="1" angle="90"/><translate y="2"/>')
+        + wall("back", "0.725, 0.71, 0.68", '<translate y="1" z="-1"/>')
+        + wall("left", "0.63, 0.065, 0.05", '<rotate y="1" angle="90"/><translate x="-1" y="1"/>')
+        + wall("right", "0.14, 0.45, 0.091", '<rotate y="1" angle="-90"/><translate x="1" y="1"/>')
+        + '''  <shape type="rectangle" id="light">
+    <transform name="to_world"><scale value="0.25"/><rotate x="1" angle="90"/><translate y="1.99"/></transform>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0, 0, 0"/></bsdf>
+    <emitter type="area"><rgb name="radiance" value="17, 12, 4"/></emitter>
+  </shape>
+  <shape type="sphere" id="ball">
+    <point name="center" x="0.3" y="0.4" z="-0.2"/><float name="radius" value="0.4"/>
+    <bsdf type="diffuse"><rgb name="reflectance" value="0.8, 0.8, 0.8"/></bsdf>
+  </shape>
+</scene>
+''')
+
+# a tiny sensor (64 x 32 px of 6.2 µm behind a 1 mm lens: a 23° view of the box), 3 bands, 4 spp and
+# a 31 µm margin (kernels of 11 px): seconds, not minutes
+TOML = """[lens]
+focal_length_mm = 1.0
+f_number = 2.0
+[sensor]
+width_px = 64
+height_px = 32
+pitch_um = 6.2
+[bands]
+range_nm = [400, 700]
+step_nm = 100
+[render]
+spp = 4
+margin_um = 31
+[content]
+type = "mitsuba_xml"
+file = "{xml}"
+"""
+
+
+FOV = '\n    <float name="fov" value="40"/>'
+
+
+def write_scene(folder, name="cbox", type="perspective", extra=FOV, transform=LOOKAT, sensor=True):
+    xml = CBOX.format(sensor=SENSOR.format(type=type, extra=extra, transform=transform) if sensor else "")
+    (folder / f"{name}.xml").write_text(xml)
+    (folder / f"{name}.toml").write_text(TOML.format(xml=f"{name}.xml"))
+    return folder / f"{name}.toml"
+
+
+def one_error_line(err: str) -> str:
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("udc-render: error: ") and "Traceback" not in err
+    return lines[0]
+
+
+@pytest.fixture(autouse=True)
+def _cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("UDC_RENDER_CACHE", str(tmp_path / "cache"))
+
+
+def test_synth_renders_the_xml_scene_from_its_own_camera(tmp_path, capsys):
+    """`udc-render synth` on a Cornell box whose scene file has no camera: the pose is the XML's lookat,
+    the focus its target, the field of view the scene's lens and sensor; the captures are written."""
+    scene = write_scene(tmp_path)
+    out = tmp_path / "o"
+    assert main(["synth", str(scene), "--display", "toled", "--out", str(out), "--quiet"]) == 0
+    for f in ("gt.exr", "synth.json", "glass/raw.dng", "glass/capture.json", "toled/raw.dng", "toled/capture.json"):
+        assert (out / f).stat().st_size > 0, f
+    meta = json.loads((out / "synth.json").read_text())["render"]
+    xc = meta["xml_camera"]
+    assert xc["file"] == str(tmp_path / "cbox.xml") and xc["sensor"] == "perspective" and xc["sensor_id"] == "cam"
+    np.testing.assert_allclose(xc["origin_m"], ORIGIN, atol=1e-6)
+    np.testing.assert_allclose(xc["target_m"], TARGET, atol=1e-6)
+    forward = np.subtract(TARGET, ORIGIN) / np.linalg.norm(np.subtract(TARGET, ORIGIN))
+    up = np.subtract(UP, np.dot(UP, forward) * forward)  # the lookat's up, made orthogonal to the axis
+    np.testing.assert_allclose(xc["up"], up / np.linalg.norm(up), atol=1e-6)
+    np.testing.assert_allclose(meta["camera"]["origin_m"], ORIGIN, atol=1e-6)
+    np.testing.assert_allclose(meta["camera"]["target_m"], TARGET, atol=1e-6)
+    focus = float(np.linalg.norm(np.subtract(TARGET, ORIGIN)))
+    assert xc["focus_from"] == "lookat target" and xc["focus_distance_m"] == pytest.approx(focus)
+    assert meta["camera"]["focus_distance_m"] == pytest.approx(focus)
+    # the field of view is the scene's (1 mm lens, 64 + 2·5 px of 6.2 µm), not the XML's 40°
+    v_um = 1 / (1 / 1000 - 1 / (focus * 1e6))
+    assert meta["camera"]["fov_x_deg"] == pytest.approx(2 * np.degrees(np.arctan(74 * 6.2 / 2 / v_um)))
+    assert xc["xml_fov_x_deg"] == pytest.approx(40) and meta["lens"]["focal_length_mm"] == 1.0
+    assert meta["content"] == "mitsuba_xml" and meta["render_path"] == "spectral"
+    assert "toled" in capsys.readouterr().out
+
+
+MIRRORED = '<scale x="-1"/>' + LOOKAT
+REFUSED = {  # name: (write_scene arguments, fragments of the one line besides the scene and XML file names)
+    "ortho": (dict(type="orthographic", extra=""), ['<sensor type="orthographic" id="cam">', "perspective or thinlens"]),
+    "nosensor": (dict(sensor=False), ["content.use_xml_camera", "no sensor"]),
+    "mirrored": (dict(transform=MIRRORED), ['<sensor type="perspective" id="cam">', "to_world", "not a rigid pose",
+                                            "lookat"]),
+    "offaxis": (dict(extra=FOV + '\n    <float name="principal_point_offset_x" value="0.1"/>'),
+                ["principal_point_offset_x = 0.1", "expected 0"]),
+}
+
+
+@pytest.mark.parametrize("name", list(REFUSED))
+def test_unsupported_xml_camera_is_one_line_before_any_work(tmp_path, capsys, name):
+    kwargs, fragments = REFUSED[name]
+    scene = write_scene(tmp_path, name, **kwargs)
+    assert main(["synth", str(scene), "--display", "toled", "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    std = capsys.readouterr()
+    line = one_error_line(std.err)
+    for frag in [f"{name}.toml", f"{name}.xml"] + fragments:
+        assert frag in line, (frag, line)
+    # refused before any kernel or output folder was made
+    assert std.out == "" and not (tmp_path / "o").exists() and not (tmp_path / "cache").exists()
+
+
+def test_a_file_mitsuba_cannot_load_is_one_line(tmp_path, capsys):
+    scene = write_scene(tmp_path, "bad")
+    (tmp_path / "bad.xml").write_text('<scene version="3.0.0">\n  <shape type="hologram"/>\n</scene>\n')
+    assert main(["synth", str(scene), "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    for frag in ("bad.toml", "content.file = 'bad.xml'", "Mitsuba cannot load", "hologram"):
+        assert frag in line, (frag, line)
+
+
+def test_thinlens_gives_pose_and_focus_and_its_aperture_is_not_used(tmp_path):
+    """A thinlens sensor: its focus distance is taken, its aperture only recorded (the render stays the
+    scene's lens model: the wave optics adds the defocus from the rendered depth)."""
+    extra = FOV + '\n    <float name="aperture_radius" value="0.05"/><float name="focus_distance" value="2.5"/>'
+    scene = load_scene(write_scene(tmp_path, "thin", type="thinlens", extra=extra))
+    assert scene.camera.origin_m is None
+    r = resolve_xml_camera(scene)
+    xc = r.content.xml_camera
+    assert xc.sensor == "thinlens" and xc.focus_from == "thinlens focus_distance"
+    assert xc.xml_aperture_radius_m == pytest.approx(0.05)
+    assert r.lens.focus_distance_m == pytest.approx(2.5) and r.lens.model == "pinhole"
+    np.testing.assert_allclose(r.camera.origin_m, ORIGIN, atol=1e-6)
+    np.testing.assert_allclose(r.camera.target_m, TARGET, atol=1e-6)
+    assert resolve_xml_camera(r) is r  # once: resolving again changes nothing
+    # the scene's own lens.focus_distance_m wins over the XML's
+    toml = tmp_path / "thin.toml"
+    toml.write_text(toml.read_text().replace("f_number = 2.0", "f_number = 2.0\nfocus_distance_m = 7.0"))
+    r = resolve_xml_camera(load_scene(toml))
+    assert r.lens.focus_distance_m == 7.0 and r.content.xml_camera.focus_from == "lens.focus_distance_m"
+
+
+def test_pose_without_a_readable_lookat_focuses_at_infinity(tmp_path):
+    """A to_world of rotations and translations: the pose is the same, but with no target distance the
+    focus is at infinity (and the target at 1 m along the axis)."""
+    transform = '<rotate y="1" angle="180"/><translate x="0.5" y="1" z="3"/>'  # at (0.5, 1, 3) looking down −z
+    r = resolve_xml_camera(load_scene(write_scene(tmp_path, "rot", transform=transform)))
+    np.testing.assert_allclose(r.camera.origin_m, (0.5, 1.0, 3.0), atol=1e-6)
+    np.testing.assert_allclose(r.camera.target_m, (0.5, 1.0, 2.0), atol=1e-6)
+    np.testing.assert_allclose(r.camera.up, (0.0, 1.0, 0.0), atol=1e-6)
+    assert r.lens.focus_distance_m == np.inf and r.content.xml_camera.focus_from == "infinity"
+
+
+def test_unresolved_scene_names_the_resolver(tmp_path):
+    from udc_render.scene import SceneError
+    from udc_render.scene.geometry import camera_geometry
+    with pytest.raises(SceneError, match="camera.origin_m is required.*resolve_xml_camera"):
+        camera_geometry(load_scene(write_scene(tmp_path)))
+
+
+def test_dataset_refuses_the_xml_scene_in_one_line(tmp_path, capsys):
+    """A dataset shows one image per item on the monitor: an XML scene has no image to change."""
+    scene = write_scene(tmp_path)
+    assert main(["dataset", "--builtin", "--count", "1", "--scene", str(scene), "--out", str(tmp_path / "d"),
+                 "--quiet"]) == 2
+    line = one_error_line(capsys.readouterr().err)
+    assert "cbox.toml" in line and "a dataset needs a monitor scene" in line and "mitsuba_xml" in line
