@@ -27,9 +27,20 @@ channel through glass at gain 1 (a fixed setting for every image, like the paper
 displays the paper's gains 6 and 25 bring the levels back); for 3D scenes the EXPOSURE_PERCENTILE
 of the glass image's brightest channel takes that place.
 
+Object distance (defocus). The kernels carry the defocus of the object's distance (psf: the pupil phase
+π r² (1/z − 1/z_f)/λ): for the monitor its plane's distance, known from the scene; for 3D scenes the
+rendered depth, through depth layers (optics.layers: as few layers as the defocus tolerance
+SynthConfig.defocus_tolerance_px allows, each blurred with its own kernels, summed with the layered
+occlusion model). The render is a pinhole's (sharp); a thin-lens render already holds its defocus, so
+its kernels stay in focus (counted once).
+
+Very bright pixels (the sun) are convolved apart in float64 (bright_pixels, optics.BrightPixels), so
+that the float32 FFTs' round-off stays below a tenth of the read noise at any dynamic range.
+
 Kernels are planned from the scene alone (plan_kernels: the render grid and the lens are facts of the
 scene), so they can be computed before or beside the render: at the render pitch with size
-2·margin + 1 (the largest the margin allows), for the object at the focus distance (in focus), and
+2·margin + 1 (the largest the margin allows), for the object at the scene's distance (the monitor's
+plane; the focus distance for 3D scenes, whose other layers are planned after the render), and
 cached on disk (psf.cache, in SynthConfig.kernel_cache or psf's default folder). They integrate over
 the render pixel, and the render's pixels are area means too, so at render.supersample = 1 the
 sensor pixel's box enters twice (an extra blur of one pixel); with supersample s the render and the
@@ -50,20 +61,24 @@ from psf.cache import cached
 from psf.engine import DEFAULT_FIELD_PHASES
 from psf.spectral import channel_kernels
 from udc_render.errors import UdcError
-from udc_render.optics import (FieldBasis, apply_kernels, band_spectra, convolve_bands, field_basis, field_weights,
-                               live_phases)
+from udc_render.optics import FieldBasis, field_basis, field_weights, live_phases
+from udc_render.optics.layers import DefocusGeometry, DepthLayers, LayerError, choose_layers, one_layer
 from udc_render.optics import gamma
 from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.render import BandImage, render_scene
-from udc_render.scene import Scene
-from udc_render.scene.geometry import RenderGrid, camera_geometry, psf_lens, render_grid
+from udc_render.scene import Monitor, Scene
+from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens, render_grid
 from udc_render.sensor import (Capture, DefectConfig, SensorConfig, band_electron_weights, capture, capture_electrons,
-                               cos4_map, electrons_rgb, mosaic_of, rgb_to_rggb)
-from udc_render.sensor.radiometry import checked_nonnegative
+                               electrons_rgb, mosaic_of, rgb_to_rggb)
+from udc_render.views import View, bin_pixels, bright_pixels, layered_electrons, per_channel_blur
 
 FORMS = ("spectral", "per_channel")
 EXPOSURE_FILL = 0.8
 EXPOSURE_PERCENTILE = 99.5
+# Depth layers: the largest error in a pixel's blur-circle diameter, in render pixels (optics.layers).
+# `study capture` (layers): 0.5 px gives 0.X % error against the per-pixel reference; see README.
+DEFAULT_DEFOCUS_TOLERANCE_PX = 0.5
+
 
 
 class SynthError(UdcError):
@@ -88,6 +103,10 @@ class SynthConfig:
     use_cache: bool = True
     kernel_cache: str | None = None  # kernel cache folder (None: psf.cache's default); how, not what: not recorded
     defects: DefectConfig | None = None  # dead and hot pixels of the sensor (None: none)
+    # Depth layers (optics.layers): largest blur-diameter error, render px; None: no defocus at all
+    # (every pixel in focus, the kernels of the focus distance)
+    defocus_tolerance_px: float | None = DEFAULT_DEFOCUS_TOLERANCE_PX
+    bright_split: bool = True  # very bright pixels convolved apart in float64 (bright_pixels)
     # The profile that chose form, distance and defects (udc_render.profiles.resolve_profile): a JSON
     # record {name, sets, options, applied}, kept in synth.json; None when no profile was used.
     profile: dict | None = field(default=None, hash=False)
@@ -99,6 +118,10 @@ class SynthConfig:
             raise SynthError(f"defects = {self.defects!r}: expected a sensor.defects.DefectConfig or None")
         if self.exposure_s is not None and not (self.exposure_s > 0 and math.isfinite(self.exposure_s)):
             raise SynthError(f"exposure_s = {self.exposure_s!r}: expected a positive number of seconds or auto")
+        tol = self.defocus_tolerance_px
+        if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
+                                or not tol >= 0.05):
+            raise SynthError(f"defocus_tolerance_px = {tol!r}: expected a number of pixels ≥ 0.05, or None (no defocus)")
 
 
 @dataclass(frozen=True)
@@ -121,6 +144,7 @@ class Kernels:
     band: dict[str, KernelSet]
     channel: dict[str, KernelSet] = field(default_factory=dict)
     field_bases: dict[str, FieldBasis] = field(default_factory=dict)  # compact_kernels: rank-r phase bases
+    object_distance_m: float = math.nan  # the distance the kernels are focused for (scene_object_distance_m)
 
 
 def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um: tuple[float, float],
@@ -141,35 +165,51 @@ def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um
     return ks
 
 
+def scene_object_distance_m(scene: Scene) -> float:
+    """The object distance the scene itself fixes: the monitor's plane (the camera sits on its centre
+    line); for 3D scenes, and for any thin-lens render (its defocus is in the render), the focus distance."""
+    if isinstance(scene.content, Monitor) and scene.lens.model == "pinhole":
+        return monitor_distance_m(scene)
+    return camera_geometry(scene).focus_distance_m
+
+
 def display_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
-                    progress: bool = False) -> KernelSet:
-    """The band kernels of `display` for `scene` (its lens and frame) on `grid`."""
+                    progress: bool = False, object_distance_m: float | None = None) -> KernelSet:
+    """The band kernels of `display` for `scene` (its lens and frame) on `grid`, for objects at
+    `object_distance_m` (None: the focus distance)."""
     frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
-    return band_kernel_set(display.layout, psf_lens(scene), grid, display.distance_mm, frame_um, cfg, display.name,
-                           progress)
+    return band_kernel_set(display.layout, psf_lens(scene, object_distance_m), grid, display.distance_mm, frame_um,
+                           cfg, display.name, progress)
 
 
-def display_channel_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig) -> KernelSet:
+def display_channel_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
+                            object_distance_m: float | None = None) -> KernelSet:
     """Channel-effective kernels [3] (camera-weighted under D65) for the per-channel form."""
-    ks, _ = cached(channel_kernels, "channel", display.layout, psf_lens(scene), cfg.use_cache,
+    ks, _ = cached(channel_kernels, "channel", display.layout, psf_lens(scene, object_distance_m), cfg.use_cache,
                    cache_dir=cfg.kernel_cache, camera=cfg.sensor.camera, illuminant="D65", step_nm=None,
                    pixel_um=grid.pitch_um, size_px=grid.kernel_size_px, distance_mm=0.0,
                    precision=cfg.kernel_precision)
     return ks
 
 
-def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progress: bool = False) -> Kernels:
-    """Every kernel set the synthesis of `scene` through `displays` needs, from the scene alone."""
+def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progress: bool = False,
+                 object_distance_m: float | None = None) -> Kernels:
+    """Every kernel set the synthesis of `scene` through `displays` needs, from the scene alone, for
+    objects at `object_distance_m` (None: scene_object_distance_m; the focus distance when
+    cfg.defocus_tolerance_px is None)."""
     grid = render_grid(scene)
+    z = object_distance_m
+    if z is None:
+        z = camera_geometry(scene).focus_distance_m if cfg.defocus_tolerance_px is None else scene_object_distance_m(scene)
     glass = Display("glass", None)
-    band = {"glass": display_kernels(glass, scene, grid, cfg, progress)}
+    band = {"glass": display_kernels(glass, scene, grid, cfg, progress, z)}
     channel = {}
     for d in displays:
         if d.name not in band and (cfg.form == "spectral" or d.source != "preset"):  # per_channel: analytic γ
-            band[d.name] = display_kernels(d, scene, grid, cfg, progress)
+            band[d.name] = display_kernels(d, scene, grid, cfg, progress, z)
         if cfg.form == "per_channel":
-            channel[d.name] = display_channel_kernels(d, scene, grid, cfg)
-    return Kernels(grid, band, channel)
+            channel[d.name] = display_channel_kernels(d, scene, grid, cfg, z)
+    return Kernels(grid, band, channel, object_distance_m=float(z))
 
 
 def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels:
@@ -220,45 +260,6 @@ def noise_seed(seed: int, item: int, display_name: str) -> np.random.SeedSequenc
     return np.random.SeedSequence([int(seed), int(item), zlib.crc32(display_name.encode())])
 
 
-def ground_truth(band_image: BandImage, glass_kernels, sensor: SensorConfig, cfg: SynthConfig, spectra=None):
-    """([3, H, W] linear camera RGB of the clean view in units of the full well (1 = white at gain 1),
-    the glass view's electrons [3, H, W] and the optics record they came from)."""
-    e_rgb, applied = channel_electrons(band_image, glass_kernels, None, sensor, cfg, spectra)
-    return (e_rgb / sensor.full_well_e).astype(np.float32), e_rgb, applied
-
-
-def channel_electrons(band_image: BandImage, kernel_set, transmission, sensor: SensorConfig, cfg: SynthConfig,
-                      spectra=None, field_basis: FieldBasis | None = None) -> tuple[np.ndarray, dict]:
-    """Mean electrons [3, H, W] (float64, sensor pitch, cos⁴ included) that an R, G and B pixel would
-    collect through one display: e_c = cos⁴ · bin(Σ_k w_ck g_k (x_k ⊗ k_k)), w = band_electron_weights.
-    The band sum is taken in Fourier space (apply_kernels' channel_weights: three inverse FFTs, not K);
-    blend 'output' sums the K blurred bands instead. Round-off negatives are set to 0 (counted), larger ones
-    refused, as the sensor does for band radiance (sensor.radiometry.checked_nonnegative)."""
-    w = band_electron_weights(band_image.edges_nm, sensor)
-    kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=field_basis)
-    if cfg.blend == "source":
-        optics = apply_kernels(band_image, kernel_set, transmission, cfg.precision, channel_weights=w, spectra=spectra, **kw)
-        e = optics.images.astype(np.float64)
-    else:
-        optics = apply_kernels(band_image, kernel_set, transmission, cfg.precision, **kw)
-        e = np.einsum("ck,khw->chw", w, optics.images, dtype=np.float64, optimize=True)
-    e, clamped = checked_nonnegative(bin_pixels(e, band_image.pitch_um, sensor.pitch_um), "channel electrons")
-    if sensor.cos4_falloff:
-        e *= cos4_map(*e.shape[1:], sensor.pitch_um, sensor.focal_length_um)
-    applied = {**optics.applied, "gains": optics.gains.tolist(), "transmission": optics.transmission.tolist(),
-               "negative_electrons_clamped": clamped}
-    return e, applied
-
-
-def bin_pixels(a: np.ndarray, pitch_um: float, sensor_pitch_um: float) -> np.ndarray:
-    """Block mean [..., H·s, W·s] -> [..., H, W] where s = sensor pitch / render pitch (render.supersample)."""
-    s = int(round(sensor_pitch_um / pitch_um))
-    if s == 1:
-        return a
-    *lead, h, w = a.shape
-    return a.reshape(*lead, h // s, s, w // s, s).mean(axis=(-3, -1))
-
-
 def check_grid(band_image: BandImage, grid: RenderGrid) -> None:
     """The kernels were planned for the grid the render used (pitch, margin, bands)."""
     same = (abs(band_image.pitch_um - grid.pitch_um) <= 1e-9 * grid.pitch_um and band_image.margin_px == grid.margin_px
@@ -269,44 +270,86 @@ def check_grid(band_image: BandImage, grid: RenderGrid) -> None:
                          f"{band_image.margin_px} px, {band_image.edges_nm.size - 1} bands: plan them from this scene")
 
 
-def shared_spectra(band_image: BandImage, displays: list[Display], kernels: Kernels, cfg: SynthConfig):
-    """The band images' spectra (optics.band_spectra), computed once when a display besides the ground
-    truth convolves the plain bands too (d = 0, spectral form); else None (each view transforms its own)."""
-    plain = [d for d in displays if cfg.form == "spectral" and d.name not in kernels.field_bases
-             and kernels.band[d.name].field_kernels is None and not d.is_glass]
-    if not plain:
-        return None
-    return band_spectra(band_image.bands, kernels.grid.kernel_size_px, band_image.margin_px, cfg.precision)
+def depth_layers(band_image: BandImage, scene: Scene, grid: RenderGrid, cfg: SynthConfig) -> DepthLayers:
+    """The render's depth layers (optics.layers): one for the monitor's plane, a thin-lens render, a scene
+    without depth or with defocus off; else those the defocus tolerance needs for the rendered depth."""
+    geom = camera_geometry(scene)
+    lens = psf_lens(scene)
+    g = DefocusGeometry(lens.aperture_um, lens.image_distance_um, geom.focus_distance_m, grid.pitch_um)
+    tol = cfg.defocus_tolerance_px
+    if tol is None:
+        return one_layer(geom.focus_distance_m, g, "defocus off (defocus_tolerance_px = None): every pixel in focus")
+    if scene.lens.model == "thinlens":
+        return one_layer(geom.focus_distance_m, g, "thin-lens render: its defocus is in the render, not added again", tol)
+    if isinstance(scene.content, Monitor):
+        return one_layer(monitor_distance_m(scene), g, "the monitor's plane", tol)
+    if band_image.depth_m is None:
+        return one_layer(geom.focus_distance_m, g, "no depth rendered (render.depth = false): every pixel in focus", tol)
+    try:
+        return choose_layers(band_image.depth_m, g, tol, grid.kernel_size_px)
+    except LayerError as e:
+        raise SynthError(f"{scene.source}: {e}") from None
+
+
+def layer_kernels(layers: DepthLayers, kernels: Kernels, scene: Scene, displays: list[Display], cfg: SynthConfig,
+                  progress: bool = False) -> list[Kernels]:
+    """The kernels of each layer's distance: `kernels` where it is theirs, else planned (through the kernel
+    cache) and, like `kernels`, compacted to rank-r field bases when those are used."""
+    out = []
+    for z in layers.depths_m:
+        if z == kernels.object_distance_m:
+            out.append(kernels)
+            continue
+        k = plan_kernels(scene, displays, cfg, progress, object_distance_m=z)
+        out.append(compact_kernels(k, scene, cfg) if kernels.field_bases else k)
+    return out
+
+
+def _views(kernels: Kernels, displays: list[Display], edges_nm) -> list[View]:
+    """The ground truth ('gt': glass, T = 1) and every display but a glass with T = 1 (that one is the ground
+    truth's optics exactly)."""
+    out = [View("gt", kernels.band["glass"], None)]
+    for d in displays:
+        t = d.transmission.band_means(edges_nm)
+        if not (d.is_glass and np.all(t == 1)):
+            out.append(View(d.name, kernels.band[d.name], t, kernels.field_bases.get(d.name)))
+    return out
 
 
 def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg: SynthConfig = SynthConfig(),
                item: int = 0, progress: bool = False, kernels: Kernels | None = None) -> SynthResult:
     """The ground truth and one capture per display from one render, with the kernels planned for its
-    scene (plan_kernels; planned here when not given) (module doc)."""
+    scene (plan_kernels; planned here when not given) and for each of its depth layers (module doc)."""
     from tqdm import tqdm
     names = [d.name for d in displays]
     if len(set(names)) != len(names):
         raise SynthError(f"displays {names}: names must be distinct (they name the output folders)")
     kernels = kernels or plan_kernels(scene, displays, cfg, progress)
     check_grid(band_image, kernels.grid)
+    layers = depth_layers(band_image, scene, kernels.grid, cfg)
+    per_layer = layer_kernels(layers, kernels, scene, displays, cfg, progress)
     t0 = time.perf_counter()
     optics_sensor = sensor_for_scene(cfg.sensor, scene)
     exposure, how = (cfg.exposure_s, "set") if cfg.exposure_s is not None else auto_exposure_s(band_image, optics_sensor)
     base_sensor = replace(optics_sensor, exposure_s=float(exposure))
+    bright = bright_pixels(band_image, base_sensor) if cfg.bright_split else None
     bar = tqdm(total=len(displays) + 1, desc="captures", unit="view", disable=not progress, leave=False)
-    spectra = shared_spectra(band_image, displays, kernels, cfg)
-    gt, glass_e, gt_optics = ground_truth(band_image, kernels.band["glass"], base_sensor, cfg, spectra)
+    spectral_views = displays if cfg.form == "spectral" else []
+    electrons = layered_electrons(band_image, layers, lambda l: _views(per_layer[l], spectral_views, band_image.edges_nm),
+                                  base_sensor, cfg, bright)
+    glass_e, gt_optics = electrons["gt"]
+    gt = (glass_e / base_sensor.full_well_e).astype(np.float32)
     bar.update()
     captures, display_meta, rgb = {}, {}, None
     for d in displays:
         rng = np.random.default_rng(noise_seed(cfg.seed, item, d.name))
         if cfg.form == "spectral":
-            cap, extra = _spectral_capture(band_image, d, kernels, cfg, base_sensor, rng, (glass_e, gt_optics), spectra)
+            cap, extra = _spectral_capture(band_image, d, electrons.get(d.name, electrons["gt"]), cfg, base_sensor, rng)
         else:
             if rgb is None:  # the un-blurred camera RGB of the render grid, shared by every display
                 rgb = (electrons_rgb(band_image.bands, band_image.edges_nm, base_sensor)
                        / base_sensor.full_well_e).astype(np.float32)
-            cap, extra = _per_channel_capture(band_image, rgb, d, kernels, cfg, base_sensor, rng)
+            cap, extra = _per_channel_capture(band_image, rgb, d, per_layer, layers, cfg, base_sensor, rng, bright)
         captures[d.name] = cap
         display_meta[d.name] = {"display": d.describe(), "form": cfg.form, "noise_seed":
                                 f"SeedSequence([{cfg.seed}, {item}, crc32('{d.name}')])", **extra}
@@ -315,6 +358,7 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     meta = {"form": cfg.form, "exposure_s": exposure, "exposure_rule": how, "seed": cfg.seed, "item": item,
             "gt": "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, "
                   "/ full well (1.0 = white level at gain 1), not clipped", "gt_optics": gt_optics,
+            "depth_layers": layers.describe(), "bright_pixels": 0 if bright is None else int(bright.mask.sum()),
             "defects": None if cfg.defects is None else asdict(cfg.defects), "profile": cfg.profile,
             "kernel_size_px": kernels.grid.kernel_size_px, "kernel_pixel_um": float(band_image.pitch_um),
             "kernel_precision": cfg.kernel_precision, "lens": psf_lens(scene).describe(),
@@ -331,19 +375,16 @@ def capture_scene(scene: Scene, displays: list[Display], cfg: SynthConfig = Synt
     return band_image, synthesize(band_image, scene, displays, cfg, item, progress, kernels)
 
 
-def _spectral_capture(band_image: BandImage, d: Display, kernels: Kernels, cfg: SynthConfig, base_sensor, rng,
-                      glass_electrons, spectra):
+def _spectral_capture(band_image: BandImage, d: Display, view_electrons: tuple, cfg: SynthConfig, base_sensor, rng):
+    """The capture of display d from its view's electrons (views.layered_electrons; a glass with T = 1 has
+    the ground truth's)."""
+    e_rgb, applied = view_electrons
     t = d.transmission.band_means(band_image.edges_nm)
-    if d.is_glass and np.all(t == 1):  # the ground truth's optics exactly (a bare lens has no field kernels)
-        e_rgb, applied = glass_electrons
-    else:
-        e_rgb, applied = channel_electrons(band_image, kernels.band[d.name], t, base_sensor, cfg, spectra,
-                                           kernels.field_bases.get(d.name))
     sensor = replace(base_sensor, gain=d.gain, form="spectral")
     cap = capture_electrons(mosaic_of(e_rgb), sensor, rng, cfg.defects, {
         "input_shape": list(band_image.bands.shape), "input_pitch_um": float(band_image.pitch_um),
         "edges_nm": np.asarray(band_image.edges_nm, float).tolist(),
-        "input": "camera-channel electrons of the blurred bands (pipeline.channel_electrons)"})
+        "input": "camera-channel electrons of the blurred bands (views.layered_electrons)"})
     applied = dict(applied)
     gains = applied.pop("gains")
     return cap, {"optics": applied, "optics_gains": gains, "transmission_band_means": t.tolist()}
@@ -360,10 +401,11 @@ def display_gamma(d: Display, band_image: BandImage, kernels: Kernels, sensor: S
     return tuple(float(x) for x in g), "γ of the display file (optics.gamma)"
 
 
-def _per_channel_capture(band_image, rgb, d: Display, kernels: Kernels, cfg: SynthConfig, base_sensor, rng):
-    gamma, why = display_gamma(d, band_image, kernels, base_sensor)
-    ks = kernels.channel[d.name]
-    blurred = bin_pixels(convolve_bands(rgb, ks.kernels, band_image.margin_px, None, cfg.precision),
+def _per_channel_capture(band_image, rgb, d: Display, per_layer: list[Kernels], layers: DepthLayers,
+                         cfg: SynthConfig, base_sensor, rng, bright=None):
+    gamma, why = display_gamma(d, band_image, per_layer[0], base_sensor)
+    blurred = bin_pixels(per_channel_blur(rgb, layers, lambda l: per_layer[l].channel[d.name].kernels,
+                                          band_image.margin_px, cfg.precision, bright),
                          band_image.pitch_um, base_sensor.pitch_um)
     # DN = gain · (γ/gain) · x · R: the paper's γ includes the display's gain; electrons are γ/gain · x · FW
     sensor = replace(base_sensor, gain=d.gain, form="per_channel",

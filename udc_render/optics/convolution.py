@@ -26,6 +26,11 @@ of the display the sensor sees (psf.engine.field_shifts). 'source' conserves ene
 'output' gives a flat field exactly the interpolated P(s(x)). With d = 0 (or no field kernels) one
 kernel per band is used and nothing field-dependent is computed.
 
+Very bright pixels (BrightPixels: the sun beside a dim room) are left out of the FFTs and convolved apart, in
+float64, on the boxes they occupy (_bright_blur): a float32 FFT spreads a round-off of about
+0.6 · ε32 · ‖x‖₂ / √N over every pixel of the frame (measured: a point source on a 768 × 1280 grid), which
+the sun's 1e9 dynamic range would lift above the sensor's noise floor (pipeline.bright_pixels chooses them).
+
 FFTs: scipy.fft rfft2/irfft2 with ``workers``; float32/complex64 by default, float64 on request.
 FFT size per axis: next_fast_len(H) — the kernel is stored wrapped around index 0, so circular
 wrap-around only reaches the margin rows/columns that are cropped (exact linear result in the frame
@@ -105,6 +110,58 @@ def _precision(precision: str):
     return PRECISIONS[precision]
 
 
+# ---------------------------------------------------------------------------- very bright pixels
+
+
+@dataclass(frozen=True)
+class BrightPixels:
+    """Pixels of the render grid convolved apart in float64 (module doc): mask [H, W] and the boxes
+    (row slice, column slice) that hold them (scipy.ndimage.find_objects of its clusters)."""
+    mask: np.ndarray
+    boxes: tuple
+
+    @classmethod
+    def of_mask(cls, mask: np.ndarray) -> "BrightPixels | None":
+        """The clusters of `mask` (8-connected), or None when it is empty."""
+        from scipy import ndimage
+        if not mask.any():
+            return None
+        labels, _ = ndimage.label(mask, structure=np.ones((3, 3)))
+        return cls(mask, tuple(ndimage.find_objects(labels)))
+
+
+def _dim(x: np.ndarray, bright: BrightPixels | None, dtype) -> np.ndarray:
+    """x with the bright pixels set to 0 (a copy), in dtype; x itself (as dtype) without bright pixels."""
+    x = x.astype(dtype, copy=False)
+    return x if bright is None else np.where(bright.mask, dtype(0), x)
+
+
+def _bright_blur(x: np.ndarray, bright: BrightPixels, terms, frame_shape, m: int, at_output: bool = False) -> np.ndarray:
+    """float64 frame [h, w] of Σ_terms k ⊗ (w · P · x_bright) (blend 'source'), or Σ w · P · (k ⊗ x_bright)
+    (at_output: blend 'output'), on each bright box only (direct FFT convolution of the box, full size:
+    output row i of a box starting at row r0 is grid row r0 + i − S//2; the kernel convention of convolve_bands)."""
+    from scipy.signal import fftconvolve
+    h, w = frame_shape
+    out = np.zeros((h, w))
+    patches = [np.where(bright.mask[rows, cols], x[rows, cols], 0).astype(np.float64) for rows, cols in bright.boxes]
+    for kern, wmap, power in terms:  # terms outer: a lazy generator of weight maps is read once
+        half = kern.shape[-1] // 2
+        k64 = kern.astype(np.float64)
+        for (rows, cols), patch in zip(bright.boxes, patches):
+            r0, c0 = rows.start - half - m, cols.start - half - m  # frame coordinates of the blur's corner
+            src = patch if wmap is None or at_output else patch * wmap[rows, cols]
+            blur = fftconvolve(src * float(power), k64, mode="full")
+            fr = slice(max(r0, 0), min(r0 + blur.shape[0], h))
+            fc = slice(max(c0, 0), min(c0 + blur.shape[1], w))
+            if fr.start >= fr.stop or fc.start >= fc.stop:
+                continue
+            part = blur[fr.start - r0:fr.stop - r0, fc.start - c0:fc.stop - c0]
+            if at_output and wmap is not None:
+                part = part * wmap[fr.start + m:fr.stop + m, fc.start + m:fc.stop + m]
+            out[fr, fc] += part
+    return out
+
+
 # ---------------------------------------------------------------------------- convolution core
 
 
@@ -124,13 +181,14 @@ def _kernel_spectrum(kernel: np.ndarray, shape, dtype, workers: int) -> np.ndarr
 
 
 def band_spectra(bands: np.ndarray, size_px: int, margin_px: int, precision: str = "float32",
-                 workers: int | None = None) -> np.ndarray:
+                 workers: int | None = None, bright: BrightPixels | None = None) -> np.ndarray:
     """rfft2 of every band [K, H, W] at fft_shape((H, W), size_px, margin_px): [K, Fy, Fx//2 + 1].
-    One render's spectra serve the ground truth and every display of the same kernel size."""
+    One render's spectra serve the ground truth and every display of the same kernel size; without
+    the bright pixels when given (they are convolved apart: module doc)."""
     dtype = _precision(precision)
     workers = _workers(workers)
     shape = fft_shape(bands.shape[1:], size_px, margin_px)
-    return np.stack([sfft.rfft2(b.astype(dtype, copy=False), s=shape, workers=workers) for b in bands])
+    return np.stack([sfft.rfft2(_dim(b, bright, dtype), s=shape, workers=workers) for b in bands])
 
 
 def _channel_weights(channel_weights, K: int) -> np.ndarray | None:
@@ -153,6 +211,7 @@ class _Output:
         n = K if channel_weights is None else channel_weights.shape[0]
         self.out = np.empty((n, H - 2 * m, W - 2 * m), dtype=dtype)
         self.acc = None if channel_weights is None else [None] * n
+        self.spatial = None if channel_weights is None else [None] * n
 
     def add(self, k: int, spec: np.ndarray) -> None:
         if self.w is None:
@@ -166,23 +225,40 @@ class _Output:
             else:
                 self.acc[c] += spec * self.dtype(wc)
 
+    def add_frame(self, k: int, frame: np.ndarray) -> None:
+        """Band k's blurred frame made in space (the bright pixels' float64 blur), after add(k, ...): into
+        the band's image, or into float64 channel sums added to the channels' inverse FFTs."""
+        if self.w is None:
+            self.out[k] += (frame * self.gains[k]).astype(self.dtype)
+            return
+        for c, wc in enumerate(self.w[:, k] * self.gains[k]):
+            if wc != 0:
+                if self.spatial[c] is None:
+                    self.spatial[c] = frame * wc
+                else:
+                    self.spatial[c] += frame * wc
+
     def result(self) -> np.ndarray:
         if self.w is not None:
             for c, a in enumerate(self.acc):
                 self.out[c] = 0 if a is None else sfft.irfft2(a, s=self.shape, workers=self.workers)[self.crop]
+            for c, frame in enumerate(self.spatial):
+                if frame is not None:
+                    self.out[c] += frame.astype(self.dtype)
         return self.out
 
 
 def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains=None,
                    precision: str = "float32", workers: int | None = None, channel_weights=None,
-                   spectra: np.ndarray | None = None) -> np.ndarray:
+                   spectra: np.ndarray | None = None, bright: BrightPixels | None = None) -> np.ndarray:
     """Linear convolution per band, cropped to the frame: y_k = g_k · (x_k ⊗ k_k)[m:H−m, m:W−m].
 
     bands [K, H, W], kernels [K, S, S] (odd S, centre S//2), margin_px ≥ S//2. Output [K, H−2m, W−2m]
     in `precision`. A kernel larger than the sensor frame is fine (exact) as long as the margin
     covers its half-width; a kernel larger than the whole grid necessarily fails that check.
     channel_weights [C, K]: return the channel images Σ_k w_ck y_k [C, H−2m, W−2m] instead (C inverse
-    FFTs, not K). spectra: band_spectra(bands, ...) computed once and shared (no forward FFT here).
+    FFTs, not K). spectra: band_spectra(bands, ...) computed once and shared (no forward FFT here; made
+    with the same `bright`). bright: pixels left out of the FFTs and convolved apart in float64 (module doc).
     """
     dtype = _precision(precision)
     workers = _workers(workers)
@@ -200,10 +276,12 @@ def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains
         raise OpticsError(f"band spectra of shape {spectra.shape} do not match {K} bands at FFT shape {shape}")
     out = _Output(K, H, W, m, shape, dtype, gains, _channel_weights(channel_weights, K), workers)
     for k in range(K):
-        spec = (sfft.rfft2(bands[k].astype(dtype, copy=False), s=shape, workers=workers) if spectra is None
+        spec = (sfft.rfft2(_dim(bands[k], bright, dtype), s=shape, workers=workers) if spectra is None
                 else spectra[k].copy())
         spec *= _kernel_spectrum(kernels[k].astype(dtype, copy=False), shape, dtype, workers)
         out.add(k, spec)
+        if bright is not None:
+            out.add_frame(k, _bright_blur(bands[k], bright, [(kernels[k], None, 1.0)], (H - 2 * m, W - 2 * m), m))
     return out.result()
 
 
@@ -299,7 +377,8 @@ def _basis_map(coeff_r: np.ndarray, live, power: np.ndarray, wy: np.ndarray, wx:
 def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np.ndarray, weights_y: np.ndarray,
                    weights_x: np.ndarray, margin_px: int, gains=None, blend: str = "source",
                    precision: str = "float32", workers: int | None = None, rank: int | None = None,
-                   channel_weights=None, basis: FieldBasis | None = None) -> tuple[np.ndarray, float]:
+                   channel_weights=None, basis: FieldBasis | None = None,
+                   bright: BrightPixels | None = None) -> tuple[np.ndarray, float]:
     """Field-varying blur: y_k = g_k Σ_{j,i} k_kji ⊗ (w_j(row) w_i(col) P_kji x_k)  (blend='source'),
     or g_k Σ_{j,i} w_j w_i P_kji (k_kji ⊗ x_k) (blend='output'). Frame cropped as convolve_bands.
 
@@ -310,6 +389,7 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     maps W_r = Σ_q c_qr P_q w_q: r FFT pairs per band instead of one per phase. channel_weights [C, K]
     (blend 'source' only): the channel images Σ_k w_ck y_k, summed in Fourier space (C inverse FFTs).
     basis: the rank-r bases made beforehand (field_basis; field_kernels may then be None).
+    bright: pixels left out of the FFTs and convolved apart in float64 (module doc).
     Returns (the images, the largest relative kernel residual over the bands; 0 when exact).
     """
     dtype = _precision(precision)
@@ -337,16 +417,21 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     fy, fx = slice(m, H - m), slice(m, W - m)
     worst = 0.0
     for k in range(K):
-        x = bands[k].astype(dtype, copy=False)
+        x = _dim(bands[k], bright, dtype)
         if rank is None:
-            terms = ((field_kernels[k, j, i], wy[j][:, None] * wx[i][None, :], dtype(field_power[k, j, i]))
-                     for j, i in live)  # lazily: one weight map in memory at a time
+            def phase_terms(k=k):  # lazily: one weight map in memory at a time
+                return ((field_kernels[k, j, i], wy[j][:, None] * wx[i][None, :], dtype(field_power[k, j, i]))
+                        for j, i in live)
         else:
             b_k, coeff, residual = ((basis.bases[k], basis.coeffs[k], basis.residuals[k]) if basis is not None
                                     else phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank))
             worst = max(worst, residual)
-            terms = ((b_k[r], _basis_map(coeff[:, r], live, field_power[k], wy, wx, dtype), dtype(1.0))
-                     for r in range(b_k.shape[0]))
+            maps = [(b_k[r], _basis_map(coeff[:, r], live, field_power[k], wy, wx, dtype), dtype(1.0))
+                    for r in range(b_k.shape[0])]
+
+            def phase_terms(maps=maps):
+                return iter(maps)
+        terms = phase_terms()
         if blend == "source":
             acc, weighted = None, np.empty_like(x)
             for kern, wmap, power in terms:
@@ -367,6 +452,9 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
                                    workers=workers)[fy, fx]
                 y += blur * wmap[fy, fx] * power
             out.out[k] = y * dtype(gains[k])
+        if bright is not None:
+            out.add_frame(k, _bright_blur(bands[k], bright, phase_terms(), (H - 2 * m, W - 2 * m), m,
+                                          at_output=blend == "output"))
     return out.result(), worst
 
 
@@ -415,7 +503,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
                   blend: str = "source", field: bool = True, distance_mm: float | None = None,
                   image_distance_um: float | None = None, period_um=None,
                   field_rank: int | None = None, channel_weights=None, spectra: np.ndarray | None = None,
-                  field_basis: FieldBasis | None = None) -> OpticsResult:
+                  field_basis: FieldBasis | None = None, bright: BrightPixels | None = None) -> OpticsResult:
     """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
 
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (module doc).
@@ -426,6 +514,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     channel_weights [C, K]: images are the channel sums Σ_k w_ck y_k [C, H, W] (one inverse FFT per
     channel; blend 'source'); spectra: band_spectra of the band image, shared between calls (d = 0 path).
     field_basis: the kernel set's rank-`field_rank` bases for this grid, made once (field_basis).
+    bright: very bright pixels, convolved apart in float64 (module doc; pipeline.bright_pixels).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -457,17 +546,19 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     applied = {"convolution": "linear, FFT (scipy.fft rfft2), margin cropped", "precision": precision,
                "output": "bands" if channel_weights is None else "channel sums Σ_k w_ck y_k (Fourier space)",
                "fft_shape": list(fft_shape((H, W), S, m)), "margin_px": m, "kernel_px": S,
-               "gain": "T · transmittance · (1 − energy_outside)", "distance_mm": d_mm, "workers": workers}
+               "gain": "T · transmittance · (1 − energy_outside)", "distance_mm": d_mm, "workers": workers,
+               "bright_pixels": 0 if bright is None else int(bright.mask.sum())}
     has_field = kernel_set.field_kernels is not None or field_basis is not None
     use_field = field and has_field and d_mm > 0
     if not use_field:
         why = ("field kernels disabled" if has_field and not field else "d = 0 or no field kernels: one kernel per band")
         applied.update(model="field-independent", skipped=[f"field-dependent blur ({why})"])
-        images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra)
+        images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra, bright)
     else:
         wy, wx, geometry = field_weights(kernel_set, (H, W), pitch, d_mm, image_distance_um, period_um)
         images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
-                                          gains, blend, precision, workers, field_rank, channel_weights, field_basis)
+                                          gains, blend, precision, workers, field_rank, channel_weights, field_basis,
+                                          bright)
         if field_rank is not None:
             applied.update(field_rank=int(field_rank), field_rank_kernel_residual=residual)
         applied.update(model="field-dependent", blend=blend, **geometry)

@@ -1,0 +1,172 @@
+"""The electrons of every view of one render (the ground truth through glass, then each display), through
+the render's depth layers (optics.layers), with very bright pixels convolved apart.
+
+One layer (the monitor, a scene within the defocus tolerance of focus): each view is one optics pass,
+channel_electrons, the band spectra shared by the views that convolve the plain bands (d = 0).
+Several layers, near to far: each layer's masked bands α_l x are transformed once and serve every
+d = 0 view (and the ground truth); each view's blurred layer Y_l is added under the visibility left by the
+nearer layers, Π (1 − k̄_m ⊗ α_m) (optics.layers.composite), with k̄ the layer's kernels weighted per camera
+channel by the view's band weights and the image's mean spectrum (a silhouette's edge is blurred with one
+kernel per channel, not per band: the occlusion's only approximation beyond the model's own).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from udc_render.optics import BrightPixels, FieldBasis, apply_kernels, band_spectra, convolve_bands
+from udc_render.optics.layers import DepthLayers, composite, occluder_kernels
+from udc_render.render import BandImage
+from udc_render.sensor import SensorConfig, band_electron_weights, cos4_map
+from udc_render.sensor.radiometry import checked_nonnegative
+
+# Bright pixels: a float32 FFT convolution's round-off per pixel is at most ROUNDOFF_FACTOR · ε32 · ‖x‖₂ / √N
+# (measured 0.60 for a point source on a 768 × 1280 grid with a 511-px kernel; ‖x‖₂ over the N pixels), times
+# ROUNDOFF_SAFETY for the K bands summed per channel and the kernels' own round-off; pixels are split off,
+# brightest first, until it stays below ROUNDOFF_TARGET of the read noise.
+ROUNDOFF_FACTOR = 0.6
+ROUNDOFF_SAFETY = 4.0
+ROUNDOFF_TARGET = 0.1
+
+
+@dataclass(frozen=True)
+class View:
+    """One view's optics in one layer: its name ('gt' for the ground truth), band kernels, T(λ_k) (None:
+    1) and rank-r field basis (d > 0, compacted kernels)."""
+    name: str
+    kernel_set: object
+    transmission: np.ndarray | None
+    field_basis: FieldBasis | None = None
+
+    @property
+    def plain(self) -> bool:
+        """Convolves the plain bands (d = 0 or glass), so it can share their spectra."""
+        return self.field_basis is None and self.kernel_set.field_kernels is None
+
+
+def bin_pixels(a: np.ndarray, pitch_um: float, sensor_pitch_um: float) -> np.ndarray:
+    """Block mean [..., H·s, W·s] -> [..., H, W] where s = sensor pitch / render pitch (render.supersample)."""
+    s = int(round(sensor_pitch_um / pitch_um))
+    if s == 1:
+        return a
+    *lead, h, w = a.shape
+    return a.reshape(*lead, h // s, s, w // s, s).mean(axis=(-3, -1))
+
+
+def bright_pixels(band_image: BandImage, sensor: SensorConfig) -> BrightPixels | None:
+    """The pixels to convolve apart in float64 (module doc, ROUNDOFF_*), from their electrons at gain 1,
+    e = max_c Σ_k w_ck x_k: none unless ‖e‖₂ exceeds the budget target · σ_read · √N / (factor · safety · ε32)."""
+    x = band_image.bands
+    w = band_electron_weights(band_image.edges_nm, sensor)
+    n = x.shape[1] * x.shape[2]
+    budget = ROUNDOFF_TARGET * sensor.read_noise_e * np.sqrt(n) / (
+        ROUNDOFF_FACTOR * ROUNDOFF_SAFETY * np.finfo(np.float32).eps)
+    band_norms = np.sqrt(np.einsum("khw,khw->k", x, x, dtype=np.float64))
+    if float(np.abs(w).max(axis=0) @ band_norms) <= budget:  # ‖Σ_k w_k x_k‖ ≤ Σ_k |w_k| ‖x_k‖: nothing to split
+        return None
+    e = np.einsum("ck,khw->chw", w.astype(np.float32), x, optimize=True).max(axis=0).astype(np.float64)
+    flat = np.sort(e.ravel())
+    below = np.cumsum(flat ** 2)  # ‖e‖² of the pixels up to each value
+    keep = int(np.searchsorted(below, budget ** 2, side="right"))  # the dimmest `keep` pixels stay in the FFTs
+    if keep >= flat.size:
+        return None
+    return BrightPixels.of_mask(e > flat[keep - 1] if keep > 0 else np.ones(e.shape, bool))
+
+
+def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectra, bright) -> tuple[np.ndarray, dict]:
+    """One optics pass: electrons [3, h, w] (float64, render pitch, before binning) and its record."""
+    w = band_electron_weights(band_image.edges_nm, sensor)
+    kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=view.field_basis, bright=bright)
+    if cfg.blend == "source":
+        optics = apply_kernels(band_image, view.kernel_set, view.transmission, cfg.precision, channel_weights=w,
+                               spectra=spectra, **kw)
+        e = optics.images.astype(np.float64)
+    else:
+        optics = apply_kernels(band_image, view.kernel_set, view.transmission, cfg.precision, **kw)
+        e = np.einsum("ck,khw->chw", w, optics.images, dtype=np.float64, optimize=True)
+    return e, {**optics.applied, "gains": optics.gains.tolist(), "transmission": optics.transmission.tolist()}
+
+
+def _finish(e: np.ndarray, band_image: BandImage, sensor: SensorConfig, applied: dict) -> tuple[np.ndarray, dict]:
+    """Binned to the sensor pitch, round-off negatives clamped (real ones refused: checked_nonnegative), cos⁴."""
+    e, clamped = checked_nonnegative(bin_pixels(e, band_image.pitch_um, sensor.pitch_um), "channel electrons")
+    if sensor.cos4_falloff:
+        e *= cos4_map(*e.shape[1:], sensor.pitch_um, sensor.focal_length_um)
+    return e, {**applied, "negative_electrons_clamped": clamped}
+
+
+def channel_electrons(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectra=None,
+                      bright: BrightPixels | None = None) -> tuple[np.ndarray, dict]:
+    """Mean electrons [3, H, W] (float64, sensor pitch, cos⁴ included) that an R, G and B pixel would
+    collect through one view: e_c = cos⁴ · bin(Σ_k w_ck g_k (x_k ⊗ k_k)), w = band_electron_weights.
+    The band sum is taken in Fourier space (apply_kernels' channel_weights: three inverse FFTs, not K);
+    blend 'output' sums the K blurred bands instead."""
+    e, applied = _optics(band_image, view, sensor, cfg, spectra, bright)
+    return _finish(e, band_image, sensor, applied)
+
+
+def shared_spectra(band_image: BandImage, views: list[View], cfg, bright=None):
+    """The band images' spectra (optics.band_spectra), computed once when more than one view convolves
+    the plain bands (spectral form); else None (each view transforms its own)."""
+    if cfg.form != "spectral" or sum(v.plain for v in views) < 2:
+        return None
+    size = views[0].kernel_set.size_px
+    return band_spectra(band_image.bands, size, band_image.margin_px, cfg.precision, bright=bright)
+
+
+def silhouette_transmittance(alpha: np.ndarray, view: View, weights: np.ndarray, margin_px: int,
+                             precision: str) -> np.ndarray:
+    """1 − k̄_c ⊗ α per camera channel [3, h, w], clipped to [0, 1]: the light a layer's silhouette leaves to
+    the layers behind it (k̄_c: optics.layers.occluder_kernels of the view's kernels, weights [3, K])."""
+    kbar = occluder_kernels(view.kernel_set.kernels, weights).astype(np.float32)
+    spec = band_spectra(alpha[None], kbar.shape[-1], margin_px, precision)
+    cover = convolve_bands(np.broadcast_to(alpha, (3,) + alpha.shape), kbar, margin_px, None, precision,
+                           spectra=np.broadcast_to(spec, (3,) + spec.shape[1:]))
+    return np.clip(1.0 - cover.astype(np.float64), 0.0, 1.0)
+
+
+def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer, sensor: SensorConfig, cfg,
+                      bright: BrightPixels | None = None) -> dict[str, tuple[np.ndarray, dict]]:
+    """{view name: (electrons [3, H, W], record)} of every view through the layers (module doc).
+    views_of_layer(l) gives the views with layer l's kernels (layers far to near, as DepthLayers)."""
+    if layers.labels is None:
+        views = views_of_layer(0)
+        spectra = shared_spectra(band_image, views, cfg, bright)
+        return {v.name: channel_electrons(band_image, v, sensor, cfg, spectra, bright) for v in views}
+    w = band_electron_weights(band_image.edges_nm, sensor)
+    mean_bands = band_image.frame(band_image.bands).mean(axis=(1, 2), dtype=np.float64)
+    acc, vis, records = {}, {}, {}
+    for l in reversed(range(layers.count)):  # near to far
+        alpha = layers.alpha(l)
+        layer = replace(band_image, bands=band_image.bands * alpha)
+        layer_bright = None if bright is None else BrightPixels.of_mask(bright.mask & (alpha > 0))
+        views = views_of_layer(l)
+        spectra = shared_spectra(layer, views, cfg, layer_bright)
+        for v in views:
+            y, records[v.name] = _optics(layer, v, sensor, cfg, spectra if v.plain else None, layer_bright)
+            acc[v.name] = y if v.name not in acc else acc[v.name] + vis[v.name] * y
+            if l > 0:  # the farthest layer hides nothing
+                g = np.asarray(records[v.name]["gains"])
+                t = silhouette_transmittance(alpha, v, w * g[None] * mean_bands[None], band_image.margin_px,
+                                             cfg.precision)
+                vis[v.name] = t if v.name not in vis else vis[v.name] * t
+        del layer, spectra
+    return {name: _finish(acc[name], band_image, sensor, records[name]) for name in acc}
+
+
+def per_channel_blur(rgb: np.ndarray, layers: DepthLayers, kernels_of_layer, margin_px: int, precision: str,
+                     bright: BrightPixels | None = None) -> np.ndarray:
+    """The paper's per-channel blur x_c ⊗ k_c [3, h, w] through the layers (optics.layers.composite, the
+    silhouettes blurred with the same channel kernels); kernels_of_layer(l) gives layer l's [3, S, S]."""
+    if layers.labels is None:
+        return convolve_bands(rgb, kernels_of_layer(0), margin_px, None, precision, bright=bright)
+    images, hides = [], []
+    for l in reversed(range(layers.count)):
+        alpha = layers.alpha(l)
+        k = kernels_of_layer(l)
+        lb = None if bright is None else BrightPixels.of_mask(bright.mask & (alpha > 0))
+        images.append(convolve_bands(rgb * alpha, k, margin_px, None, precision, bright=lb))
+        hides.append(None if l == 0 else np.clip(1.0 - convolve_bands(
+            np.broadcast_to(alpha, (3,) + alpha.shape), k, margin_px, None, precision), 0.0, 1.0))
+    return composite(images, hides).astype(np.float32)
