@@ -1,0 +1,510 @@
+"""Banding study: the bands a display a distance d in front of the lens prints on a flat field (issue 14).
+
+    udc-render study banding --out DIR [--quick]
+
+Rig: the monitor scene (scenes/monitor.toml) showing ``pattern:white`` with framing ``fill``, on a
+reduced sensor (FULL: 1024 × 128 px of 1.55 µm). The rendered panel's centre spectrum is extended over
+the whole render grid (the margin included), so the frame's edges see no panel edge: a flat field.
+Each display (T-OLED, P-OLED presets, gains 6 and 25) is synthesised at every distance d with the
+default SynthConfig (spectral form, blend 'source', 4 field phases per axis, field rank 2, Poisson and
+read noise, the rig's auto exposure: monitor white at 0.8 of the full well through glass).
+
+Measured (green Gr sites of the RGGB mosaic, sample every 2 px along x):
+
+- profile(x) = column mean over the Gr rows of clean_dn(display) / clean_dn(glass) (the noise-free
+  mosaic; the glass ratio removes any fall-off), divided by its mean;
+- period T and first harmonic: least squares of c0 + Σ_{h≤H} [a_h cos(2πhx/T) + b_h sin(2πhx/T)],
+  T refined by a bounded scalar search of the residual around the zero-padded FFT peak (no use of
+  the expected period); A1 = √(a1² + b1²) / c0 (relative to the mean);
+- σ: the per-pixel noise, std(mosaic_dn − clean_dn) over the Gr sites (DN).
+
+Analytic (psf.banding.PowerSeries, exact for a periodic display): the band period on the sensor is
+T = z_i · p / d (z_i the lens' image distance, p the display period along x), and the profile is
+Σ_k a_k P_k(s) with the mask shift s = (x, y) · d / z_i, a_k = w_Gk · L_k · T_k (camera weight of band
+k in green, the panel's white radiance, the stack's transmission; the kernel window's energy outside
+is left out), averaged over the same Gr rows and fitted at the known T, harmonic by harmonic.
+
+Expected ratio measured / analytic < 1: the synthesis samples P(s) at P field phases per axis and
+interpolates linearly, which multiplies harmonic h by sinc²(h/P) (0.81 for h = 1, P = 4), and the PSF
+smooths the weighted source (blend 'source'). The phases run measures the ratio against P.
+
+Visibility: bands are visible per pixel when A1 · mean ≥ σ (first-harmonic amplitude at least the
+per-pixel noise at that level); averaged along the bands over the N Gr rows of the frame the criterion
+is A1 · mean ≥ σ / √N. A period longer than the frame is a gradient, not bands (not visible as bands);
+one below 4 px (the Nyquist limit of a colour channel sampled every 2 px) is not resolved.
+
+Outputs: study_banding.csv (one row per display, distance and field-phase count), study_banding.md
+(set-up, table, visible ranges) and study_banding.png (period and amplitude against d with the analytic
+curves; a flat-field example). ``quick``: 512 × 64 px, 3 bands of 100 nm, 60 µm render margin, one
+distance per display and P = 2 (CI smoke run; an empty temporary kernel cache).
+"""
+from __future__ import annotations
+
+import math
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from scipy.optimize import minimize_scalar
+
+from psf.banding import PowerSeries
+from psf.engine import DEFAULT_FIELD_PHASES, field_shifts
+from udc_render.optics import displays as D
+from udc_render.optics.convolution import phase_weights
+from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
+from udc_render.render import render_scene
+from udc_render.scene import Bands, load_scene
+from udc_render.scene.geometry import psf_lens
+from udc_render.sensor import SensorConfig, band_electron_weights
+from udc_render.studies.report import machine_text, md_table, pyplot, save_plot, write_tables
+
+DISPLAYS = ("toled", "poled")
+AXES = ("x", "y")
+GREEN = 1  # camera channel index (R, G, B) of the Gr sites
+GR_SITE = (0, 1)  # RGGB: Gr at even rows, odd columns
+HARMONICS = 3
+COLUMNS = ["axis", "display", "distance_mm", "field_phases", "period_formula_um", "period_formula_px", "period_fit_um",
+           "period_error_rel", "harmonic_order", "periods_in_frame", "a1_measured_rel", "a1_analytic_rel",
+           "a1_interpolated_rel", "ratio_measured_analytic", "ratio_measured_interpolated", "sinc2_interp", "mean_dn", "a1_dn", "sigma_dn", "rows_averaged",
+           "snr_pixel", "snr_averaged", "regime", "visible_pixel", "visible_averaged", "kernel_s", "synth_s"]
+FULL = {"sensor": (1024, 128), "step_nm": 20.0, "margin_um": None,
+        "distances_mm": {"toled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0), "poled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0)},
+        "phases": (2, 3, 6), "phase_display": "toled", "phase_distance_mm": 4.0,
+        "curve_mm": (0.25, 20.0, 21), "curve_step_nm": 50.0,
+        "y_distances_mm": {"toled": (2.0, 4.0, 8.0), "poled": (1.0, 4.0)}}
+QUICK = {"sensor": (512, 64), "step_nm": 100.0, "margin_um": 60.0,
+         "distances_mm": {"toled": (6.0,), "poled": (3.0,)},
+         "phases": (2,), "phase_display": "toled", "phase_distance_mm": 6.0,
+         "curve_mm": (1.0, 16.0, 5), "curve_step_nm": 100.0, "y_distances_mm": {"toled": (6.0,)}}
+
+
+# ----------------------------------------------------------------------------------------------
+# The rig
+
+
+def flat_field_scene(cfg: dict):
+    """The monitor scene showing pattern:white, framing fill, on cfg's sensor, bands and margin."""
+    s = load_scene("monitor")
+    w, h = cfg["sensor"]
+    s = replace(s, sensor=replace(s.sensor, width_px=w, height_px=h), bands=Bands(step_nm=float(cfg["step_nm"])),
+                content=replace(s.content, image="pattern:white", framing="fill"))
+    return s if cfg["margin_um"] is None else s.with_render(margin_um=float(cfg["margin_um"]))
+
+
+def flat_band_image(band_image):
+    """The render with its centre pixel's spectrum over the whole grid (margin included): a flat field
+    whose frame edges see no panel edge (the PSF halo of an edge would mimic a gradient)."""
+    K, H, W = band_image.bands.shape
+    centre = band_image.bands[:, H // 2, W // 2].astype(np.float32)
+    return replace(band_image, bands=np.ascontiguousarray(np.broadcast_to(centre[:, None, None], (K, H, W))))
+
+
+def period_formula_um(z_i_um: float, period_um: float, distance_mm: float) -> float:
+    """Band period on the sensor T = z_i · p / d (µm)."""
+    return z_i_um * period_um / (distance_mm * 1000.0)
+
+
+def sinc2(h: int, phases: int) -> float:
+    """sinc²(h / P): what linear interpolation between P samples per period keeps of harmonic h."""
+    return float(np.sinc(h / phases) ** 2)
+
+
+# ----------------------------------------------------------------------------------------------
+# Measuring a profile
+
+
+def site_positions_um(shape_hw, pitch_um: float) -> tuple[np.ndarray, np.ndarray]:
+    """(x of the Gr columns, y of the Gr rows) in µm from the optical axis (frame centre), as the optics
+    place pixel centres (optics.convolution.field_weights)."""
+    H, W = shape_hw
+    x = (np.arange(W)[GR_SITE[1]::2] - (W - 1) / 2) * pitch_um
+    y = (np.arange(H)[GR_SITE[0]::2] - (H - 1) / 2) * pitch_um
+    return x, y
+
+
+def green_sites(mosaic: np.ndarray) -> np.ndarray:
+    """The Gr sites [H/2, W/2] of an RGGB mosaic."""
+    return np.asarray(mosaic, np.float64)[GR_SITE[0]::2, GR_SITE[1]::2]
+
+
+def flat_profile(clean_dn: np.ndarray, glass_dn: np.ndarray, axis: str = "x") -> np.ndarray:
+    """The Gr sites of clean_dn / glass_dn averaged across the bands (column means for bands along x,
+    row means along y), divided by its mean."""
+    p = (green_sites(clean_dn) / green_sites(glass_dn)).mean(axis=0 if axis == "x" else 1)
+    return p / p.mean()
+
+
+def harmonic_design(x_um: np.ndarray, period_um: float, harmonics: int = HARMONICS) -> np.ndarray:
+    """Columns 1, cos(2πhx/T), sin(2πhx/T) for h = 1…H."""
+    cols = [np.ones_like(x_um)]
+    for h in range(1, harmonics + 1):
+        ph = 2 * np.pi * h * x_um / period_um
+        cols += [np.cos(ph), np.sin(ph)]
+    return np.stack(cols, axis=1)
+
+
+def harmonic_fit(x_um, y, period_um: float, harmonics: int = HARMONICS) -> tuple[np.ndarray, float]:
+    """(relative amplitudes |c_h| / c0 for h = 0…H (entry 0 is c0), residual sum of squares) of the
+    least-squares fit at period T."""
+    coef, *_ = np.linalg.lstsq(harmonic_design(x_um, period_um, harmonics), y, rcond=None)
+    resid = y - harmonic_design(x_um, period_um, harmonics) @ coef
+    amps = np.concatenate([[coef[0]], np.hypot(coef[1::2], coef[2::2]) / coef[0]])
+    return amps, float(resid @ resid)
+
+
+def fft_peak_period_um(x_um: np.ndarray, y: np.ndarray, pad: int = 16) -> float:
+    """Period of the largest peak of |FFT(y − mean)| (zero-padded pad×) above the lowest whole-frame bin."""
+    n = y.size
+    spec = np.abs(np.fft.rfft(y - y.mean(), n=pad * n))
+    spec[:pad] = 0.0  # below one period per frame: a gradient
+    dx = float(x_um[1] - x_um[0])
+    return pad * n * dx / int(np.argmax(spec))
+
+
+def fit_period(x_um: np.ndarray, y: np.ndarray, harmonics: int = HARMONICS) -> tuple[float, np.ndarray]:
+    """(period T (µm), relative amplitudes) of y: the residual of harmonic_fit minimised over T within
+    ± one unpadded FFT bin of the FFT peak (bounded Brent search); the expected period is not used."""
+    span = float(x_um[-1] - x_um[0] + (x_um[1] - x_um[0]))
+    f0 = 1.0 / fft_peak_period_um(x_um, y)
+    lo, hi = max(f0 - 1.0 / span, 0.5 / span), f0 + 1.0 / span
+    best = minimize_scalar(lambda f: harmonic_fit(x_um, y, 1.0 / f, harmonics)[1], bounds=(lo, hi),
+                           method="bounded", options={"xatol": 1e-6 / span})
+    period = 1.0 / float(best.x)
+    return period, harmonic_fit(x_um, y, period, harmonics)[0]
+
+
+def noise_sigma_dn(capture) -> float:
+    """Per-pixel noise σ (DN): std of mosaic_dn − clean_dn over the Gr sites."""
+    return float((green_sites(capture.mosaic_dn) - green_sites(capture.clean_dn)).std())
+
+
+# ----------------------------------------------------------------------------------------------
+# The analytic profile
+
+
+def green_band_weights(band_image, display, exposure_s: float) -> np.ndarray:
+    """a_k = w_Gk · L_k · T_k: electrons of a green pixel per unit transmitted power fraction, band k."""
+    w = band_electron_weights(band_image.edges_nm, SensorConfig(exposure_s=exposure_s))[GREEN]
+    return w * band_image.white_bands() * display.transmission.band_means(band_image.edges_nm)
+
+
+def band_series(display, lens, centres_nm, distance_mm: float) -> list[PowerSeries]:
+    """P_k(s) of every band centre at distance d (psf.banding.PowerSeries)."""
+    return [PowerSeries(display.layout, lens, wl * 1e-3, distance_mm * 1000.0) for wl in centres_nm]
+
+
+def analytic_harmonics(series, weights, display, distance_mm: float, across_um: np.ndarray, z_i_um: float,
+                       axis: str = "x", samples: int = 64, harmonics: int = HARMONICS) -> np.ndarray:
+    """Relative harmonic amplitudes h = 1…H along `axis` of Σ_k a_k P_k(s) averaged over the positions
+    across_um on the other axis, s = (x, y) · d / z_i: P sampled at `samples` shifts over one period
+    along the axis (exact DFT below samples / 2), the mean across taken, the DFT along."""
+    a = AXES.index(axis)
+    shifts = np.zeros((across_um.size, samples, 2))
+    shifts[..., a] = (np.arange(samples) * display.layout.period_um[a] / samples)[None, :]
+    shifts[..., 1 - a] = (across_um * distance_mm * 1000.0 / z_i_um)[:, None]
+    total = sum(a * ps(shifts).mean(axis=0) for ps, a in zip(series, weights))
+    spec = np.abs(np.fft.rfft(total)) / samples
+    return 2 * spec[1:harmonics + 1] / spec[0]
+
+
+def interpolated_harmonics(series, weights, display, distance_mm: float, x_um: np.ndarray, y_um: np.ndarray,
+                           z_i_um: float, phases: int, frame_um: tuple[float, float], order: int = 1,
+                           axis: str = "x") -> float:
+    """Relative amplitude of harmonic `order` of the profile the synthesis' phase interpolation alone
+    would give: Σ_k a_k P_k at the kernels' P × P field shifts (psf.engine.field_shifts), blended
+    bilinearly over the Gr pixels (optics.convolution.phase_weights), averaged across the bands, fit at
+    T = z_i p / d along `axis`."""
+    d_um = distance_mm * 1000.0
+    period = display.layout.period_um
+    shifts = field_shifts(period, d_um, z_i_um, phases, frame_um)  # [P, P, 2]: rows y, columns x
+    power = sum(a * ps(shifts) for ps, a in zip(series, weights))
+    periodic = [span * d_um / z_i_um >= p for span, p in zip(frame_um, period)]
+    wx = phase_weights(x_um, shifts[0, :, 0], d_um, z_i_um, period[0], periodic[0])
+    wy = phase_weights(y_um, shifts[:, 0, 1], d_um, z_i_um, period[1], periodic[1])
+    a = AXES.index(axis)
+    prof = (wy.T @ power @ wx).mean(axis=a)  # [rows y, columns x]: across the bands
+    amps, _ = harmonic_fit((x_um, y_um)[a], prof / prof.mean(), period_formula_um(z_i_um, period[a], distance_mm),
+                           max(HARMONICS, order))
+    return float(amps[order])
+
+
+# ----------------------------------------------------------------------------------------------
+# The runs
+
+
+class Rig:
+    """The scene, its flat field, the glass capture and the kernel cache shared by every run; bands
+    measured along `axis` (y: the sensor turned to portrait, cfg's height × width)."""
+
+    def __init__(self, cfg: dict, kernel_cache: str, axis: str = "x"):
+        self.cfg, self.axis, self.a = cfg, axis, AXES.index(axis)
+        self.scene = flat_field_scene(cfg if axis == "x" else {**cfg, "sensor": cfg["sensor"][::-1]})
+        self.band_image = flat_band_image(render_scene(self.scene, progress=False))
+        self.lens = psf_lens(self.scene)
+        self.z_i_um = float(self.lens.image_distance_um)  # z_i: the lens focused on the panel (the kernels' own)
+        self.pitch_um = float(self.scene.sensor.pitch_um)
+        self.base = SynthConfig(kernel_cache=kernel_cache)
+        glass = D.preset("glass")
+        res = synthesize(self.band_image, self.scene, [glass], self.base,
+                         kernels=plan_kernels(self.scene, [glass], self.base))
+        self.glass_dn = res.captures["glass"].clean_dn
+        self.exposure_s = float(res.meta["exposure_s"])
+        self.x_um, self.y_um = site_positions_um(self.glass_dn.shape, self.pitch_um)
+        self.along_um, self.across_um = (self.x_um, self.y_um)[self.a], (self.x_um, self.y_um)[1 - self.a]
+
+    @property
+    def frame_size_um(self) -> tuple[float, float]:
+        """(width, height) of the frame (µm): what the kernels' field shifts see (pipeline.display_kernels)."""
+        return self.scene.sensor.width_px * self.pitch_um, self.scene.sensor.height_px * self.pitch_um
+
+    @property
+    def frame_um(self) -> float:
+        """The frame's extent along the bands' axis (µm)."""
+        return self.frame_size_um[self.a]
+
+    def capture(self, display, phases: int | None):
+        """(capture, kernel seconds, synthesis seconds) of `display` with `phases` field phases."""
+        cfg = replace(self.base, field_phases=phases)
+        t0 = time.perf_counter()
+        kernels = plan_kernels(self.scene, [display], cfg)
+        t1 = time.perf_counter()
+        res = synthesize(self.band_image, self.scene, [display], cfg, kernels=kernels)
+        return res.captures[display.name], t1 - t0, time.perf_counter() - t1
+
+    def series(self, display, distance_mm: float, step_nm: float | None = None):
+        """(P_k(s) series, green weights a_k) on the render's bands, or on bands of step_nm."""
+        bi = self.band_image
+        if step_nm is not None and step_nm != self.cfg["step_nm"]:
+            edges = np.asarray(Bands(step_nm=step_nm).edges_nm)
+            white = np.interp((edges[:-1] + edges[1:]) / 2, bi.centres_nm, bi.white_bands())
+            bi = replace(bi, edges_nm=edges, primaries_matrix=np.stack([white, 0 * white, 0 * white]))
+        return band_series(display, self.lens, bi.centres_nm, distance_mm), green_band_weights(bi, display, self.exposure_s)
+
+    def analytic(self, display, distance_mm: float, step_nm: float | None = None) -> np.ndarray:
+        """Analytic relative harmonics (h = 1…H) of the green flat-field profile (analytic_harmonics)."""
+        series, w = self.series(display, distance_mm, step_nm)
+        return analytic_harmonics(series, w, display, distance_mm, self.across_um, self.z_i_um, self.axis)
+
+
+def measure(rig: Rig, name: str, distance_mm: float, phases: int | None) -> dict:
+    """One row: the capture of display `name` at distance_mm, its measured bands against the analytic
+    (exact, and with the synthesis' phase interpolation alone)."""
+    display = D.preset(name).with_distance(distance_mm)
+    cap, kernel_s, synth_s = rig.capture(display, phases)
+    P = phases or DEFAULT_FIELD_PHASES
+    T = period_formula_um(rig.z_i_um, display.layout.period_um[rig.a], distance_mm)
+    row = {"axis": rig.axis, "display": name, "distance_mm": distance_mm, "field_phases": P, "period_formula_um": T,
+           "period_formula_px": T / rig.pitch_um, "periods_in_frame": rig.frame_um / T,
+           "kernel_s": round(kernel_s, 2), "synth_s": round(synth_s, 2)}
+    series, weights = rig.series(display, distance_mm)
+    analytic = analytic_harmonics(series, weights, display, distance_mm, rig.across_um, rig.z_i_um, rig.axis)
+    prof = flat_profile(cap.clean_dn, rig.glass_dn, rig.axis)
+    mean_dn = float(green_sites(cap.clean_dn).mean())
+    sigma = noise_sigma_dn(cap)
+    n_rows = rig.across_um.size
+    row.update(mean_dn=mean_dn, sigma_dn=sigma, rows_averaged=n_rows, sinc2_interp=sinc2(1, P),
+               a1_analytic_rel=float(analytic[0]))
+    if T > rig.frame_um or T < 4 * rig.pitch_um:
+        row.update(regime="gradient (T > frame)" if T > rig.frame_um else "unresolved (T < 4 px)",
+                   visible_pixel=False, visible_averaged=False)
+        return row
+    period, amps = fit_period(rig.along_um, prof)
+    order = max(1, int(round(T / period)))
+    a1 = float(amps[1])
+    a_ref = float(analytic[order - 1]) if order <= analytic.size else math.nan
+    a_interp = interpolated_harmonics(series, weights, display, distance_mm, rig.x_um, rig.y_um, rig.z_i_um, P,
+                                      rig.frame_size_um, order, rig.axis)
+    row.update(regime="bands", period_fit_um=period, period_error_rel=period * order / T - 1, harmonic_order=order,
+               a1_measured_rel=a1, a1_analytic_rel=a_ref, a1_interpolated_rel=a_interp,
+               ratio_measured_analytic=a1 / a_ref if a_ref > 0 else math.nan,
+               ratio_measured_interpolated=a1 / a_interp if a_interp > 0 else math.nan,
+               sinc2_interp=sinc2(order, P), a1_dn=a1 * mean_dn, snr_pixel=a1 * mean_dn / sigma,
+               snr_averaged=a1 * mean_dn * math.sqrt(n_rows) / sigma, visible_pixel=bool(a1 * mean_dn >= sigma),
+               visible_averaged=bool(a1 * mean_dn * math.sqrt(n_rows) >= sigma))
+    return row
+
+
+def jobs(cfg: dict) -> list[tuple[str, str, float, int | None]]:
+    """(axis, display, distance mm, field phases) in run order: every distance at the default phases, the
+    phase-count runs, then the bands along y."""
+    out = [("x", n, d, None) for n in DISPLAYS for d in cfg["distances_mm"][n]]
+    out += [("x", cfg["phase_display"], cfg["phase_distance_mm"], p) for p in cfg["phases"]]
+    return out + [("y", n, d, None) for n in DISPLAYS for d in cfg["y_distances_mm"].get(n, ())]
+
+
+def analytic_curves(rig: Rig, cfg: dict) -> dict:
+    """{display: (distances mm [n], analytic relative harmonics [n, H])} on a log grid (bands of curve_step_nm)."""
+    lo, hi, n = cfg["curve_mm"]
+    ds = np.geomspace(lo, hi, int(n))
+    return {name: (ds, np.array([rig.analytic(D.preset(name), d, cfg["curve_step_nm"]) for d in ds]))
+            for name in DISPLAYS}
+
+
+def visible_range(rows: list[dict], name: str, curve: tuple, rig: Rig) -> dict:
+    """Where the bands of `name` are visible per pixel and after averaging along them: the strongest analytic
+    harmonic h (period T/h) scaled by the median measured/analytic ratio, against σ / mean measured, with
+    the period inside [4 px, frame]. Ranges are (first, last) curve distances that pass, or None."""
+    rs = [r for r in rows if r["display"] == name and r["field_phases"] == DEFAULT_FIELD_PHASES and r["axis"] == "x"]
+    ratios = [r["ratio_measured_analytic"] for r in rs if np.isfinite(r.get("ratio_measured_analytic", math.nan))]
+    ratio = float(np.median(ratios)) if ratios else 1.0
+    noise_rel = float(np.median([r["sigma_dn"] / r["mean_dn"] for r in rs]))
+    ds, harmonics = curve
+    a1 = harmonics.max(axis=1)
+    order = harmonics.argmax(axis=1) + 1
+    T = np.array([period_formula_um(rig.z_i_um, D.preset(name).layout.period_um[0], d) for d in ds]) / order
+    fits = (T <= rig.frame_um) & (T >= 4 * rig.pitch_um)
+    n_rows = rig.across_um.size
+
+    def span(ok):
+        d = ds[ok & fits]
+        return (float(d.min()), float(d.max())) if d.size else None
+    return {"display": name, "ratio_used": ratio, "noise_rel": noise_rel, "a1_max_rel": float(np.max(a1 * ratio)),
+            "pixel": span(a1 * ratio >= noise_rel), "averaged": span(a1 * ratio * math.sqrt(n_rows) >= noise_rel)}
+
+
+def run_study(out: Path, quick: bool = False, progress: bool = True) -> list[dict]:
+    """Run every (display, distance, phases) capture, write study_banding.{csv,md,png} into out, return the rows."""
+    from tqdm import tqdm
+    cfg = QUICK if quick else FULL
+    out = Path(out)
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="udc-banding-kernels-") as cache:
+        rigs: dict[str, Rig] = {}
+        rows = []
+        for axis, name, d, p in tqdm(jobs(cfg), desc="study banding", unit="capture", disable=not progress):
+            rig = rigs.get(axis) or rigs.setdefault(axis, Rig(cfg, cache, axis))
+            rows.append(measure(rig, name, d, p))
+        rig = rigs["x"]
+        example = example_profile(rig, rows)
+    curves = analytic_curves(rig, cfg)
+    ranges = [visible_range(rows, n, curves[n], rig) for n in DISPLAYS]
+    out.mkdir(parents=True, exist_ok=True)
+    write_tables(out, "study_banding", rows, COLUMNS, markdown(rows, ranges, rig, cfg, time.perf_counter() - t0))
+    plot(rows, curves, rig, example, out / "study_banding.png")
+    return rows
+
+
+def example_profile(rig: Rig, rows: list[dict]):
+    """(display, d, x µm, profile, clean Gr image) of the T-OLED run with the most periods in the frame
+    that still holds ≥ 2, recaptured (its kernels are cached)."""
+    rs = [r for r in rows if r["display"] == "toled" and r["field_phases"] == DEFAULT_FIELD_PHASES
+          and r["regime"] == "bands" and r["axis"] == "x"]
+    if not rs:
+        return None
+    pick = min(rs, key=lambda r: abs(r["periods_in_frame"] - 3))
+    cap, _, _ = rig.capture(D.preset("toled").with_distance(pick["distance_mm"]), None)
+    return "toled", pick["distance_mm"], rig.x_um, flat_profile(cap.clean_dn, rig.glass_dn), green_sites(cap.clean_dn)
+
+
+# ----------------------------------------------------------------------------------------------
+# Report
+
+
+def _fmt_range(r) -> str:
+    return "none" if r is None else f"{r[0]:.3g}–{r[1]:.3g} mm"
+
+
+def markdown(rows: list[dict], ranges: list[dict], rig: Rig, cfg: dict, elapsed_s: float) -> str:
+    """study_banding.md: set-up, criteria, one table row per capture and the visible ranges."""
+    w, h = cfg["sensor"]
+    k = rig.band_image.bands.shape[0]
+    lines = ["# Banding of a flat field against the display-to-lens distance", "",
+             f"Monitor rig showing `pattern:white` (framing fill, the panel's spectrum extended over the render "
+             f"margin), {w} × {h} px of {rig.pitch_um:g} µm, {k} bands of {cfg['step_nm']:g} nm, default synthesis "
+             f"(blend 'source', field rank 2, Poisson + read noise), auto exposure {rig.exposure_s * 1e3:.3g} ms. "
+             f"z_i = {rig.z_i_um:.1f} µm (bands along y: the sensor turned to {h} × {w} px, framed anew). Measured on "
+             "the green (Gr) sites: the mean across the bands (column mean for x) of clean_dn / glass, "
+             f"least-squares fit of a sinusoid + {HARMONICS - 1} harmonics with the period free (FFT start, bounded "
+             "search); analytic: psf.banding.PowerSeries of the same rows and bands, T = z_i · p / d. "
+             "Regenerate with `udc-render study banding --out DIR`.", "",
+             "Criteria: bands are **visible per pixel** when the first harmonic A1 · mean ≥ σ, the per-pixel noise "
+             "(std of the noisy minus the clean mosaic, Gr sites) at that level; **visible averaged** when "
+             f"A1 · mean ≥ σ / √N after averaging the N = {rig.across_um.size} Gr sites of this frame along the bands "
+             "(rows for bands along x; the y runs turn the sensor to portrait, N the same). "
+             "A period longer than the frame is a gradient, not bands; below 4 px it is not resolved.", "",
+             "The ratio measured / analytic is expected below 1: the synthesis interpolates P(s) linearly "
+             "between P field phases per axis, keeping sinc²(h/P) of harmonic h (0.81 for h = 1, P = 4), and "
+             "blend 'source' smooths the weighted source with the PSF. harmonic_order > 1: the fit found the "
+             "period T/order (the first harmonic vanishes), compared with the analytic harmonic of that order. "
+             "A1 interp.: the analytic P(s) sampled at the kernels' P × P field shifts and blended bilinearly "
+             "as the synthesis does (no PSF, no rank-2 basis): the ratio to it is what the rest of the optics "
+             "changes.", ""]
+    lines += md_table(rows, [("axis", "bands along"), ("display", "display"), ("distance_mm", "d mm"), ("field_phases", "P"),
+                             ("period_formula_px", "T formula px"), ("period_error_rel", "T fit error"),
+                             ("harmonic_order", "order"), ("a1_measured_rel", "A1 measured"),
+                             ("a1_analytic_rel", "A1 analytic"), ("a1_interpolated_rel", "A1 interp."),
+                             ("ratio_measured_analytic", "ratio"), ("ratio_measured_interpolated", "ratio to interp."),
+                             ("sinc2_interp", "sinc²(h/P)"), ("a1_dn", "A1 DN"), ("sigma_dn", "σ DN"),
+                             ("snr_pixel", "A1/σ"), ("regime", "regime"), ("visible_pixel", "visible/pixel"),
+                             ("visible_averaged", "visible averaged"), ("kernel_s", "kernel s")],
+                      {"period_error_rel": lambda v: "" if v is None else f"{v:+.2e}"})
+    lines += ["", "Visible ranges on the analytic grid of d (the strongest analytic harmonic × the median "
+              "measured/analytic ratio, against the measured σ / mean; its period within [4 px, frame]):", ""]
+    lines += md_table([{**r, "pixel": _fmt_range(r["pixel"]), "averaged": _fmt_range(r["averaged"])} for r in ranges],
+                      [("display", "display"), ("ratio_used", "ratio used"), ("noise_rel", "σ / mean"),
+                       ("a1_max_rel", "strongest harmonic (× ratio), max over d"), ("pixel", "visible per pixel"),
+                       ("averaged", f"visible averaged over {rig.across_um.size} rows")])
+    return "\n".join(lines + ["", machine_text(elapsed_s) + "."]) + "\n"
+
+
+def plot(rows: list[dict], curves: dict, rig: Rig, example, path: Path) -> None:
+    """study_banding.png: period and first harmonic against d (measured points, analytic curves, the
+    noise level), the ratio against P, and a flat-field example."""
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 4, figsize=(19, 4.2))
+    ax_t, ax_a, ax_p, ax_e = axes
+    for name, colour in zip(DISPLAYS, ("C0", "C1")):
+        rs = [r for r in rows if r["display"] == name and r["field_phases"] == DEFAULT_FIELD_PHASES and r["axis"] == "x"]
+        ds, harmonics = curves[name]
+        a1 = harmonics[:, 0]
+        p = D.preset(name).layout.period_um[0]
+        ax_t.loglog(ds, [period_formula_um(rig.z_i_um, p, d) / rig.pitch_um for d in ds], "-", color=colour,
+                    label=f"{name}: z_i p / d")
+        b = [r for r in rs if r["regime"] == "bands"]
+        ax_t.loglog([r["distance_mm"] for r in b], [r["period_fit_um"] * r["harmonic_order"] / rig.pitch_um for r in b],
+                    "o", color=colour, label=f"{name}: fit × order")
+        ax_a.loglog(ds, np.maximum(a1, 1e-9), "-", color=colour, label=f"{name}: analytic h = 1")
+        if np.any(harmonics.max(axis=1) > 1.5 * a1):
+            ax_a.loglog(ds, harmonics.max(axis=1), "-.", color=colour, lw=0.8, label=f"{name}: analytic, strongest h")
+        ax_a.loglog([r["distance_mm"] for r in b], [max(r["a1_measured_rel"], 1e-9) for r in b], "o", color=colour,
+                    label=f"{name}: measured")
+        noise = float(np.median([r["sigma_dn"] / r["mean_dn"] for r in rs]))
+        ys = [r for r in rows if r["display"] == name and r["axis"] == "y" and r["regime"] == "bands"]
+        if ys:
+            ax_t.loglog([r["distance_mm"] for r in ys], [r["period_fit_um"] * r["harmonic_order"] / rig.pitch_um
+                                                         for r in ys], "s", mfc="none", color=colour,
+                        label=f"{name}: fit × order, along y")
+            ax_a.loglog([r["distance_mm"] for r in ys], [max(r["a1_measured_rel"], 1e-9) for r in ys], "s", mfc="none",
+                        color=colour, label=f"{name}: measured along y")
+            ax_a.loglog([r["distance_mm"] for r in ys], [max(r["a1_analytic_rel"], 1e-9) for r in ys], "x",
+                        color=colour, label=f"{name}: analytic along y")
+        ax_a.axhline(noise, color=colour, ls="--", lw=0.8, label=f"{name}: σ / mean (per pixel)")
+        ax_a.axhline(noise / math.sqrt(rig.across_um.size), color=colour, ls=":", lw=0.8, label=f"{name}: averaged")
+    ax_t.axhline(rig.frame_um / rig.pitch_um, color="k", lw=0.8, ls="--", label="frame width")
+    ax_t.set(xlabel="display-to-lens distance d (mm)", ylabel="band period on the sensor (px)", title="period")
+    ax_a.set(xlabel="display-to-lens distance d (mm)", ylabel="first harmonic / mean", title="amplitude (green)")
+    ph = sorted((r for r in rows if r["display"] == rig.cfg["phase_display"] and r["axis"] == "x"
+                 and r["distance_mm"] == rig.cfg["phase_distance_mm"] and r["regime"] == "bands"),
+                key=lambda r: r["field_phases"])
+    Ps = np.linspace(3, 8, 100)
+    ax_p.plot(Ps, np.sinc(1 / Ps) ** 2, "k-", lw=0.8, label="sinc²(1/P) (a pure sinusoid, P ≥ 3)")
+    label = f"{rig.cfg['phase_display']}, d = {rig.cfg['phase_distance_mm']:g} mm"
+    ax_p.plot([r["field_phases"] for r in ph], [r["ratio_measured_analytic"] for r in ph], "o-",
+              label=f"{label}: measured")
+    ax_p.plot([r["field_phases"] for r in ph], [r["a1_interpolated_rel"] / r["a1_analytic_rel"] for r in ph], "s--",
+              mfc="none", label=f"{label}: P(s) interpolated alone")
+    ax_p.set(xlabel="field phases P per axis", ylabel="A1 measured / analytic", title="interpolation in phase")
+    if example is not None:
+        name, d, x, prof, img = example
+        ax_e.plot(x, prof, lw=0.8)
+        ax_e.set(xlabel="x on the sensor (µm)", ylabel="column mean / glass / mean",
+                 title=f"{name}, d = {d:g} mm: flat-field profile")
+        inset = ax_e.inset_axes([0.0, 1.12, 1.0, 0.25])
+        inset.imshow(img / img.mean(), cmap="gray", aspect="auto")
+        inset.set_axis_off()
+    for ax in axes[:3]:
+        ax.grid(True, which="both", alpha=0.25)
+        ax.legend(fontsize=7)
+    save_plot(fig, path)
