@@ -5,9 +5,10 @@ One layer (the monitor, a scene within the defocus tolerance of focus): each vie
 channel_electrons, the band spectra shared by the views that convolve the plain bands (d = 0).
 Several layers, near to far: each layer's masked bands α_l x are transformed once and serve every
 d = 0 view (and the ground truth); each view's blurred layer Y_l is added under the visibility left by the
-nearer layers, Π (1 − k̄_m ⊗ α_m) (optics.layers.composite), with k̄ the layer's kernels weighted per camera
-channel by the view's band weights and the image's mean spectrum (a silhouette's edge is blurred with one
-kernel per channel, not per band: the occlusion's only approximation beyond the model's own).
+nearer layers (optics.layers.Compositor: Hasinoff & Kutulakos' occlusion, Ikoma et al.'s normalisation),
+the silhouettes α_l and their normalisers blurred with k̄, the layer's kernels weighted per camera channel
+by the view's band weights and the image's mean spectrum (one kernel per channel, not per band, and the
+mean kernel over the field phases at d > 0: the occlusion's approximations beyond the model's own).
 """
 from __future__ import annotations
 
@@ -16,7 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from udc_render.optics import BrightPixels, FieldBasis, apply_kernels, band_spectra, convolve_bands
-from udc_render.optics.layers import DepthLayers, composite, occluder_kernels
+from udc_render.optics.layers import Compositor, DepthLayers, occluder_kernels
 from udc_render.render import BandImage
 from udc_render.sensor import SensorConfig, band_electron_weights, cos4_map
 from udc_render.sensor.radiometry import checked_nonnegative
@@ -115,15 +116,13 @@ def shared_spectra(band_image: BandImage, views: list[View], cfg, bright=None):
     return band_spectra(band_image.bands, size, band_image.margin_px, cfg.precision, bright=bright)
 
 
-def silhouette_transmittance(alpha: np.ndarray, view: View, weights: np.ndarray, margin_px: int,
-                             precision: str) -> np.ndarray:
-    """1 − k̄_c ⊗ α per camera channel [3, h, w], clipped to [0, 1]: the light a layer's silhouette leaves to
-    the layers behind it (k̄_c: optics.layers.occluder_kernels of the view's kernels, weights [3, K])."""
-    kbar = occluder_kernels(view.kernel_set.kernels, weights).astype(np.float32)
-    spec = band_spectra(alpha[None], kbar.shape[-1], margin_px, precision)
-    cover = convolve_bands(np.broadcast_to(alpha, (3,) + alpha.shape), kbar, margin_px, None, precision,
-                           spectra=np.broadcast_to(spec, (3,) + spec.shape[1:]))
-    return np.clip(1.0 - cover.astype(np.float64), 0.0, 1.0)
+def silhouette_covers(masks: np.ndarray, kernels: np.ndarray, margin_px: int, precision: str) -> np.ndarray:
+    """k_c ⊗ mask_i for each mask [n, H, W] and channel kernel [C, S, S]: [n, C, h, w] (frame; float64)."""
+    n, C = masks.shape[0], kernels.shape[0]
+    spec = band_spectra(masks, kernels.shape[-1], margin_px, precision)
+    return np.stack([convolve_bands(np.broadcast_to(masks[i], (C,) + masks.shape[1:]), kernels, margin_px, None,
+                                    precision, spectra=np.broadcast_to(spec[i], (C,) + spec.shape[1:]))
+                     for i in range(n)]).astype(np.float64)
 
 
 def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer, sensor: SensorConfig, cfg,
@@ -136,7 +135,8 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
         return {v.name: channel_electrons(band_image, v, sensor, cfg, spectra, bright) for v in views}
     w = band_electron_weights(band_image.edges_nm, sensor)
     mean_bands = band_image.frame(band_image.bands).mean(axis=(1, 2), dtype=np.float64)
-    acc, vis, records = {}, {}, {}
+    comp, records = {}, {}
+    behind = np.ones(band_image.bands.shape[1:], np.float32)  # this layer and every farther one
     for l in reversed(range(layers.count)):  # near to far
         alpha = layers.alpha(l)
         layer = replace(band_image, bands=band_image.bands * alpha)
@@ -145,28 +145,29 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
         spectra = shared_spectra(layer, views, cfg, layer_bright)
         for v in views:
             y, records[v.name] = _optics(layer, v, sensor, cfg, spectra if v.plain else None, layer_bright)
-            acc[v.name] = y if v.name not in acc else acc[v.name] + vis[v.name] * y
-            if l > 0:  # the farthest layer hides nothing
-                g = np.asarray(records[v.name]["gains"])
-                t = silhouette_transmittance(alpha, v, w * g[None] * mean_bands[None], band_image.margin_px,
-                                             cfg.precision)
-                vis[v.name] = t if v.name not in vis else vis[v.name] * t
+            g = np.asarray(records[v.name]["gains"])
+            kbar = occluder_kernels(v.kernel_set.kernels, w * g[None] * mean_bands[None]).astype(np.float32)
+            cover, cover_behind = silhouette_covers(np.stack([alpha, behind]), kbar, band_image.margin_px, cfg.precision)
+            comp.setdefault(v.name, Compositor()).add(y, cover if l > 0 else None, cover_behind)
+        behind -= alpha
         del layer, spectra
-    return {name: _finish(acc[name], band_image, sensor, records[name]) for name in acc}
+    return {name: _finish(c.result(), band_image, sensor, records[name]) for name, c in comp.items()}
 
 
 def per_channel_blur(rgb: np.ndarray, layers: DepthLayers, kernels_of_layer, margin_px: int, precision: str,
                      bright: BrightPixels | None = None) -> np.ndarray:
-    """The paper's per-channel blur x_c ⊗ k_c [3, h, w] through the layers (optics.layers.composite, the
+    """The paper's per-channel blur x_c ⊗ k_c [3, h, w] through the layers (optics.layers.Compositor, the
     silhouettes blurred with the same channel kernels); kernels_of_layer(l) gives layer l's [3, S, S]."""
     if layers.labels is None:
         return convolve_bands(rgb, kernels_of_layer(0), margin_px, None, precision, bright=bright)
-    images, hides = [], []
+    comp = Compositor()
+    behind = np.ones(rgb.shape[1:], np.float32)
     for l in reversed(range(layers.count)):
         alpha = layers.alpha(l)
         k = kernels_of_layer(l)
         lb = None if bright is None else BrightPixels.of_mask(bright.mask & (alpha > 0))
-        images.append(convolve_bands(rgb * alpha, k, margin_px, None, precision, bright=lb))
-        hides.append(None if l == 0 else np.clip(1.0 - convolve_bands(
-            np.broadcast_to(alpha, (3,) + alpha.shape), k, margin_px, None, precision), 0.0, 1.0))
-    return composite(images, hides).astype(np.float32)
+        light = convolve_bands(rgb * alpha, k, margin_px, None, precision, bright=lb).astype(np.float64)
+        cover, cover_behind = silhouette_covers(np.stack([alpha, behind]), k, margin_px, precision)
+        comp.add(light, cover if l > 0 else None, cover_behind)
+        behind -= alpha
+    return comp.result().astype(np.float32)

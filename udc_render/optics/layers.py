@@ -13,17 +13,18 @@ fewest intervals of that width). A layer's kernels are computed at the centre of
 focus exactly for the focus interval), so no pixel's blur diameter is off by more than tol. A flat scene
 has one layer; a scene within tol of focus has one, at focus: the in-focus kernels of before.
 
-Compositing (composite). The layered occlusion model of Hasinoff & Kutulakos, "A Layer-Based Restoration
-Framework for Variable-Aperture Photography" (ICCV 2007), in the form used to simulate defocus with
-occlusion by Ikoma, Nguyen, Metzler, Peng & Wetzstein, "Depth from Defocus with Learned Optics for
-Imaging and Occlusion-aware Depth Estimation" (ICCP 2021):
+Compositing (Compositor). The layered occlusion model of Hasinoff & Kutulakos, "A Layer-Based
+Restoration Framework for Variable-Aperture Photography" (ICCV 2007), with the normalisation of Ikoma,
+Nguyen, Metzler, Peng & Wetzstein, "Depth from Defocus with Learned Optics for Imaging and
+Occlusion-aware Depth Estimation" (ICCP 2021, their image formation model), layers l near to far:
 
-    y = Σ_l (k_l ⊗ (α_l x)) · Π_{m nearer than l} (1 − k_m ⊗ α_m)
+    y = Σ_l Ĉ_l · Π_{m nearer than l} (1 − Â_m),   Ĉ_l = k_l ⊗ (α_l x) / B_l,   Â_l = k_l ⊗ α_l / B_l,
+    B_l = k_l ⊗ (α_l + every farther α)
 
-α_l is 1 where the pinhole render sees layer l. A layer's light is dimmed where the blurred silhouettes of
-nearer layers cover it; the nearest layer is seen whole. Light from behind an occluder's edge that the
-pinhole render never saw is missing (a thin dark fringe behind strongly blurred foreground edges): the
-model's known limit, measured against the per-pixel reference in `study capture`.
+α_l is 1 where the pinhole render sees layer l. The nearer layers' blurred silhouettes hide the light
+behind them; the normalisation B_l fills what the render could not see behind a blurred foreground
+edge with the layer's own blurred colour, and keeps a continuous surface cut into two layers seamless
+(uniform light through two adjacent layers of one kernel sums to itself: without B, a seam of −25 %).
 """
 from __future__ import annotations
 
@@ -142,18 +143,27 @@ def choose_layers(depth_m: np.ndarray, geometry: DefocusGeometry, tolerance_px: 
                        f"{len(centres)} layers cover blur diameters {values.min():.3g} … {values.max():.3g} px")
 
 
-def composite(layer_images, transmittances) -> np.ndarray:
-    """y = Σ_l Y_l Π_{m nearer than l} T_m, with the layers given near to far (two iterables of the same
-    length, [C, h, w] each; the farthest layer's transmittance is not used and may be None)."""
-    acc = vis = None
-    for y, t in zip(layer_images, transmittances):
-        if acc is None:
-            acc = np.array(y, dtype=np.float64)
-        else:
-            acc += vis * y
-        if t is not None:
-            vis = np.array(t, dtype=np.float64) if vis is None else vis * t
-    return acc
+NORMALIZE_FLOOR = 1e-3  # B_l below this: nothing of layer l or behind it reaches the pixel (Ikoma et al.'s ε)
+
+
+class Compositor:
+    """y = Σ_l Ĉ_l Π_{m nearer} (1 − Â_m) (module doc), fed one layer at a time, near to far: add(Y_l,
+    k_l ⊗ α_l, B_l), each [C, h, w] (the cover of the farthest layer is not used and may be None)."""
+
+    def __init__(self):
+        self.acc = None
+        self.vis = None
+
+    def add(self, light, cover, cover_behind) -> None:
+        inv = np.divide(1.0, cover_behind, out=np.zeros(np.shape(cover_behind)), where=cover_behind > NORMALIZE_FLOOR)
+        shown = light * inv if self.vis is None else self.vis * light * inv
+        self.acc = shown if self.acc is None else self.acc + shown
+        if cover is not None:
+            hide = 1.0 - np.clip(cover * inv, 0.0, 1.0)
+            self.vis = hide if self.vis is None else self.vis * hide
+
+    def result(self) -> np.ndarray:
+        return self.acc
 
 
 def occluder_kernels(kernels: np.ndarray, weights: np.ndarray) -> np.ndarray:
