@@ -99,6 +99,17 @@ def one_layer(depth_m: float, geometry: DefocusGeometry, reason: str, tolerance_
     return DepthLayers((float(depth_m),), (float(geometry.beta_px(depth_m)),), None, tolerance_px, reason)
 
 
+def _occupied(beta: np.ndarray, step: float) -> np.ndarray:
+    """The sorted occupied β: the exact smallest and largest of each histogram bin of width `step` (a
+    histogram keeps this O(pixels) and its list short; the extremes keep the intervals exact)."""
+    bins, inverse = np.unique(np.floor(beta.ravel() / step).astype(np.int64), return_inverse=True)
+    lo = np.full(bins.size, np.inf)
+    hi = np.full(bins.size, -np.inf)
+    np.minimum.at(lo, inverse, beta.ravel())
+    np.maximum.at(hi, inverse, beta.ravel())
+    return np.unique(np.concatenate([lo, hi]))
+
+
 def _cover(values: np.ndarray, width: float) -> list[tuple[float, float]]:
     """Greedy intervals [lo, hi] (hi − lo ≤ width) of sorted values: each starts at the first uncovered one."""
     out, i = [], 0
@@ -117,9 +128,7 @@ def choose_layers(depth_m: np.ndarray, geometry: DefocusGeometry, tolerance_px: 
     beta = geometry.beta_px(depth_m)
     if not np.all(np.isfinite(beta)):
         raise LayerError("depth map: NaN or negative distances; expected axial distances > 0 m or inf")
-    step = tolerance_px / 64  # β resolution of the histogram: 1/64 of the tolerance
-    levels = np.unique(np.round(beta / step).astype(np.int64))
-    values = levels * step
+    values = _occupied(beta, tolerance_px / 64)
     near_focus = np.abs(values) <= tolerance_px
     intervals = ([(0.0, 0.0)] if near_focus.any() else [])
     intervals += [(lo, hi) for lo, hi in _cover(values[values > tolerance_px], 2 * tolerance_px)]
