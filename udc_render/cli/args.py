@@ -53,6 +53,19 @@ def field_rank(text):
     return value
 
 
+def defocus_tolerance(text):
+    """--defocus-tolerance-px: a number of pixels ≥ 0.05, or 'off' (no defocus: None)."""
+    if text == "off":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value >= 0.05 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"--defocus-tolerance-px = {text!r}: expected a number of pixels ≥ 0.05 or 'off'")
+    return value
+
+
 def float_list(text):
     try:
         values = [float(t) for t in text.split(",") if t.strip()]
@@ -139,6 +152,7 @@ def scene_from_args(args):
 
 def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     """Knobs shared by synth and dataset (demo: the defaults)."""
+    from udc_render.pipeline import DEFAULT_DEFOCUS_TOLERANCE_PX
     from udc_render.profiles import DEFAULT_PROFILE, PHYSICAL_DISTANCE_MM, PROFILES
     p.add_argument("--display", default="toled",
                    help="comma-separated: glass, toled, poled or display files (.toml); the glass "
@@ -161,6 +175,10 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
                    help="d > 0: convolve with a rank-R basis of each band's phase kernels (R FFT pairs per band "
                         "instead of one per phase; the kernel residual is recorded), or 'exact' [2]")
     p.add_argument("--precision", choices=("float32", "float64"), default="float32", help="optics FFTs [float32]")
+    p.add_argument("--defocus-tolerance-px", type=defocus_tolerance, default=argparse.SUPPRESS,
+                   help="depth layers: the largest error in a pixel's blur-circle diameter, render pixels (fewer "
+                        f"layers when larger; udc_render/optics/layers.py), or 'off' (every pixel in focus) "
+                        f"[{DEFAULT_DEFOCUS_TOLERANCE_PX:g}]")
 
 
 def add_sensor_arguments(p: argparse.ArgumentParser) -> None:
@@ -187,6 +205,7 @@ def synth_config(args):
                        exposure_s=getattr(args, "exposure_s", None), precision=getattr(args, "precision", "float32"),
                        field_phases=getattr(args, "field_phases", None),
                        field_rank=getattr(args, "field_rank", SynthConfig.field_rank),
+                       defocus_tolerance_px=getattr(args, "defocus_tolerance_px", SynthConfig.defocus_tolerance_px),
                        seed=getattr(args, "noise_seed", 0),
                        use_cache=not getattr(args, "no_cache", False), kernel_cache=None if cache is None else str(cache))
 

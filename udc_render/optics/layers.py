@@ -6,12 +6,12 @@ z_i, blurs (geometric optics) into a disc of diameter b = D · z_i · |1/z − 1
 pixels of pitch δ, the signed β = D · z_i · (1/z − 1/z_f) / δ (β > 0: nearer than focus; z = ∞ is
 1/z = 0).
 
-Layers (choose_layers). The occupied β of the render grid are covered by intervals of width 2·tol (tol:
-the defocus tolerance, in render pixels of blur-circle diameter): first [−tol, tol] about focus, then
-greedily outwards on each side (each interval starts at the first uncovered β; greedy covering is the
-fewest intervals of that width). A layer's kernels are computed at the centre of its occupied β (at
-focus exactly for the focus interval), so no pixel's blur diameter is off by more than tol. A flat scene
-has one layer; a scene within tol of focus has one, at focus: the in-focus kernels of before.
+Layers (choose_layers). Layer centres sit on a fixed grid of β, the multiples of 2·tol (tol: the defocus
+tolerance, in render pixels of blur-circle diameter), and each pixel goes to the nearest: no pixel's blur
+diameter is off by more than tol, the focus layer is at focus exactly (β = 0: the in-focus kernels of
+before), and the same distances recur from render to render (a dataset's views of one scene share their
+layers' kernels through the kernel cache). A scene whose pixels share one distance (a flat scene) has one
+layer, at that distance exactly.
 
 Compositing (Compositor). The layered occlusion model of Hasinoff & Kutulakos, "A Layer-Based
 Restoration Framework for Variable-Aperture Photography" (ICCV 2007), with the normalisation of Ikoma,
@@ -99,27 +99,6 @@ def one_layer(depth_m: float, geometry: DefocusGeometry, reason: str, tolerance_
     return DepthLayers((float(depth_m),), (float(geometry.beta_px(depth_m)),), None, tolerance_px, reason)
 
 
-def _occupied(beta: np.ndarray, step: float) -> np.ndarray:
-    """The sorted occupied β: the exact smallest and largest of each histogram bin of width `step` (a
-    histogram keeps this O(pixels) and its list short; the extremes keep the intervals exact)."""
-    bins, inverse = np.unique(np.floor(beta.ravel() / step).astype(np.int64), return_inverse=True)
-    lo = np.full(bins.size, np.inf)
-    hi = np.full(bins.size, -np.inf)
-    np.minimum.at(lo, inverse, beta.ravel())
-    np.maximum.at(hi, inverse, beta.ravel())
-    return np.unique(np.concatenate([lo, hi]))
-
-
-def _cover(values: np.ndarray, width: float) -> list[tuple[float, float]]:
-    """Greedy intervals [lo, hi] (hi − lo ≤ width) of sorted values: each starts at the first uncovered one."""
-    out, i = [], 0
-    while i < values.size:
-        j = int(np.searchsorted(values, values[i] + width, side="right")) - 1
-        out.append((float(values[i]), float(values[j])))
-        i = j + 1
-    return out
-
-
 def choose_layers(depth_m: np.ndarray, geometry: DefocusGeometry, tolerance_px: float, window_px: int) -> DepthLayers:
     """The layers of a depth map [H, W] (module doc). Refused at once (LayerError): a tolerance ≤ 0, more
     than MAX_LAYERS layers, or a layer blurred wider than the kernel window (its light would be lost)."""
@@ -128,28 +107,29 @@ def choose_layers(depth_m: np.ndarray, geometry: DefocusGeometry, tolerance_px: 
     beta = geometry.beta_px(depth_m)
     if not np.all(np.isfinite(beta)):
         raise LayerError("depth map: NaN or negative distances; expected axial distances > 0 m or inf")
-    values = _occupied(beta, tolerance_px / 64)
-    near_focus = np.abs(values) <= tolerance_px
-    intervals = ([(0.0, 0.0)] if near_focus.any() else [])
-    intervals += [(lo, hi) for lo, hi in _cover(values[values > tolerance_px], 2 * tolerance_px)]
-    intervals += [(-hi, -lo) for lo, hi in _cover(np.sort(-values[values < -tolerance_px]), 2 * tolerance_px)]
-    if len(intervals) > MAX_LAYERS:
-        raise LayerError(f"defocus tolerance {tolerance_px:g} px needs {len(intervals)} depth layers for blur "
-                         f"diameters {values.min():.3g} … {values.max():.3g} px; allowed ≤ {MAX_LAYERS}: "
-                         f"use a tolerance ≥ {(values.max() - values.min()) / (2 * MAX_LAYERS):.3g} px")
-    centres = sorted((lo + hi) / 2 for lo, hi in intervals)  # far (β small) to near
-    widest = max(abs(c) for c in centres) + tolerance_px
+    lo, hi = float(beta.min()), float(beta.max())
+    if lo == hi:  # one distance: exactly it
+        return DepthLayers((geometry.depth_m(lo),), (lo,), None, tolerance_px, "every pixel at one distance")
+    step = 2.0 * tolerance_px
+    cells = np.rint(beta / step).astype(np.int64)
+    first, last = int(cells.min()), int(cells.max())
+    if last - first + 1 > MAX_LAYERS:
+        raise LayerError(f"defocus tolerance {tolerance_px:g} px needs up to {last - first + 1} depth layers for "
+                         f"blur diameters {lo:.3g} … {hi:.3g} px; allowed ≤ {MAX_LAYERS}: use a tolerance ≥ "
+                         f"{(hi - lo) / (2 * (MAX_LAYERS - 1)):.3g} px")
+    used = np.unique(cells)  # far (β small) to near
+    widest = float(np.abs(used).max()) * step + tolerance_px
     if widest > window_px:
-        z = geometry.depth_m(max(centres, key=abs))
+        z = geometry.depth_m(float(used[np.argmax(np.abs(used))]) * step)
         raise LayerError(f"objects at {z:.3g} m blur to {widest:.0f} px, wider than the {window_px}-px kernel "
                          f"window: raise render.margin_um, or focus nearer to them")
-    mids = (np.asarray(centres[:-1]) + np.asarray(centres[1:])) / 2
-    labels = np.searchsorted(mids, beta).astype(np.uint8)  # the nearest centre (≤ tol away: module doc)
+    centres = tuple(float(c) * step for c in used)
     depths = tuple(geometry.depth_m(c) for c in centres)
-    if len(centres) == 1:
-        return DepthLayers(depths, tuple(centres), None, tolerance_px, "the depth map lies within one tolerance")
-    return DepthLayers(depths, tuple(centres), labels, tolerance_px,
-                       f"{len(centres)} layers cover blur diameters {values.min():.3g} … {values.max():.3g} px")
+    if used.size == 1:
+        return DepthLayers(depths, centres, None, tolerance_px, "the depth map lies within one tolerance")
+    labels = np.searchsorted(used, cells).astype(np.uint8)
+    return DepthLayers(depths, centres, labels, tolerance_px,
+                       f"{used.size} layers cover blur diameters {lo:.3g} … {hi:.3g} px")
 
 
 NORMALIZE_FLOOR = 1e-3  # B_l below this: nothing of layer l or behind it reaches the pixel (Ikoma et al.'s ε)
