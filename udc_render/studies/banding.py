@@ -36,12 +36,12 @@ one below 4 px (the Nyquist limit of a colour channel sampled every 2 px) is not
 Outputs: study_banding.csv (one row per display, distance and field-phase count), study_banding.md
 (set-up, table, visible ranges) and study_banding.png (period and amplitude against d with the analytic
 curves; a flat-field example). ``quick``: 512 × 64 px, 3 bands of 100 nm, 60 µm render margin, one
-distance per display and P = 2 (CI smoke run; an empty temporary kernel cache).
+distance per display and P = 2 (CI smoke run). Kernels are computed with the cache off (a d > 0 set of the
+full run is 250 MB; nothing is written to disk).
 """
 from __future__ import annotations
 
 import math
-import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -67,8 +67,9 @@ GR_SITE = (0, 1)  # RGGB: Gr at even rows, odd columns
 HARMONICS = 3
 COLUMNS = ["axis", "display", "distance_mm", "field_phases", "period_formula_um", "period_formula_px", "period_fit_um",
            "period_error_rel", "harmonic_order", "periods_in_frame", "a1_measured_rel", "a1_analytic_rel",
-           "a1_interpolated_rel", "ratio_measured_analytic", "ratio_measured_interpolated", "sinc2_interp", "mean_dn", "a1_dn", "sigma_dn", "rows_averaged",
-           "snr_pixel", "snr_averaged", "regime", "visible_pixel", "visible_averaged", "kernel_s", "synth_s"]
+           "a1_interpolated_rel", "ratio_measured_analytic", "ratio_measured_interpolated", "sinc2_interp", "mean_dn",
+           "a1_dn", "sigma_dn", "rows_averaged", "snr_pixel", "snr_averaged", "regime", "visible_pixel",
+           "visible_averaged", "kernel_s", "synth_s"]
 FULL = {"sensor": (1024, 128), "step_nm": 20.0, "margin_um": None,
         "distances_mm": {"toled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0), "poled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0)},
         "phases": (2, 3, 6), "phase_display": "toled", "phase_distance_mm": 4.0,
@@ -235,17 +236,17 @@ def interpolated_harmonics(series, weights, display, distance_mm: float, x_um: n
 
 
 class Rig:
-    """The scene, its flat field, the glass capture and the kernel cache shared by every run; bands
+    """The scene, its flat field and the glass capture shared by every run (kernels: cache off); bands
     measured along `axis` (y: the sensor turned to portrait, cfg's height × width)."""
 
-    def __init__(self, cfg: dict, kernel_cache: str, axis: str = "x"):
+    def __init__(self, cfg: dict, axis: str = "x"):
         self.cfg, self.axis, self.a = cfg, axis, AXES.index(axis)
         self.scene = flat_field_scene(cfg if axis == "x" else {**cfg, "sensor": cfg["sensor"][::-1]})
         self.band_image = flat_band_image(render_scene(self.scene, progress=False))
         self.lens = psf_lens(self.scene)
         self.z_i_um = float(self.lens.image_distance_um)  # z_i: the lens focused on the panel (the kernels' own)
         self.pitch_um = float(self.scene.sensor.pitch_um)
-        self.base = SynthConfig(kernel_cache=kernel_cache)
+        self.base = SynthConfig(use_cache=False)
         glass = D.preset("glass")
         res = synthesize(self.band_image, self.scene, [glass], self.base,
                          kernels=plan_kernels(self.scene, [glass], self.base))
@@ -280,7 +281,8 @@ class Rig:
             edges = np.asarray(Bands(step_nm=step_nm).edges_nm)
             white = np.interp((edges[:-1] + edges[1:]) / 2, bi.centres_nm, bi.white_bands())
             bi = replace(bi, edges_nm=edges, primaries_matrix=np.stack([white, 0 * white, 0 * white]))
-        return band_series(display, self.lens, bi.centres_nm, distance_mm), green_band_weights(bi, display, self.exposure_s)
+        weights = green_band_weights(bi, display, self.exposure_s)
+        return band_series(display, self.lens, bi.centres_nm, distance_mm), weights
 
     def analytic(self, display, distance_mm: float, step_nm: float | None = None) -> np.ndarray:
         """Analytic relative harmonics (h = 1…H) of the green flat-field profile (analytic_harmonics)."""
@@ -288,9 +290,9 @@ class Rig:
         return analytic_harmonics(series, w, display, distance_mm, self.across_um, self.z_i_um, self.axis)
 
 
-def measure(rig: Rig, name: str, distance_mm: float, phases: int | None) -> dict:
-    """One row: the capture of display `name` at distance_mm, its measured bands against the analytic
-    (exact, and with the synthesis' phase interpolation alone)."""
+def measure(rig: Rig, name: str, distance_mm: float, phases: int | None) -> tuple[dict, np.ndarray, np.ndarray]:
+    """(one row, the flat-field profile, the clean Gr image): the capture of display `name` at distance_mm,
+    its measured bands against the analytic (exact, and with the synthesis' phase interpolation alone)."""
     display = D.preset(name).with_distance(distance_mm)
     cap, kernel_s, synth_s = rig.capture(display, phases)
     P = phases or DEFAULT_FIELD_PHASES
@@ -309,7 +311,7 @@ def measure(rig: Rig, name: str, distance_mm: float, phases: int | None) -> dict
     if T > rig.frame_um or T < 4 * rig.pitch_um:
         row.update(regime="gradient (T > frame)" if T > rig.frame_um else "unresolved (T < 4 px)",
                    visible_pixel=False, visible_averaged=False)
-        return row
+        return row, prof, green_sites(cap.clean_dn)
     period, amps = fit_period(rig.along_um, prof)
     order = max(1, int(round(T / period)))
     a1 = float(amps[1])
@@ -323,7 +325,7 @@ def measure(rig: Rig, name: str, distance_mm: float, phases: int | None) -> dict
                sinc2_interp=sinc2(order, P), a1_dn=a1 * mean_dn, snr_pixel=a1 * mean_dn / sigma,
                snr_averaged=a1 * mean_dn * math.sqrt(n_rows) / sigma, visible_pixel=bool(a1 * mean_dn >= sigma),
                visible_averaged=bool(a1 * mean_dn * math.sqrt(n_rows) >= sigma))
-    return row
+    return row, prof, green_sites(cap.clean_dn)
 
 
 def jobs(cfg: dict) -> list[tuple[str, str, float, int | None]]:
@@ -346,7 +348,7 @@ def visible_range(rows: list[dict], name: str, curve: tuple, rig: Rig) -> dict:
     """Where the bands of `name` are visible per pixel and after averaging along them: the strongest analytic
     harmonic h (period T/h) scaled by the median measured/analytic ratio, against σ / mean measured, with
     the period inside [4 px, frame]. Ranges are (first, last) curve distances that pass, or None."""
-    rs = [r for r in rows if r["display"] == name and r["field_phases"] == DEFAULT_FIELD_PHASES and r["axis"] == "x"]
+    rs = [r for r in rows if r["display"] == name and r["axis"] == "x" and r["field_phases"] == DEFAULT_FIELD_PHASES]
     ratios = [r["ratio_measured_analytic"] for r in rs if np.isfinite(r.get("ratio_measured_analytic", math.nan))]
     ratio = float(np.median(ratios)) if ratios else 1.0
     noise_rel = float(np.median([r["sigma_dn"] / r["mean_dn"] for r in rs]))
@@ -370,14 +372,16 @@ def run_study(out: Path, quick: bool = False, progress: bool = True) -> list[dic
     cfg = QUICK if quick else FULL
     out = Path(out)
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory(prefix="udc-banding-kernels-") as cache:
-        rigs: dict[str, Rig] = {}
-        rows = []
-        for axis, name, d, p in tqdm(jobs(cfg), desc="study banding", unit="capture", disable=not progress):
-            rig = rigs.get(axis) or rigs.setdefault(axis, Rig(cfg, cache, axis))
-            rows.append(measure(rig, name, d, p))
-        rig = rigs["x"]
-        example = example_profile(rig, rows)
+    rigs: dict[str, Rig] = {}
+    rows, images = [], {}
+    for axis, name, d, p in tqdm(jobs(cfg), desc="study banding", unit="capture", disable=not progress):
+        rig = rigs.get(axis) or rigs.setdefault(axis, Rig(cfg, axis))
+        row, prof, img = measure(rig, name, d, p)
+        rows.append(row)
+        if axis == "x" and name == "toled" and p is None:
+            images[d] = (prof, img)
+    rig = rigs["x"]
+    example = example_profile(rig, rows, images)
     curves = analytic_curves(rig, cfg)
     ranges = [visible_range(rows, n, curves[n], rig) for n in DISPLAYS]
     out.mkdir(parents=True, exist_ok=True)
@@ -386,16 +390,16 @@ def run_study(out: Path, quick: bool = False, progress: bool = True) -> list[dic
     return rows
 
 
-def example_profile(rig: Rig, rows: list[dict]):
-    """(display, d, x µm, profile, clean Gr image) of the T-OLED run with the most periods in the frame
-    that still holds ≥ 2, recaptured (its kernels are cached)."""
+def example_profile(rig: Rig, rows: list[dict], images: dict):
+    """(display, d, x µm, profile, clean Gr image) of the T-OLED run (bands along x) nearest to 3 periods
+    in the frame; images: {d: (profile, clean Gr image)} of those runs."""
     rs = [r for r in rows if r["display"] == "toled" and r["field_phases"] == DEFAULT_FIELD_PHASES
           and r["regime"] == "bands" and r["axis"] == "x"]
     if not rs:
         return None
     pick = min(rs, key=lambda r: abs(r["periods_in_frame"] - 3))
-    cap, _, _ = rig.capture(D.preset("toled").with_distance(pick["distance_mm"]), None)
-    return "toled", pick["distance_mm"], rig.x_um, flat_profile(cap.clean_dn, rig.glass_dn), green_sites(cap.clean_dn)
+    prof, img = images[pick["distance_mm"]]
+    return "toled", pick["distance_mm"], rig.x_um, prof, img
 
 
 # ----------------------------------------------------------------------------------------------
@@ -414,24 +418,27 @@ def markdown(rows: list[dict], ranges: list[dict], rig: Rig, cfg: dict, elapsed_
              f"Monitor rig showing `pattern:white` (framing fill, the panel's spectrum extended over the render "
              f"margin), {w} × {h} px of {rig.pitch_um:g} µm, {k} bands of {cfg['step_nm']:g} nm, default synthesis "
              f"(blend 'source', field rank 2, Poisson + read noise), auto exposure {rig.exposure_s * 1e3:.3g} ms. "
-             f"z_i = {rig.z_i_um:.1f} µm (bands along y: the sensor turned to {h} × {w} px, framed anew). Measured on "
-             "the green (Gr) sites: the mean across the bands (column mean for x) of clean_dn / glass, "
+             f"z_i = {rig.z_i_um:.1f} µm (bands along y: the sensor turned to {h} × {w} px, framed anew). "
+             "Measured on the green (Gr) sites: the mean across the bands (column mean for x) of clean_dn / glass, "
              f"least-squares fit of a sinusoid + {HARMONICS - 1} harmonics with the period free (FFT start, bounded "
              "search); analytic: psf.banding.PowerSeries of the same rows and bands, T = z_i · p / d. "
              "Regenerate with `udc-render study banding --out DIR`.", "",
              "Criteria: bands are **visible per pixel** when the first harmonic A1 · mean ≥ σ, the per-pixel noise "
              "(std of the noisy minus the clean mosaic, Gr sites) at that level; **visible averaged** when "
-             f"A1 · mean ≥ σ / √N after averaging the N = {rig.across_um.size} Gr sites of this frame along the bands "
-             "(rows for bands along x; the y runs turn the sensor to portrait, N the same). "
+             f"A1 · mean ≥ σ / √N after averaging the N = {rig.across_um.size} Gr sites of this frame along the "
+             "bands (rows for bands along x; the y runs turn the sensor to portrait, N the same). "
              "A period longer than the frame is a gradient, not bands; below 4 px it is not resolved.", "",
              "The ratio measured / analytic is expected below 1: the synthesis interpolates P(s) linearly "
              "between P field phases per axis, keeping sinc²(h/P) of harmonic h (0.81 for h = 1, P = 4), and "
-             "blend 'source' smooths the weighted source with the PSF. harmonic_order > 1: the fit found the "
+             "blend 'source' smooths the weighted source with the PSF. The sampling also aliases harmonics "
+             "h = mP ± 1 into the first: where the exact first harmonic is weak against them (T-OLED along y) "
+             "the synthesis' first harmonic exceeds the exact one. harmonic_order > 1: the fit found the "
              "period T/order (the first harmonic vanishes), compared with the analytic harmonic of that order. "
              "A1 interp.: the analytic P(s) sampled at the kernels' P × P field shifts and blended bilinearly "
              "as the synthesis does (no PSF, no rank-2 basis): the ratio to it is what the rest of the optics "
              "changes.", ""]
-    lines += md_table(rows, [("axis", "bands along"), ("display", "display"), ("distance_mm", "d mm"), ("field_phases", "P"),
+    lines += md_table(rows, [("axis", "bands along"), ("display", "display"), ("distance_mm", "d mm"),
+                             ("field_phases", "P"),
                              ("period_formula_px", "T formula px"), ("period_error_rel", "T fit error"),
                              ("harmonic_order", "order"), ("a1_measured_rel", "A1 measured"),
                              ("a1_analytic_rel", "A1 analytic"), ("a1_interpolated_rel", "A1 interp."),
@@ -456,7 +463,8 @@ def plot(rows: list[dict], curves: dict, rig: Rig, example, path: Path) -> None:
     fig, axes = plt.subplots(1, 4, figsize=(19, 4.2))
     ax_t, ax_a, ax_p, ax_e = axes
     for name, colour in zip(DISPLAYS, ("C0", "C1")):
-        rs = [r for r in rows if r["display"] == name and r["field_phases"] == DEFAULT_FIELD_PHASES and r["axis"] == "x"]
+        rs = [r for r in rows if r["display"] == name and r["axis"] == "x"
+              and r["field_phases"] == DEFAULT_FIELD_PHASES]
         ds, harmonics = curves[name]
         a1 = harmonics[:, 0]
         p = D.preset(name).layout.period_um[0]
