@@ -283,6 +283,10 @@ def test_study_capture_quick_writes_table_and_errors_order(tmp_path):
     by = {(r["study"], r["setting"]): r["rel_error"] for r in rows}
     assert by[("precision", "float64")] == 0.0 and by[("precision", "float32")] < 1e-5
     assert all(np.isfinite(r["rel_error"]) and r["kernel_s"] >= 0 for r in rows)
+    layers = [r["rel_error"] for r in rows if r["study"] == "layers"]  # tolerances falling, then defocus off
+    assert layers[0] > layers[1] and layers[-1] > 10 * layers[1]
+    bright = {(r["display"], r["setting"]): r["rel_error"] for r in rows if r["study"] == "bright"}
+    assert all(v < 0.1 for (_, setting), v in bright.items() if "sun apart" in setting)
 
 
 def test_the_scene_is_the_one_source_of_the_optics(tmp_path):

@@ -22,6 +22,8 @@ Knobs, each against its own reference:
 - ``precision``: float32 vs float64 optics FFTs and kernels (T-OLED, 10 nm bands).
 - ``supersample``: render.supersample s = 1, 2 vs 3 (T-OLED and glass, 6 bands): the render pixel's
   box and the kernel's pixel integration count the sensor pixel twice at s = 1 (pipeline.py).
+- ``layers`` and ``bright`` (studies.capture_depth, their own small scenes): the defocus tolerance of the
+  depth layers against a per-pixel reference, and the sun in frame with and without its float64 split.
 
 Outputs: study_capture.csv, study_capture.md (tables and the defaults they justify), study_capture.png.
 ``quick``: 128 × 64 px of 6.2 µm, fewer settings (a smoke run, 5 min on 2 cores: every kernel is computed with the cache off).
@@ -39,9 +41,10 @@ from udc_render.render import render_scene
 from udc_render.scene import Bands, load_scene
 from udc_render.sensor import SensorConfig
 from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
+from udc_render.studies import capture_depth
 from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
 
-COLUMNS = ["study", "display", "setting", "reference", "rel_error", "kernel_s", "apply_s"]
+COLUMNS = ["study", "display", "setting", "reference", "metric", "rel_error", "frame_error", "kernel_s", "apply_s"]
 FULL = {"sensor": (512, 256, 1.55), "steps": (50, 30, 20, 10), "ref_step": 5, "phases": (1, 2, 3, 4, 6),
         "ref_phases": 8, "supersample": (1, 2), "ref_supersample": 3, "ranks": (1, 2, 3, 4)}
 QUICK = {"sensor": (128, 64, 6.2), "steps": (100,), "ref_step": 50, "phases": (1, 2), "ref_phases": 3,
@@ -171,7 +174,10 @@ def run_study(out_dir, quick: bool = False, progress: bool = True) -> list[dict]
     for study, d, setting in tqdm(jobs, desc="study capture", unit="run", disable=not progress):
         (ref, ref_label), (y, tk, ta), label = getattr(runs, study)(d, setting)
         rows.append({"study": study, "display": d.name, "setting": label, "reference": ref_label,
-                     "rel_error": _err(y, ref), "kernel_s": round(tk, 3), "apply_s": round(ta, 3)})
+                     "metric": "rel. L2 of the RAW", "rel_error": _err(y, ref), "kernel_s": round(tk, 3),
+                     "apply_s": round(ta, 3)})
+    rows += capture_depth.layer_rows(capture_depth.QUICK if quick else capture_depth.FULL)
+    rows += capture_depth.bright_rows(capture_depth.QUICK if quick else capture_depth.FULL)
     out.mkdir(parents=True, exist_ok=True)
     write_tables(out, "study_capture", rows, COLUMNS, markdown(rows, cfg))
     plot(rows, out / "study_capture.png")
@@ -184,12 +190,16 @@ def markdown(rows: list[dict], cfg: dict) -> str:
     lines = ["# Capture synthesis: error against run time", "",
              f"Default rig, astronaut, {w} × {h} px of {p} µm, noise off. Error: relative L2 of the noise-free "
              "RAW against each study's reference; kernel_s: computing the kernels (cache off); apply_s: "
-             "optics + sensor with cached kernels. Regenerate with `udc-render study capture --out DIR`.", ""]
+             "optics + sensor with cached kernels. Regenerate with `udc-render study capture --out DIR`.",
+             "", "`layers` and `bright` use their own small scenes (udc_render/studies/capture_depth.py): "
+             "`layers` is the relative L2 of the electrons within 8 px of a near ramp's outline against the "
+             "per-pixel reference (frame error: the whole frame), apply s the layered optics; `bright` is the "
+             "largest error over the pixel's own noise √(σ_read² + e) with the sun in frame.", ""]
     lines += md_table(rows, [("study", "study"), ("display", "display"), ("setting", "setting"),
-                             ("reference", "reference"), ("rel_error", "rel. error"), ("kernel_s", "kernel s"),
-                             ("apply_s", "apply s")],
-                      {"rel_error": lambda v: f"{v:.2e}", "kernel_s": lambda v: f"{v:.2f}",
-                       "apply_s": lambda v: f"{v:.2f}"})
+                             ("reference", "reference"), ("metric", "metric"), ("rel_error", "error"),
+                             ("frame_error", "frame error"), ("kernel_s", "kernel s"), ("apply_s", "apply s")],
+                      {"rel_error": lambda v: f"{v:.2e}", "frame_error": lambda v: "" if v is None else f"{v:.2e}",
+                       "kernel_s": lambda v: f"{v:.2f}", "apply_s": lambda v: f"{v:.2f}"})
     return "\n".join(lines) + "\n"
 
 
@@ -209,7 +219,7 @@ def plot(rows: list[dict], path: Path) -> None:
                             xytext=(3, 3))
         ax.set_title(st)
         ax.set_xlabel("seconds (kernels + apply)")
-        ax.set_ylabel("relative L2 error of the RAW")
+        ax.set_ylabel(rs[0]["metric"])
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
     save_plot(fig, path)
