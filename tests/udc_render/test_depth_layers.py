@@ -54,6 +54,12 @@ def test_refusals_are_one_line():
         with pytest.raises(LayerError) as e:
             choose_layers(depth, GEO, tol, window)
         assert "\n" not in str(e.value) and words in str(e.value)
+    for z in (0.0, -1.0, np.nan):
+        with pytest.raises(LayerError, match="expected axial distances > 0 m") as e:
+            choose_layers(np.array([[3.0, z]]), GEO, 0.5, 1001)
+        assert "\n" not in str(e.value)
+    huge = choose_layers(np.array([[1e30, np.inf]]), GEO, 0.5, 1001)  # beyond any lens' reach: one layer, finite
+    assert huge.count == 1 and np.isfinite(huge.beta_px[0])
     with pytest.raises(SynthError, match="defocus_tolerance_px"):
         SynthConfig(defocus_tolerance_px=0.0)
 

@@ -104,9 +104,12 @@ def choose_layers(depth_m: np.ndarray, geometry: DefocusGeometry, tolerance_px: 
     than MAX_LAYERS layers, or a layer blurred wider than the kernel window (its light would be lost)."""
     if not (tolerance_px > 0 and math.isfinite(tolerance_px)):
         raise LayerError(f"defocus tolerance {tolerance_px!r} px: expected a positive number of pixels")
-    beta = geometry.beta_px(depth_m)
-    if not np.all(np.isfinite(beta)):
-        raise LayerError("depth map: NaN or negative distances; expected axial distances > 0 m or inf")
+    z = np.asarray(depth_m)
+    bad = ~((z > 0) & ~np.isnan(z))
+    if bad.any():
+        raise LayerError(f"depth map: {int(bad.sum())} pixels at {float(z[bad].flat[0])!r} m; expected axial distances "
+                         f"> 0 m (inf: no surface)")
+    beta = geometry.beta_px(z)
     lo, hi = float(beta.min()), float(beta.max())
     if lo == hi:  # one distance: exactly it
         return DepthLayers((geometry.depth_m(lo),), (lo,), None, tolerance_px, "every pixel at one distance")
