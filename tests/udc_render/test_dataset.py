@@ -197,7 +197,7 @@ def test_builtin_images_stay_distinct_past_the_list():
     (["--images", "MISSING", "--count", "2"], "no such folder"),
     (["--images", "EMPTY", "--count", "2"], "no images"),
     (["--builtin", "--count", "2", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "not allowed with"),
-    (["--builtin", "--count", "2", "--scene", "room"], "needs a monitor scene"),
+    (["--builtin", "--count", "2", "--scene", "room"], "--builtin is for a monitor scene; the room scene"),
     (["--builtin", "--count", "2", "--scheduler", "tcp://127.0.0.1:1"], "cannot reach the scheduler"),
     (["--builtin", "--count", "2", "--scheduler", "NO_DISTRIBUTED"], "needs the 'distributed' package"),
 ])

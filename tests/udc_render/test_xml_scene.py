@@ -188,10 +188,11 @@ def test_unresolved_scene_names_the_resolver(tmp_path):
         camera_geometry(load_scene(write_scene(tmp_path)))
 
 
-def test_dataset_refuses_the_xml_scene_in_one_line(tmp_path, capsys):
-    """A dataset shows one image per item on the monitor: an XML scene has no image to change."""
+def test_dataset_refuses_images_for_the_xml_scene_in_one_line(tmp_path, capsys):
+    """A dataset of an XML scene is made of views of it (tests/udc_render/test_dataset_3d.py): it has no
+    monitor image to change per item, so --builtin is refused."""
     scene = write_scene(tmp_path)
     assert main(["dataset", "--builtin", "--count", "1", "--scene", str(scene), "--out", str(tmp_path / "d"),
                  "--quiet"]) == 2
     line = one_error_line(capsys.readouterr().err)
-    assert "cbox.toml" in line and "a dataset needs a monitor scene" in line and "mitsuba_xml" in line
+    assert "cbox.toml" in line and "--builtin is for a monitor scene" in line and "mitsuba_xml" in line

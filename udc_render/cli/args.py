@@ -120,7 +120,9 @@ def add_scene_arguments(r: argparse.ArgumentParser, scene_option: bool = False) 
     positional argument, or --scene when `scene_option`."""
     from udc_render.scene import RENDER_PATHS, SAMPLERS
     if scene_option:
-        r.add_argument("--scene", default="monitor", help="a monitor scene file or name [monitor]")
+        r.add_argument("--scene", default="monitor", help="a scene file (TOML) or a built-in scene's name: a monitor "
+                       "scene (one image per item) or a 3D one, room, hdr or a Mitsuba XML scene (one view per item) "
+                       "[monitor]")
     else:
         r.add_argument("scene", help="a scene file (TOML) or a built-in scene's name (monitor, room, hdr)")
     samples = r.add_mutually_exclusive_group()

@@ -3,10 +3,16 @@
     udc-render dataset --images DIR | --builtin --display glass,toled,poled --count N --out DIR
                        [--profile physical|paper] [--split 200,40,60] [--shard-size 1000]
                        [--workers N | --scheduler ADDRESS] [--previews] [--side-by-side]
+    udc-render dataset --scene room|hdr|FILE.toml --display toled --count N --out DIR
+                       [--pose-jitter-m 0.15,0.1,0.15] [--target-jitter-m 0.3,0.2,0] [...]
+
+A monitor scene (the default) needs --images or --builtin (item i shows image i); a 3D scene (room, hdr,
+a Mitsuba XML scene) takes neither: item i is a view of the scene from a jittered camera pose.
 """
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from udc_render.cli.args import (UserError, add_capture_arguments, add_scene_arguments, capture_setup, positive,
@@ -23,14 +29,35 @@ def _split(text: str) -> tuple[int, int, int]:
     return counts
 
 
+def _jitter(name: str):
+    def parse(text: str) -> tuple[float, float, float]:
+        try:
+            v = tuple(float(t) for t in text.split(","))
+        except ValueError:
+            v = ()
+        if len(v) != 3 or not all(math.isfinite(x) and x >= 0 for x in v):
+            raise argparse.ArgumentTypeError(f"{name} must be three distances ≥ 0 in metres X,Y,Z, got '{text}'")
+        return v
+    return parse
+
+
 def register(sub) -> None:
-    p = sub.add_parser("dataset", help="many capture pairs: one image per item through every display "
-                                       "(sharded, resumable, parallel)")
+    from udc_render.dataset.plan import DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M
+    p = sub.add_parser("dataset", help="many capture pairs: one monitor image or one view of a 3D scene per item "
+                                       "through every display (sharded, resumable, parallel)")
     p.set_defaults(run=run, path=None, image=None)
-    src = p.add_mutually_exclusive_group(required=True)
-    src.add_argument("--images", type=Path, help="a folder of images (searched recursively, sorted by path)")
+    src = p.add_mutually_exclusive_group()
+    src.add_argument("--images", type=Path, help="a monitor scene: a folder of images (searched recursively, sorted "
+                                                 "by path); one of --images, --builtin is required for a monitor scene")
     src.add_argument("--builtin", action="store_true",
-                     help="scikit-image's samples and the procedural charts, then dead-leaves charts")
+                     help="a monitor scene: scikit-image's samples and the procedural charts, then dead-leaves charts")
+    xyz = lambda v: ",".join(f"{x:g}" for x in v)  # noqa: E731
+    p.add_argument("--pose-jitter-m", type=_jitter("--pose-jitter-m"),
+                   help="a 3D scene: item i > 0 moves the camera origin by up to ± X,Y,Z metres (uniform, per world "
+                        f"axis; item 0 is the scene's own pose) [{xyz(DEFAULT_ORIGIN_JITTER_M)}]")
+    p.add_argument("--target-jitter-m", type=_jitter("--target-jitter-m"),
+                   help="a 3D scene: item i > 0 moves the camera target by up to ± X,Y,Z metres; the focus distance "
+                        f"stays the scene's own pose's [{xyz(DEFAULT_TARGET_JITTER_M)}]")
     p.add_argument("--count", type=positive("--count", int), help="number of items [the sum of --split]")
     p.add_argument("--split", type=_split, help="TRAIN,VAL,TEST item counts, assigned in id order [all train]")
     p.add_argument("--out", type=Path, default=Path("out/dataset"), help="output folder [out/dataset]")
@@ -62,11 +89,29 @@ def dataset_job(args):
     """The DatasetJob that the parsed `udc-render dataset` arguments describe (also benchmarks/bench_dataset.py)."""
     from udc_render.dataset import DatasetJob
     from udc_render.cli.args import out_dir
+    from udc_render.dataset.plan import DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M
+    from udc_render.scene import Monitor
     split = split_counts(args.count, args.split)
     cfg, displays = capture_setup(args)
-    return DatasetJob(scene_from_args(args), displays, cfg, out=out_dir(args.out), split=split, images_dir=args.images,
+    scene = scene_from_args(args)
+    jitters = [o for o, v in (("--pose-jitter-m", args.pose_jitter_m), ("--target-jitter-m", args.target_jitter_m))
+               if v is not None]
+    if isinstance(scene.content, Monitor):
+        if args.images is None and not args.builtin:
+            raise UserError(f"udc-render dataset: one of the arguments --images --builtin is required: item i of the "
+                            f"monitor scene {scene.source} shows image i (a 3D scene, --scene room|hdr|FILE, needs neither)")
+        if jitters:
+            raise UserError(f"udc-render dataset: {jitters[0]} is for a 3D scene; the monitor scene {scene.source} "
+                            f"changes its image per item (--images, --builtin)")
+    elif args.images is not None or args.builtin:
+        raise UserError(f"udc-render dataset: {'--images' if args.images is not None else '--builtin'} is for a monitor "
+                        f"scene; the {scene.content_type} scene {scene.source} makes item i a view of it from a "
+                        f"jittered camera pose (--pose-jitter-m, --target-jitter-m)")
+    return DatasetJob(scene, displays, cfg, out=out_dir(args.out), split=split, images_dir=args.images,
                       shard_size=args.shard_size, side_by_side=args.side_by_side,
-                      previews=args.previews or args.side_by_side)
+                      previews=args.previews or args.side_by_side,
+                      origin_jitter_m=args.pose_jitter_m or DEFAULT_ORIGIN_JITTER_M,
+                      target_jitter_m=args.target_jitter_m or DEFAULT_TARGET_JITTER_M)
 
 
 def run(args) -> int:

@@ -14,27 +14,29 @@ from itertools import islice
 from pathlib import Path
 
 from udc_render.dataset.plan import DatasetError, Task
-from udc_render.dataset.threads import blas_threads_env, set_worker_threads, threads_per_worker
+from udc_render.dataset.threads import blas_threads, blas_threads_env, set_worker_threads, threads_per_worker
 from udc_render.dataset.store import TMP_PREFIX, item_record
 from udc_render.optics.displays import Display
 from udc_render.pipeline import Kernels, SynthConfig
-from udc_render.scene import Scene
+from udc_render.scene import Monitor, Scene
 
 CONNECT_TIMEOUT_S = 10.0  # reaching a Dask scheduler and waiting for its first worker
 
 
 @dataclass(frozen=True)
 class Shared:
-    """What every item needs: the scene without its image, the displays, the synthesis knobs (with
-    the kernel cache folder the parent filled: workers load those kernels and never recompute them,
-    so every worker uses the same bits), the output folder (absolute), whether to plot and whether to
-    write the sRGB previews."""
+    """What every item needs: the scene without its image (a monitor) or at its base pose with the focus
+    distance fixed (a 3D scene: every item uses the same in-focus kernels), the displays, the synthesis
+    knobs (with the kernel cache folder the parent filled: workers load those kernels and never recompute
+    them, so every worker uses the same bits), the output folder (absolute), whether to plot, whether to
+    write the sRGB previews, and the parent's BLAS thread count (a 3D scene: cache_layer_kernels)."""
     scene: Scene
     displays: list[Display]
     cfg: SynthConfig
     out: Path
     side_by_side: bool
     previews: bool
+    blas_threads: int | None = None  # the parent's BLAS threads: a 3D item's off-focus kernels are computed with them
 
 
 _WORKER_KERNELS: dict[str, Kernels] = {}  # per process: the job's kernels, loaded once per worker
@@ -52,6 +54,23 @@ def worker_kernels(shared: Shared) -> Kernels:
     return _WORKER_KERNELS[key]
 
 
+def cache_layer_kernels(band_image, scene: Scene, shared: Shared, kernels: Kernels) -> None:
+    """Plan the kernels of the item's depth layers other than the job's (a 3D scene's depth away from
+    the focus) into the kernel cache before the synthesis, which then loads them from there: computed
+    here with the parent's BLAS thread count (Shared.blas_threads; a pool worker has it already, a Dask
+    worker has its cluster's), since psf's kernels differ in the last bits with the BLAS thread count
+    (threads.py), so an item's bytes do not depend on which process computed a layer's kernels. Costs
+    one extra load per such layer; nothing without the cache (then the synthesis computes them with this
+    process's BLAS threads) or for a monitor (one layer, the job's)."""
+    from udc_render.pipeline import depth_layers, plan_kernels
+    if not shared.cfg.use_cache or isinstance(scene.content, Monitor):
+        return
+    with blas_threads(shared.blas_threads):  # the bits of the parent's kernels (threads.py)
+        for z in depth_layers(band_image, scene, kernels.grid, shared.cfg).depths_m:
+            if z != kernels.object_distance_m:
+                plan_kernels(scene, shared.displays, shared.cfg, object_distance_m=z)
+
+
 def make_item(shared: Shared, task: Task) -> dict:
     """Render and synthesise one item into a temporary folder, then rename it into place.
     Runs in this process, a pool process or a Dask worker; returns run times (s) for the log."""
@@ -60,11 +79,17 @@ def make_item(shared: Shared, task: Task) -> dict:
     from udc_render.pipeline import synthesize
     from udc_render.render import render_scene
     t0 = time.perf_counter()
-    scene = replace(shared.scene, content=replace(shared.scene.content, image=task.image),
-                    render=replace(shared.scene.render, seed=task.render_seed))
+    scene = replace(shared.scene, render=replace(shared.scene.render, seed=task.render_seed))
+    if task.pose is None:  # a monitor item: its image
+        scene = replace(scene, content=replace(scene.content, image=task.image))
+    else:  # a 3D item: its camera pose (the focus distance stays the job's, fixed in shared.scene.lens)
+        origin, target, up = task.pose
+        scene = replace(scene, camera=replace(scene.camera, origin_m=origin, target_m=target, up=up))
     band_image = render_scene(scene, progress=False)
     t1 = time.perf_counter()
-    result = synthesize(band_image, scene, shared.displays, shared.cfg, task.item, kernels=worker_kernels(shared))
+    kernels = worker_kernels(shared)
+    cache_layer_kernels(band_image, scene, shared, kernels)
+    result = synthesize(band_image, scene, shared.displays, shared.cfg, task.item, kernels=kernels)
     t2 = time.perf_counter()
     final = shared.out / task.folder
     final.parent.mkdir(parents=True, exist_ok=True)
@@ -115,7 +140,11 @@ def executor(workers: int, scheduler: str | None, shared: Shared):
     import multiprocessing
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     threads = threads_per_worker(workers)
-    with blas_threads_env(threads):  # spawn: Dr.Jit threads and fork do not mix
+    # BLAS threads change the kernels' bits (psf's matrix products): a monitor's kernels all come from this
+    # process, so its workers get a share of the cores; a 3D scene's workers compute their off-focus layers'
+    # kernels, so they get this process's BLAS threads (the same bits as a 1-worker run; threads.py)
+    blas = threads if isinstance(shared.scene.content, Monitor) else shared.blas_threads
+    with blas_threads_env(blas) if blas else contextlib.nullcontext():  # spawn: Dr.Jit threads and fork do not mix
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=set_worker_threads, initargs=(threads,))
         [f.result() for f in [pool.submit(os.getpid) for _ in range(workers)]]  # start them inside the env

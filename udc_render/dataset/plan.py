@@ -1,4 +1,5 @@
-"""Planning a dataset job: which image each item shows, its split, folder and render seed."""
+"""Planning a dataset job: which image each item shows (a monitor scene) or from where it sees the scene
+(a 3D scene: Views), its split, folder and render seed."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -12,21 +13,73 @@ SPLITS = ("train", "val", "test")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 BUILTIN_CHARTS = ("pattern:slanted_edge", "pattern:sine_x", "pattern:sine_y", "pattern:siemens",
                   "pattern:dead_leaves:0")
+# a 3D scene's per-item camera moves (± metres per world axis x, y, z): small against the built-in rooms
+# (4 × 2.6 × 5.5 m, the camera 5.4 m from its target), so every view stays inside the room and on its objects
+DEFAULT_ORIGIN_JITTER_M = (0.15, 0.1, 0.15)
+DEFAULT_TARGET_JITTER_M = (0.3, 0.2, 0.0)
 
 
 class DatasetError(UdcError):
     """A dataset job that cannot run as asked; one line."""
 
 
+Pose = tuple[tuple[float, float, float], tuple[float, float, float], tuple[float, float, float]]
+
+
 @dataclass(frozen=True)
 class Task:
-    """One item: its id, split, folder (relative to OUT), image (spec and label) and render seed."""
+    """One item: its id, split, folder (relative to OUT), image (spec and label; a monitor scene) or camera
+    pose (origin, target, up in metres; a 3D scene), and render seed."""
     item: int
     split: str
     folder: str
-    image: str  # what the monitor shows: an absolute file path, builtin:NAME or pattern:NAME
-    label: str  # the image as recorded: a path relative to --images, or the spec
+    image: str | None  # what the monitor shows: an absolute file path, builtin:NAME or pattern:NAME
+    label: str | None  # the image as recorded: a path relative to --images, or the spec
     render_seed: int
+    pose: Pose | None = None  # a 3D scene's camera for this item (Views.pose); None: a monitor item
+
+
+@dataclass(frozen=True)
+class Views:
+    """A 3D scene's items: item 0 sees the scene from its own pose (origin, target, up); item i > 0 moves
+    the origin by u[0:3] · origin_jitter_m and the target by u[3:6] · target_jitter_m (per world axis),
+    u = default_rng(SeedSequence([base seed, i])).uniform(−1, 1, 6); the up vector is kept. The focus
+    distance is not part of a pose: the job fixes it at the base pose's (same kernels for every item)."""
+    origin_m: tuple[float, float, float]
+    target_m: tuple[float, float, float]
+    up: tuple[float, float, float]
+    origin_jitter_m: tuple[float, float, float] = DEFAULT_ORIGIN_JITTER_M
+    target_jitter_m: tuple[float, float, float] = DEFAULT_TARGET_JITTER_M
+
+    def pose(self, base_seed: int, item: int) -> Pose:
+        if item == 0:
+            return self.origin_m, self.target_m, self.up
+        u = np.random.default_rng(np.random.SeedSequence([base_seed, item])).uniform(-1.0, 1.0, 6)
+        origin = tuple(float(v) for v in np.add(self.origin_m, u[:3] * np.asarray(self.origin_jitter_m, float)))
+        target = tuple(float(v) for v in np.add(self.target_m, u[3:] * np.asarray(self.target_jitter_m, float)))
+        axis = np.subtract(target, origin)
+        n = float(np.linalg.norm(axis))
+        if not n > 1e-6 or float(np.linalg.norm(np.cross(axis / n, self.up))) < 1e-3:
+            raise DatasetError(f"item {item}: the jittered camera at {_fmt(origin)} looking at {_fmt(target)} has no "
+                               f"view direction apart from up {_fmt(self.up)}; use a smaller --pose-jitter-m or "
+                               f"--target-jitter-m")
+        return origin, target, self.up
+
+    def describe(self) -> dict:
+        return {"base": {"origin_m": list(self.origin_m), "target_m": list(self.target_m), "up": list(self.up)},
+                "origin_jitter_m": list(self.origin_jitter_m), "target_jitter_m": list(self.target_jitter_m),
+                "draw": "item 0: the base pose; item i: origin += u[0:3]·origin_jitter_m, target += "
+                        "u[3:6]·target_jitter_m, u = default_rng(SeedSequence([render_seed, i])).uniform(-1, 1, 6)"}
+
+
+def _fmt(v) -> str:
+    return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
+
+
+def pose_record(pose: Pose) -> dict:
+    """An item's pose as item.json and the manifest record it."""
+    origin, target, up = pose
+    return {"origin_m": list(origin), "target_m": list(target), "up": list(up)}
 
 
 def image_list(images_dir: Path | None) -> tuple[list[tuple[str, str]], str]:
@@ -59,12 +112,14 @@ def render_seed(base: int, item: int) -> int:
     return int(np.random.SeedSequence([base, item]).generate_state(1)[0])
 
 
-def plan_tasks(count: int, split: tuple[int, int, int], shard_size: int, images, builtin: bool, base_seed: int) -> list[Task]:
+def plan_tasks(count: int, split: tuple[int, int, int], shard_size: int, images, builtin: bool, base_seed: int,
+               views: Views | None = None) -> list[Task]:
+    """Every item's Task: with `views` (a 3D scene) each has its pose and no image, else its image."""
     tasks = []
     for name, n in zip(SPLITS, split):
         for pos in range(n):
             i = len(tasks)
-            spec, label = image_of(images, builtin, i)
+            spec, label = image_of(images, builtin, i) if views is None else (None, None)
             tasks.append(Task(i, name, f"{name}/shard_{pos // shard_size:04d}/item_{i:06d}", spec, label,
-                              render_seed(base_seed, i)))
+                              render_seed(base_seed, i), None if views is None else views.pose(base_seed, i)))
     return tasks

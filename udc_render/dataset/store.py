@@ -7,7 +7,7 @@ import json
 import shutil
 from pathlib import Path
 
-from udc_render.dataset.plan import DatasetError, Task
+from udc_render.dataset.plan import DatasetError, Task, pose_record
 from udc_render.io.files import save_json, save_text
 
 TMP_PREFIX = ".tmp-"
@@ -52,7 +52,8 @@ def clean_stale(out: Path) -> int:
 
 def item_record(task: Task, displays: list[str], noise_seed: int) -> dict:
     """item.json and the manifest's line (less the file list): nothing that depends on where OUT is."""
-    return {"item": task.item, "split": task.split, "folder": task.folder, "image": task.label,
+    what = {"image": task.label} if task.pose is None else {"pose": pose_record(task.pose)}
+    return {"item": task.item, "split": task.split, "folder": task.folder, **what,
             "render_seed": task.render_seed, "noise_seed": f"SeedSequence([{noise_seed}, {task.item}, crc32(display)])",
             "displays": displays}
 
