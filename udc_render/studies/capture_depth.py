@@ -127,5 +127,5 @@ def bright_rows(cfg: dict) -> list[dict]:
                                     f"{' (default)' if split and precision == 'float32' else ''}",
                          "reference": "float64, sun apart", "rel_error": float(np.max(np.abs(e[view] - ref[view]) / noise)),
                          "kernel_s": round(kernel_s, 3), "apply_s": round(apply_s, 3),
-                         "metric": f"max |Δe| / noise ({0 if bright is None else int(bright.mask.sum())} px apart)"})
+                         "metric": f"max abs Δe over the noise ({0 if bright is None else int(bright.mask.sum())} px apart)"})
     return rows
