@@ -32,65 +32,25 @@ def set_worker_threads(threads: int) -> None:
     drjit.set_thread_count(threads)
 
 
-_OPENBLAS_GET = ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads", "openblas_get_num_threads64_",
-                 "openblas_get_num_threads")
-
-
-def _openblas_libs() -> list:
-    """The OpenBLAS libraries loaded in this process (ctypes handles), numpy's first."""
-    import ctypes
-    import numpy  # noqa: F401  (loads its BLAS)
-    try:
-        with open("/proc/self/maps") as f:
-            paths = {line.split()[-1] for line in f if "openblas" in line.lower() and ".so" in line}
-    except OSError:
-        return []
-    libs = []
-    for path in sorted(paths, key=lambda p: ("numpy" not in p, p)):
-        try:
-            libs.append(ctypes.CDLL(path))
-        except OSError:
-            pass
-    return libs
-
-
-def _symbol(lib, verb: str):
-    for name in _OPENBLAS_GET:
-        name = name.replace("_get_", f"_{verb}_")
-        if hasattr(lib, name):
-            return getattr(lib, name)
-    return None
-
-
 def parent_blas_threads() -> int | None:
-    """The thread count of numpy's OpenBLAS in this process (read from the loaded library: the environment
-    may have changed since it was loaded, e.g. by a Dask LocalCluster), or None when it cannot be read."""
-    for lib in _openblas_libs():
-        get = _symbol(lib, "get")
-        if get is not None:
-            n = int(get())
-            return n if n >= 1 else None
-    return None
+    """The thread count of the BLAS numpy loaded in this process (threadpoolctl reads the library itself:
+    the environment may have changed since it was loaded, e.g. by a Dask LocalCluster), or None."""
+    from threadpoolctl import threadpool_info
+    counts = [i["num_threads"] for i in threadpool_info() if i.get("user_api") == "blas"]
+    return int(counts[0]) if counts and counts[0] >= 1 else None
 
 
 @contextlib.contextmanager
 def blas_threads(threads: int | None):
-    """Every loaded OpenBLAS at `threads` threads inside the block (None: unchanged), restored after:
-    kernels computed on a worker (a Dask worker's BLAS count is its cluster's) get the parent's bits."""
+    """Every loaded BLAS at `threads` threads inside the block (None: unchanged), restored after
+    (threadpoolctl): kernels computed on a worker (a Dask worker's BLAS count is its cluster's) get the
+    parent's bits."""
     if not threads:
         yield
         return
-    saved = []
-    for lib in _openblas_libs():
-        get, put = _symbol(lib, "get"), _symbol(lib, "set")
-        if get is not None and put is not None:
-            saved.append((put, int(get())))
-            put(int(threads))
-    try:
+    from threadpoolctl import threadpool_limits
+    with threadpool_limits(limits=int(threads), user_api="blas"):
         yield
-    finally:
-        for put, n in saved:
-            put(n)
 
 
 @contextlib.contextmanager
