@@ -55,6 +55,11 @@ def synth_and_write(scene, displays, cfg, out: Path, quiet: bool, keep_render: b
     print(f"{scene.source}: {band_image.bands.shape[0]} bands, frame {scene.sensor.width_px}x{scene.sensor.height_px}, "
           f"form {cfg.form}, exposure {result.meta['exposure_s'] * 1e3:.2f} ms ({result.meta['exposure_rule']})")
     print(describe(cfg.profile))
+    layers = result.meta["depth_layers"]
+    blur = ", ".join(f"{b:.2g}" for b in layers["blur_diameter_px"])
+    print(f"depth: {layers['count']} layer{'s' if layers['count'] > 1 else ''} (blur diameter {blur} px; "
+          f"{layers['reason']})" + (f"; {result.meta['bright_pixels']} very bright pixels convolved apart in float64"
+                                    if result.meta["bright_pixels"] else ""))
     print(f"{'view':>10} {'gain':>5} {'mean R':>8} {'mean Gr':>8} {'mean Gb':>8} {'mean B':>8} {'PSNR paper':>10} "
           f"{'PSNR srgb':>10}")
     for d in displays:
