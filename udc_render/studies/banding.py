@@ -337,11 +337,15 @@ def jobs(cfg: dict) -> list[tuple[str, str, float, int | None]]:
 
 
 def analytic_curves(rig: Rig, cfg: dict) -> dict:
-    """{display: (distances mm [n], analytic relative harmonics [n, H])} on a log grid (bands of curve_step_nm)."""
+    """{display: (distances mm [n], analytic relative harmonics [n, H])} on a log grid (bands of curve_step_nm),
+    with the distance where the period z_i p / d equals the frame added (the visible range's exact edge)."""
     lo, hi, n = cfg["curve_mm"]
-    ds = np.geomspace(lo, hi, int(n))
-    return {name: (ds, np.array([rig.analytic(D.preset(name), d, cfg["curve_step_nm"]) for d in ds]))
-            for name in DISPLAYS}
+    out = {}
+    for name in DISPLAYS:
+        edge_mm = rig.z_i_um * D.preset(name).layout.period_um[0] / rig.frame_um / 1000.0 * (1 + 1e-9)
+        ds = np.unique(np.concatenate([np.geomspace(lo, hi, int(n)), [edge_mm] if lo < edge_mm < hi else []]))
+        out[name] = (ds, np.array([rig.analytic(D.preset(name), d, cfg["curve_step_nm"]) for d in ds]))
+    return out
 
 
 def visible_range(rows: list[dict], name: str, curve: tuple, rig: Rig) -> dict:
@@ -447,8 +451,9 @@ def markdown(rows: list[dict], ranges: list[dict], rig: Rig, cfg: dict, elapsed_
                              ("snr_pixel", "A1/σ"), ("regime", "regime"), ("visible_pixel", "visible/pixel"),
                              ("visible_averaged", "visible averaged"), ("kernel_s", "kernel s")],
                       {"period_error_rel": lambda v: "" if v is None else f"{v:+.2e}"})
-    lines += ["", "Visible ranges on the analytic grid of d (the strongest analytic harmonic × the median "
-              "measured/analytic ratio, against the measured σ / mean; its period within [4 px, frame]):", ""]
+    lines += ["", "Visible ranges on the analytic grid of d, which holds the distance where the period equals "
+              "the frame (the strongest analytic harmonic × the median measured/analytic ratio, against the "
+              "measured σ / mean; its period within [4 px, frame]):", ""]
     lines += md_table([{**r, "pixel": _fmt_range(r["pixel"]), "averaged": _fmt_range(r["averaged"])} for r in ranges],
                       [("display", "display"), ("ratio_used", "ratio used"), ("noise_rel", "σ / mean"),
                        ("a1_max_rel", "strongest harmonic (× ratio), max over d"), ("pixel", "visible per pixel"),
