@@ -11,7 +11,7 @@ Median seconds, the ratio in the same run (the machine is shared), the layer cou
 number of bright pixels convolved apart.
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_layers.py [--scenes room,hdr] [--spp 4] [--repeats 3]
-        [--cache-dir DIR] [--out out/bench/layers.md]
+        [--tolerance-px 1.0 0.5] [--cache-dir DIR] [--out out/bench/layers.md]
 """
 from __future__ import annotations
 
@@ -23,7 +23,7 @@ from pathlib import Path
 
 from udc_render.io.files import save_text
 from udc_render.optics.displays import load_displays
-from udc_render.pipeline import (SynthConfig, _views, auto_exposure_s, compact_kernels, depth_layers, layer_kernels,
+from udc_render.pipeline import (DEFAULT_DEFOCUS_TOLERANCE_PX, SynthConfig, _views, auto_exposure_s, compact_kernels, depth_layers, layer_kernels,
                                  plan_kernels, sensor_for_scene)
 from udc_render.profiles import resolve_profile
 from udc_render.render import render_scene
@@ -31,10 +31,10 @@ from udc_render.scene import load_scene
 from udc_render.views import bright_pixels, layered_electrons
 
 
-def setup(name: str, spp: int, cache_dir: str | None):
+def setup(name: str, spp: int, cache_dir: str | None, tolerance_px: float):
     """(scene, render, displays, cfg, kernels per layer with and without defocus, layers, seconds of kernels)."""
     scene = load_scene(name).with_render(spp=spp)
-    cfg, displays = resolve_profile("physical", replace(SynthConfig(), kernel_cache=cache_dir),
+    cfg, displays = resolve_profile("physical", SynthConfig(kernel_cache=cache_dir, defocus_tolerance_px=tolerance_px),
                                     load_displays("toled,poled"))
     t0 = time.perf_counter()
     band_image = render_scene(scene, progress=True)
@@ -58,8 +58,8 @@ def optics_seconds(band_image, scene, displays, cfg, per_layer, layers, bright) 
     return time.perf_counter() - t0
 
 
-def bench(name: str, spp: int, repeats: int, cache_dir: str | None) -> dict:
-    scene, bi, displays, cfg, per_layer, base_off, layers, render_s, kernel_s = setup(name, spp, cache_dir)
+def bench(name: str, spp: int, repeats: int, cache_dir: str | None, tolerance_px: float) -> dict:
+    scene, bi, displays, cfg, per_layer, base_off, layers, render_s, kernel_s = setup(name, spp, cache_dir, tolerance_px)
     off = replace(cfg, defocus_tolerance_px=None)
     single = depth_layers(bi, scene, base_off.grid, off)
     sensor = sensor_for_scene(cfg.sensor, scene)
@@ -69,7 +69,7 @@ def bench(name: str, spp: int, repeats: int, cache_dir: str | None) -> dict:
         t_layers.append(optics_seconds(bi, scene, displays, cfg, per_layer, layers, bright))
         t_single.append(optics_seconds(bi, scene, displays, off, [base_off], single, bright))
     d = layers.describe()
-    return {"scene": name, "layers": layers.count, "blur_px": d["blur_diameter_px"], "share": d["pixel_share"],
+    return {"scene": name, "tolerance_px": tolerance_px, "layers": layers.count, "blur_px": d["blur_diameter_px"], "share": d["pixel_share"],
             "bright_px": 0 if bright is None else int(bright.mask.sum()), "layered_s": statistics.median(t_layers),
             "single_s": statistics.median(t_single), "render_s": render_s, "kernel_s": kernel_s}
 
@@ -79,10 +79,10 @@ def table(rows: list[dict], repeats: int) -> str:
              f"Physical profile (ground truth, T-OLED and P-OLED at d = 2 mm, 30 bands), median of {repeats} "
              "interleaved rounds of views.layered_electrons; `kernels s` is every kernel these runs needed "
              "(the layers' included; cold or cached as the cache was). Target: layered ≤ 3 × one layer.", "",
-             "| scene | layers | blur diameters (px) | pixel share | bright px | one layer s | layered s | ratio | kernels s |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| scene | tolerance px | layers | blur diameters (px) | pixel share | bright px | one layer s | layered s | ratio | kernels s |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['layers']} | {', '.join(f'{b:.2f}' for b in r['blur_px'])} | "
+        lines.append(f"| {r['scene']} | {r['tolerance_px']:g} | {r['layers']} | {', '.join(f'{b:.2f}' for b in r['blur_px'])} | "
                      f"{', '.join(f'{s:.2f}' for s in r['share'])} | {r['bright_px']} | {r['single_s']:.2f} | "
                      f"{r['layered_s']:.2f} | {r['layered_s'] / r['single_s']:.2f} | {r['kernel_s']:.0f} |")
     return "\n".join(lines) + "\n"
@@ -94,9 +94,11 @@ def main() -> None:
     ap.add_argument("--spp", type=int, default=4)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--cache-dir", default=None)
+    ap.add_argument("--tolerance-px", type=float, nargs="+", default=[DEFAULT_DEFOCUS_TOLERANCE_PX],
+                    help="defocus tolerances to time (each its own render of the scene)")
     ap.add_argument("--out", type=Path, default=Path("out/bench/layers.md"))
     args = ap.parse_args()
-    rows = [bench(n, args.spp, args.repeats, args.cache_dir) for n in args.scenes.split(",")]
+    rows = [bench(n, args.spp, args.repeats, args.cache_dir, t) for n in args.scenes.split(",") for t in args.tolerance_px]
     text = table(rows, args.repeats)
     print(text)
     args.out.parent.mkdir(parents=True, exist_ok=True)
