@@ -1,13 +1,14 @@
 """`udc-render results`: the whole loop in one resumable command, written up as RESULTS.md.
 
-    dataset (udc-render dataset, builtin images, glass + T-OLED + P-OLED)
+    datasets (udc-render dataset, builtin images, glass + T-OLED + P-OLED; physical and paper profiles)
       ─► train UNet and ResNet per display ─► evaluate input, DeP, ResNet, UNet on the test split
       ─► face detection (restore.face_study) ─► RESULTS.md (tables, budget, the paper's ordering checked)
 
 Every stage resumes: the dataset and training runs pick up where they stopped; evaluation and the
-face study are re-run (minutes). BUDGETS holds the settings; 'cpu' is what this 2-core machine can
-afford in about 50 minutes (with a higher learning rate than the paper's, stated in the document),
-'quick' a smoke run, 'paper' the paper's schedule (for a GPU).
+face study are re-run (minutes). BUDGETS holds the settings; 'cpu' makes the paper's framing (2048 × 1024,
+150/20/30 items per profile, hours on this 2-core machine; its training schedule is still the earlier
+short one, with a higher learning rate than the paper's, stated in the document), 'quick' a smoke run,
+'paper' the paper's schedule (for a GPU).
 """
 from __future__ import annotations
 
@@ -21,7 +22,7 @@ BUDGETS = {
               "crop_px": {"unet": 64, "resnet": 32}, "crops_per_pair": 1, "batch": 2, "face_sensor_px": (512, 256),
               "lr": 1e-4,
               "models": {"unet": {"type": "unet", "width": 8}, "resnet": {"type": "resnet", "features": 8, "blocks": 2}}},
-    "cpu": {"items": (32, 4, 6), "sensor_px": (1024, 512), "epochs": {"unet": 48, "resnet": 16},
+    "cpu": {"items": (150, 20, 30), "sensor_px": (2048, 1024), "epochs": {"unet": 48, "resnet": 16},
             "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (1024, 512),
             "lr": 5e-4, "models": {"unet": None, "resnet": None}},
     "paper": {"items": (400, 40, 60), "sensor_px": (2048, 1024), "epochs": {"unet": 400, "resnet": 400},
@@ -30,19 +31,26 @@ BUDGETS = {
               "models": {"unet": None, "resnet": None}},
 }
 DISPLAYS = ("toled", "poled")
+PROFILES = ("physical", "paper")  # udc_render.profiles: the captures, and the paper's synthesis (UNet (Syn))
 
 
-def make_dataset(data: Path, b: dict, progress: bool) -> None:
-    """The budget's dataset (built-in images, glass + T-OLED + P-OLED), made or resumed."""
+def make_datasets(out: Path, b: dict, progress: bool) -> dict[str, Path]:
+    """The budget's datasets, made or resumed: the built-in images and charts through glass, T-OLED and
+    P-OLED at the budget's framing, once per profile (physical: the tables' train and test pairs; paper:
+    the UNet (Syn) row's training pairs, the paper's own synthesis). {profile: folder}."""
     from udc_render.dataset import DatasetJob, run_dataset
     from udc_render.optics.displays import load_displays
     from udc_render.pipeline import SynthConfig
+    from udc_render.profiles import resolve_profile
     from udc_render.scene import load_scene
     from udc_render.scene.overrides import with_overrides
     scene = with_overrides(load_scene("monitor"), sensor_px=b["sensor_px"])
-    job = DatasetJob(scene, load_displays("glass," + ",".join(DISPLAYS)), SynthConfig(), out=data,
-                     split=tuple(b["items"]))
-    run_dataset(job, progress=progress)
+    folders = {}
+    for profile in PROFILES:
+        cfg, displays = resolve_profile(profile, SynthConfig(), load_displays(",".join(DISPLAYS)))
+        folders[profile] = out / f"dataset_{profile}"
+        run_dataset(DatasetJob(scene, displays, cfg, out=folders[profile], split=tuple(b["items"])), progress=progress)
+    return folders
 
 
 def train_models(data: Path, out: Path, b: dict, progress: bool, times: dict) -> dict:
@@ -71,8 +79,7 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     from restore.studies.faces import face_experiment
     b, out = BUDGETS[budget], Path(out)
     t0, times = time.perf_counter(), {}
-    data = out / "dataset"
-    make_dataset(data, b, progress)
+    data = make_datasets(out, b, progress)["physical"]
     times["dataset_s"] = time.perf_counter() - t0
     models = train_models(data, out, b, progress, times)
     t = time.perf_counter()
