@@ -23,8 +23,8 @@ from pathlib import Path
 
 from udc_render.io.files import save_text
 from udc_render.optics.displays import load_displays
-from udc_render.pipeline import (DEFAULT_DEFOCUS_TOLERANCE_PX, SynthConfig, _views, auto_exposure_s, compact_kernels, depth_layers, layer_kernels,
-                                 plan_kernels, sensor_for_scene)
+from udc_render.pipeline import (DEFAULT_DEFOCUS_TOLERANCE_PX, SynthConfig, auto_exposure_s, capture_views,
+                                 compact_kernels, depth_layers, layer_kernels, plan_kernels, sensor_for_scene)
 from udc_render.profiles import resolve_profile
 from udc_render.render import render_scene
 from udc_render.scene import load_scene
@@ -53,7 +53,7 @@ def optics_seconds(band_image, scene, displays, cfg, per_layer, layers, bright) 
     sensor = sensor_for_scene(cfg.sensor, scene)
     sensor = replace(sensor, exposure_s=auto_exposure_s(band_image, sensor)[0])
     t0 = time.perf_counter()
-    layered_electrons(band_image, layers, lambda l: _views(per_layer[l], displays, band_image.edges_nm), sensor, cfg,
+    layered_electrons(band_image, layers, lambda l: capture_views(per_layer[l], displays, band_image.edges_nm), sensor, cfg,
                       bright)
     return time.perf_counter() - t0
 

@@ -308,7 +308,7 @@ def layer_kernels(layers: DepthLayers, kernels: Kernels, scene: Scene, displays:
     return out
 
 
-def _views(kernels: Kernels, displays: list[Display], edges_nm) -> list[View]:
+def capture_views(kernels: Kernels, displays: list[Display], edges_nm) -> list[View]:
     """The ground truth ('gt': glass, T = 1) and every display but a glass with T = 1 (that one is the ground
     truth's optics exactly)."""
     out = [View("gt", kernels.band["glass"], None)]
@@ -338,7 +338,8 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     bright = bright_pixels(band_image, base_sensor) if cfg.bright_split else None
     bar = tqdm(total=len(displays) + 1, desc="captures", unit="view", disable=not progress, leave=False)
     spectral_views = displays if cfg.form == "spectral" else []
-    electrons = layered_electrons(band_image, layers, lambda l: _views(per_layer[l], spectral_views, band_image.edges_nm),
+    electrons = layered_electrons(band_image, layers,
+                                  lambda l: capture_views(per_layer[l], spectral_views, band_image.edges_nm),
                                   base_sensor, cfg, bright)
     glass_e, gt_optics = electrons["gt"]
     gt = (glass_e / base_sensor.full_well_e).astype(np.float32)

@@ -11,8 +11,8 @@ import pytest
 
 from udc_render.optics import displays as D
 from udc_render.optics.layers import MAX_LAYERS, Compositor, DefocusGeometry, LayerError, choose_layers
-from udc_render.pipeline import (SynthConfig, SynthError, _views, depth_layers, display_kernels, plan_kernels,
-                                 sensor_for_scene, synthesize)
+from udc_render.pipeline import (SynthConfig, SynthError, capture_views, depth_layers, display_kernels,
+                                 plan_kernels, sensor_for_scene, synthesize)
 from udc_render.render import BandImage, render_scene
 from udc_render.scene import Bands, load_scene
 from udc_render.scene.geometry import camera_geometry, psf_lens, render_grid
@@ -238,7 +238,7 @@ def test_the_sun_in_frame_synthesises_at_the_default_precision(kernel_cache):
     kernels = plan_kernels(s, displays, cfg)
 
     def electrons(c, bright):
-        views = lambda l: _views(kernels, displays, bi.edges_nm)  # noqa: E731
+        views = lambda l: capture_views(kernels, displays, bi.edges_nm)  # noqa: E731
         return {k: v[0] for k, v in layered_electrons(bi, layers, views, sensor, c, bright).items()}
 
     bright = bright_pixels(bi, sensor)

@@ -20,7 +20,7 @@ import numpy as np
 
 from udc_render.optics import displays as D
 from udc_render.optics.layers import DefocusGeometry
-from udc_render.pipeline import SynthConfig, _views, depth_layers, display_kernels, plan_kernels, sensor_for_scene
+from udc_render.pipeline import SynthConfig, capture_views, depth_layers, display_kernels, plan_kernels, sensor_for_scene
 from udc_render.render import BandImage
 from udc_render.scene import Bands, load_scene
 from udc_render.scene.geometry import camera_geometry, psf_lens, render_grid
@@ -112,7 +112,7 @@ def bright_rows(cfg: dict) -> list[dict]:
 
     def electrons(precision, split):
         t0 = time.perf_counter()
-        out = layered_electrons(bi, layers, lambda l: _views(kernels, displays, bi.edges_nm), sensor,
+        out = layered_electrons(bi, layers, lambda l: capture_views(kernels, displays, bi.edges_nm), sensor,
                                 replace(NOISELESS, precision=precision), bright if split else None)
         return {k: v[0] for k, v in out.items()}, time.perf_counter() - t0
 
