@@ -192,3 +192,26 @@ def test_dep_on_captures_without_a_display_record_is_a_one_line_error(pairs_dir,
                  "--out", str(tmp_path / "e"), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert "no display record" in err and len(err.splitlines()) == 1
+
+
+def test_plateau_step_needs_a_flat_last_fifth():
+    """plateau_step: the first validated step whose last fifth of validations (≥ 3) spans < the threshold."""
+    from restore.train import plateau_step
+    rising = [{"step": s, "val_psnr_db": 20 + s / 100} for s in range(10, 1010, 10)]
+    assert plateau_step(rising, 0.1) is None  # 0.2 dB per fifth of 1000 steps at the end: never flat
+    flat_tail = [{"step": s, "val_psnr_db": min(25.0, 20 + s / 100)} for s in range(10, 2010, 10)]
+    s = plateau_step(flat_tail, 0.1)
+    assert s is not None and 500 < s and all(
+        r["val_psnr_db"] == 25.0 for r in flat_tail if (0.8 * s) <= r["step"] <= s)
+    few = [{"step": 100, "val_psnr_db": 20.0}, {"step": 110, "val_psnr_db": None}, {"step": 120, "val_psnr_db": 20.0}]
+    assert plateau_step(few, 0.1) is None  # two validations in the window: not enough
+
+
+def test_training_stops_at_the_plateau_and_says_so(tmp_path):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 4), ("val", 1)), blur_px=1, noise=0.01)
+    s = TrainSettings(model=TINY_RESNET, display="blur", epochs=40, batch=2, crop_px=16, lr=1e-6, plateau_db=100.0)
+    summary = train(data, tmp_path / "run", s, val_every=1, progress=False)
+    # validations at every epoch: the last fifth of epoch e holds ≥ 3 of them from e = 10 on
+    assert summary["plateaued"] and summary["epochs"] == 10 and summary["epochs_planned"] == 40
+    again = train(data, tmp_path / "run", s, val_every=1, progress=False)  # resumed: already plateaued
+    assert again["epochs"] == 10 and again["steps"] == summary["steps"]
