@@ -67,9 +67,10 @@ def _overlay(panels: list, path: Path) -> None:
 
 
 def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512), seed: int = 0,
-                    denoiser: str | None = None, progress: bool = True) -> dict:
+                    denoiser: str | None = None, progress: bool = True, chart: dict | None = None) -> dict:
     """Run the experiment into `out` (faces.json, faces.md, detections.png); `models`: display →
-    model.pt of a trained restorer (optional). Returns the recall table."""
+    model.pt of a trained restorer (optional); `chart`: face_chart's face_px and contrast (None: the
+    study's hard chart). Returns the recall table."""
     import imageio.v3 as iio
     import torch
     from restore.dep import dep_restore
@@ -82,7 +83,7 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
     from udc_render.pipeline import SynthConfig, capture_scene
     out, models = Path(out), models or {}
     out.mkdir(parents=True, exist_ok=True)
-    chart, boxes = face_chart(*CHART_PX, seed=seed)
+    chart, boxes = face_chart(*CHART_PX, seed=seed, **(chart or {}))
     with atomic_path(out / "chart.png", ".png") as tmp:
         iio.imwrite(tmp, chart)
     scene = load_scene("monitor")
@@ -118,8 +119,11 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
                      "mean_iou_of_matches": float(iou[iou >= 0.5].mean()) if np.any(iou >= 0.5) else None})
         panels.append((f"{condition} · {d}: recall {matched}/{total}", img, truth, found))
     _overlay(panels, out / "detections.png")
+    from restore.studies.face_chart import STUDY_CONTRAST, STUDY_FACE_PX
+    chart_args = {"face_px": list(STUDY_FACE_PX), "contrast": list(STUDY_CONTRAST),
+                  **{k: list(v) for k, v in (chart or {}).items()}}
     table = {"rows": rows, "sensor_px": list(sensor_px), "chart_px": list(CHART_PX), "faces": int(len(truth)),
-             "seed": seed, "protocol": __doc__.split("\n\n")[1].replace("\n", " ")}
+             "chart": chart_args, "seed": seed, "protocol": __doc__.split("\n\n")[1].replace("\n", " ")}
     save_json(out / "faces.json", table)
     save_text(out / "faces.md", faces_markdown(table))
     return table

@@ -153,7 +153,8 @@ def results_document(results: dict, faces: dict, b: dict, budget: str, data: Pat
     lines += [f"| {c} | {'yes' if ok else '**no**'} | {v} |" for c, ok, v in ordering_checks(results)]
     lines += ["", "## Face detection (MTCNN recall)", "",
               f"{faces['faces']} faces (scikit-image's LFW subset on a {faces['chart_px'][0]} × {faces['chart_px'][1]} "
-              f"chart) shown on the virtual monitor, sensor {faces['sensor_px'][0]} × {faces['sensor_px'][1]} px; "
+              f"chart, {faces['chart']['face_px'][0]}–{faces['chart']['face_px'][1]} px at contrasts "
+              f"{faces['chart']['contrast'][0]:g}–{faces['chart']['contrast'][1]:g}) shown on the virtual monitor, sensor {faces['sensor_px'][0]} × {faces['sensor_px'][1]} px; "
               "clean = the ground truth (the same for both columns). The paper: 60 % clean, 8 % / 0 % degraded, "
               "56 % / 39 % restored (T-OLED / P-OLED).", "", faces_markdown(faces),
               f"Detections: `{out / 'faces' / 'detections.png'}`; previews: `{out / 'eval'}/<method>/previews/`.", ""]
