@@ -83,9 +83,9 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
     from udc_render.pipeline import SynthConfig, capture_scene
     out, models = Path(out), models or {}
     out.mkdir(parents=True, exist_ok=True)
-    chart, boxes = face_chart(*CHART_PX, seed=seed, **(chart or {}))
+    chart_image, boxes = face_chart(*CHART_PX, seed=seed, **(chart or {}))
     with atomic_path(out / "chart.png", ".png") as tmp:
-        iio.imwrite(tmp, chart)
+        iio.imwrite(tmp, chart_image)
     scene = load_scene("monitor")
     scene = replace(scene, content=replace(scene.content, image=str((out / "chart.png").resolve())),
                     sensor=replace(scene.sensor, width_px=int(sensor_px[0]), height_px=int(sensor_px[1])))
