@@ -23,7 +23,7 @@ BUDGETS = {
               "lr": 1e-4,
               "models": {"unet": {"type": "unet", "width": 8}, "resnet": {"type": "resnet", "features": 8, "blocks": 2}}},
     "cpu": {"items": (150, 20, 30), "sensor_px": (2048, 1024), "epochs": {"unet": 48, "resnet": 16},
-            "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (1024, 512),
+            "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (2048, 1024),
             "lr": 5e-4, "models": {"unet": None, "resnet": None}},
     "paper": {"items": (400, 40, 60), "sensor_px": (2048, 1024), "epochs": {"unet": 400, "resnet": 400},
               "crop_px": {"unet": 256, "resnet": 256}, "crops_per_pair": 1, "batch": 4, "face_sensor_px": (2048, 1024),
