@@ -32,7 +32,7 @@ from udc_render.io.files import csv_text, save_figure, save_json, save_text
 from udc_render.sensor import unpack_rggb
 
 MAC_INPUT_SHAPE = (1, 4, 512, 1024)  # the paper's: 512 × 1024 × 4 packed RAW
-ROW_ORDER = ("input", "dep", "resnet", "unet")
+ROW_ORDER = ("input", "dep", "resnet", "unet_syn", "unet")  # the paper's Table 2 order; unet_syn: UNet (Syn)
 DISPLAY_TITLES = {"toled": "T-OLED", "poled": "P-OLED"}
 METRICS = {"paper": ("psnr_db_paper", "ssim_paper"), "srgb": ("psnr_db_srgb", "ssim_srgb", "lpips_srgb")}
 PROTOCOLS_TEXT = {name: f"{text}; {BORDER_PX}-px border cropped; PSNR peak 1; SSIM Gaussian σ 1.5"

@@ -53,41 +53,51 @@ def make_datasets(out: Path, b: dict, progress: bool) -> dict[str, Path]:
     return folders
 
 
-def train_models(data: Path, out: Path, b: dict, progress: bool, times: dict) -> dict:
-    """UNet and ResNet per display, trained or resumed in out/train/<kind>_<display>; their model.pt paths."""
+# (row, model kind, the profile whose pairs train it): the paper's rows; UNet (Syn) is trained on the paper's
+# own synthesis and tested on the physical captures, as the paper's synthetic-to-real row.
+ROWS = (("unet", "unet", "physical"), ("resnet", "resnet", "physical"), ("unet_syn", "unet", "paper"))
+
+
+def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, times: dict) -> dict:
+    """Every row's model per display, trained or resumed in out/train/<row>_<display>: {(row, display):
+    model.pt}."""
     from restore.models import RESNET_CONFIG, UNET_CONFIG
     from restore.train import TrainSettings, data_fingerprint, train
     defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
     models = {}
-    for kind in ("unet", "resnet"):
+    for row, kind, profile in ROWS:
         cfg = dict(b["models"][kind] or defaults[kind])
+        data = datasets[profile]
         for d in DISPLAYS:
             t = time.perf_counter()
-            run = out / "train" / f"{kind}_{d}"
+            run = out / "train" / f"{row}_{d}"
             settings = TrainSettings(model=cfg, display=d, epochs=b["epochs"][kind], batch=b["batch"],
                                      crop_px=b["crop_px"][kind], crops_per_pair=b["crops_per_pair"], lr=b["lr"],
                                      data_fingerprint=data_fingerprint(data))
             train(data, run, settings, progress=progress)
-            models[(kind, d)] = run / "model.pt"
-            times[f"train_{kind}_{d}_s"] = time.perf_counter() - t
+            models[(row, d)] = run / "model.pt"
+            times[f"train_{row}_{d}_s"] = time.perf_counter() - t
     return models
 
 
 def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progress: bool = True) -> dict:
     """Run every stage into `out` and write `out`/RESULTS.md (and a copy at `write`)."""
-    from restore.evaluate import evaluate
+    from restore.evaluate import EvalSettings, evaluate
     from restore.studies.faces import face_experiment
     b, out = BUDGETS[budget], Path(out)
     t0, times = time.perf_counter(), {}
-    data = make_datasets(out, b, progress)["physical"]
+    datasets = make_datasets(out, b, progress)
+    data = datasets["physical"]  # every row is tested on the physical captures
     times["dataset_s"] = time.perf_counter() - t0
-    models = train_models(data, out, b, progress, times)
+    models = train_models(datasets, out, b, progress, times)
     t = time.perf_counter()
     ev = out / "eval"
     if (ev / "results.json").is_file():
         (ev / "results.json").unlink()  # rebuilt from this run's rows only
-    for method in ["input", "dep", *map(str, models.values())]:
+    for method in ("input", "dep"):
         evaluate(data, method, ev, progress=progress)
+    for (row, _), path in models.items():
+        evaluate(data, str(path), ev, EvalSettings(name=row), progress=progress)
     times["evaluate_s"] = time.perf_counter() - t
     t = time.perf_counter()
     faces = face_experiment(out / "faces", {d: models[("unet", d)] for d in DISPLAYS}, b["face_sensor_px"],
@@ -103,17 +113,29 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     return {"results": results, "faces": faces, "times": times}
 
 
+PAPER_SYN_GAP_DB = {"toled": 4.3, "poled": 4.6}  # the paper: UNet trained on its synthetic data, on real data
+UNET_OVER_DEP_DB = 3.0  # the ordering the issue asks for: UNet at least this far above DeP
+
+
 def ordering_checks(results: dict) -> list[tuple[str, bool, str]]:
-    """The paper's qualitative findings, checked on our numbers under the paper protocol: (claim, holds, values)."""
+    """The paper's findings, checked on our numbers under the paper protocol: (claim, holds, values)."""
     m = results["methods"]
+
+    def psnr(name, d):
+        return m.get(name, {}).get("displays", {}).get(d, {}).get("psnr_db_paper")
+
     checks = []
     for d in DISPLAYS:
-        if "unet" in m and "dep" in m and d in m["unet"]["displays"] and d in m["dep"]["displays"]:
-            u, p = m["unet"]["displays"][d]["psnr_db_paper"], m["dep"]["displays"][d]["psnr_db_paper"]
-            checks.append((f"UNet above DeP on {d} (PSNR)", u > p, f"{u:.2f} vs {p:.2f} dB"))
-    for name in ("input", "dep", "resnet", "unet"):
-        if name in m and all(d in m[name]["displays"] for d in DISPLAYS):
-            t, p = (m[name]["displays"][d]["psnr_db_paper"] for d in DISPLAYS)
+        u, p, s = psnr("unet", d), psnr("dep", d), psnr("unet_syn", d)
+        if u is not None and p is not None:
+            checks.append((f"UNet above DeP by ≥ {UNET_OVER_DEP_DB:g} dB on {d} (PSNR)", u - p >= UNET_OVER_DEP_DB,
+                           f"{u:.2f} vs {p:.2f} dB ({u - p:+.2f})"))
+        if u is not None and s is not None:
+            checks.append((f"UNet (Syn) below UNet on {d} (PSNR)", s < u,
+                           f"{s:.2f} vs {u:.2f} dB: gap {u - s:.2f} dB (paper {PAPER_SYN_GAP_DB[d]:g} dB)"))
+    for name in ("input", "dep", "resnet", "unet_syn", "unet"):
+        t, p = psnr(name, "toled"), psnr(name, "poled")
+        if t is not None and p is not None:
             checks.append((f"P-OLED harder than T-OLED for {name} (PSNR)", p < t, f"{p:.2f} vs {t:.2f} dB"))
     return checks
 
@@ -133,7 +155,9 @@ def results_document(results: dict, faces: dict, b: dict, budget: str, data: Pat
         f"- Dataset: `udc-render dataset --builtin`, {sum(n)} items (train {n[0]}, val {n[1]}, test {n[2]}), "
         f"sensor {b['sensor_px'][0]} × {b['sensor_px'][1]} px of 1.55 µm, each item one render through glass "
         "(ground truth), T-OLED and P-OLED with the sensor noise; content: scikit-image samples, charts, then "
-        f"dead leaves; every setting in `{data / 'job.json'}` ({len(job)} keys).",
+        f"dead leaves; every setting in `{data / 'job.json'}` ({len(job)} keys). Profile physical; the same items "
+        "under the paper profile (the paper's own synthesis) train the UNet (Syn) row, which is tested on the "
+        "physical captures like every row.",
         f"- Training ({budget} budget): Adam (0.9, 0.999, 1e-8), lr {b['lr']:g} halved at half the epochs, L1 loss, "
         f"batch {b['batch']}, {b['crops_per_pair']} random crops per pair and epoch with Bayer-preserving "
         f"augmentation; UNet {b['epochs']['unet']} epochs of {b['crop_px']['unet']}-px crops, ResNet "

@@ -23,7 +23,7 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     from restore.studies.results import run_results
     r = run_results(tmp_path / "res", "quick", progress=False)
     methods = r["results"]["methods"]
-    assert set(methods) == {"input", "dep", "unet", "resnet"}
+    assert set(methods) == {"input", "dep", "unet", "resnet", "unet_syn"}
     for d in ("toled", "poled"):
         # DeP improves on the degraded input on rendered T-OLED and P-OLED pairs
         assert methods["dep"]["displays"][d]["psnr_db_paper"] > methods["input"]["displays"][d]["psnr_db_paper"]

@@ -1,0 +1,25 @@
+"""The results document's ordering checks are computed from the tables (restore.studies.results)."""
+from restore.studies.results import PAPER_SYN_GAP_DB, ordering_checks
+
+
+def _results(psnr: dict) -> dict:
+    return {"methods": {name: {"displays": {d: {"psnr_db_paper": v} for d, v in by_display.items()}}
+                        for name, by_display in psnr.items()}}
+
+
+def test_ordering_checks_follow_the_tables():
+    table = {"dep": {"toled": 28.5, "poled": 17.0}, "unet": {"toled": 36.7, "poled": 30.5},
+             "unet_syn": {"toled": 32.4, "poled": 25.9}, "resnet": {"toled": 36.3, "poled": 27.4},
+             "input": {"toled": 20.0, "poled": 12.0}}  # the paper's Table 2 (UNet (Syn): UNet − 4.3 / 4.6)
+    checks = {claim: (ok, values) for claim, ok, values in ordering_checks(_results(table))}
+    assert all(ok for ok, _ in checks.values()) and len(checks) == 2 * 2 + 5
+    ok, values = checks["UNet (Syn) below UNet on toled (PSNR)"]
+    assert "gap 4.30 dB" in values and f"paper {PAPER_SYN_GAP_DB['toled']:g} dB" in values
+
+    table["unet"]["poled"] = 19.0  # within 3 dB of DeP, below the UNet (Syn), easier than the T-OLED: all fail
+    table["unet"]["toled"] = 18.0
+    checks = {claim: ok for claim, ok, _ in ordering_checks(_results(table))}
+    assert not checks["UNet above DeP by ≥ 3 dB on poled (PSNR)"]
+    assert not checks["UNet (Syn) below UNet on poled (PSNR)"]
+    assert not checks["P-OLED harder than T-OLED for unet (PSNR)"]
+    assert checks["P-OLED harder than T-OLED for dep (PSNR)"]
