@@ -28,4 +28,7 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
         # DeP improves on the degraded input on rendered T-OLED and P-OLED pairs
         assert methods["dep"]["displays"][d]["psnr_db_paper"] > methods["input"]["displays"][d]["psnr_db_paper"]
         assert np.isfinite(methods["unet"]["displays"][d]["psnr_db_paper"])
-    assert (tmp_path / "res" / "RESULTS.md").read_text().startswith("# Restoration results")
+    doc = (tmp_path / "res" / "RESULTS.md").read_text()
+    assert doc.startswith("# Restoration results")
+    assert "## Training: where each model stopped" in doc
+    assert doc.count("| unet_syn |") == 4  # two training lines, a row in each protocol's table
