@@ -19,6 +19,7 @@ from udc_render.dataset import DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M,
 pytestmark = pytest.mark.usefixtures("render_cache")
 
 from tests.udc_render.cornell_box import ORIGIN, TARGET, cbox_xml
+from tests.udc_render.test_dataset import assert_same_files, manifest, one_error_line, tree
 
 CBOX = cbox_xml()
 
@@ -65,28 +66,6 @@ def reference(scene, tmp_path_factory, render_cache):
     before = set(render_cache.glob("*.npz"))
     assert main(args(scene, out)) == 0
     return out, set(render_cache.glob("*.npz")) - before
-
-
-def tree(out: Path) -> dict:
-    return {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*"))
-            if p.is_file() and p.name not in ("timing.jsonl", ".lock")}
-
-
-def assert_same_files(out: Path, reference: Path) -> None:
-    a, b = tree(out), tree(reference)
-    assert sorted(a) == sorted(b)
-    assert [k for k in a if a[k] != b[k]] == []
-
-
-def manifest(out: Path) -> list[dict]:
-    return [json.loads(line) for line in (out / "manifest.jsonl").read_text().splitlines()]
-
-
-def one_error_line(err: str) -> str:
-    lines = err.strip().splitlines()
-    assert len(lines) == 1, err
-    assert lines[0].startswith("udc-render: error: ") and "Traceback" not in err
-    return lines[0]
 
 
 def test_items_are_views_from_jittered_poses_with_one_focus(reference):
