@@ -60,6 +60,9 @@ class TrainSettings:
     # Stop once validation PSNR has plateaued: it spans less than this (dB) over the last fifth of the steps
     # (plateau_step); None: every epoch. Issue 15's criterion is 0.1 dB.
     plateau_db: float | None = None
+    # Validate on the central val_crop_px square of each val frame (None: the whole frame). A stopping signal
+    # only: the test split is always scored whole (restore.evaluate). Keeps the ResNet's validations cheap.
+    val_crop_px: int | None = None
 
 
 def data_fingerprint(data_dir: Path) -> str:
@@ -136,7 +139,21 @@ def _training_data(data_dir: Path, settings: TrainSettings) -> tuple[PairDataset
     if settings.crop_px > largest_crop_px(h, w):
         raise TrainError(f"--crop-px = {settings.crop_px}: too large for the {w} × {h} px frames of {data_dir} "
                          f"({settings.display}): at most {largest_crop_px(h, w)} (the smaller side less 2 px)")
-    return data, [load_pair(p) for p in list_pairs(data_dir, "val", [settings.display])]
+    val = [load_pair(p) for p in list_pairs(data_dir, "val", [settings.display])]
+    if settings.val_crop_px is not None:
+        c = settings.val_crop_px
+        if c < 32 or c % 32 or c > min(h, w):
+            raise TrainError(f"val_crop_px = {c}: expected a multiple of 32 px from 32 to {min(h, w)} "
+                             f"(the smaller side of {data_dir}'s frames)")
+        val = [centre_crop(packed, gt, c) for packed, gt in val]
+    return data, val
+
+
+def centre_crop(packed: np.ndarray, gt: np.ndarray, crop_px: int) -> tuple[np.ndarray, np.ndarray]:
+    """(packed [4, c/2, c/2], gt [3, c, c]): the central crop_px square of a pair, in whole RGGB cells."""
+    half = crop_px // 2
+    y, x = (packed.shape[1] - half) // 2, (packed.shape[2] - half) // 2
+    return packed[:, y:y + half, x:x + half], gt[:, 2 * y:2 * y + crop_px, 2 * x:2 * x + crop_px]
 
 
 @contextmanager

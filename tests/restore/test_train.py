@@ -215,3 +215,25 @@ def test_training_stops_at_the_plateau_and_says_so(tmp_path):
     assert summary["plateaued"] and summary["epochs"] == 10 and summary["epochs_planned"] == 40
     again = train(data, tmp_path / "run", s, val_every=1, progress=False)  # resumed: already plateaued
     assert again["epochs"] == 10 and again["steps"] == summary["steps"]
+
+
+def test_centre_crop_keeps_the_pair_aligned_and_whole_rggb_cells():
+    """centre_crop: the packed crop's RGGB cell (y, x) is the gt crop's pixels (2y..2y+1, 2x..2x+1)."""
+    from restore.train import centre_crop
+    packed = np.arange(4 * 40 * 60, dtype=np.float32).reshape(4, 40, 60)
+    gt = np.repeat(np.repeat(packed[:3], 2, axis=1), 2, axis=2)  # each cell's value on its 2 × 2 pixels
+    p, g = centre_crop(packed, gt, 32)
+    assert p.shape == (4, 16, 16) and g.shape == (3, 32, 32)
+    assert np.array_equal(np.repeat(np.repeat(p[:3], 2, axis=1), 2, axis=2), g)
+    assert p[0, 0, 0] == packed[0, 12, 22]  # centred: (40 − 16) / 2, (60 − 16) / 2
+
+
+def test_validation_on_a_centre_crop_is_checked_and_used(tmp_path):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2), ("val", 1)), blur_px=1, noise=0.01)
+    base = dict(model=TINY_RESNET, display="blur", epochs=1, batch=2, crop_px=16)
+    with pytest.raises(TrainError, match="val_crop_px = 48: expected a multiple of 32"):
+        train(data, tmp_path / "bad", TrainSettings(**base, val_crop_px=48), progress=False)
+    assert not (tmp_path / "bad").exists()  # refused before the run folder is made
+    whole = train(data, tmp_path / "whole", TrainSettings(**base), val_every=1, progress=False)
+    crop = train(data, tmp_path / "crop", TrainSettings(**base, val_crop_px=32), val_every=1, progress=False)
+    assert crop["val_pairs"] == 1 and crop["val_psnr_db"] != whole["val_psnr_db"]  # same weights, other pixels
