@@ -23,3 +23,16 @@ def test_ordering_checks_follow_the_tables():
     assert not checks["UNet (Syn) below UNet on poled (PSNR)"]
     assert not checks["P-OLED harder than T-OLED for unet (PSNR)"]
     assert checks["P-OLED harder than T-OLED for dep (PSNR)"]
+
+
+def test_face_table_puts_the_papers_recall_beside_ours():
+    from restore.studies.faces import faces_markdown
+    rows = [{"condition": "clean", "display": "glass", "faces": 45, "found": 28, "recall": 28 / 45},
+            *({"condition": c, "display": d, "faces": 45, "found": f, "recall": f / 45}
+              for c, d, f in (("degraded", "toled", 1), ("degraded", "poled", 0), ("DeP", "toled", 7),
+                              ("DeP", "poled", 0), ("unet", "toled", 20), ("unet", "poled", 9)))]
+    lines = faces_markdown({"rows": rows}).splitlines()
+    assert lines[0] == "| MTCNN recall | T-OLED | paper | P-OLED | paper |"
+    assert lines[2] == "| clean | 62 % (28/45) | 60 % | 62 % (28/45) | 60 % |"  # the same clean view twice
+    assert lines[4] == "| DeP | 16 % (7/45) | — | 0 % (0/45) | — |"  # the paper has no DeP row
+    assert lines[5] == "| unet | 44 % (20/45) | 56 % | 20 % (9/45) | 39 % |"
