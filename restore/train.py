@@ -225,7 +225,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     opt = torch.optim.Adam(model.parameters(), lr=settings.lr, betas=(0.9, 0.999), eps=1e-8)
     save_json(out / "train.json", asdict(settings))  # everything above checked: the run folder is used now
     start_epoch, step, log = _resume(out / "checkpoint.pt", model, opt, dev)
-    t_start, t_ckpt = time.perf_counter(), time.perf_counter()
+    t_start, t_ckpt = time.perf_counter() - (log[-1]["seconds"] if log else 0.0), time.perf_counter()  # cumulative
     model.train()
     bar = tqdm(range(start_epoch, settings.epochs), initial=start_epoch, total=settings.epochs, unit="epoch",
                desc=f"train {settings.model['type']} {settings.display}", disable=not progress)
@@ -271,7 +271,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
                "plateaued": plateau is not None, "final_loss": log[-1]["loss"] if log else None,
                "val_psnr_db": next((r["val_psnr_db"] for r in reversed(log) if r["val_psnr_db"] is not None), None),
                "train_pairs": len(data.pairs), "val_pairs": len(val_pairs), "device": str(dev),
-               "seconds_this_run": round(time.perf_counter() - t_start, 1)}
+               "seconds": round(time.perf_counter() - t_start, 1)}
     save_json(out / "train_summary.json", summary)
     return summary
 

@@ -5,10 +5,10 @@
       ─► face detection (restore.face_study) ─► RESULTS.md (tables, budget, the paper's ordering checked)
 
 Every stage resumes: the dataset and training runs pick up where they stopped; evaluation and the
-face study are re-run (minutes). BUDGETS holds the settings; 'cpu' makes the paper's framing (2048 × 1024,
-150/20/30 items per profile, hours on this 2-core machine; its training schedule is still the earlier
-short one, with a higher learning rate than the paper's, stated in the document), 'quick' a smoke run,
-'paper' the paper's schedule (for a GPU).
+face study are re-run (minutes to an hour). BUDGETS holds the settings; 'cpu' makes the paper's framing
+(2048 × 1024, 150/20/30 items per profile) and trains each model to its validation plateau under an epoch
+cap, about a working day of this 2-core machine in all; 'quick' is a smoke run, 'paper' the paper's
+schedule (for a GPU). Changing a budget's training values makes the existing run folders refuse to resume.
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ BUDGETS = {
     # of 20 whole frames would take 6 min). Caps: about a working day of this machine if nothing plateaus.
     "cpu": {"items": (150, 20, 30), "sensor_px": (2048, 1024), "epochs": {"unet": 80, "resnet": 50},
             "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (2048, 1024),
-            "lr": 5e-4, "plateau_db": 0.1, "val_every": 4, "val_crop_px": 768, "models": {"unet": None, "resnet": None}},
+            "lr": 2e-4, "plateau_db": 0.1, "val_every": 4, "val_crop_px": 768, "models": {"unet": None, "resnet": None}},
     "paper": {"items": (400, 40, 60), "sensor_px": (2048, 1024), "epochs": {"unet": 400, "resnet": 400},
               "crop_px": {"unet": 256, "resnet": 256}, "crops_per_pair": 1, "batch": 4, "face_sensor_px": (2048, 1024),
               "lr": 1e-4,
@@ -86,7 +86,8 @@ def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, 
 
 
 def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progress: bool = True) -> dict:
-    """Run every stage into `out` and write `out`/RESULTS.md (and a copy at `write`)."""
+    """Run every stage into `out` and write `out`/RESULTS.md with its figures in `out`/figures; with
+    `write`, the document there too, its figures in docs/figures/results beside it."""
     from restore.evaluate import EvalSettings, evaluate
     from restore.studies.faces import face_experiment
     b, out = BUDGETS[budget], Path(out)
@@ -110,11 +111,11 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     times["faces_s"] = time.perf_counter() - t
     times["total_s"] = time.perf_counter() - t0
     results = json.loads((ev / "results.json").read_text())
-    text = results_document(results, faces, b, budget, data, out, times)
     from udc_render.io.files import save_text
-    save_text(out / "RESULTS.md", text)
-    if write:
-        save_text(write, text)
+    for doc, fig_dir in ((out / "RESULTS.md", out / "figures"),
+                         *(((Path(write), Path(write).parent / "docs" / "figures" / "results"),) if write else ())):
+        figures = copy_figures(out, fig_dir)
+        save_text(doc, results_document(results, faces, b, budget, datasets, out, times, figures, doc.parent))
     return {"results": results, "faces": faces, "times": times}
 
 
@@ -145,12 +146,125 @@ def ordering_checks(results: dict) -> list[tuple[str, bool, str]]:
     return checks
 
 
+def training_logs(out: Path) -> dict[tuple[str, str], list[dict]]:
+    """{(row, display): the run's loss.csv rows as numbers} for every run that has one."""
+    import csv
+    logs = {}
+    for row, _, _ in ROWS:
+        for d in DISPLAYS:
+            path = out / "train" / f"{row}_{d}" / "loss.csv"
+            if path.is_file():
+                with path.open() as f:
+                    logs[(row, d)] = [{k: float(v) if v else None for k, v in r.items()} for r in csv.DictReader(f)]
+    return logs
+
+
+def plot_training_curves(out: Path, path: Path) -> None:
+    """Validation PSNR (left) and training L1 loss (right) against epoch for every run; a cross marks
+    where a run reached its plateau."""
+    from udc_render.io.plots import pyplot, save_plot
+    plt, logs = pyplot(), training_logs(out)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4))
+    for i, ((row, d), log) in enumerate(logs.items()):
+        style = dict(color=f"C{i}", label=f"{row} {d}")
+        val = [(r["epoch"], r["val_psnr_db"]) for r in log if r["val_psnr_db"] is not None]
+        if val:
+            a.plot(*zip(*val), "o-", ms=3, **style)
+        summary = out / "train" / f"{row}_{d}" / "train_summary.json"
+        if summary.is_file() and json.loads(summary.read_text()).get("plateaued") and val:
+            a.plot(*val[-1], "kx", ms=9)
+        b.semilogy([r["epoch"] for r in log], [r["loss"] for r in log], **style)
+    a.set(xlabel="epoch", ylabel="validation PSNR (dB, linear, central crop)", title="validation (× = plateau)")
+    b.set(xlabel="epoch", ylabel="training L1 loss", title="training loss")
+    b.legend(fontsize=8)
+    save_plot(fig, path)
+
+
+def content_counts(data: Path) -> dict[str, dict[str, int]]:
+    """{split: {content kind: items}} from the dataset's manifest: scikit-image photographs, charts,
+    dead leaves (each a new seed) and the user's --images files."""
+    counts: dict[str, dict[str, int]] = {}
+    for line in (data / "manifest.jsonl").read_text().splitlines():
+        item = json.loads(line)
+        image = item.get("image") or ""
+        kind = ("dead leaves" if image.startswith("pattern:dead_leaves") else "charts" if image.startswith("pattern:")
+                else "photographs (scikit-image)" if image.startswith("builtin:") else "--images files")
+        split = counts.setdefault(item["split"], {})
+        split[kind] = split.get(kind, 0) + 1
+    return counts
+
+
+def dataset_hours(data: Path) -> float:
+    """The dataset's generation time (h): the sum of its items' recorded seconds (timing.jsonl), so a
+    dataset made in resumed parts counts every part."""
+    rows = [json.loads(line) for line in (data / "timing.jsonl").read_text().splitlines() if line.strip()]
+    return sum(r.get("seconds", 0.0) for r in rows) / 3600
+
+
+def copy_figures(out: Path, fig_dir: Path) -> dict[str, Path]:
+    """The document's figures into fig_dir: the training curves, the face detections and the first test
+    item's UNet previews; {name: path}."""
+    import shutil
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    figures = {"curves": fig_dir / "training_curves.png"}
+    plot_training_curves(out, figures["curves"])
+    sources = {"faces": out / "faces" / "detections.png"}
+    for d in DISPLAYS:
+        previews = sorted((out / "eval" / "unet" / "previews").glob(f"{d}_*.png"))
+        if previews:
+            sources[f"unet_{d}"] = previews[0]
+    for name, src in sources.items():
+        if src.is_file():
+            figures[name] = fig_dir / f"{name}.png"
+            shutil.copyfile(src, figures[name])
+    return figures
+
+
+def _link(path: Path, base: Path) -> str:
+    try:
+        return str(Path(path).resolve().relative_to(Path(base).resolve()))
+    except ValueError:
+        return str(path)
+
+
+def data_section(b: dict, data: Path, datasets: dict[str, Path]) -> list[str]:
+    n, counts = b["items"], content_counts(data)
+    kinds = sorted({k for c in counts.values() for k in c})
+    lines = [f"- {sum(n)} items per profile (train {n[0]}, val {n[1]}, test {n[2]}; the paper: 240/30/30 real pairs), "
+             f"`udc-render dataset` of the monitor scene with the built-in content: sensor {b['sensor_px'][0]} × "
+             f"{b['sensor_px'][1]} px of 1.55 µm (the paper's framing), the default monitor rig; each item one render "
+             "seen through glass (the ground truth), T-OLED and P-OLED, with the sensor's noise.",
+             "- Profiles: `physical` (the calibrated displays, d = 2 mm; every row is tested on it) and `paper` (the "
+             "paper's own synthesis, d = 0; it trains the UNet (Syn) row only). Generation time (sum of the items' "
+             "recorded seconds): " + ", ".join(f"{p} {dataset_hours(f):.1f} h" for p, f in datasets.items()) + ".",
+             "", "| split | " + " | ".join(kinds) + " |", "|---|" + "---|" * len(kinds)]
+    lines += [f"| {split} | " + " | ".join(str(counts[split].get(k, 0)) for k in kinds) + " |" for split in counts]
+    lines += ["", "The built-in list is cycled once (6 scikit-image photographs, 4 charts), then every further item is a "
+              "new dead-leaves seed, so the val and test splits are all dead leaves: scale-invariant occlusion "
+              "statistics like natural images', but not photographs. A user with DIV2K passes `--images DIR` to "
+              f"`udc-render dataset`. Every setting: `{data / 'job.json'}`."]
+    return lines
+
+
+def training_section(b: dict, budget: str, out: Path) -> list[str]:
+    return [f"Adam (0.9, 0.999, 1e-8), L1 loss, lr {b['lr']:g} halved at half the epoch cap, batch {b['batch']}, "
+            f"{b['crops_per_pair']} random crops per pair and epoch with Bayer-preserving flips; UNet "
+            f"{b['crop_px']['unet']}-px crops, at most {b['epochs']['unet']} epochs; ResNet {b['crop_px']['resnet']}-px "
+            f"crops, at most {b['epochs']['resnet']} epochs. Each model stops at its plateau: validation PSNR "
+            f"(linear, on the central {b.get('val_crop_px') or 'whole'}-px square of the {b['items'][1]} val frames, "
+            f"every {b.get('val_every', 10)} epochs) spanning less than {b.get('plateau_db')} dB over the last fifth of "
+            "the steps, with at least 3 validations in it (`restore.train.plateau_step`). The paper trains 400 "
+            "epochs at lr 1e-4 on a GPU. The cpu budget's lr is 2e-4: at 5e-4 the UNet diverged at epoch 8 (loss "
+            "0.066 → 0.50, validation PSNR 20.1 → 8.9 dB), and at 1e-4 an earlier UNet (1024 × 512 data) sat at a "
+            "loss of 0.11 from epoch 8 to 20.", "",
+            *training_table(out, b)]
+
+
 def training_table(out: Path, b: dict) -> list[str]:
-    """One line per trained model from its train_summary.json: epochs, steps, whether validation PSNR reached
-    the plateau (restore.train.plateau_step: < plateau_db over the last fifth of the steps) and where."""
-    lines = [f"Plateau: validation PSNR spanning < {b.get('plateau_db')} dB over the last fifth of the steps, "
-             f"validated every {b.get('val_every', 10)} epochs; curves in `{out / 'train'}/<row>_<display>/loss.png`.",
-             "", "| row | display | epochs (of planned) | steps | plateau | last val PSNR (dB) |", "|---|---|---|---|---|---|"]
+    """One line per trained model from its train_summary.json: epochs, steps, wall time, whether validation
+    PSNR reached the plateau (restore.train.plateau_step) and where."""
+    lines = ["| row | display | epochs (cap) | steps | wall time (h) | plateau | last val PSNR (dB) |",
+             "|---|---|---|---|---|---|---|"]
     for row, _, _ in ROWS:
         for d in DISPLAYS:
             path = out / "train" / f"{row}_{d}" / "train_summary.json"
@@ -159,53 +273,47 @@ def training_table(out: Path, b: dict) -> list[str]:
             t = json.loads(path.read_text())
             plateau = f"at step {t['plateau_step']}" if t.get("plateaued") else "**not reached**"
             val = "—" if t.get("val_psnr_db") is None else f"{t['val_psnr_db']:.2f}"
-            lines.append(f"| {row} | {d} | {t['epochs']} (of {t.get('epochs_planned', t['epochs'])}) | {t['steps']} | "
-                         f"{plateau} | {val} |")
+            hours = "—" if t.get("seconds") is None else f"{t['seconds'] / 3600:.2f}"
+            lines.append(f"| {row} | {d} | {t['epochs']} ({t.get('epochs_planned', t['epochs'])}) | {t['steps']} | "
+                         f"{hours} | {plateau} | {val} |")
     return lines
 
 
-def results_document(results: dict, faces: dict, b: dict, budget: str, data: Path, out: Path, times: dict) -> str:
+def results_document(results: dict, faces: dict, b: dict, budget: str, datasets: dict[str, Path], out: Path,
+                     times: dict, figures: dict[str, Path], base: Path) -> str:
+    """RESULTS.md: data, training, both tables (paper protocol first), the orderings checked from the
+    tables, the face table; figure links relative to `base` (the document's folder)."""
     from restore.evaluate import results_markdown
     from restore.studies.faces import faces_markdown
     import torch
-    job = json.loads((data / "job.json").read_text())
-    n = b["items"]
+    data = datasets["physical"]
+    fig = {k: _link(v, base) for k, v in figures.items()}
     lines = [
         "# Restoration results", "",
-        f"Generated by `udc-render results --budget {budget} --out {out} --write RESULTS.md` "
-        f"({times['total_s'] / 60:.0f} min on {platform.machine()}, {torch.get_num_threads()} torch threads, "
-        f"{'GPU ' + torch.cuda.get_device_name() if torch.cuda.is_available() else 'CPU only'}).", "",
-        "## Data and training budget", "",
-        f"- Dataset: `udc-render dataset --builtin`, {sum(n)} items (train {n[0]}, val {n[1]}, test {n[2]}), "
-        f"sensor {b['sensor_px'][0]} × {b['sensor_px'][1]} px of 1.55 µm, each item one render through glass "
-        "(ground truth), T-OLED and P-OLED with the sensor noise; content: scikit-image samples, charts, then "
-        f"dead leaves; every setting in `{data / 'job.json'}` ({len(job)} keys). Profile physical; the same items "
-        "under the paper profile (the paper's own synthesis) train the UNet (Syn) row, which is tested on the "
-        "physical captures like every row.",
-        f"- Training ({budget} budget): Adam (0.9, 0.999, 1e-8), lr {b['lr']:g} halved at half the epochs, L1 loss, "
-        f"batch {b['batch']}, {b['crops_per_pair']} random crops per pair and epoch with Bayer-preserving "
-        f"augmentation; UNet {b['epochs']['unet']} epochs of {b['crop_px']['unet']}-px crops, ResNet "
-        f"{b['epochs']['resnet']} epochs of {b['crop_px']['resnet']}-px crops. The paper trains 400 epochs on "
-        "about 240 real pairs at lr 1e-4: these models are far from converged, and the numbers are this budget's. "
-        "(The cpu budget raises lr to 5e-4: at 1e-4 the UNet's loss sat on a plateau of 0.11 from epoch 8 to 20; "
-        "at 1e-3 it reached 0.086 by epoch 14.)",
-        "- Stage times (s): " + ", ".join(f"{k[:-2]} {v:.0f}" for k, v in times.items()) + ".", "",
-        "## Training: where each model stopped", "",
-        *training_table(out, b), "",
+        f"Generated by `udc-render results --budget {budget} --out {out} --write RESULTS.md` on {platform.machine()}, "
+        f"{torch.get_num_threads()} torch threads, "
+        f"{'GPU ' + torch.cuda.get_device_name() if torch.cuda.is_available() else 'CPU only'}. "
+        "This invocation's stage times (s): " + ", ".join(f"{k[:-2]} {v:.0f}" for k, v in times.items()) +
+        "; the datasets' and models' own times, summed over resumed parts, are below.", "",
+        "## Data", "", *data_section(b, data, datasets), "",
+        f"## Training ({budget} budget)", "", *training_section(b, budget, out), "",
+        *([f"![training curves]({fig['curves']})", ""] if "curves" in fig else []),
         "## Pipeline comparison (test split)", "",
         results_markdown(results), "",
         "The paper (real captures): DeP 28.50/0.9117 and 16.97/0.7084; ResNet 36.26/0.9703 and 27.42/0.9176; "
-        "UNet 36.71/0.9713 and 30.45/0.9427 (T-OLED and P-OLED PSNR/SSIM); UNet 8.93 M, 124.36 G MACs, "
-        "21.37 ms/MP on a Titan X.", "",
+        "UNet (Syn) 32.42/0.9343 and 25.88/0.9006; UNet 36.71/0.9713 and 30.45/0.9427 (T-OLED and P-OLED "
+        "PSNR/SSIM); UNet 8.93 M, 124.36 G MACs, 21.37 ms/MP on a Titan X.", "",
+        *[f"![UNet on the first test item, {d}]({fig[f'unet_{d}']})" for d in DISPLAYS if f"unet_{d}" in fig], "",
         "## The paper's ordering", "",
+        "Computed from the paper-protocol table above (`restore.studies.results.ordering_checks`).", "",
         "| claim | holds | values |", "|---|---|---|",
     ]
     lines += [f"| {c} | {'yes' if ok else '**no**'} | {v} |" for c, ok, v in ordering_checks(results)]
     lines += ["", "## Face detection (MTCNN recall)", "",
               f"{faces['faces']} faces (scikit-image's LFW subset on a {faces['chart_px'][0]} × {faces['chart_px'][1]} "
               f"chart, {faces['chart']['face_px'][0]}–{faces['chart']['face_px'][1]} px at contrasts "
-              f"{faces['chart']['contrast'][0]:g}–{faces['chart']['contrast'][1]:g}) shown on the virtual monitor, sensor {faces['sensor_px'][0]} × {faces['sensor_px'][1]} px; "
-              "clean = the ground truth (the same for both columns). The paper: 60 % clean, 8 % / 0 % degraded, "
-              "56 % / 39 % restored (T-OLED / P-OLED).", "", faces_markdown(faces),
-              f"Detections: `{out / 'faces' / 'detections.png'}`; previews: `{out / 'eval'}/<method>/previews/`.", ""]
+              f"{faces['chart']['contrast'][0]:g}–{faces['chart']['contrast'][1]:g}) shown on the virtual monitor, "
+              f"sensor {faces['sensor_px'][0]} × {faces['sensor_px'][1]} px; clean = the ground truth (the same for "
+              "both columns); unet = the UNet row's models.", "", faces_markdown(faces),
+              *([f"![detections]({fig['faces']})", ""] if "faces" in fig else [])]
     return "\n".join(lines)

@@ -30,5 +30,16 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
         assert np.isfinite(methods["unet"]["displays"][d]["psnr_db_paper"])
     doc = (tmp_path / "res" / "RESULTS.md").read_text()
     assert doc.startswith("# Restoration results")
-    assert "## Training: where each model stopped" in doc
+    assert "## Training (quick budget)" in doc and "![training curves](figures/training_curves.png)" in doc
+    assert (tmp_path / "res" / "figures" / "training_curves.png").is_file()
+    assert "| test | " in doc  # the content table per split
     assert doc.count("| unet_syn |") == 4  # two training lines, a row in each protocol's table
+
+    # a second run resumes every stage: the datasets and the trained models are kept as they are
+    kept = {p: p.stat().st_mtime_ns for p in (tmp_path / "res").rglob("*")
+            if p.name in ("model.pt", "timing.jsonl", "manifest.jsonl")}
+    again = run_results(tmp_path / "res", "quick", progress=False)
+    assert len(kept) == 2 * 2 + 3 * 2 and all(p.stat().st_mtime_ns == t for p, t in kept.items())
+    for d in ("toled", "poled"):  # the same weights on the same pairs
+        assert (again["results"]["methods"]["unet"]["displays"][d]["psnr_db_paper"] ==
+                methods["unet"]["displays"][d]["psnr_db_paper"])

@@ -63,7 +63,9 @@ def test_resumed_training_gives_the_uninterrupted_weights(tmp_path, monkeypatch)
         train(data, tmp_path / "resumed", s, checkpoint_s=0, progress=False)
     assert torch.load(tmp_path / "resumed" / "checkpoint.pt", weights_only=False)["epoch"] == 2
     monkeypatch.setattr(T, "learning_rate", real)
-    train(data, tmp_path / "resumed", s, progress=False)
+    summary = train(data, tmp_path / "resumed", s, progress=False)
+    seconds = [r["seconds"] for r in torch.load(tmp_path / "resumed" / "checkpoint.pt", weights_only=False)["log"]]
+    assert seconds == sorted(seconds) and summary["seconds"] >= seconds[-1]  # wall time counted across the resume
     a = torch.load(tmp_path / "straight" / "model.pt", weights_only=False)["state_dict"]
     b = torch.load(tmp_path / "resumed" / "model.pt", weights_only=False)["state_dict"]
     assert all(torch.equal(a[k], b[k]) for k in a)
