@@ -63,6 +63,9 @@ class TrainSettings:
     # Validate on the central val_crop_px square of each val frame (None: the whole frame). A stopping signal
     # only: the test split is always scored whole (restore.evaluate). Keeps the ResNet's validations cheap.
     val_crop_px: int | None = None
+    # Clip the gradient's global L2 norm to this (None: no clipping). Without it the full UNet at lr 2e-4
+    # spiked at epoch 24 (loss 0.058 → 0.068, validation −1.6 dB); its norms ran 0.09–0.33, one batch 0.74.
+    clip_grad_norm: float | None = None
 
 
 def data_fingerprint(data_dir: Path) -> str:
@@ -245,6 +248,8 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
             loss = loss_of(model(x), y)
             opt.zero_grad(set_to_none=True)
             loss.backward()
+            if settings.clip_grad_norm is not None:
+                torch.nn.utils.clip_grad_norm_(model.parameters(), settings.clip_grad_norm)
             opt.step()
             losses.append(loss.item())
             step += 1

@@ -239,3 +239,19 @@ def test_validation_on_a_centre_crop_is_checked_and_used(tmp_path):
     whole = train(data, tmp_path / "whole", TrainSettings(**base), val_every=1, progress=False)
     crop = train(data, tmp_path / "crop", TrainSettings(**base, val_crop_px=32), val_every=1, progress=False)
     assert crop["val_pairs"] == 1 and crop["val_psnr_db"] != whole["val_psnr_db"]  # same weights, other pixels
+
+
+def test_gradient_clipping_bounds_the_update(tmp_path):
+    """clip_grad_norm: a norm clipped far below Adam's ε (1e-8) leaves the update ≈ lr · g/ε ≈ 0, while the
+    unclipped run moves the weights by about lr per step."""
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(32, 32))
+    base = dict(model=TINY_RESNET, display="blur", epochs=1, batch=2, crop_px=16, lr=1e-3)
+    from restore.models import build_model
+    torch.manual_seed(0)  # the initial weights, as train() draws them (seed 0)
+    start = {k: v.clone() for k, v in build_model(TINY_RESNET).state_dict().items()}
+    moved = {}
+    for name, clip in (("free", None), ("clipped", 1e-14)):
+        train(data, tmp_path / name, TrainSettings(**base, clip_grad_norm=clip), progress=False)
+        w = torch.load(tmp_path / name / "model.pt", weights_only=False)["state_dict"]
+        moved[name] = max(float((w[k].float() - start[k].float()).abs().max()) for k in start)
+    assert moved["free"] > 5e-4 and moved["clipped"] < 1e-5
