@@ -18,6 +18,7 @@ sample order and crops are seeded by (seed, epoch).
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import math
 import time
@@ -186,10 +187,18 @@ def _resume(path: Path, model, opt, dev) -> tuple[int, int, list]:
 def _save_checkpoint(out: Path, model, opt, epoch: int, step: int, log: list, settings: TrainSettings) -> None:
     state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "epoch": epoch, "step": step, "log": log,
              "model_config": model_config(model), "settings": asdict(settings)}
-    with atomic_path(out / "checkpoint.pt", ".pt") as tmp:
-        torch.save(state, tmp)
+    save_torch(out / "checkpoint.pt", state)
     save_text(out / "loss.csv", csv_text(log, LOG_COLUMNS))
     plot_loss(log, out / "loss.png")
+
+
+def save_torch(path: Path, obj) -> None:
+    """torch.save, atomically, through memory: the zip's records are named 'archive/…' rather than after the
+    temporary file, so the same object always gives the same bytes."""
+    buf = io.BytesIO()
+    torch.save(obj, buf)
+    with atomic_path(path, ".pt") as tmp:
+        Path(tmp).write_bytes(buf.getvalue())
 
 
 def plot_loss(log: list, path: Path) -> None:
@@ -270,8 +279,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     epochs_done = log[-1]["epoch"] if log else 0
     final = {"model_config": model_config(model), "state_dict": model.state_dict(), "display": settings.display,
              "settings": asdict(settings), "epochs_done": epochs_done, "plateau_step": plateau}
-    with atomic_path(out / "model.pt", ".pt") as tmp:
-        torch.save(final, tmp)
+    save_torch(out / "model.pt", final)
     summary = {"epochs": epochs_done, "epochs_planned": settings.epochs, "steps": step, "plateau_step": plateau,
                "plateaued": plateau is not None, "final_loss": log[-1]["loss"] if log else None,
                "val_psnr_db": next((r["val_psnr_db"] for r in reversed(log) if r["val_psnr_db"] is not None), None),

@@ -66,6 +66,9 @@ def test_resumed_training_gives_the_uninterrupted_weights(tmp_path, monkeypatch)
     summary = train(data, tmp_path / "resumed", s, progress=False)
     seconds = [r["seconds"] for r in torch.load(tmp_path / "resumed" / "checkpoint.pt", weights_only=False)["log"]]
     assert seconds == sorted(seconds) and summary["seconds"] >= seconds[-1]  # wall time counted across the resume
+    before = (tmp_path / "resumed" / "model.pt").read_bytes()
+    train(data, tmp_path / "resumed", s, progress=False)  # finished: nothing trained, the same bytes written
+    assert (tmp_path / "resumed" / "model.pt").read_bytes() == before
     a = torch.load(tmp_path / "straight" / "model.pt", weights_only=False)["state_dict"]
     b = torch.load(tmp_path / "resumed" / "model.pt", weights_only=False)["state_dict"]
     assert all(torch.equal(a[k], b[k]) for k in a)
