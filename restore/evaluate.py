@@ -35,7 +35,8 @@ MAC_INPUT_SHAPE = (1, 4, 512, 1024)  # the paper's: 512 × 1024 × 4 packed RAW
 ROW_ORDER = ("input", "dep", "resnet", "unet_syn", "unet")  # the paper's Table 2 order; unet_syn: UNet (Syn)
 DISPLAY_TITLES = {"toled": "T-OLED", "poled": "P-OLED"}
 METRICS = {"paper": ("psnr_db_paper", "ssim_paper"), "srgb": ("psnr_db_srgb", "ssim_srgb", "lpips_srgb")}
-PROTOCOLS_TEXT = {name: f"{text}; {BORDER_PX}-px border cropped; PSNR peak 1; SSIM Gaussian σ 1.5"
+PROTOCOLS_TEXT = {name: text + ("" if "border cropped" in text else f"; {BORDER_PX}-px border cropped")
+                  + "; PSNR peak 1; SSIM Gaussian σ 1.5"
                   + ("; LPIPS AlexNet v0.1" if name == "srgb" else "; the input row on its packed RAW")
                   + "; means over images; ms/MP: median restorer wall time per output megapixel"
                   for name, text in PROTOCOLS.items()}
