@@ -46,7 +46,8 @@ PROTOCOLS_TEXT = {name: text + ("" if "border cropped" in text else f"; {BORDER_
 class EvalSettings:
     """How a method is scored: the split, displays (None: a checkpoint's own, else all of the dataset's),
     the row name (None: the method or model type), torch device, previews per display, DeP's denoiser
-    (None: restore.dep's default) and DeP's kernel size (None: restore.known's default)."""
+    (None: restore.dep's default), DeP's kernel size (None: restore.known's default) and the items scored
+    (image_prefix: only those whose image label starts with it; None: all)."""
     split: str = "test"
     displays: tuple[str, ...] | None = None
     name: str | None = None
@@ -54,6 +55,7 @@ class EvalSettings:
     previews: int = 4
     denoiser: str | None = None
     kernel_px: int | None = None
+    image_prefix: str | None = None
 
 
 def check_frame_size(pair: Pair) -> None:
@@ -178,10 +180,14 @@ def evaluate(data_dir: Path, method: str, out: Path, settings: EvalSettings = Ev
     data_dir, out = Path(data_dir), Path(out)
     restorer = RESTORERS[method if method in ("input", "dep") else "model"](method, settings)
     displays = restorer.displays(data_dir) if settings.displays is None else settings.displays
-    pairs_by_display = {d: list_pairs(data_dir, settings.split, [d]) for d in displays}
+    pairs_by_display = {d: [p for p in list_pairs(data_dir, settings.split, [d])
+                            if settings.image_prefix is None or (p.image or "").startswith(settings.image_prefix)]
+                        for d in displays}
     for d, pairs in pairs_by_display.items():
         if not pairs:
-            raise DataError(f"{data_dir}: split = {settings.split!r} has no items (display {d})")
+            raise DataError(f"{data_dir}: split = {settings.split!r} has no items (display {d}"
+                            + ("" if settings.image_prefix is None else f", --image-prefix {settings.image_prefix!r}")
+                            + ")")
         check_frame_size(pairs[0])  # a dataset has one frame size
     restorer.prepare(pairs_by_display)
     lp = LPIPS()

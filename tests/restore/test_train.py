@@ -117,6 +117,9 @@ def test_train_and_evaluate_commands(tmp_path, capsys):
     assert md.index("| input |") < md.index("| unet |") and md.index("Protocol paper:") < md.index("Protocol srgb:")
     assert (out / "results.csv").read_text().startswith("method,display,params")
     assert (out / "unet" / "previews" / "blur_item_000003_blur.png").is_file()
+    assert main(["evaluate", "--data", str(data), "--model", "input", "--display", "blur", "--out", str(out),
+                 "--quiet", "--image-prefix", "blobs:4", "--name", "one"]) == 0  # items 3 and 4: only item 4
+    assert json.loads((out / "results.json").read_text())["methods"]["one"]["displays"]["blur"]["images"] == 1
 
 
 def test_command_errors_are_one_line(tmp_path, capsys):
@@ -136,6 +139,8 @@ def test_command_errors_are_one_line(tmp_path, capsys):
          "no such checkpoint file"),
         (["evaluate", "--data", str(data), "--model", str(bad), "--out", str(tmp_path / "e")],
          "not a udc-render checkpoint"),
+        (["evaluate", "--data", str(data), "--model", "input", "--split", "train", "--image-prefix", "builtin:",
+          "--out", str(tmp_path / "e")], "has no items (display blur, --image-prefix 'builtin:')"),
     ]
     for argv, message in cases:
         _assert_one_line_error(capsys, argv, message)

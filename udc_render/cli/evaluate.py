@@ -14,6 +14,8 @@ def register(sub) -> None:
     e.add_argument("--out", type=Path, required=True, help="results folder (rows of several runs are merged)")
     e.add_argument("--split", default="test", choices=("train", "val", "test"), help="split to score [test]")
     e.add_argument("--display", help="comma-separated displays [a checkpoint's own; all of the dataset's for dep]")
+    e.add_argument("--image-prefix", help="score only the items whose image starts with this, e.g. builtin: "
+                                          "(the scikit-image photographs) or pattern:dead_leaves [all]")
     e.add_argument("--name", help="row name in the tables [input, dep, or the model type]")
     e.add_argument("--denoiser", help="DeP's denoiser [restore.dep's default]")
     e.add_argument("--kernel-px", type=positive("--kernel-px", int),
@@ -31,7 +33,7 @@ def run(args) -> int:
     set_threads(args.threads)
     settings = EvalSettings(split=args.split, displays=tuple(args.display.split(",")) if args.display else None,
                             name=args.name, device=args.device, previews=args.previews, denoiser=args.denoiser,
-                            kernel_px=args.kernel_px)
+                            kernel_px=args.kernel_px, image_prefix=args.image_prefix)
     entry = evaluate(args.data, args.model, args.out, settings, progress=not args.quiet)
     for d, r in entry["displays"].items():
         print(f"{entry['name']} {d}: paper protocol PSNR {r['psnr_db_paper']:.2f} dB, SSIM {r['ssim_paper']:.4f}; "
