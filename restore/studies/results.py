@@ -62,6 +62,11 @@ def make_datasets(out: Path, b: dict, progress: bool) -> dict[str, Path]:
 ROWS = (("unet", "unet", "physical"), ("unet_syn", "unet", "paper"), ("resnet", "resnet", "physical"))
 
 
+def run_dir(out: Path, row: str, display: str) -> Path:
+    """The training run folder of one row's model for one display."""
+    return out / "train" / f"{row}_{display}"
+
+
 def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, times: dict) -> dict:
     """Every row's model per display, trained or resumed in out/train/<row>_<display>: {(row, display):
     model.pt}."""
@@ -74,7 +79,7 @@ def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, 
         data = datasets[profile]
         for d in DISPLAYS:
             t = time.perf_counter()
-            run = out / "train" / f"{row}_{d}"
+            run = run_dir(out, row, d)
             settings = TrainSettings(model=cfg, display=d, epochs=b["epochs"][kind], batch=b["batch"],
                                      crop_px=b["crop_px"][kind], crops_per_pair=b["crops_per_pair"], lr=b["lr"],
                                      data_fingerprint=data_fingerprint(data), plateau_db=b.get("plateau_db"),
@@ -112,8 +117,10 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     times["total_s"] = time.perf_counter() - t0
     results = json.loads((ev / "results.json").read_text())
     from udc_render.io.files import save_text
-    for doc, fig_dir in ((out / "RESULTS.md", out / "figures"),
-                         *(((Path(write), Path(write).parent / "docs" / "figures" / "results"),) if write else ())):
+    targets = [(out / "RESULTS.md", out / "figures")]  # (document, its figures' folder)
+    if write:
+        targets.append((Path(write), Path(write).parent / "docs" / "figures" / "results"))
+    for doc, fig_dir in targets:
         figures = copy_figures(out, fig_dir)
         save_text(doc, results_document(results, faces, b, budget, datasets, out, times, figures, doc.parent))
     return {"results": results, "faces": faces, "times": times}
@@ -152,7 +159,7 @@ def training_logs(out: Path) -> dict[tuple[str, str], list[dict]]:
     logs = {}
     for row, _, _ in ROWS:
         for d in DISPLAYS:
-            path = out / "train" / f"{row}_{d}" / "loss.csv"
+            path = run_dir(out, row, d) / "loss.csv"
             if path.is_file():
                 with path.open() as f:
                     logs[(row, d)] = [{k: float(v) if v else None for k, v in r.items()} for r in csv.DictReader(f)]
@@ -170,7 +177,7 @@ def plot_training_curves(out: Path, path: Path) -> None:
         val = [(r["epoch"], r["val_psnr_db"]) for r in log if r["val_psnr_db"] is not None]
         if val:
             a.plot(*zip(*val), "o-", ms=3, **style)
-        summary = out / "train" / f"{row}_{d}" / "train_summary.json"
+        summary = run_dir(out, row, d) / "train_summary.json"
         if summary.is_file() and json.loads(summary.read_text()).get("plateaued") and val:
             a.plot(*val[-1], "kx", ms=9)
         b.semilogy([r["epoch"] for r in log], [r["loss"] for r in log], **style)
@@ -270,7 +277,7 @@ def training_table(out: Path, b: dict) -> list[str]:
              "|---|---|---|---|---|---|---|"]
     for row, _, _ in ROWS:
         for d in DISPLAYS:
-            path = out / "train" / f"{row}_{d}" / "train_summary.json"
+            path = run_dir(out, row, d) / "train_summary.json"
             if not path.is_file():
                 continue
             t = json.loads(path.read_text())
