@@ -2,6 +2,7 @@
 
     datasets (udc-render dataset, builtin images, glass + T-OLED + P-OLED; physical and paper profiles)
       ─► train UNet and ResNet per display ─► evaluate input, DeP, ResNet, UNet on the test split
+      ─► the same on held-out photographs (restore.studies.heldout)
       ─► face detection (restore.face_study) ─► RESULTS.md (tables, budget, the paper's ordering checked)
 
 Every stage resumes: the dataset and training runs pick up where they stopped; evaluation and the
@@ -20,14 +21,14 @@ from pathlib import Path
 BUDGETS = {
     "quick": {"items": (4, 1, 2), "sensor_px": (256, 128), "epochs": {"unet": 2, "resnet": 1},
               "crop_px": {"unet": 64, "resnet": 32}, "crops_per_pair": 1, "batch": 2, "face_sensor_px": (512, 256),
-              "lr": 1e-4, "plateau_db": 0.1, "val_every": 1,
+              "heldout_items": 2, "lr": 1e-4, "plateau_db": 0.1, "val_every": 1,
               "models": {"unet": {"type": "unet", "width": 8}, "resnet": {"type": "resnet", "features": 8, "blocks": 2}}},
     # cpu: epoch caps, not targets; each model stops at the 0.1 dB plateau, which needs ≥ 3 validations in the
     # last fifth, so ≥ 40 epochs at val_every 4. Validation on the central 768-px square (a ResNet validation
     # of 20 whole frames would take 6 min). Caps: about a working day of this machine if nothing plateaus.
     "cpu": {"items": (150, 20, 30), "sensor_px": (2048, 1024), "epochs": {"unet": 80, "resnet": 50},
             "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (2048, 1024),
-            "lr": 2e-4, "plateau_db": 0.1, "val_every": 4, "val_crop_px": 768, "clip_grad_norm": 0.5, "models": {"unet": None, "resnet": None}},
+            "heldout_items": None, "lr": 2e-4, "plateau_db": 0.1, "val_every": 4, "val_crop_px": 768, "clip_grad_norm": 0.5, "models": {"unet": None, "resnet": None}},
     "paper": {"items": (400, 40, 60), "sensor_px": (2048, 1024), "epochs": {"unet": 400, "resnet": 400},
               "crop_px": {"unet": 256, "resnet": 256}, "crops_per_pair": 1, "batch": 4, "face_sensor_px": (2048, 1024),
               "lr": 1e-4,
@@ -93,8 +94,8 @@ def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, 
 def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progress: bool = True) -> dict:
     """Run every stage into `out` and write `out`/RESULTS.md with its figures in `out`/figures; with
     `write`, the document there too, its figures in docs/figures/results beside it."""
-    from restore.evaluate import EvalSettings, evaluate
     from restore.studies.faces import face_experiment
+    from restore.studies.heldout import make_held_out_dataset
     b, out = BUDGETS[budget], Path(out)
     t0, times = time.perf_counter(), {}
     datasets = make_datasets(out, b, progress)
@@ -102,28 +103,39 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     times["dataset_s"] = time.perf_counter() - t0
     models = train_models(datasets, out, b, progress, times)
     t = time.perf_counter()
-    ev = out / "eval"
-    if (ev / "results.json").is_file():
-        (ev / "results.json").unlink()  # rebuilt from this run's rows only
-    for method in ("input", "dep"):
-        evaluate(data, method, ev, progress=progress)
-    for (row, _), path in models.items():
-        evaluate(data, str(path), ev, EvalSettings(name=row), progress=progress)
+    results = evaluate_rows(data, models, out / "eval", progress)
     times["evaluate_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    heldout = make_held_out_dataset(out, b["sensor_px"], b.get("heldout_items"), progress)
+    heldout_results = evaluate_rows(heldout, models, out / "eval_heldout", progress)
+    times["heldout_s"] = time.perf_counter() - t
     t = time.perf_counter()
     faces = face_experiment(out / "faces", {d: models[("unet", d)] for d in DISPLAYS}, b["face_sensor_px"],
                             progress=progress)
     times["faces_s"] = time.perf_counter() - t
     times["total_s"] = time.perf_counter() - t0
-    results = json.loads((ev / "results.json").read_text())
     from udc_render.io.files import save_text
     targets = [(out / "RESULTS.md", out / "figures")]  # (document, its figures' folder)
     if write:
         targets.append((Path(write), Path(write).parent / "docs" / "figures" / "results"))
     for doc, fig_dir in targets:
         figures = copy_figures(out, fig_dir)
-        save_text(doc, results_document(results, faces, b, budget, datasets, out, times, figures, doc.parent))
-    return {"results": results, "faces": faces, "times": times}
+        save_text(doc, results_document(results, heldout_results, faces, b, budget, datasets, out, times, figures,
+                                        doc.parent))
+    return {"results": results, "heldout": heldout_results, "faces": faces, "times": times}
+
+
+def evaluate_rows(data: Path, models: dict, ev: Path, progress: bool) -> dict:
+    """Input, DeP and every trained row on `data`'s test split into `ev` (its results.json rebuilt from
+    these rows only); returns that results.json."""
+    from restore.evaluate import EvalSettings, evaluate
+    if (ev / "results.json").is_file():
+        (ev / "results.json").unlink()
+    for method in ("input", "dep"):
+        evaluate(data, method, ev, progress=progress)
+    for (row, _), path in models.items():
+        evaluate(data, str(path), ev, EvalSettings(name=row), progress=progress)
+    return json.loads((ev / "results.json").read_text())
 
 
 PAPER_SYN_GAP_DB = {"toled": 4.3, "poled": 4.6}  # the paper: UNet trained on its synthetic data, on real data
@@ -289,10 +301,30 @@ def training_table(out: Path, b: dict) -> list[str]:
     return lines
 
 
-def results_document(results: dict, faces: dict, b: dict, budget: str, datasets: dict[str, Path], out: Path,
-                     times: dict, figures: dict[str, Path], base: Path) -> str:
+def ordering_table(results: dict) -> list[str]:
+    """The ordering checks of `results` as a Markdown table."""
+    return ["| claim | holds | values |", "|---|---|---|",
+            *(f"| {c} | {'yes' if ok else '**no**'} | {v} |" for c, ok, v in ordering_checks(results))]
+
+
+def heldout_section(heldout: dict, out: Path) -> list[str]:
+    """The held-out photographs' paper-protocol table and the orderings computed from it."""
+    from restore.evaluate import protocol_table
+    from restore.studies.heldout import HELD_OUT
+    n = {m["displays"][d]["images"] for m in heldout["methods"].values() for d in m["displays"]}
+    return ["## Held-out photographs (a content check)", "",
+            f"{'/'.join(map(str, sorted(n)))} photographs and micrographs that scikit-image ships and no split uses "
+            f"(of {', '.join(HELD_OUT)}; `restore.studies.heldout`), rendered as the test split is, through the "
+            f"physical profile, and scored by the same models (`{out / 'eval_heldout'}`). Not the paper's test split "
+            "and not part of the orderings above: it asks whether they depend on the dead-leaves content.", "",
+            protocol_table(heldout, "paper"), "", "The orderings on these photographs:", "", *ordering_table(heldout)]
+
+
+def results_document(results: dict, heldout: dict, faces: dict, b: dict, budget: str, datasets: dict[str, Path],
+                     out: Path, times: dict, figures: dict[str, Path], base: Path) -> str:
     """RESULTS.md: data, training, both tables (paper protocol first), the orderings checked from the
-    tables, the face table; figure links relative to `base` (the document's folder)."""
+    tables, the held-out photographs' table and orderings, the face table; figure links relative to `base`
+    (the document's folder)."""
     from restore.evaluate import results_markdown
     from restore.studies.faces import faces_markdown
     import torch
@@ -316,14 +348,14 @@ def results_document(results: dict, faces: dict, b: dict, budget: str, datasets:
         *[f"![UNet on the first test item, {d}]({fig[f'unet_{d}']})" for d in DISPLAYS if f"unet_{d}" in fig], "",
         "## The paper's ordering", "",
         "Computed from the paper-protocol table above (`restore.studies.results.ordering_checks`).", "",
-        "| claim | holds | values |", "|---|---|---|",
+        *ordering_table(results), "",
+        *heldout_section(heldout, out), "",
+        "## Face detection (MTCNN recall)", "",
+        f"{faces['faces']} faces (scikit-image's LFW subset on a {faces['chart_px'][0]} × {faces['chart_px'][1]} "
+        f"chart, {faces['chart']['face_px'][0]}–{faces['chart']['face_px'][1]} px at contrasts "
+        f"{faces['chart']['contrast'][0]:g}–{faces['chart']['contrast'][1]:g}) shown on the virtual monitor, "
+        f"sensor {faces['sensor_px'][0]} × {faces['sensor_px'][1]} px; clean = the ground truth (the same for "
+        "both columns); unet = the UNet row's models.", "", faces_markdown(faces),
+        *([f"![detections]({fig['faces']})", ""] if "faces" in fig else []),
     ]
-    lines += [f"| {c} | {'yes' if ok else '**no**'} | {v} |" for c, ok, v in ordering_checks(results)]
-    lines += ["", "## Face detection (MTCNN recall)", "",
-              f"{faces['faces']} faces (scikit-image's LFW subset on a {faces['chart_px'][0]} × {faces['chart_px'][1]} "
-              f"chart, {faces['chart']['face_px'][0]}–{faces['chart']['face_px'][1]} px at contrasts "
-              f"{faces['chart']['contrast'][0]:g}–{faces['chart']['contrast'][1]:g}) shown on the virtual monitor, "
-              f"sensor {faces['sensor_px'][0]} × {faces['sensor_px'][1]} px; clean = the ground truth (the same for "
-              "both columns); unet = the UNet row's models.", "", faces_markdown(faces),
-              *([f"![detections]({fig['faces']})", ""] if "faces" in fig else [])]
     return "\n".join(lines)

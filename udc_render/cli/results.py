@@ -9,7 +9,8 @@ from udc_render.cli.args import out_dir
 
 def register(sub) -> None:
     from restore.studies.results import BUDGETS
-    p = sub.add_parser("results", help="dataset → train → evaluate → face detection → RESULTS.md (resumable)")
+    p = sub.add_parser("results", help="dataset → train → evaluate (test split, held-out photographs) → face detection "
+                                       "→ RESULTS.md (resumable)")
     p.add_argument("--out", type=Path, default=Path("out/results"), help="work folder [out/results]")
     p.add_argument("--budget", choices=tuple(BUDGETS), default="cpu",
                    help="cpu (2048 × 1024, 150/20/30 items per profile: hours on 2 cores; resumable), quick (a smoke run), "
