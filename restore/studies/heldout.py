@@ -47,17 +47,9 @@ def write_held_out(folder: Path, count: int | None = None) -> Path:
 def make_held_out_dataset(out: Path, sensor_px: tuple[int, int], count: int | None, progress: bool) -> Path:
     """The held-out photographs through glass, T-OLED and P-OLED, physical profile, test split only,
     made or resumed in out/dataset_heldout (images in out/heldout_images); returns the dataset folder."""
-    from udc_render.dataset import DatasetJob, run_dataset
-    from udc_render.optics.displays import load_displays
-    from udc_render.pipeline import SynthConfig
-    from udc_render.profiles import resolve_profile
-    from udc_render.scene import load_scene
-    from udc_render.scene.overrides import with_overrides
-    from restore.studies.results import DISPLAYS
+    from udc_render.dataset import run_dataset
+    from restore.studies.results import dataset_job
     images = write_held_out(out / "heldout_images", count)
-    n = len(list(images.glob("*.png")))
-    scene = with_overrides(load_scene("monitor"), sensor_px=sensor_px)
-    cfg, displays = resolve_profile("physical", SynthConfig(), load_displays(",".join(DISPLAYS)))
-    folder = out / "dataset_heldout"
-    run_dataset(DatasetJob(scene, displays, cfg, out=folder, split=(0, 0, n), images_dir=images), progress=progress)
+    folder, n = out / "dataset_heldout", len(list(images.glob("*.png")))
+    run_dataset(dataset_job("physical", sensor_px, folder, (0, 0, n), images), progress=progress)
     return folder
