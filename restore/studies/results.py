@@ -228,17 +228,18 @@ def dataset_hours(data: Path) -> float:
 
 
 def copy_figures(out: Path, fig_dir: Path) -> dict[str, Path]:
-    """The document's figures into fig_dir: the training curves, the face detections and the first test
-    item's UNet previews; {name: path}."""
+    """The document's figures into fig_dir: the training curves, the face detections and the UNet previews
+    of the first test item and the first held-out photograph; {name: path}."""
     import shutil
     fig_dir.mkdir(parents=True, exist_ok=True)
     figures = {"curves": fig_dir / "training_curves.png"}
     plot_training_curves(out, figures["curves"])
     sources = {"faces": out / "faces" / "detections.png"}
-    for d in DISPLAYS:
-        previews = sorted((out / "eval" / "unet" / "previews").glob(f"{d}_*.png"))
-        if previews:
-            sources[f"unet_{d}"] = previews[0]
+    for ev, prefix in (("eval", "unet"), ("eval_heldout", "heldout_unet")):
+        for d in DISPLAYS:
+            previews = sorted((out / ev / "unet" / "previews").glob(f"{d}_*.png"))
+            if previews:
+                sources[f"{prefix}_{d}"] = previews[0]
     for name, src in sources.items():
         if src.is_file():
             figures[name] = fig_dir / f"{name}.png"
@@ -314,8 +315,9 @@ def ordering_table(results: dict) -> list[str]:
             *(f"| {c} | {'yes' if ok else '**no**'} | {v} |" for c, ok, v in ordering_checks(results))]
 
 
-def heldout_section(heldout: dict, out: Path) -> list[str]:
-    """The held-out photographs' paper-protocol table and the orderings computed from it."""
+def heldout_section(heldout: dict, out: Path, fig: dict[str, str]) -> list[str]:
+    """The held-out photographs' paper-protocol table, the orderings computed from it, and the UNet
+    previews in `fig` (figure links by name)."""
     from restore.evaluate import protocol_table
     from restore.studies.heldout import HELD_OUT
     n = {m["displays"][d]["images"] for m in heldout["methods"].values() for d in m["displays"]}
@@ -324,7 +326,9 @@ def heldout_section(heldout: dict, out: Path) -> list[str]:
             f"(of {', '.join(HELD_OUT)}; `restore.studies.heldout`), rendered as the test split is, through the "
             f"physical profile, and scored by the same models (`{out / 'eval_heldout'}`). Not the paper's test split "
             "and not part of the orderings above: it asks whether they depend on the dead-leaves content.", "",
-            protocol_table(heldout, "paper"), "", "The orderings on these photographs:", "", *ordering_table(heldout)]
+            protocol_table(heldout, "paper"), "", "The orderings on these photographs:", "", *ordering_table(heldout),
+            "", *(f"![UNet on a held-out photograph, {d}]({fig[f'heldout_unet_{d}']})" for d in DISPLAYS
+                  if f"heldout_unet_{d}" in fig)]
 
 
 def results_document(results: dict, heldout: dict, faces: dict, b: dict, budget: str, datasets: dict[str, Path],
@@ -356,7 +360,7 @@ def results_document(results: dict, heldout: dict, faces: dict, b: dict, budget:
         "## The paper's ordering", "",
         "Computed from the paper-protocol table above (`restore.studies.results.ordering_checks`).", "",
         *ordering_table(results), "",
-        *heldout_section(heldout, out), "",
+        *heldout_section(heldout, out, fig), "",
         "## Face detection (MTCNN recall)", "",
         f"{faces['faces']} faces (scikit-image's LFW subset on a {faces['chart_px'][0]} × {faces['chart_px'][1]} "
         f"chart, {faces['chart']['face_px'][0]}–{faces['chart']['face_px'][1]} px at contrasts "

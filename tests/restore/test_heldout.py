@@ -31,7 +31,8 @@ def test_heldout_section_checks_its_own_table(tmp_path):
         name: {"params": None, "macs_g": None, "displays": {
             d: {"images": 10, "psnr_db_paper": v, "ssim_paper": 0.9, "ms_per_mp": 1.0}
             for d, v in zip(("toled", "poled"), values)}} for name, values in table.items()}}
-    text = "\n".join(heldout_section(results, tmp_path))
+    text = "\n".join(heldout_section(results, tmp_path, {"heldout_unet_poled": "figures/heldout_unet_poled.png"}))
     assert "| UNet above DeP by ≥ 3 dB on toled (PSNR) | yes | 30.00 vs 20.00 dB (+10.00) |" in text
     assert "| P-OLED harder than T-OLED for unet (PSNR) | yes | 25.00 vs 30.00 dB |" in text
     assert text.count("| unet |") == 1 and "10 photographs" in text
+    assert text.endswith("![UNet on a held-out photograph, poled](figures/heldout_unet_poled.png)")
