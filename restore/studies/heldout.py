@@ -2,9 +2,10 @@
 
 The datasets cycle through six scikit-image photographs and four charts, then dead leaves
 (udc_render.dataset.plan), so the val and test splits are all dead leaves. This set asks whether the
-paper's orderings depend on that content: every other photograph or micrograph that scikit-image
-ships offline (HELD_OUT: textures, coins, the moon, a cell, a clock, a galaxy field, a retina and a
-street scene; the text page and the binary horse are left out, as not photographs). Written as
+paper's orderings depend on that content: the other photographs and micrographs of at least 256 px
+that scikit-image ships offline (HELD_OUT: textures, coins, the moon, a cell, a clock, a galaxy field,
+a retina and a street scene; left out: the text page and the binary horse, not photographs, and the
+102-px microaneurysms). Written as
 PNG and rendered through the physical profile by `udc-render dataset --images` at the budget's
 framing, test split only. It is a diagnostic beside the paper's test split, not a replacement: the
 list is fixed by what scikit-image ships, not chosen by score.

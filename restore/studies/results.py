@@ -28,7 +28,8 @@ BUDGETS = {
     # of 20 whole frames would take 6 min). Caps: about a working day of this machine if nothing plateaus.
     "cpu": {"items": (150, 20, 30), "sensor_px": (2048, 1024), "epochs": {"unet": 80, "resnet": 50},
             "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (2048, 1024),
-            "heldout_items": None, "lr": 2e-4, "plateau_db": 0.1, "val_every": 4, "val_crop_px": 768, "clip_grad_norm": 0.5, "models": {"unet": None, "resnet": None}},
+            "heldout_items": None, "lr": 2e-4, "plateau_db": 0.1, "val_every": 4, "val_crop_px": 768,
+            "clip_grad_norm": 0.5, "models": {"unet": None, "resnet": None}},
     "paper": {"items": (400, 40, 60), "sensor_px": (2048, 1024), "epochs": {"unet": 400, "resnet": 400},
               "crop_px": {"unet": 256, "resnet": 256}, "crops_per_pair": 1, "batch": 4, "face_sensor_px": (2048, 1024),
               "lr": 1e-4,
