@@ -1,5 +1,6 @@
 """The held-out photographs (restore.studies.heldout): disjoint from the datasets' content, shipped with
-scikit-image, written once; their document section computes its orderings from its own table."""
+scikit-image, written once; their document section computes its orderings from its own table. The profile
+gap (restore.studies.profile_gap) tells noise, hot pixels and colour apart."""
 import numpy as np
 
 from restore.studies.heldout import HELD_OUT, load_held_out, write_held_out
@@ -36,3 +37,17 @@ def test_heldout_section_checks_its_own_table(tmp_path):
     assert "| P-OLED harder than T-OLED for unet (PSNR) | yes | 25.00 vs 30.00 dB |" in text
     assert text.count("| unet |") == 1 and "10 photographs" in text
     assert text.endswith("![UNet on a held-out photograph, poled](figures/heldout_unet_poled.png)")
+
+
+def test_profile_gap_separates_noise_hot_pixels_and_colour():
+    from restore.studies.profile_gap import capture_gap
+    rng = np.random.default_rng(0)
+    a = np.full((4, 256, 256), 0.3)
+    b = a + rng.normal(0, 0.01, a.shape)  # white noise: 8 × 8 block means cut its variance 64×
+    b[1, 10, 10] = 1.0  # a saturated hot pixel in B only
+    g = capture_gap(a, b)
+    assert g["hot_px"] == 1 and g["psnr_db"] < g["psnr_db_without_hot"]
+    assert abs(g["psnr_db_without_hot"] - 40.0) < 0.05  # σ = 0.01
+    assert abs(g["block_psnr_db"] - (40.0 + 10 * np.log10(64))) < 0.5  # the hot pixel adds (0.7 / 64)² / 4
+    assert np.allclose(g["channel_ratio"], 1.0, atol=1e-3)
+    assert np.allclose(capture_gap(a, 1.01 * a)["channel_ratio"], 1 / 1.01, rtol=1e-12, atol=0)
