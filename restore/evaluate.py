@@ -24,7 +24,7 @@ import numpy as np
 
 from restore.data import DataError, Pair, dataset_displays, list_pairs, load_pair
 from restore.metrics import image_metrics
-from udc_render.metrics import BORDER_PX, PROTOCOLS, border_px
+from udc_render.metrics import BORDER_TEXT, PROTOCOLS, border_px
 from udc_render.metrics import encode_srgb
 from udc_render.io.previews import daylight_balance
 from udc_render.sensor import demosaic_bilinear
@@ -35,8 +35,9 @@ MAC_INPUT_SHAPE = (1, 4, 512, 1024)  # the paper's: 512 × 1024 × 4 packed RAW
 ROW_ORDER = ("input", "dep", "resnet", "unet_syn", "unet")  # the paper's Table 2 order; unet_syn: UNet (Syn)
 DISPLAY_TITLES = {"toled": "T-OLED", "poled": "P-OLED"}
 METRICS = {"paper": ("psnr_db_paper", "ssim_paper"), "srgb": ("psnr_db_srgb", "ssim_srgb", "lpips_srgb")}
-PROTOCOLS_TEXT = {name: text + ("" if "border cropped" in text else f"; {BORDER_PX}-px border cropped")
-                  + "; PSNR peak 1; SSIM Gaussian σ 1.5"
+# the paper protocol's text describes udc_render.metrics.paper_linear, which keeps the border: restore.metrics
+# crops it here; the srgb text already names display_referred's crop
+PROTOCOLS_TEXT = {name: text + ("; " + BORDER_TEXT if name == "paper" else "") + "; PSNR peak 1; SSIM Gaussian σ 1.5"
                   + ("; LPIPS AlexNet v0.1" if name == "srgb" else "; the input row on its packed RAW")
                   + "; means over images; ms/MP: median restorer wall time per output megapixel"
                   for name, text in PROTOCOLS.items()}

@@ -19,10 +19,11 @@ import math
 import numpy as np
 
 BORDER_PX = 16
+BORDER_TEXT = f"{BORDER_PX}-px border cropped"  # display_referred crops it; restore.metrics crops the paper pair
 PROTOCOLS = {
     "paper": "linear camera values in [0, 1] of the white level, no white balance, no tone curve "
              "(captures: packed RAW against the ground truth's RGGB samples)",
-    "srgb": f"daylight-balanced camera RGB, clipped to [0, 1], sRGB-encoded, {BORDER_PX}-px border cropped",
+    "srgb": f"daylight-balanced camera RGB, clipped to [0, 1], sRGB-encoded, {BORDER_TEXT}",
 }
 
 

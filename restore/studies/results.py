@@ -126,6 +126,7 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     targets = [(out / "RESULTS.md", out / "figures")]  # (document, its figures' folder)
     if write:
         targets.append((Path(write), Path(write).parent / "docs" / "figures" / "results"))
+    plot_training_curves(out, out / "train" / "training_curves.png")  # drawn once, copied per document
     for doc, fig_dir in targets:
         figures = copy_figures(out, fig_dir)
         save_text(doc, results_document(results, heldout_results, faces, b, budget, datasets, out, times, figures,
@@ -232,13 +233,12 @@ def dataset_hours(data: Path) -> float:
 
 
 def copy_figures(out: Path, fig_dir: Path) -> dict[str, Path]:
-    """The document's figures into fig_dir: the training curves, the face detections and the UNet previews
-    of the first test item and the first held-out photograph; {name: path}."""
+    """The document's figures into fig_dir: the training curves (out/train/training_curves.png), the face
+    detections and the UNet previews of the first test item and the first held-out photograph; {name: path}."""
     import shutil
     fig_dir.mkdir(parents=True, exist_ok=True)
-    figures = {"curves": fig_dir / "training_curves.png"}
-    plot_training_curves(out, figures["curves"])
-    sources = {"faces": out / "faces" / "detections.png"}
+    figures = {}
+    sources = {"training_curves": out / "train" / "training_curves.png", "faces": out / "faces" / "detections.png"}
     for ev, prefix in (("eval", "unet"), ("eval_heldout", "heldout_unet")):
         for d in DISPLAYS:
             previews = sorted((out / ev / "unet" / "previews").glob(f"{d}_*.png"))
@@ -356,7 +356,7 @@ def results_document(results: dict, heldout: dict, faces: dict, b: dict, budget:
         "; the datasets' and models' own times, summed over resumed parts, are below.", "",
         "## Data", "", *data_section(b, data, datasets), "",
         f"## Training ({budget} budget)", "", *training_section(b, budget, out), "",
-        *([f"![training curves]({fig['curves']})", ""] if "curves" in fig else []),
+        *([f"![training curves]({fig['training_curves']})", ""] if "training_curves" in fig else []),
         "## Pipeline comparison (test split)", "",
         results_markdown(results), "",
         PAPER_TABLE, "",
