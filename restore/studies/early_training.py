@@ -1,0 +1,107 @@
+"""How fast a training recipe starts: a few hundred steps of the cpu budget's recipe, then the validation
+PSNR. A cheap probe (minutes, not hours) of why one model learns slower than another.
+
+Each variant is `type:crop_px:lr[:json]`: the model type (restore.models; the paper's config of that type,
+updated with the json, e.g. '{"width": 64}'), the training crop and a constant learning rate. The rest is
+restore.train's recipe at the cpu budget (Adam (0.9, 0.999, 1e-8), L1, gradient norm clipped at 0.5,
+batch 4, 2 Bayer-preserving crops per pair and epoch, seed 0, epochs shuffled by seed), so the UNet at
+256 px reproduces the full run's first validation (epoch 4 = 300 steps: 19.82 dB on the T-OLED).
+Validation: the central `val_crop_px` of every val frame, as restore.train's.
+
+    python -m restore.studies.early_training DATA --display toled --steps 300 \\
+        --variant unet:256:2e-4 --variant unet:128:1e-3 --variant 'unet:128:2e-4:{"width": 64}'
+
+Rows are appended to <out>/results.jsonl (a variant already there is not run again) and the table of all
+rows is printed.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+BATCH, CROPS_PER_PAIR, CLIP_GRAD_NORM, SEED = 4, 2, 0.5, 0  # restore.studies.results.BUDGETS["cpu"]
+
+
+def parse_variant(text: str) -> dict:
+    """'type:crop_px:lr[:json]' → {"model": config, "crop_px", "lr", "variant": text}."""
+    from restore.models import RESNET_CONFIG, UNET_CONFIG, ModelConfigError
+    parts = text.split(":", 3)
+    defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
+    try:
+        kind, crop, lr = parts[0], int(parts[1]), float(parts[2])
+        extra = json.loads(parts[3]) if len(parts) > 3 else {}
+    except (IndexError, ValueError) as exc:
+        raise ModelConfigError(f"--variant = {text!r}: expected type:crop_px:lr[:json] ({exc})") from None
+    if kind not in defaults:
+        raise ModelConfigError(f"--variant = {text!r}: type {kind!r}, expected one of {', '.join(defaults)}")
+    return {"model": dict(defaults[kind], **extra), "crop_px": crop, "lr": lr, "variant": text}
+
+
+def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop_px: int = 768) -> dict:
+    """Train `variant` for `steps` steps from seed 0; its validation PSNR, mean loss of the last 75 steps
+    and seconds."""
+    import torch
+    from restore.data import PairDataset, list_pairs, load_pair
+    from restore.losses import loss_fn
+    from restore.models import build_model
+    from restore.train import centre_crop, validation_psnr
+    torch.manual_seed(SEED)
+    data = PairDataset(list_pairs(data_dir, "train", [display]), variant["crop_px"], augment=True, seed=SEED,
+                       crops_per_pair=CROPS_PER_PAIR)
+    val = [centre_crop(*load_pair(p), val_crop_px) for p in list_pairs(data_dir, "val", [display])]
+    model = build_model(variant["model"]).to(memory_format=torch.channels_last)
+    opt = torch.optim.Adam(model.parameters(), lr=variant["lr"], betas=(0.9, 0.999), eps=1e-8)
+    l1, losses, epoch, t0 = loss_fn("l1"), [], 0, time.perf_counter()
+    while len(losses) < steps:
+        data.set_epoch(epoch)
+        order = torch.Generator().manual_seed(SEED * 1_000_003 + epoch)
+        for x, y in torch.utils.data.DataLoader(data, batch_size=BATCH, shuffle=True, generator=order):
+            loss = l1(model(x.to(memory_format=torch.channels_last)), y.to(memory_format=torch.channels_last))
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), CLIP_GRAD_NORM)
+            opt.step()
+            losses.append(loss.item())
+            if len(losses) == steps:
+                break
+        epoch += 1
+    return {"variant": variant["variant"], "display": display, "steps": steps,
+            "val_psnr_db": validation_psnr(model, val, torch.device("cpu")),
+            "loss_last75": float(np.mean(losses[-75:])), "seconds": time.perf_counter() - t0}
+
+
+def main(argv: list[str]) -> None:
+    from udc_render.errors import UdcError
+    from udc_render.io.files import save_text
+    ap = argparse.ArgumentParser(prog="python -m restore.studies.early_training", description=__doc__.split("\n")[0])
+    ap.add_argument("data", type=Path)
+    ap.add_argument("--display", required=True)
+    ap.add_argument("--variant", action="append", required=True, help="type:crop_px:lr[:json]; repeat")
+    ap.add_argument("--steps", type=int, default=300)
+    ap.add_argument("--out", type=Path, default=Path("out/early_training"))
+    a = ap.parse_args(argv)
+    path = a.out / "results.jsonl"
+    try:
+        variants = [parse_variant(v) for v in a.variant]
+        a.out.mkdir(parents=True, exist_ok=True)
+        rows = [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
+        for v in variants:
+            if not any(r["variant"] == v["variant"] and r["display"] == a.display and r["steps"] == a.steps
+                       for r in rows):
+                rows.append(early_psnr(a.data, a.display, v, a.steps))
+                save_text(path, "".join(json.dumps(r) + "\n" for r in rows))
+    except (UdcError, OSError) as exc:
+        sys.exit(f"error: {exc}")
+    print("| variant | display | steps | val PSNR (dB) | loss, last 75 steps | s |\n|---|---|---|---|---|---|")
+    for r in rows:
+        print(f"| `{r['variant']}` | {r['display']} | {r['steps']} | {r['val_psnr_db']:.2f} | {r['loss_last75']:.4f} | "
+              f"{r['seconds']:.0f} |")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
