@@ -118,6 +118,9 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     heldout_results = evaluate_rows(heldout, models, out / "eval_heldout", progress)
     times["heldout_s"] = time.perf_counter() - t
     t = time.perf_counter()
+    bands = error_band_rows(data, models, out / "error_bands")
+    times["error_bands_s"] = time.perf_counter() - t
+    t = time.perf_counter()
     faces = face_experiment(out / "faces", {d: models[("unet", d)] for d in DISPLAYS}, b["face_sensor_px"],
                             progress=progress)
     times["faces_s"] = time.perf_counter() - t
@@ -129,22 +132,90 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     plot_training_curves(out, out / "train" / "training_curves.png")  # drawn once, copied per document
     for doc, fig_dir in targets:
         figures = copy_figures(out, fig_dir)
-        save_text(doc, results_document(results, heldout_results, faces, b, budget, datasets, out, times, figures,
+        save_text(doc, results_document(results, heldout_results, bands, faces, b, budget, datasets, out, times, figures,
                                         doc.parent))
-    return {"results": results, "heldout": heldout_results, "faces": faces, "times": times}
+    return {"results": results, "heldout": heldout_results, "error_bands": bands, "faces": faces, "times": times}
+
+
+BAND_ITEMS, BAND_CROP_PX = 6, 512  # the error bands' val frames and central crop (a diagnosis, not a score)
+
+
+def error_band_rows(data: Path, models: dict, folder: Path) -> dict:
+    """{display: {"bands": {row: [bands] MSE}, "transfer": [bands] mean |OTF|}} of input, DeP and the
+    display's trained rows on the val split's central crops (restore.studies.error_bands); plots in `folder`."""
+    from restore.studies.error_bands import display_transfer, method_bands, plot
+    res = {}
+    for d in DISPLAYS:
+        methods = {"input": "input", "dep": "dep", **{row: str(p) for (row, md), p in models.items() if md == d}}
+        transfer = display_transfer(data, d)
+        bands = method_bands(data, d, methods, "val", BAND_ITEMS, BAND_CROP_PX)
+        plot(bands, transfer, folder / f"error_bands_{d}.png",
+             f"{d}: error by spatial frequency (val, {BAND_ITEMS} frames, central {BAND_CROP_PX} px)")
+        res[d] = {"bands": bands, "transfer": transfer}
+    return res
+
+
+def error_bands_section(bands: dict, fig: dict[str, str]) -> list[str]:
+    """Per display: the rows' error per octave band beside the display's transfer, the sentence on its
+    weakest band, and the plot."""
+    from restore.studies.error_bands import markdown, weakest_band_text
+    lines = ["## Where the error lies (spatial frequency)", "",
+             f"Each row's MSE on the central {BAND_CROP_PX} px of the first {BAND_ITEMS} val frames, split into octave "
+             "bands of spatial frequency (cycles per sensor pixel; by Parseval the bands sum to the MSE), beside the "
+             "display's mean |OTF| in each band (its known green kernel at d = 0, defined up to 1/4 cycle per pixel). "
+             "A diagnosis of the orderings, not a score: `python -m restore.studies.error_bands`.", ""]
+    for d, r in bands.items():
+        lines += [f"### {d}", "", markdown(r["bands"], r["transfer"]), "", weakest_band_text(r["bands"], r["transfer"]),
+                  "", *([f"![error bands, {d}]({fig[f'error_bands_{d}']})", ""] if f"error_bands_{d}" in fig else [])]
+    return lines
+
+
+SCORING_MODULES = ("restore.evaluate", "restore.metrics", "restore.dep", "restore.known", "restore.lpips",
+                   "restore.data", "restore.models", "restore.train", "udc_render.metrics")
+"""The code a score depends on beyond the data and the checkpoint: its source is part of evaluation_stamp."""
+
+
+def evaluation_stamp(data: Path, method: str) -> str:
+    """sha256 of what decides a row's scores: the dataset's manifest (restore.train.data_fingerprint), the
+    method ('input', 'dep', or the checkpoint's bytes) and the source of SCORING_MODULES. Deeper code (the
+    optics behind DeP's known kernels) is not in it: a change there needs `rm -r <out>/eval*`."""
+    import hashlib
+    import importlib.util
+    from restore.train import data_fingerprint
+    h = hashlib.sha256(data_fingerprint(data).encode())
+    h.update(method.encode() if method in ("input", "dep") else Path(method).read_bytes())
+    for name in SCORING_MODULES:
+        h.update(Path(importlib.util.find_spec(name).origin).read_bytes())
+    return h.hexdigest()[:16]
 
 
 def evaluate_rows(data: Path, models: dict, ev: Path, progress: bool) -> dict:
-    """Input, DeP and every trained row on `data`'s test split into `ev` (its results.json rebuilt from
-    these rows only); returns that results.json."""
-    from restore.evaluate import EvalSettings, evaluate
-    if (ev / "results.json").is_file():
-        (ev / "results.json").unlink()
-    for method in ("input", "dep"):
-        evaluate(data, method, ev, progress=progress)
-    for (row, _), path in models.items():
-        evaluate(data, str(path), ev, EvalSettings(name=row), progress=progress)
-    return json.loads((ev / "results.json").read_text())
+    """Input, DeP and every trained row on `data`'s test split into `ev`; returns its results.json, holding
+    these rows only. Resumes: a row whose evaluation_stamp matches the one recorded in `ev`/stamps.json when
+    it was scored, and whose displays are all in results.json, is not scored again."""
+    from restore.data import dataset_displays
+    from restore.evaluate import EvalSettings, evaluate, results_csv, results_markdown
+    from udc_render.io.files import save_json, save_text
+    path, stamps_path = ev / "results.json", ev / "stamps.json"
+    stamps = json.loads(stamps_path.read_text()) if stamps_path.is_file() and path.is_file() else {}
+    rows = [("input", "input", dataset_displays(data)), ("dep", "dep", dataset_displays(data))]
+    rows += [(row, str(p), [d]) for (row, d), p in models.items()]
+    for name, method, displays in rows:
+        stamp = evaluation_stamp(data, method)
+        done = json.loads(path.read_text())["methods"].get(name, {}).get("displays", {}) if path.is_file() else {}
+        if stamps.get(method) == stamp and all(d in done for d in displays):
+            continue
+        evaluate(data, method, ev, EvalSettings(name=None if method in ("input", "dep") else name), progress=progress)
+        stamps[method] = stamp
+        save_json(stamps_path, stamps)
+    results = json.loads(path.read_text())
+    names = {name for name, _, _ in rows}
+    if set(results["methods"]) - names:  # rows of an earlier budget or model list
+        results["methods"] = {k: v for k, v in results["methods"].items() if k in names}
+        save_json(path, results)
+        save_text(ev / "results.md", results_markdown(results))
+        save_text(ev / "results.csv", results_csv(results))
+    return results
 
 
 PAPER_TABLE = ("The paper (real captures): DeP 28.50/0.9117 and 16.97/0.7084; ResNet 36.26/0.9703 and 27.42/0.9176; "
@@ -238,7 +309,8 @@ def copy_figures(out: Path, fig_dir: Path) -> dict[str, Path]:
     import shutil
     fig_dir.mkdir(parents=True, exist_ok=True)
     figures = {}
-    sources = {"training_curves": out / "train" / "training_curves.png", "faces": out / "faces" / "detections.png"}
+    sources = {"training_curves": out / "train" / "training_curves.png", "faces": out / "faces" / "detections.png",
+               **{f"error_bands_{d}": out / "error_bands" / f"error_bands_{d}.png" for d in DISPLAYS}}
     for ev, prefix in (("eval", "unet"), ("eval_heldout", "heldout_unet")):
         for d in DISPLAYS:
             previews = sorted((out / ev / "unet" / "previews").glob(f"{d}_*.png"))
@@ -337,11 +409,11 @@ def heldout_section(heldout: dict, out: Path, fig: dict[str, str]) -> list[str]:
                   if f"heldout_unet_{d}" in fig)]
 
 
-def results_document(results: dict, heldout: dict, faces: dict, b: dict, budget: str, datasets: dict[str, Path],
-                     out: Path, times: dict, figures: dict[str, Path], base: Path) -> str:
+def results_document(results: dict, heldout: dict, bands: dict, faces: dict, b: dict, budget: str,
+                     datasets: dict[str, Path], out: Path, times: dict, figures: dict[str, Path], base: Path) -> str:
     """RESULTS.md: data, training, both tables (paper protocol first), the orderings checked from the
-    tables, the held-out photographs' table and orderings, the face table; figure links relative to `base`
-    (the document's folder)."""
+    tables, the held-out photographs' table and orderings, the error by spatial frequency, the face table;
+    figure links relative to `base` (the document's folder)."""
     from restore.evaluate import results_markdown
     from restore.studies.faces import faces_markdown
     import torch
@@ -365,6 +437,7 @@ def results_document(results: dict, heldout: dict, faces: dict, b: dict, budget:
         "Computed from the paper-protocol table above (`restore.studies.results.ordering_checks`).", "",
         *ordering_table(results), "",
         *heldout_section(heldout, out, fig), "",
+        *error_bands_section(bands, fig),
         "## Face detection (MTCNN recall)", "",
         f"{faces['faces']} faces (scikit-image's LFW subset on a {faces['chart_px'][0]} × {faces['chart_px'][1]} "
         f"chart, {faces['chart']['face_px'][0]}–{faces['chart']['face_px'][1]} px at contrasts "

@@ -33,18 +33,22 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     assert "## Training (quick budget)" in doc and "![training curves](figures/training_curves.png)" in doc
     assert (tmp_path / "res" / "figures" / "training_curves.png").is_file()
     assert "| test | " in doc  # the content table per split
-    assert doc.count("| unet_syn |") == 5  # two training lines, a row in each protocol's table, one held out
+    # two training lines, a row in each protocol's table, one held out, one per display in the error bands
+    assert doc.count("| unet_syn |") == 7 and "## Where the error lies (spatial frequency)" in doc
+    assert (tmp_path / "res" / "figures" / "error_bands_poled.png").is_file()
     assert set(r["heldout"]["methods"]) == set(methods) and "## Held-out photographs (a content check)" in doc
     assert r["heldout"]["methods"]["input"]["displays"]["toled"]["images"] == 2
 
-    # a second run resumes every stage: nothing is rendered or trained again (timing.jsonl and the loss logs
-    # untouched), and the manifests and models are the same bytes
+    # a second run resumes every stage: nothing is rendered, trained or scored again (timing.jsonl, the loss
+    # logs and the per-image scores untouched), and the manifests and models are the same bytes
     res = tmp_path / "res"
+    scores = {p: p.stat().st_mtime_ns for p in res.rglob("metrics_*.csv")}
     untouched = {p: p.stat().st_mtime_ns for p in res.rglob("*") if p.name in ("timing.jsonl", "loss.csv")}
     same = {p: p.read_bytes() for p in res.rglob("*") if p.name in ("model.pt", "manifest.jsonl")}
     again = run_results(res, "quick", progress=False)
     assert len(untouched) == 3 + 3 * 2 and all(p.stat().st_mtime_ns == t for p, t in untouched.items())
     assert len(same) == 3 + 3 * 2 and all(p.read_bytes() == b for p, b in same.items())
+    assert len(scores) == 2 * 5 * 2 and all(p.stat().st_mtime_ns == t for p, t in scores.items())
     for d in ("toled", "poled"):  # the same weights on the same pairs
         assert (again["results"]["methods"]["unet"]["displays"][d]["psnr_db_paper"] ==
                 methods["unet"]["displays"][d]["psnr_db_paper"])

@@ -36,3 +36,22 @@ def test_face_table_puts_the_papers_recall_beside_ours():
     assert lines[2] == "| clean | 62 % (28/45) | 60 % | 62 % (28/45) | 60 % |"  # the same clean view twice
     assert lines[4] == "| DeP | 16 % (7/45) | — | 0 % (0/45) | — |"  # the paper has no DeP row
     assert lines[5] == "| unet | 44 % (20/45) | 56 % | 20 % (9/45) | 39 % |"
+
+
+def test_evaluation_stamp_follows_the_checkpoint_and_the_data(tmp_path):
+    """A row is scored again (restore.studies.results.evaluate_rows) exactly when its stamp changes."""
+    import json
+    from restore.studies.results import evaluation_stamp
+    data = tmp_path / "data"
+    data.mkdir()
+    (data / "manifest.jsonl").write_text(json.dumps({"item": 0, "split": "test"}) + "\n")
+    ckpt = tmp_path / "model.pt"
+    ckpt.write_bytes(b"weights a")
+    first = evaluation_stamp(data, str(ckpt))
+    assert evaluation_stamp(data, str(ckpt)) == first
+    assert len({first, evaluation_stamp(data, "input"), evaluation_stamp(data, "dep")}) == 3
+    ckpt.write_bytes(b"weights b")  # retrained
+    assert evaluation_stamp(data, str(ckpt)) != first
+    ckpt.write_bytes(b"weights a")
+    (data / "manifest.jsonl").write_text(json.dumps({"item": 1, "split": "test"}) + "\n")  # other items
+    assert evaluation_stamp(data, str(ckpt)) != first
