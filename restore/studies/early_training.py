@@ -16,7 +16,6 @@ rows is printed.
 """
 from __future__ import annotations
 
-import argparse
 import json
 import sys
 import time
@@ -76,24 +75,24 @@ def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop
 
 
 def main(argv: list[str]) -> None:
+    from restore.studies.error_bands import parse_options
     from udc_render.errors import UdcError
     from udc_render.io.files import save_text
-    ap = argparse.ArgumentParser(prog="python -m restore.studies.early_training", description=__doc__.split("\n")[0])
-    ap.add_argument("data", type=Path)
-    ap.add_argument("--display", required=True)
-    ap.add_argument("--variant", action="append", required=True, help="type:crop_px:lr[:json]; repeat")
-    ap.add_argument("--steps", type=int, default=300)
-    ap.add_argument("--out", type=Path, default=Path("out/early_training"))
-    a = ap.parse_args(argv)
-    path = a.out / "results.jsonl"
+    usage = ("python -m restore.studies.early_training DATA --display D --variant type:crop_px:lr[:json] "
+             "[--variant ...] [--steps 300] [--out out/early_training]")
+    pos, o = parse_options(argv, usage, repeated=("variant",))
+    if len(pos) != 1 or "display" not in o or not o["variant"]:
+        sys.exit(f"usage: {usage}")
+    data, display, steps, out = Path(pos[0]), o["display"], int(o.get("steps", 300)), Path(o.get("out", "out/early_training"))
+    path = out / "results.jsonl"
     try:
-        variants = [parse_variant(v) for v in a.variant]
-        a.out.mkdir(parents=True, exist_ok=True)
+        variants = [parse_variant(v) for v in o["variant"]]
+        out.mkdir(parents=True, exist_ok=True)
         rows = [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
         for v in variants:
-            if not any(r["variant"] == v["variant"] and r["display"] == a.display and r["steps"] == a.steps
+            if not any(r["variant"] == v["variant"] and r["display"] == display and r["steps"] == steps
                        for r in rows):
-                rows.append(early_psnr(a.data, a.display, v, a.steps))
+                rows.append(early_psnr(data, display, v, steps))
                 save_text(path, "".join(json.dumps(r) + "\n" for r in rows))
     except (UdcError, OSError) as exc:
         sys.exit(f"error: {exc}")

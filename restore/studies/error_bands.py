@@ -17,7 +17,6 @@ prints a Markdown table (MSE per band, and each method's share of the total) and
 """
 from __future__ import annotations
 
-import argparse
 import sys
 from pathlib import Path
 
@@ -119,31 +118,46 @@ def plot(bands: dict[str, np.ndarray], transfer: np.ndarray, path: Path, title: 
     plt.close(fig)
 
 
+def parse_options(argv: list[str], usage: str, repeated=()) -> tuple[list[str], dict]:
+    """(positional arguments, {option: value, or a list for `repeated`}) of `--option value` pairs; a
+    dangling option exits with `usage` (library modules take no argparse: the CLI lives in udc_render.cli)."""
+    pos, opts, it = [], {k: [] for k in repeated}, iter(argv)
+    for a in it:
+        if a.startswith("--"):
+            value = next(it, None)
+            if value is None:
+                sys.exit(f"error: {a} needs a value\nusage: {usage}")
+            key = a[2:].replace("-", "_")
+            if key in repeated:
+                opts[key].append(value)
+            else:
+                opts[key] = value
+        else:
+            pos.append(a)
+    return pos, opts
+
+
 def main(argv: list[str]) -> None:
     from udc_render.errors import UdcError
-    ap = argparse.ArgumentParser(prog="python -m restore.studies.error_bands", description=__doc__.split("\n")[0])
-    ap.add_argument("data", type=Path)
-    ap.add_argument("--display", required=True)
-    ap.add_argument("--method", action="append", required=True,
-                    help="input, dep or a checkpoint path (named by its run folder); repeat")
-    ap.add_argument("--split", default="val")
-    ap.add_argument("--items", type=int, default=6)
-    ap.add_argument("--crop-px", type=int, default=512)
-    ap.add_argument("--out", type=Path, default=Path("out/error_bands"))
-    a = ap.parse_args(argv)
+    usage = "python -m restore.studies.error_bands DATA --display D --method M [--method M ...] [--split val] " \
+            "[--items 6] [--crop-px 512] [--out out/error_bands]"
+    pos, o = parse_options(argv, usage, repeated=("method",))
+    if len(pos) != 1 or "display" not in o or not o["method"]:
+        sys.exit(f"usage: {usage}")
+    data, display, split = Path(pos[0]), o["display"], o.get("split", "val")
+    items, crop_px, out = int(o.get("items", 6)), int(o.get("crop_px", 512)), Path(o.get("out", "out/error_bands"))
     try:
-        a.out.mkdir(parents=True, exist_ok=True)
-        transfer = display_transfer(a.data, a.display, a.split)
-        methods = {m if m in ("input", "dep") else Path(m).parent.name: m for m in a.method}
-        bands = method_bands(a.data, a.display, methods, a.split, a.items, a.crop_px)
+        out.mkdir(parents=True, exist_ok=True)
+        transfer = display_transfer(data, display, split)
+        methods = {m if m in ("input", "dep") else Path(m).parent.name: m for m in o["method"]}
+        bands = method_bands(data, display, methods, split, items, crop_px)
     except (UdcError, OSError) as exc:
         sys.exit(f"error: {exc}")
     print(markdown(bands, transfer))
     if "input" in bands:
         print("\n" + weakest_band_text(bands, transfer))
-    path = a.out / f"error_bands_{a.display}.png"
-    plot(bands, transfer, path, f"{a.display}: error by spatial frequency ({a.split}, {a.items} items, "
-         f"central {a.crop_px} px)")
+    path = out / f"error_bands_{display}.png"
+    plot(bands, transfer, path, f"{display}: error by spatial frequency ({split}, {items} items, central {crop_px} px)")
     print(f"wrote {path}")
 
 
