@@ -75,7 +75,7 @@ def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop
 
 
 def main(argv: list[str]) -> None:
-    from restore.studies.error_bands import parse_options
+    from restore.studies.options import parse_options
     from udc_render.errors import UdcError
     from udc_render.io.files import save_text
     usage = ("python -m restore.studies.early_training DATA --display D --variant type:crop_px:lr[:json] "

@@ -118,26 +118,8 @@ def plot(bands: dict[str, np.ndarray], transfer: np.ndarray, path: Path, title: 
     plt.close(fig)
 
 
-def parse_options(argv: list[str], usage: str, repeated=()) -> tuple[list[str], dict]:
-    """(positional arguments, {option: value, or a list for `repeated`}) of `--option value` pairs; a
-    dangling option exits with `usage` (library modules take no argparse: the CLI lives in udc_render.cli)."""
-    pos, opts, it = [], {k: [] for k in repeated}, iter(argv)
-    for a in it:
-        if a.startswith("--"):
-            value = next(it, None)
-            if value is None:
-                sys.exit(f"error: {a} needs a value\nusage: {usage}")
-            key = a[2:].replace("-", "_")
-            if key in repeated:
-                opts[key].append(value)
-            else:
-                opts[key] = value
-        else:
-            pos.append(a)
-    return pos, opts
-
-
 def main(argv: list[str]) -> None:
+    from restore.studies.options import parse_options
     from udc_render.errors import UdcError
     usage = "python -m restore.studies.error_bands DATA --display D --method M [--method M ...] [--split val] " \
             "[--items 6] [--crop-px 512] [--out out/error_bands]"

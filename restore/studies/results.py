@@ -13,6 +13,7 @@ schedule (for a GPU). Changing a budget's training values makes the existing run
 """
 from __future__ import annotations
 
+import functools
 import json
 import platform
 import time
@@ -180,13 +181,18 @@ def evaluation_stamp(data: Path, method: str) -> str:
     method ('input', 'dep', or the checkpoint's bytes) and the source of SCORING_MODULES. Deeper code (the
     optics behind DeP's known kernels) is not in it: a change there needs `rm -r <out>/eval*`."""
     import hashlib
-    import importlib.util
     from restore.train import data_fingerprint
     h = hashlib.sha256(data_fingerprint(data).encode())
     h.update(method.encode() if method in ("input", "dep") else Path(method).read_bytes())
-    for name in SCORING_MODULES:
-        h.update(Path(importlib.util.find_spec(name).origin).read_bytes())
+    h.update(_scoring_source())
     return h.hexdigest()[:16]
+
+
+@functools.lru_cache(maxsize=1)
+def _scoring_source() -> bytes:
+    """The source of SCORING_MODULES, read once per process: the code this process scores with."""
+    import importlib.util
+    return b"".join(Path(importlib.util.find_spec(name).origin).read_bytes() for name in SCORING_MODULES)
 
 
 def evaluate_rows(data: Path, models: dict, ev: Path, progress: bool) -> dict:
@@ -200,10 +206,10 @@ def evaluate_rows(data: Path, models: dict, ev: Path, progress: bool) -> dict:
     stamps = json.loads(stamps_path.read_text()) if stamps_path.is_file() and path.is_file() else {}
     rows = [("input", "input", dataset_displays(data)), ("dep", "dep", dataset_displays(data))]
     rows += [(row, str(p), [d]) for (row, d), p in models.items()]
+    scored = json.loads(path.read_text())["methods"] if path.is_file() else {}  # before this call's rows
     for name, method, displays in rows:
         stamp = evaluation_stamp(data, method)
-        done = json.loads(path.read_text())["methods"].get(name, {}).get("displays", {}) if path.is_file() else {}
-        if stamps.get(method) == stamp and all(d in done for d in displays):
+        if stamps.get(method) == stamp and all(d in scored.get(name, {}).get("displays", {}) for d in displays):
             continue
         evaluate(data, method, ev, EvalSettings(name=None if method in ("input", "dep") else name), progress=progress)
         stamps[method] = stamp
