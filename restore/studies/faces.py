@@ -67,10 +67,14 @@ def _overlay(panels: list, path: Path) -> None:
 
 
 def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512), seed: int = 0,
-                    denoiser: str | None = None, progress: bool = True, chart: dict | None = None) -> dict:
-    """Run the experiment into `out` (faces.json, faces.md, detections.png); `models`: display →
-    model.pt of a trained restorer (optional); `chart`: face_chart's face_px and contrast (None: the
-    study's hard chart). Returns the recall table."""
+                    denoiser: str | None = None, progress: bool = True, chart: dict | None = None,
+                    train_level: dict | None = None) -> dict:
+    """Run the experiment into `out` (faces.json, faces.md, detections.png); `models`: display → the
+    model.pt files of trained restorers (optional; a row per model type); `chart`: face_chart's face_px
+    and contrast (None: the study's hard chart); `train_level`: display → the training captures' mean
+    green level (fraction of white): each model gets a second row, "<type> ×k", on the capture scaled by
+    k = train_level / the chart capture's green level and its output divided by k (a diagnostic of the
+    models' exposure range, not a method of the paper). Returns the recall table."""
     import imageio.v3 as iio
     import torch
     from restore.dep import dep_restore
@@ -91,10 +95,10 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
                     sensor=replace(scene.sensor, width_px=int(sensor_px[0]), height_px=int(sensor_px[1])))
     _, result = capture_scene(scene, [preset(n) for n in ("glass", "toled", "poled")],
                               SynthConfig(seed=seed), progress=progress)
-    write_synthesis(out / "capture", result, SynthConfig().sensor.camera, side_by_side=False)
+    summary = write_synthesis(out / "capture", result, SynthConfig().sensor.camera, side_by_side=False)
     truth = chart_boxes_on_sensor(boxes, result.meta)
     balance, detector = daylight_balance(), MTCNN()
-    images = {("clean", "glass"): result.gt}
+    images, levels, gains = {("clean", "glass"): result.gt}, {}, {}
     for d in ("toled", "poled"):
         pair = Pair(0, "test", out / "capture", d, "face chart")
         packed = load_packed(out / "capture" / d)
@@ -102,9 +106,16 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
         kwargs = {} if denoiser is None else {"denoiser": denoiser}
         images[("DeP", d)] = dep_restore(packed, known_gamma_rggb(pair), known_kernels_rggb(pair),
                                          rng=np.random.default_rng(seed), **kwargs).rgb
-        if d in models:
-            model, record = load_model(Path(models[d]), "auto")
-            images[(record["model_config"]["type"], d)] = predict(model, packed, next(model.parameters()).device)
+        level = float(summary["views"][d]["mean_level"]["Gr"])
+        levels[d] = level
+        for path in models.get(d, []):
+            model, record = load_model(Path(path), "auto")
+            kind, dev = record["model_config"]["type"], next(model.parameters()).device
+            images[(kind, d)] = predict(model, packed, dev)
+            if train_level and d in train_level:
+                k = train_level[d] / level
+                images[(f"{kind} ×k", d)] = predict(model, packed * k, dev) / k
+                gains[d] = k
             del model
             if torch.cuda.is_available():
                 torch.cuda.empty_cache()
@@ -123,7 +134,8 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
     chart_args = {"face_px": list(STUDY_FACE_PX), "contrast": list(STUDY_CONTRAST),
                   **{k: list(v) for k, v in (chart or {}).items()}}
     table = {"rows": rows, "sensor_px": list(sensor_px), "chart_px": list(CHART_PX), "faces": int(len(truth)),
-             "chart": chart_args, "seed": seed, "protocol": __doc__.split("\n\n")[1].replace("\n", " ")}
+             "chart": chart_args, "seed": seed, "protocol": __doc__.split("\n\n")[1].replace("\n", " "),
+             "chart_level": levels, "train_level": dict(train_level or {}), "level_gain": gains}
     save_json(out / "faces.json", table)
     save_text(out / "faces.md", faces_markdown(table))
     return table

@@ -37,6 +37,7 @@ BUDGETS = {
               "models": {"unet": None, "resnet": None}},
 }
 DISPLAYS = ("toled", "poled")
+DISPLAY_NAMES = {"toled": "T-OLED", "poled": "P-OLED"}
 PROFILES = ("physical", "paper")  # udc_render.profiles: the captures, and the paper's synthesis (UNet (Syn))
 
 
@@ -122,8 +123,8 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     bands = error_band_rows(data, models, out / "error_bands")
     times["error_bands_s"] = time.perf_counter() - t
     t = time.perf_counter()
-    faces = face_experiment(out / "faces", {d: models[("unet", d)] for d in DISPLAYS}, b["face_sensor_px"],
-                            progress=progress)
+    faces = face_experiment(out / "faces", {d: [models[(kind, d)] for kind in ("unet", "resnet")] for d in DISPLAYS},
+                            b["face_sensor_px"], progress=progress, train_level=training_levels(data))
     times["faces_s"] = time.perf_counter() - t
     times["total_s"] = time.perf_counter() - t0
     from udc_render.io.files import save_text
@@ -174,6 +175,15 @@ def error_bands_section(bands: dict, fig: dict[str, str]) -> list[str]:
 SCORING_MODULES = ("restore.evaluate", "restore.metrics", "restore.dep", "restore.known", "restore.lpips",
                    "restore.data", "restore.models", "restore.train", "udc_render.metrics")
 """The code a score depends on beyond the data and the checkpoint: its source is part of evaluation_stamp."""
+
+
+def training_levels(data: Path) -> dict[str, float]:
+    """Display → the median over the training captures of their mean green level (fraction of white − black,
+    the captures' summary.json): the exposure range the models learnt on."""
+    import numpy as np
+    from restore.data import list_pairs
+    return {d: float(np.median([json.loads((p.folder / "summary.json").read_text())["views"][d]["mean_level"]["Gr"]
+                                for p in list_pairs(data, "train", [d])])) for d in DISPLAYS}
 
 
 def evaluation_stamp(data: Path, method: str) -> str:
@@ -415,6 +425,17 @@ def heldout_section(heldout: dict, out: Path, fig: dict[str, str]) -> list[str]:
                   if f"heldout_unet_{d}" in fig)]
 
 
+def faces_levels_text(faces: dict) -> list[str]:
+    """The face chart's exposure against the training captures' (faces.json), and what the ×k rows are."""
+    lv, tr, k = faces.get("chart_level", {}), faces.get("train_level", {}), faces.get("level_gain", {})
+    if not (lv and tr and k):
+        return []
+    each = "; ".join(f"{DISPLAY_NAMES[d]} {lv[d]:.3f} against {tr[d]:.3f} (k = {k[d]:.2f})" for d in DISPLAYS if d in k)
+    return [f"Exposure: the chart's captures have a mean green level (fraction of white) of {each} for the "
+            "training captures' median. A `×k` row restores the capture scaled by k to the training level and "
+            "divides the output by k: a diagnostic of the models' exposure range, not a method of the paper.", ""]
+
+
 def results_document(results: dict, heldout: dict, bands: dict, faces: dict, b: dict, budget: str,
                      datasets: dict[str, Path], out: Path, times: dict, figures: dict[str, Path], base: Path) -> str:
     """RESULTS.md: data, training, both tables (paper protocol first), the orderings checked from the
@@ -449,7 +470,7 @@ def results_document(results: dict, heldout: dict, bands: dict, faces: dict, b: 
         f"chart, {faces['chart']['face_px'][0]}–{faces['chart']['face_px'][1]} px at contrasts "
         f"{faces['chart']['contrast'][0]:g}–{faces['chart']['contrast'][1]:g}) shown on the virtual monitor, "
         f"sensor {faces['sensor_px'][0]} × {faces['sensor_px'][1]} px; clean = the ground truth (the same for "
-        "both columns); unet = the UNet row's models.", "", faces_markdown(faces),
+        "both columns); unet, resnet = those rows' models.", "", *faces_levels_text(faces), faces_markdown(faces),
         *([f"![detections]({fig['faces']})", ""] if "faces" in fig else []),
     ]
     return "\n".join(lines)

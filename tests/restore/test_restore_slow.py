@@ -38,6 +38,9 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     assert (tmp_path / "res" / "figures" / "error_bands_poled.png").is_file()
     assert set(r["heldout"]["methods"]) == set(methods) and "## Held-out photographs (a content check)" in doc
     assert r["heldout"]["methods"]["input"]["displays"]["toled"]["images"] == 2
+    faces = {(row["condition"], row["display"]) for row in r["faces"]["rows"]}
+    assert {("unet", "poled"), ("resnet", "toled"), ("unet ×k", "toled"), ("resnet ×k", "poled")} <= faces
+    assert all(k > 0 for k in r["faces"]["level_gain"].values()) and "A `×k` row restores" in doc
 
     # a second run resumes every stage: nothing is rendered, trained or scored again (timing.jsonl, the loss
     # logs and the per-image scores untouched), and the manifests and models are the same bytes

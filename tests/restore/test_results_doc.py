@@ -38,6 +38,15 @@ def test_face_table_puts_the_papers_recall_beside_ours():
     assert lines[5] == "| unet | 44 % (20/45) | 56 % | 20 % (9/45) | 39 % |"
 
 
+def test_face_exposure_text_is_computed_from_the_face_table():
+    from restore.studies.results import faces_levels_text
+    table = {"chart_level": {"toled": 0.163, "poled": 0.055}, "train_level": {"toled": 0.347, "poled": 0.116},
+             "level_gain": {"toled": 0.347 / 0.163, "poled": 0.116 / 0.055}}
+    text = faces_levels_text(table)[0]
+    assert "T-OLED 0.163 against 0.347 (k = 2.13); P-OLED 0.055 against 0.116 (k = 2.11)" in text
+    assert faces_levels_text({"rows": []}) == []  # a table made without the training levels: no sentence
+
+
 def test_evaluation_stamp_follows_the_checkpoint_and_the_data(tmp_path):
     """A row is scored again (restore.studies.results.evaluate_rows) exactly when its stamp changes."""
     import json
