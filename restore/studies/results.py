@@ -431,9 +431,9 @@ def faces_levels_text(faces: dict) -> list[str]:
     if not (lv and tr and k):
         return []
     each = "; ".join(f"{DISPLAY_NAMES[d]} {lv[d]:.3f} against {tr[d]:.3f} (k = {k[d]:.2f})" for d in DISPLAYS if d in k)
-    return [f"Exposure: the chart's captures have a mean green level (fraction of white) of {each} for the "
-            "training captures' median. A `×k` row restores the capture scaled by k to the training level and "
-            "divides the output by k: a diagnostic of the models' exposure range, not a method of the paper.", ""]
+    return [f"Exposure (mean green level, fraction of white), the chart's capture against the training captures' "
+            f"median: {each}. A `×k` row restores the capture scaled by k to the training level and divides the "
+            "output by k: a diagnostic of the models' exposure range, not a method of the paper.", ""]
 
 
 def results_document(results: dict, heldout: dict, bands: dict, faces: dict, b: dict, budget: str,
