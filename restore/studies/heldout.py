@@ -1,6 +1,6 @@
 """Held-out photographs: a second test set of natural content that no model trains on.
 
-The datasets cycle through six scikit-image photographs and four charts, then dead leaves
+The datasets cycle through six scikit-image photographs and five charts, then colour dead leaves
 (udc_render.dataset.plan), so the val and test splits are all dead leaves. This set asks whether the
 paper's orderings depend on that content: the other photographs and micrographs of at least 256 px
 that scikit-image ships offline (HELD_OUT: textures, coins, the moon, a cell, a clock, a galaxy field,

@@ -300,12 +300,13 @@ def plot_training_curves(out: Path, path: Path) -> None:
 
 def content_counts(data: Path) -> dict[str, dict[str, int]]:
     """{split: {content kind: items}} from the dataset's manifest: scikit-image photographs, charts,
-    dead leaves (each a new seed) and the user's --images files."""
+    dead leaves in a photograph's colours (each a new seed), grey dead leaves and the user's --images files."""
     counts: dict[str, dict[str, int]] = {}
     for line in (data / "manifest.jsonl").read_text().splitlines():
         item = json.loads(line)
         image = item.get("image") or ""
-        kind = ("dead leaves" if image.startswith("pattern:dead_leaves") else "charts" if image.startswith("pattern:")
+        kind = ("colour dead leaves" if image.startswith("pattern:dead_leaves_colour") else
+                "grey dead leaves" if image.startswith("pattern:dead_leaves") else "charts" if image.startswith("pattern:")
                 else "photographs (scikit-image)" if image.startswith("builtin:") else "--images files")
         split = counts.setdefault(item["split"], {})
         split[kind] = split.get(kind, 0) + 1
@@ -358,10 +359,12 @@ def data_section(b: dict, data: Path, datasets: dict[str, Path]) -> list[str]:
              "recorded seconds): " + ", ".join(f"{p} {dataset_hours(f):.1f} h" for p, f in datasets.items()) + ".",
              "", "| split | " + " | ".join(kinds) + " |", "|---|" + "---|" * len(kinds)]
     lines += [f"| {split} | " + " | ".join(str(counts[split].get(k, 0)) for k in kinds) + " |" for split in counts]
-    lines += ["", "The built-in list is cycled once (6 scikit-image photographs, 4 charts), then every further item is a "
-              "new dead-leaves seed, so the val and test splits are all dead leaves: scale-invariant occlusion "
-              "statistics like natural images', but not photographs. A user with DIV2K passes `--images DIR` to "
-              f"`udc-render dataset`. Every setting: `{data / 'job.json'}`."]
+    lines += ["", "The built-in list is cycled once (6 scikit-image photographs, 5 charts with one grey dead "
+              "leaves), then every further item is "
+              "a new seed of `pattern:dead_leaves_colour`: dead leaves painted with the pixels of one of the 5 "
+              "colour photographs (Achddou et al. 2021), so the val and test splits are all colour dead leaves: "
+              "scale-invariant occlusions in natural colours and brightness, but not photographs. A user with "
+              f"DIV2K passes `--images DIR` to `udc-render dataset`. Every setting: `{data / 'job.json'}`."]
     return lines
 
 

@@ -51,6 +51,32 @@ def test_dead_leaves_cover_the_panel_deterministically():
     assert abs(a.mean() - 0.5) < 0.1 and np.unique(a).size > 100
 
 
+def test_colour_dead_leaves_paint_the_grey_discs_from_the_palette():
+    palette = np.array([[0.1, 0.2, 0.3], [0.9, 0.5, 0.0], [0.0, 0.0, 1.0]])
+    grey = charts.dead_leaves(320, 180, seed=3)
+    img = charts.dead_leaves_colour(320, 180, 3, palette)
+    assert img.shape == (3, 180, 320)
+    colours = {tuple(c) for c in img.reshape(3, -1).T}
+    assert colours == {tuple(c) for c in palette}  # every pixel a palette colour, each colour used
+    for v in np.unique(grey)[:50]:  # one disc (one grey level), one colour
+        assert len({tuple(c) for c in img[:, grey == v].T}) == 1
+    with pytest.raises(ValueError, match="palette"):
+        charts.dead_leaves_colour(32, 18, 0, np.ones((4, 4)))
+
+
+def test_colour_dead_leaves_take_a_photographs_colours():
+    """pattern:dead_leaves_colour:SEED: the panel's colours are pixels of the seed's built-in photograph
+    (sRGB-decoded); a uniform draw per disc, so the panel's mean is near the photograph's."""
+    from udc_render.content.monitor_image import photo_palette
+    img = pattern("dead_leaves_colour:2", 640, 360)
+    palette = photo_palette(2)
+    assert img.shape == (3, 360, 640) and 0 <= img.min() and img.max() <= 1
+    sample = {tuple(c) for c in img[:, ::37, ::41].reshape(3, -1).T}
+    assert sample <= {tuple(c) for c in palette}
+    assert not np.array_equal(img[0], img[2])  # colour, not grey
+    assert np.abs(img.mean(axis=(1, 2)) - palette.mean(axis=0)).max() < 0.1
+
+
 def test_pattern_names_with_arguments():
     img = pattern("sine_x:8", 64, 32)
     assert img.shape == (3, 32, 64) and np.array_equal(img[0], img[2])

@@ -182,7 +182,7 @@ def test_side_by_side_implies_previews(scene, tmp_path):
 def test_builtin_images_stay_distinct_past_the_list():
     images, _ = dataset.image_list(None)
     tasks = dataset.plan_tasks(40, (30, 5, 5), 8, images, True, 0)
-    assert len({t.image for t in tasks}) == 40 and tasks[-1].image.startswith("pattern:dead_leaves:")
+    assert len({t.image for t in tasks}) == 40 and tasks[-1].image.startswith("pattern:dead_leaves_colour:")
     assert tasks[9].folder == "train/shard_0001/item_000009" and tasks[39].folder == "test/shard_0000/item_000039"
     assert len({t.render_seed for t in tasks}) == 40
 

@@ -50,7 +50,8 @@ def register(sub) -> None:
     src.add_argument("--images", type=Path, help="a monitor scene: a folder of images (searched recursively, sorted "
                                                  "by path); one of --images, --builtin is required for a monitor scene")
     src.add_argument("--builtin", action="store_true",
-                     help="a monitor scene: scikit-image's samples and the procedural charts, then dead-leaves charts")
+                     help="a monitor scene: scikit-image's samples and the procedural charts, then dead leaves in "
+                          "the colours of those photographs (pattern:dead_leaves_colour), a new seed per item")
     xyz = lambda v: ",".join(f"{x:g}" for x in v)  # noqa: E731
     p.add_argument("--pose-jitter-m", type=_jitter("--pose-jitter-m"),
                    help="a 3D scene: item i > 0 moves the camera origin by up to ± X,Y,Z metres (uniform, per world "

@@ -11,6 +11,10 @@ Each panel pixel shows one value (the monitor is a pixel grid), computed at the 
 - dead_leaves: occluding discs (Lee, Mumford & Huang 2001; Cao et al. 2010) with radii drawn from
   p(r) ∝ r⁻³ on [r_min, r_max] and uniform grey levels, painted front to back until every pixel is
   covered; scale-invariant texture for texture-MTF studies. Seeded.
+- dead_leaves_colour: the same discs, each painted with one colour drawn from a palette (e.g. a
+  photograph's pixels), so the image has the dead leaves' occlusion statistics and a photograph's
+  colours and brightness: the synthetic training images of Achddou, Gousseau & Ladjal (2021,
+  "Synthetic images as a regularity prior for image restoration neural networks"). [3, rows, cols].
 """
 from __future__ import annotations
 
@@ -75,3 +79,13 @@ def dead_leaves(cols: int, rows: int, seed: int = 0, r_min_px: float = DEAD_LEAV
                 if not left:
                     break
     return img
+
+
+def dead_leaves_colour(cols: int, rows: int, seed: int, palette: np.ndarray) -> np.ndarray:
+    """[3, rows, cols]: dead_leaves(cols, rows, seed)'s discs, disc of grey level v painted with
+    palette[⌊v · N⌋] (palette [N, 3] linear drive levels in [0, 1]): a uniform draw from the palette per disc."""
+    palette = np.asarray(palette, dtype=np.float64)
+    if palette.ndim != 2 or palette.shape[1] != 3 or len(palette) < 1:
+        raise ValueError(f"palette: shape {palette.shape}: expected [N, 3] colours, N ≥ 1")
+    index = np.minimum((dead_leaves(cols, rows, seed) * len(palette)).astype(np.int64), len(palette) - 1)
+    return np.moveaxis(palette[index], -1, 0)

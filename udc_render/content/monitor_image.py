@@ -25,9 +25,11 @@ CHARTS = {  # name: (function(cols, rows, arg), argument type, default argument)
     "sine_y": (lambda c, r, n: charts.sine(c, r, n, "y"), float, 64.0),
     "siemens": (charts.siemens, int, 72),
     "dead_leaves": (charts.dead_leaves, int, 0),
+    "dead_leaves_colour": (lambda c, r, seed: charts.dead_leaves_colour(c, r, seed, photo_palette(seed)), int, 1),
 }
 PATTERN_ARGS = {"slanted_edge": "ANGLE_DEG (0 to 45)", "sine_x": "CYCLES", "sine_y": "CYCLES",
-                "siemens": "SPOKES", "dead_leaves": "SEED"}
+                "siemens": "SPOKES", "dead_leaves": "SEED", "dead_leaves_colour": "SEED"}
+COLOUR_PHOTOS = ("astronaut", "coffee", "chelsea", "rocket", "immunohistochemistry")  # BUILTIN_IMAGES in colour
 
 
 class DisplayImageError(UdcError):
@@ -50,12 +52,20 @@ def decode(code: np.ndarray, transfer: str) -> np.ndarray:
     return code
 
 
+def photo_palette(seed: int) -> np.ndarray:
+    """[N, 3] the pixels of the built-in colour photograph COLOUR_PHOTOS[seed mod 5] as an sRGB panel shows
+    them (linear drive levels): the colours of pattern:dead_leaves_colour:SEED."""
+    name = COLOUR_PHOTOS[int(seed) % len(COLOUR_PHOTOS)]
+    return decode(read_code_values(f"builtin:{name}"), "srgb").reshape(-1, 3)
+
+
 def pattern(name: str, cols: int, rows: int) -> np.ndarray:
     """Test patterns in linear drive levels [3, rows, cols]; `name` is NAME or NAME:ARG:
     checker (8 × 8 squares per panel height), white, grid (1-px white lines every 1/8 of the height),
     orientation (black panel, red square top-left, green top-right, blue bottom-left, 1/8 height),
     and the grey charts of `udc_render.charts`: slanted_edge[:ANGLE_DEG], sine_x[:CYCLES],
-    sine_y[:CYCLES], siemens[:SPOKES], dead_leaves[:SEED]."""
+    sine_y[:CYCLES], siemens[:SPOKES], dead_leaves[:SEED]; and dead_leaves_colour[:SEED], the dead leaves
+    in the colours of a built-in photograph (photo_palette)."""
     kind, _, arg = name.partition(":")
     if kind in CHARTS:
         chart, cast, default = CHARTS[kind]
@@ -66,7 +76,8 @@ def pattern(name: str, cols: int, rows: int) -> np.ndarray:
         if (value is None or not math.isfinite(value) or value < 0 or (kind == "slanted_edge" and value >= 45)
                 or (kind == "siemens" and value < 1)):
             raise DisplayImageError(f"content.image = 'pattern:{name}': expected pattern:{kind}:{PATTERN_ARGS[kind]}")
-        return np.broadcast_to(chart(cols, rows, value)[None], (3, rows, cols)).copy()
+        img = chart(cols, rows, value)
+        return img if img.ndim == 3 else np.broadcast_to(img[None], (3, rows, cols)).copy()
     if arg or kind not in PATTERNS:
         raise DisplayImageError(f"content.image = 'pattern:{name}': expected one of "
                                 + ", ".join(f"pattern:{p}" for p in PATTERNS)

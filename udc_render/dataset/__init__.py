@@ -57,8 +57,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from udc_render.dataset.executors import Shared, executor
-from udc_render.dataset.plan import (DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M, SPLITS, DatasetError, Task,
-                                     Views, image_list, plan_tasks)
+from udc_render.dataset.plan import (BUILTIN_THEN, DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M, SPLITS,
+                                     DatasetError, Task, Views, image_list, plan_tasks)
 from udc_render.dataset.threads import parent_blas_threads
 from udc_render.dataset.store import check_job, clean_stale, locked, write_manifest
 from udc_render.optics.displays import Display
@@ -114,8 +114,9 @@ class DatasetJob:
 def job_params(job: DatasetJob, shared: Shared, source: str | None, images, views: Views | None = None) -> dict:
     """Everything that decides the items' bytes (not how they are run), as plain JSON values."""
     cfg = {k: v for k, v in dataclasses.asdict(shared.cfg).items() if k not in ("use_cache", "kernel_cache")}
-    what = ({"images": {"source": source, "list": [label for _, label in images]}} if views is None else
-            {"views": views.describe()})
+    images_then = {"then": BUILTIN_THEN} if source == "builtin" else {}
+    what = ({"images": {"source": source, "list": [label for _, label in images], **images_then}} if views is None
+            else {"views": views.describe()})
     params = {"version": JOB_VERSION, "count": job.count, "split": dict(zip(SPLITS, job.split)),
               "shard_size": job.shard_size, **what,
               "render_seed": job.scene.render.seed, "scene": dataclasses.asdict(shared.scene),

@@ -13,6 +13,9 @@ SPLITS = ("train", "val", "test")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
 BUILTIN_CHARTS = ("pattern:slanted_edge", "pattern:sine_x", "pattern:sine_y", "pattern:siemens",
                   "pattern:dead_leaves:0")
+# after the built-in list, item by item: dead leaves in the colours of a built-in photograph (the grey ones
+# taught restorers a grey world: on a colour chart they painted grey discs, README "Status")
+BUILTIN_THEN = "pattern:dead_leaves_colour"
 # a 3D scene's per-item camera moves (± metres per world axis x, y, z): small against the built-in rooms
 # (4 × 2.6 × 5.5 m, the camera 5.4 m from its target), so every view stays inside the room and on its objects
 DEFAULT_ORIGIN_JITTER_M = (0.15, 0.1, 0.15)
@@ -100,9 +103,9 @@ def image_list(images_dir: Path | None) -> tuple[list[tuple[str, str]], str]:
 
 
 def image_of(images: list[tuple[str, str]], builtin: bool, i: int) -> tuple[str, str]:
-    """Item i's image: the list cycled, or (builtin) new dead-leaves seeds after the list."""
+    """Item i's image: the list cycled, or (builtin) after the list a new seed of BUILTIN_THEN per item."""
     if builtin and i >= len(images):
-        spec = f"pattern:dead_leaves:{i - len(images) + 1}"
+        spec = f"{BUILTIN_THEN}:{i - len(images) + 1}"
         return spec, spec
     return images[i % len(images)]
 
