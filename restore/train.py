@@ -38,7 +38,7 @@ from udc_render.metrics import psnr_db
 
 LOG_COLUMNS = ["epoch", "step", "lr", "loss", "val_psnr_db", "seconds"]
 PLATEAU_WINDOW = 0.2  # the last fifth of the steps
-PLATEAU_MIN_VALIDATIONS = 3  # validations inside that window before a plateau can be declared
+PLATEAU_MIN_VALIDATIONS = 4  # validations inside that window before a plateau can be declared (a line needs them)
 
 
 class TrainError(UdcError):
@@ -90,13 +90,19 @@ def learning_rate(settings: TrainSettings, epoch: int) -> float:
 
 
 def plateau_step(log: list, threshold_db: float) -> int | None:
-    """The first validated step S at which the validation PSNRs logged at steps ≥ (1 − PLATEAU_WINDOW) · S,
-    at least PLATEAU_MIN_VALIDATIONS of them, span less than threshold_db (max − min); None before that."""
+    """The first validated step S at which validation PSNR changes by less than threshold_db over the last
+    fifth of the steps: the least-squares line through the validations logged at steps ≥ (1 − PLATEAU_WINDOW)
+    · S, at least PLATEAU_MIN_VALIDATIONS of them, changes by |slope| · PLATEAU_WINDOW · S < threshold_db.
+    A trend, not the span of the points: the span of three noisy validations (±0.05 dB) stopped the
+    T-OLED UNet at 21.87 dB while it was still rising 0.06 dB per 300 steps (22.27 dB 2100 steps on,
+    restore.studies.continued_training). None before that."""
     vals = [(r["step"], r["val_psnr_db"]) for r in log if r.get("val_psnr_db") is not None]
     for i, (step, _) in enumerate(vals):
-        window = [v for t, v in vals[:i + 1] if t >= (1 - PLATEAU_WINDOW) * step]
-        if len(window) >= PLATEAU_MIN_VALIDATIONS and max(window) - min(window) < threshold_db:
-            return step
+        window = np.array([(t, v) for t, v in vals[:i + 1] if t >= (1 - PLATEAU_WINDOW) * step], dtype=np.float64)
+        if len(window) >= PLATEAU_MIN_VALIDATIONS:
+            slope = np.polyfit(window[:, 0], window[:, 1], 1)[0]
+            if abs(slope) * PLATEAU_WINDOW * step < threshold_db:
+                return step
     return None
 
 

@@ -24,12 +24,12 @@ BUDGETS = {
               "crop_px": {"unet": 64, "resnet": 32}, "crops_per_pair": 1, "batch": 2, "face_sensor_px": (512, 256),
               "heldout_items": 2, "lr": 1e-4, "plateau_db": 0.1, "val_every": 1,
               "models": {"unet": {"type": "unet", "width": 8}, "resnet": {"type": "resnet", "features": 8, "blocks": 2}}},
-    # cpu: epoch caps, not targets; each model stops at the 0.1 dB plateau, which needs ≥ 3 validations in the
-    # last fifth, so ≥ 40 epochs at val_every 4. Validation on the central 768-px square (a ResNet validation
+    # cpu: epoch caps, not targets; each model stops at the 0.1 dB plateau, which needs ≥ 4 validations in the
+    # last fifth, so ≥ 30 epochs at val_every 2. Validation on the central 768-px square (a ResNet validation
     # of 20 whole frames would take 6 min). Caps: about a working day of this machine if nothing plateaus.
     "cpu": {"items": (150, 20, 30), "sensor_px": (2048, 1024), "epochs": {"unet": 80, "resnet": 50},
             "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (2048, 1024),
-            "heldout_items": None, "lr": 2e-4, "plateau_db": 0.1, "val_every": 4, "val_crop_px": 768,
+            "heldout_items": None, "lr": 2e-4, "plateau_db": 0.1, "val_every": 2, "val_crop_px": 768,
             "clip_grad_norm": 0.5, "models": {"unet": None, "resnet": None}},
     "paper": {"items": (400, 40, 60), "sensor_px": (2048, 1024), "epochs": {"unet": 400, "resnet": 400},
               "crop_px": {"unet": 256, "resnet": 256}, "crops_per_pair": 1, "batch": 4, "face_sensor_px": (2048, 1024),
@@ -369,6 +369,7 @@ def data_section(b: dict, data: Path, datasets: dict[str, Path]) -> list[str]:
 
 
 def training_section(b: dict, budget: str, out: Path) -> list[str]:
+    from restore.train import PLATEAU_MIN_VALIDATIONS
     clip = b.get("clip_grad_norm")
     return [f"Adam (0.9, 0.999, 1e-8), L1 loss, lr {b['lr']:g} halved at half the epoch cap, batch {b['batch']}, "
             + ("" if clip is None else f"gradient norm clipped at {clip:g}, ") +
@@ -376,8 +377,9 @@ def training_section(b: dict, budget: str, out: Path) -> list[str]:
             f"{b['crop_px']['unet']}-px crops, at most {b['epochs']['unet']} epochs; ResNet {b['crop_px']['resnet']}-px "
             f"crops, at most {b['epochs']['resnet']} epochs. Each model stops at its plateau: validation PSNR "
             f"(linear, on the central {b.get('val_crop_px') or 'whole'}-px square of the {b['items'][1]} val frames, "
-            f"every {b.get('val_every', 10)} epochs) spanning less than {b.get('plateau_db')} dB over the last fifth of "
-            "the steps, with at least 3 validations in it (`restore.train.plateau_step`). The paper trains 400 "
+            f"every {b.get('val_every', 10)} epochs) changing by less than {b.get('plateau_db')} dB over the last fifth "
+            f"of the steps (the least-squares line through the validations there, at least {PLATEAU_MIN_VALIDATIONS} "
+            "of them: `restore.train.plateau_step`). The paper trains 400 "
             "epochs at lr 1e-4 on a GPU. The cpu budget's lr is 2e-4: at 5e-4 the UNet diverged at epoch 8 (loss "
             "0.066 → 0.50, validation PSNR 20.1 → 8.9 dB), and at 1e-4 an earlier UNet (1024 × 512 data) sat at a "
             "loss of 0.11 from epoch 8 to 20. At 2e-4 without clipping it spiked at epoch 24 (loss 0.058 → 0.10, "
