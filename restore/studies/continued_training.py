@@ -52,7 +52,8 @@ def continue_run(run: Path, data: Path, out: Path, epochs: int, val_every: int =
         raise TrainError(f"--out = {str(out)!r}: must not be the run folder itself")
     source = out / "continued_from.json"
     record = {"run": str(run), "epochs_done": done, "settings": json.loads((run / "train.json").read_text())}
-    if source.is_file() and json.loads(source.read_text()) != record:
+    same = ("epochs_done", "settings")  # not the run's path: run folders may move
+    if source.is_file() and {k: json.loads(source.read_text()).get(k) for k in same} != {k: record[k] for k in same}:
         raise TrainError(f"{source}: this folder continues another run; use another --out")
     out.mkdir(parents=True, exist_ok=True)
     if not (out / "checkpoint.pt").is_file():

@@ -34,6 +34,18 @@ def test_continues_the_log_at_the_runs_final_rate_and_leaves_the_run_alone(finis
     assert (run / "checkpoint.pt").read_bytes() == before
     again = continue_run(run, data, tmp_path / "cont", epochs=4, val_every=1, progress=False)  # resumes: nothing to do
     assert again == rows and _log(tmp_path / "cont") == log
+    moved = run.rename(tmp_path / "moved")  # the run folder moved: the continuation still resumes
+    assert continue_run(moved, data, tmp_path / "cont", epochs=4, val_every=1, progress=False) == rows
+
+
+def test_a_folder_continuing_another_run_is_refused(finished_run, tmp_path):
+    data, run = finished_run
+    continue_run(run, data, tmp_path / "cont", epochs=3, progress=False)
+    other = TrainSettings(model=TINY_RESNET, display="blur", epochs=2, batch=2, crop_px=16, lr=5e-4,
+                          data_fingerprint=data_fingerprint(data))
+    train(data, tmp_path / "other_run", other, progress=False)
+    with pytest.raises(TrainError, match="continues another run"):
+        continue_run(tmp_path / "other_run", data, tmp_path / "cont", epochs=3, progress=False)
 
 
 def test_bad_continuations_are_refused_before_training(finished_run, tmp_path):
