@@ -112,7 +112,7 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
             model, record = load_model(Path(path), "auto")
             kind, dev = record["model_config"]["type"], next(model.parameters()).device
             images[(kind, d)] = predict(model, packed, dev)
-            if train_level and d in train_level:
+            if train_level and d in train_level and level > 0:  # a black capture has no level to match
                 k = train_level[d] / level
                 images[(f"{kind} ×k", d)] = predict(model, packed * k, dev) / k
                 gains[d] = k
