@@ -106,16 +106,15 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
         kwargs = {} if denoiser is None else {"denoiser": denoiser}
         images[("DeP", d)] = dep_restore(packed, known_gamma_rggb(pair), known_kernels_rggb(pair),
                                          rng=np.random.default_rng(seed), **kwargs).rgb
-        level = float(summary["views"][d]["mean_level"]["Gr"])
-        levels[d] = level
+        levels[d] = float(summary["views"][d]["mean_level"]["Gr"])
+        if models.get(d) and train_level and d in train_level and levels[d] > 0:  # black: no level to match
+            gains[d] = train_level[d] / levels[d]
         for path in models.get(d, []):
             model, record = load_model(Path(path), "auto")
             kind, dev = record["model_config"]["type"], next(model.parameters()).device
             images[(kind, d)] = predict(model, packed, dev)
-            if train_level and d in train_level and level > 0:  # a black capture has no level to match
-                k = train_level[d] / level
-                images[(f"{kind} ×k", d)] = predict(model, packed * k, dev) / k
-                gains[d] = k
+            if d in gains:
+                images[(f"{kind} ×k", d)] = predict(model, packed * gains[d], dev) / gains[d]
             del model
             if torch.cuda.is_available():
                 torch.cuda.empty_cache()
