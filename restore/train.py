@@ -9,6 +9,8 @@ An epoch is `crops_per_pair` random crops of every training pair. The run folder
     checkpoint.pt    model, optimiser, epochs done, loss log (atomic; written every checkpoint_s
                      seconds at an epoch's end and at the end): a re-run resumes from it
     model.pt         the final weights and how to rebuild the model (what `evaluate` loads)
+    train_summary.json   epochs, steps, plateau, seconds: a finished run (the cap or the plateau reached) is
+                     not loaded again, with or without its checkpoint (restore.studies.carry keeps none)
     loss.csv, loss.png   the loss log (mean training loss per epoch, validation PSNR)
 With plateau_db set, training stops at the first validation where the validation PSNR has spanned less
 than plateau_db over the last fifth of the steps (plateau_step); the summary says whether and where.
@@ -140,6 +142,16 @@ def _check_run_folder(out: Path, settings: TrainSettings) -> None:
                              "use another --out or the same settings to resume")
 
 
+def finished_summary(out: Path, settings: TrainSettings) -> dict | None:
+    """The saved summary of the finished run in `out` (train.json already checked against `settings`; model.pt
+    and train_summary.json written; the epoch cap or the plateau reached), else None."""
+    paths = [out / f for f in ("train.json", "model.pt", "train_summary.json")]
+    if not all(p.is_file() for p in paths):
+        return None
+    summary = json.loads(paths[2].read_text())
+    return summary if summary.get("plateaued") or summary.get("epochs") == settings.epochs else None
+
+
 def _training_data(data_dir: Path, settings: TrainSettings) -> tuple[PairDataset, list]:
     """(the training crops, the validation pairs as arrays): every pair read and checked (load_pair),
     and --crop-px checked against the smallest frame."""
@@ -236,6 +248,8 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
         raise TrainError(f"epochs = {settings.epochs}, batch = {settings.batch}: expected integers ≥ 1")
     loss_of = loss_fn(settings.loss)
     _check_run_folder(out, settings)
+    if (done := finished_summary(out, settings)) is not None:
+        return done
     dev = pick_device(device)
     data, val_pairs = _training_data(data_dir, settings)
     torch.manual_seed(settings.seed)

@@ -78,10 +78,13 @@ def run_dir(out: Path, row: str, display: str) -> Path:
     return out / "train" / f"{row}_{display}"
 
 
-def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, times: dict) -> dict:
+def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, times: dict,
+                 carry: Path | None = None) -> dict:
     """Every row's model per display, trained or resumed in out/train/<row>_<display>: {(row, display):
-    model.pt}."""
+    model.pt}. With `carry`, each finished model is kept in carry/<row>_<display> and brought back from
+    there into a run folder that lacks it (restore.studies.carry)."""
     from restore.models import RESNET_CONFIG, UNET_CONFIG
+    from restore.studies.carry import bring_back, keep
     from restore.train import TrainSettings, data_fingerprint, train
     defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
     models = {}
@@ -91,19 +94,25 @@ def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, 
         for d in DISPLAYS:
             t = time.perf_counter()
             run = run_dir(out, row, d)
+            if carry:
+                bring_back(carry / run.name, run)
             settings = TrainSettings(model=cfg, display=d, epochs=b["epochs"][kind], batch=b["batch"],
                                      crop_px=b["crop_px"][kind], crops_per_pair=b["crops_per_pair"], lr=b["lr"],
                                      data_fingerprint=data_fingerprint(data), plateau_db=b.get("plateau_db"),
                                      val_crop_px=b.get("val_crop_px"), clip_grad_norm=b.get("clip_grad_norm"))
             train(data, run, settings, val_every=b.get("val_every", 10), progress=progress)
+            if carry:
+                keep(run, carry / run.name)
             models[(row, d)] = run / "model.pt"
             times[f"train_{row}_{d}_s"] = time.perf_counter() - t
     return models
 
 
-def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progress: bool = True) -> dict:
+def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progress: bool = True,
+                carry: Path | None = None) -> dict:
     """Run every stage into `out` and write `out`/RESULTS.md with its figures in `out`/figures; with
-    `write`, the document there too, its figures in docs/figures/results beside it."""
+    `write`, the document there too, its figures in docs/figures/results beside it; with `carry`, the
+    finished models kept there and brought back from there (train_models)."""
     from restore.studies.faces import face_experiment
     from restore.studies.heldout import make_held_out_dataset
     b, out = BUDGETS[budget], Path(out)
@@ -111,7 +120,7 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     datasets = make_datasets(out, b, progress)
     data = datasets["physical"]  # every row is tested on the physical captures
     times["dataset_s"] = time.perf_counter() - t0
-    models = train_models(datasets, out, b, progress, times)
+    models = train_models(datasets, out, b, progress, times, carry)
     t = time.perf_counter()
     results = evaluate_rows(data, models, out / "eval", progress)
     times["evaluate_s"] = time.perf_counter() - t

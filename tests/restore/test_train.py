@@ -164,6 +164,7 @@ def test_a_truncated_checkpoint_is_a_one_line_error(tmp_path, capsys):
     cfg.write_text('type = "resnet"\nfeatures = 4\nblocks = 1\n')
     argv = _train_argv(data, tmp_path / "run", "--config", str(cfg), "--crop-px", "16")
     assert main(argv) == 0
+    (tmp_path / "run" / "train_summary.json").unlink()  # as if stopped before the end: the checkpoint is resumed
     ckpt = tmp_path / "run" / "checkpoint.pt"
     ckpt.write_bytes(ckpt.read_bytes()[:100])
     _assert_one_line_error(capsys, argv, str(ckpt), "damaged, truncated", "delete it", "another --out")

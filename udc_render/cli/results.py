@@ -16,6 +16,8 @@ def register(sub) -> None:
                    help="cpu (2048 × 1024, 150/20/30 items per profile: hours on 2 cores; resumable), quick (a smoke run), "
                         "paper (400 epochs; a GPU) [cpu]")
     p.add_argument("--write", type=Path, help="also write the document here (e.g. RESULTS.md)")
+    p.add_argument("--carry", type=Path, help="keep each finished model here (float16 weights, a folder git can "
+                                              "track) and bring it back into a fresh --out (restore.studies.carry)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=run)
 
@@ -23,7 +25,9 @@ def register(sub) -> None:
 def run(args) -> int:
     from restore.studies.results import ordering_checks, run_results
     out_dir(args.out)
-    r = run_results(args.out, args.budget, args.write, progress=not args.quiet)
+    if args.carry:
+        out_dir(args.carry, "--carry")
+    r = run_results(args.out, args.budget, args.write, progress=not args.quiet, carry=args.carry)
     for claim, ok, v in ordering_checks(r["results"]):
         print(f"{'ok  ' if ok else 'FAIL'} {claim}: {v}")
     print(f"written: {args.out / 'RESULTS.md'}" + (f" and {args.write}" if args.write else ""))

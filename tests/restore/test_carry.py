@@ -1,0 +1,47 @@
+"""Carrying finished models between run folders (restore.studies.carry), as `udc-render results --carry` does."""
+import numpy as np
+import torch
+
+from tests.conftest import write_pairs
+from restore.data import list_pairs, load_pair
+from restore.studies.carry import CARRIED, bring_back, keep
+from restore.train import TrainSettings, load_model, predict, train
+
+TINY_UNET = {"type": "unet", "width": 8, "depth": 3}
+
+
+def test_a_carried_model_comes_back_finished_and_is_not_trained_again(tmp_path):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 4), ("test", 1)), size_px=(32, 32))
+    s = TrainSettings(model=TINY_UNET, display="blur", epochs=3, batch=2, crop_px=16, lr=1e-3)
+    summary = train(data, tmp_path / "run", s, progress=False)
+    full = load_model(tmp_path / "run" / "model.pt", "cpu")[0]
+    keep(tmp_path / "run", tmp_path / "carry" / "unet_blur")
+    weights = torch.load(tmp_path / "carry" / "unet_blur" / "model.pt", weights_only=False)["state_dict"]
+    assert {v.dtype for v in weights.values() if v.is_floating_point()} == {torch.float16}
+    assert (tmp_path / "run" / "model.pt").read_bytes() == (tmp_path / "carry" / "unet_blur" / "model.pt").read_bytes()
+    assert sorted(p.name for p in (tmp_path / "carry" / "unet_blur").iterdir()) == sorted(CARRIED)
+
+    assert bring_back(tmp_path / "carry" / "unet_blur", tmp_path / "fresh")
+    assert train(data, tmp_path / "fresh", s, progress=False) == summary  # finished: nothing loaded or trained
+    assert not (tmp_path / "fresh" / "checkpoint.pt").exists()
+    half, record = load_model(tmp_path / "fresh" / "model.pt", "cpu")
+    assert next(half.parameters()).dtype == torch.float32 and record["display"] == "blur"
+    packed, _ = load_pair(list_pairs(data, "test", ["blur"])[0])
+    a, b = (predict(m, packed, torch.device("cpu")) for m in (full, half))
+    assert 0 < np.abs(a - b).max() < 1e-2 * np.abs(a).max()  # float16 weights: rounded, not a different model
+
+    keep(tmp_path / "fresh", tmp_path / "carry" / "unet_blur")  # idempotent: the same bytes
+    assert (tmp_path / "fresh" / "model.pt").read_bytes() == (tmp_path / "carry" / "unet_blur" / "model.pt").read_bytes()
+    assert not bring_back(tmp_path / "carry" / "unet_blur", tmp_path / "run")  # a run with its model keeps it
+
+
+def test_a_run_still_training_is_not_carried_back_as_finished(tmp_path):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
+    s = TrainSettings(model=TINY_UNET, display="blur", epochs=2, batch=2, crop_px=14)
+    assert not bring_back(tmp_path / "nothing", tmp_path / "run")
+    train(data, tmp_path / "run", s, progress=False)
+    (tmp_path / "run" / "checkpoint.pt").unlink()
+    longer = TrainSettings(model=TINY_UNET, display="blur", epochs=3, batch=2, crop_px=14)
+    (tmp_path / "run" / "train.json").unlink()  # the same folder under a longer schedule: not finished
+    summary = train(data, tmp_path / "run", longer, progress=False)
+    assert summary["epochs"] == 3 and (tmp_path / "run" / "checkpoint.pt").is_file()
