@@ -56,3 +56,11 @@ def test_non_utf8_toml_is_one_line(argv, says, tmp_path, capsys):
     assert main([*argv, "--out", str(tmp_path / "o")]) == 2
     err = _one_line(capsys)
     assert says in err and "latin1" in err
+
+
+def test_results_carry_that_cannot_be_a_folder_is_one_line_at_once(tmp_path, capsys):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    assert main(["results", "--budget", "quick", "--out", str(tmp_path / "o"), "--carry", str(blocker)]) == 2
+    err = _one_line(capsys)
+    assert "--carry" in err and str(blocker) in err

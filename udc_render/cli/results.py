@@ -17,17 +17,19 @@ def register(sub) -> None:
                         "paper (400 epochs; a GPU) [cpu]")
     p.add_argument("--write", type=Path, help="also write the document here (e.g. RESULTS.md)")
     p.add_argument("--carry", type=Path, help="keep each finished model here (float16 weights, a folder git can "
-                                              "track) and bring it back into a fresh --out (restore.studies.carry)")
+                                              "track) and bring it back into a fresh --out (restore.studies.carry) "
+                                              "[cpu: restore/trained/cpu; other budgets: none]")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=run)
 
 
 def run(args) -> int:
-    from restore.studies.results import ordering_checks, run_results
+    from restore.studies.results import BUDGETS, ordering_checks, run_results
     out_dir(args.out)
-    if args.carry:
-        out_dir(args.carry, "--carry")
-    r = run_results(args.out, args.budget, args.write, progress=not args.quiet, carry=args.carry)
+    carry = args.carry or BUDGETS[args.budget].get("carry")
+    if carry:
+        out_dir(Path(carry), "--carry")
+    r = run_results(args.out, args.budget, args.write, progress=not args.quiet, carry=carry and Path(carry))
     for claim, ok, v in ordering_checks(r["results"]):
         print(f"{'ok  ' if ok else 'FAIL'} {claim}: {v}")
     print(f"written: {args.out / 'RESULTS.md'}" + (f" and {args.write}" if args.write else ""))
