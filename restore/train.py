@@ -129,17 +129,19 @@ def validation_psnr(model, pairs, device) -> float | None:
     return float(np.mean(vals))
 
 
+def settings_differ(path: Path, settings: TrainSettings) -> str | None:
+    """'KEY = NEW differs from this folder's run (OLD)' for the first setting that the train.json at `path`
+    records otherwise, else None."""
+    old, new = json.loads(path.read_text()), json.loads(json.dumps(asdict(settings)))
+    diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+    return f"{diff[0]} = {new.get(diff[0])!r} differs from this folder's run ({old.get(diff[0])!r})" if diff else None
+
+
 def _check_run_folder(out: Path, settings: TrainSettings) -> None:
     """Refuse a run folder whose train.json records other settings."""
     path = out / "train.json"
-    if path.is_file():
-        old = json.loads(path.read_text())
-        new = json.loads(json.dumps(asdict(settings)))
-        diff = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
-        if diff:
-            k = diff[0]
-            raise TrainError(f"{path}: {k} = {new.get(k)!r} differs from this folder's run ({old.get(k)!r}): "
-                             "use another --out or the same settings to resume")
+    if path.is_file() and (diff := settings_differ(path, settings)):
+        raise TrainError(f"{path}: {diff}: use another --out or the same settings to resume")
 
 
 def finished_summary(out: Path, settings: TrainSettings) -> dict | None:

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import torch
 
-from restore.train import save_torch
+from restore.train import TrainError, TrainSettings, save_torch, settings_differ
 from udc_render.io.files import atomic_path
 
 CARRIED = ("train.json", "train_summary.json", "loss.csv", "loss.png", "model.pt")  # model.pt last: it marks a whole copy
@@ -32,10 +32,13 @@ def _copy(src: Path, dst: Path) -> None:
         shutil.copyfile(src, tmp)
 
 
-def bring_back(carried: Path, run: Path) -> bool:
-    """Copy the carried finished run `carried` into `run` when `run` has no model.pt; True if copied."""
-    if (run / "model.pt").is_file() or not (carried / "model.pt").is_file():
+def bring_back(carried: Path, run: Path, settings: TrainSettings) -> bool:
+    """Copy the carried finished run `carried` into `run` when `run` has not begun (no train.json); True if
+    copied. A carried run of other settings is a one-line TrainError."""
+    if (run / "train.json").is_file() or not (carried / "model.pt").is_file():
         return False
+    if diff := settings_differ(carried / "train.json", settings):
+        raise TrainError(f"{carried / 'train.json'}: {diff}: delete {carried} to train this model again")
     run.mkdir(parents=True, exist_ok=True)
     for name in CARRIED:
         _copy(carried / name, run / name)

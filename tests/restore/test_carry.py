@@ -1,11 +1,12 @@
 """Carrying finished models between run folders (restore.studies.carry), as `udc-render results --carry` does."""
 import numpy as np
+import pytest
 import torch
 
 from tests.conftest import write_pairs
 from restore.data import list_pairs, load_pair
 from restore.studies.carry import CARRIED, bring_back, keep
-from restore.train import TrainSettings, load_model, predict, train
+from restore.train import TrainError, TrainSettings, load_model, predict, train
 
 TINY_UNET = {"type": "unet", "width": 8, "depth": 3}
 
@@ -21,7 +22,7 @@ def test_a_carried_model_comes_back_finished_and_is_not_trained_again(tmp_path):
     assert (tmp_path / "run" / "model.pt").read_bytes() == (tmp_path / "carry" / "unet_blur" / "model.pt").read_bytes()
     assert sorted(p.name for p in (tmp_path / "carry" / "unet_blur").iterdir()) == sorted(CARRIED)
 
-    assert bring_back(tmp_path / "carry" / "unet_blur", tmp_path / "fresh")
+    assert bring_back(tmp_path / "carry" / "unet_blur", tmp_path / "fresh", s)
     assert train(data, tmp_path / "fresh", s, progress=False) == summary  # finished: nothing loaded or trained
     assert not (tmp_path / "fresh" / "checkpoint.pt").exists()
     half, record = load_model(tmp_path / "fresh" / "model.pt", "cpu")
@@ -32,16 +33,27 @@ def test_a_carried_model_comes_back_finished_and_is_not_trained_again(tmp_path):
 
     keep(tmp_path / "fresh", tmp_path / "carry" / "unet_blur")  # idempotent: the same bytes
     assert (tmp_path / "fresh" / "model.pt").read_bytes() == (tmp_path / "carry" / "unet_blur" / "model.pt").read_bytes()
-    assert not bring_back(tmp_path / "carry" / "unet_blur", tmp_path / "run")  # a run with its model keeps it
+    assert not bring_back(tmp_path / "carry" / "unet_blur", tmp_path / "run", s)  # a begun run keeps its own files
 
 
 def test_a_run_still_training_is_not_carried_back_as_finished(tmp_path):
     data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
     s = TrainSettings(model=TINY_UNET, display="blur", epochs=2, batch=2, crop_px=14)
-    assert not bring_back(tmp_path / "nothing", tmp_path / "run")
+    assert not bring_back(tmp_path / "nothing", tmp_path / "run", s)
     train(data, tmp_path / "run", s, progress=False)
     (tmp_path / "run" / "checkpoint.pt").unlink()
     longer = TrainSettings(model=TINY_UNET, display="blur", epochs=3, batch=2, crop_px=14)
     (tmp_path / "run" / "train.json").unlink()  # the same folder under a longer schedule: not finished
     summary = train(data, tmp_path / "run", longer, progress=False)
     assert summary["epochs"] == 3 and (tmp_path / "run" / "checkpoint.pt").is_file()
+
+
+def test_a_carried_run_of_other_settings_is_a_one_line_error_naming_the_carry(tmp_path):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
+    s = TrainSettings(model=TINY_UNET, display="blur", epochs=1, batch=2, crop_px=14)
+    train(data, tmp_path / "run", s, progress=False)
+    keep(tmp_path / "run", tmp_path / "carry" / "unet_blur")
+    other = TrainSettings(model=TINY_UNET, display="blur", epochs=1, batch=2, crop_px=14, lr=1e-3)
+    with pytest.raises(TrainError, match=r"carry/unet_blur/train.json: lr = 0.001 differs .* delete .*carry/unet_blur"):
+        bring_back(tmp_path / "carry" / "unet_blur", tmp_path / "fresh", other)
+    assert not (tmp_path / "fresh").exists()
