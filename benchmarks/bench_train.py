@@ -9,6 +9,8 @@ batch 4 of 256-px crops, the data loaded in the training process):
 - channels_last: model and batches in channels_last memory format;
 - crop: 128-px crops (a quarter of the pixels per step: compare Mpx/s, not steps/s);
 - compile: torch.compile(model) (inductor; its first steps, which compile, are left out of the timing);
+- bf16: the forward pass under torch.autocast in bfloat16 (restore.train's `autocast = "bf16"`; weights and
+  Adam in float32), alone and with channels_last (what `results --budget cpu` trains with);
 - loader: the pairs read by 0 and 1 DataLoader worker processes (--data DIR: a folder written by
   `udc-render dataset`; without it the batches are random tensors and the loader cases are skipped).
 
@@ -56,8 +58,11 @@ def loader_batches(data: Path, batch: int, crop_px: int, workers: int):
 
 
 def seconds_per_step(model_name: str, batches, steps: int, warmup: int, channels_last: bool = False,
-                     compile_model: bool = False) -> float:
-    """Median wall seconds of one training step (forward, L1, backward, Adam) after `warmup` steps."""
+                     compile_model: bool = False, bf16: bool = False) -> float:
+    """Median wall seconds of one training step (restore.train.train_step: forward, L1, backward, Adam) after
+    `warmup` steps."""
+    from restore.train import TrainSettings, train_step
+    settings = TrainSettings(model=CONFIGS[model_name], display="bench", autocast="bf16" if bf16 else None)
     torch.manual_seed(0)
     model = build_model(dict(CONFIGS[model_name]))
     fmt = torch.channels_last if channels_last else torch.contiguous_format
@@ -68,28 +73,29 @@ def seconds_per_step(model_name: str, batches, steps: int, warmup: int, channels
     for i in range(warmup + steps):
         t0 = time.perf_counter()  # the batch's loading counts (random tensors: a few ms)
         x, y = next(batches)
-        x, y = x.to(memory_format=fmt), y.to(memory_format=fmt)
-        loss = torch.nn.functional.l1_loss(step_model(x), y)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
+        train_step(step_model, opt, x.to(memory_format=fmt), y.to(memory_format=fmt), torch.nn.functional.l1_loss,
+                   settings)
         if i >= warmup:
             times.append(time.perf_counter() - t0)
     return statistics.median(times)
 
 
 def cases(data: Path | None) -> list[dict]:
-    """(name, threads, crop, channels_last, compile, loader workers or None for random tensors)."""
-    out = [dict(name="baseline (restore.train today)", threads=None, crop=256, cl=False, compile=False, workers=None),
-           dict(name="1 thread", threads=1, crop=256, cl=False, compile=False, workers=None),
-           dict(name="2 threads", threads=2, crop=256, cl=False, compile=False, workers=None),
-           dict(name="channels_last", threads=None, crop=256, cl=True, compile=False, workers=None),
-           dict(name="128-px crops", threads=None, crop=128, cl=False, compile=False, workers=None),
-           dict(name="torch.compile", threads=None, crop=256, cl=False, compile=True, workers=None),
-           dict(name="channels_last + compile", threads=None, crop=256, cl=True, compile=True, workers=None)]
+    """(name, threads, crop, channels_last, compile, bf16, loader workers or None for random tensors); unnamed
+    fields are the baseline's."""
+    base = dict(threads=None, crop=256, cl=False, compile=False, bf16=False, workers=None)
+    out = [dict(base, name="baseline (contiguous, float32)"),
+           dict(base, name="1 thread", threads=1),
+           dict(base, name="2 threads", threads=2),
+           dict(base, name="channels_last", cl=True),
+           dict(base, name="128-px crops", crop=128),
+           dict(base, name="torch.compile", compile=True),
+           dict(base, name="channels_last + compile", cl=True, compile=True),
+           dict(base, name="bf16 autocast", bf16=True),
+           dict(base, name="channels_last + bf16 autocast", cl=True, bf16=True)]
     if data is not None:
-        out += [dict(name="real pairs, loader in process", threads=None, crop=256, cl=False, compile=False, workers=0),
-                dict(name="real pairs, 1 loader worker", threads=None, crop=256, cl=False, compile=False, workers=1)]
+        out += [dict(base, name="real pairs, loader in process", workers=0),
+                dict(base, name="real pairs, 1 loader worker", workers=1)]
     return out
 
 
@@ -99,7 +105,8 @@ def run_case(c: dict, model: str, batch: int, steps: int, warmup: int, data: Pat
     try:
         batches = (random_batches(batch, c["crop"]) if c["workers"] is None
                    else loader_batches(data, batch, c["crop"], c["workers"]))
-        s = seconds_per_step(model, batches, steps, warmup + (3 if c["compile"] else 0), c["cl"], c["compile"])
+        s = seconds_per_step(model, batches, steps, warmup + (3 if c["compile"] else 0), c["cl"], c["compile"],
+                             c["bf16"])
     except Exception as exc:  # a case this machine cannot run (e.g. no compiler for inductor): say so
         return {**c, "s_per_step": None, "mpx_per_s": None, "error": f"{type(exc).__name__}: {str(exc)[:120]}"}
     finally:

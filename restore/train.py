@@ -69,6 +69,13 @@ class TrainSettings:
     # Clip the gradient's global L2 norm to this (None: no clipping). Without it the full UNet at lr 2e-4
     # spiked at epoch 24 (loss 0.058 → 0.068, validation −1.6 dB); its norms ran 0.09–0.33, one batch 0.74.
     clip_grad_norm: float | None = None
+    # The forward pass in bfloat16 under torch.autocast ("bf16"; weights, loss, gradients' accumulation and
+    # Adam stay float32), or all float32 (None). On this AVX512-BF16 CPU a UNet step takes half the time
+    # (benchmarks/README.md, bench_train); validation and evaluation always run in float32.
+    autocast: str | None = None
+
+
+AUTOCASTS = (None, "bf16")
 
 
 def data_fingerprint(data_dir: Path) -> str:
@@ -115,6 +122,21 @@ def predict(model: torch.nn.Module, packed: np.ndarray, device: torch.device) ->
         x = torch.from_numpy(np.ascontiguousarray(packed, np.float32))[None].to(device)
         x = x.to(memory_format=torch.channels_last)
         return model(x)[0].float().cpu().numpy()
+
+
+def train_step(model, opt, x: torch.Tensor, y: torch.Tensor, loss_of, settings: TrainSettings) -> float:
+    """One Adam step on the batch (x, y), already on the model's device in channels_last: the forward in
+    bfloat16 when settings.autocast is 'bf16' (the loss on its output widened to float32), the gradient's
+    norm clipped to settings.clip_grad_norm; returns the loss."""
+    with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=settings.autocast == "bf16"):
+        out = model(x)
+    loss = loss_of(out.float(), y)
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    if settings.clip_grad_norm is not None:
+        torch.nn.utils.clip_grad_norm_(model.parameters(), settings.clip_grad_norm)
+    opt.step()
+    return loss.item()
 
 
 def validation_psnr(model, pairs, device) -> float | None:
@@ -248,6 +270,8 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     data_dir, out = Path(data_dir), Path(out)
     if settings.epochs < 1 or settings.batch < 1:
         raise TrainError(f"epochs = {settings.epochs}, batch = {settings.batch}: expected integers ≥ 1")
+    if settings.autocast not in AUTOCASTS:
+        raise TrainError(f"autocast = {settings.autocast!r}: expected one of {', '.join(map(str, AUTOCASTS))}")
     loss_of = loss_fn(settings.loss)
     _check_run_folder(out, settings)
     if (done := finished_summary(out, settings)) is not None:
@@ -276,13 +300,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
         for x, y in loader:
             x = x.to(dev, memory_format=torch.channels_last)
             y = y.to(dev, memory_format=torch.channels_last)
-            loss = loss_of(model(x), y)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            if settings.clip_grad_norm is not None:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), settings.clip_grad_norm)
-            opt.step()
-            losses.append(loss.item())
+            losses.append(train_step(model, opt, x, y, loss_of, settings))
             step += 1
         if not all(math.isfinite(v) for v in losses):
             raise TrainError(f"epoch {epoch + 1}: the loss is not finite ({losses[-1]}); lower the learning rate")

@@ -6,7 +6,8 @@ updated with the json, e.g. '{"width": 64}'), the training crop and a constant l
 restore.train's recipe at the cpu budget (Adam (0.9, 0.999, 1e-8), L1, gradient norm clipped at 0.5,
 batch 4, 2 Bayer-preserving crops per pair and epoch, seed 0, epochs shuffled by seed), so the UNet at
 256 px reproduces the full run's first validation (epoch 4 = 300 steps: 19.82 dB on the T-OLED).
-Validation: the central `val_crop_px` of every val frame, as restore.train's.
+Validation: the central `val_crop_px` of every val frame, as restore.train's. `--autocast bf16` runs the
+forward passes in bfloat16 (restore.train.train_step), to compare a budget's precision with float32.
 
     python -m restore.studies.early_training DATA --display toled --steps 300 \\
         --variant unet:256:2e-4 --variant unet:128:1e-3 --variant 'unet:128:2e-4:{"width": 64}'
@@ -41,35 +42,35 @@ def parse_variant(text: str) -> dict:
     return {"model": dict(defaults[kind], **extra), "crop_px": crop, "lr": lr, "variant": text}
 
 
-def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop_px: int = 768) -> dict:
-    """Train `variant` for `steps` steps from seed 0; its validation PSNR, mean loss of the last 75 steps
-    and seconds."""
+def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop_px: int = 768,
+               autocast: str | None = None) -> dict:
+    """Train `variant` for `steps` steps from seed 0 (restore.train.train_step; `autocast`: its forward
+    precision); its validation PSNR, mean loss of the last 75 steps and seconds."""
     import torch
     from restore.data import PairDataset, list_pairs, load_pair
     from restore.losses import loss_fn
     from restore.models import build_model
-    from restore.train import centre_crop, validation_psnr
+    from restore.train import TrainSettings, centre_crop, train_step, validation_psnr
+    settings = TrainSettings(model=variant["model"], display=display, batch=BATCH, crop_px=variant["crop_px"],
+                             crops_per_pair=CROPS_PER_PAIR, lr=variant["lr"], seed=SEED,
+                             clip_grad_norm=CLIP_GRAD_NORM, autocast=autocast)
     torch.manual_seed(SEED)
-    data = PairDataset(list_pairs(data_dir, "train", [display]), variant["crop_px"], augment=True, seed=SEED,
+    data = PairDataset(list_pairs(data_dir, "train", [display]), settings.crop_px, augment=True, seed=SEED,
                        crops_per_pair=CROPS_PER_PAIR)
     val = [centre_crop(*load_pair(p), val_crop_px) for p in list_pairs(data_dir, "val", [display])]
-    model = build_model(variant["model"]).to(memory_format=torch.channels_last)
-    opt = torch.optim.Adam(model.parameters(), lr=variant["lr"], betas=(0.9, 0.999), eps=1e-8)
+    model = build_model(settings.model).to(memory_format=torch.channels_last)
+    opt = torch.optim.Adam(model.parameters(), lr=settings.lr, betas=(0.9, 0.999), eps=1e-8)
     l1, losses, epoch, t0 = loss_fn("l1"), [], 0, time.perf_counter()
     while len(losses) < steps:
         data.set_epoch(epoch)
         order = torch.Generator().manual_seed(SEED * 1_000_003 + epoch)
         for x, y in torch.utils.data.DataLoader(data, batch_size=BATCH, shuffle=True, generator=order):
-            loss = l1(model(x.to(memory_format=torch.channels_last)), y.to(memory_format=torch.channels_last))
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(model.parameters(), CLIP_GRAD_NORM)
-            opt.step()
-            losses.append(loss.item())
+            losses.append(train_step(model, opt, x.to(memory_format=torch.channels_last),
+                                     y.to(memory_format=torch.channels_last), l1, settings))
             if len(losses) == steps:
                 break
         epoch += 1
-    return {"variant": variant["variant"], "display": display, "steps": steps,
+    return {"variant": variant["variant"], "display": display, "steps": steps, "autocast": autocast,
             "val_psnr_db": validation_psnr(model, val, torch.device("cpu")),
             "loss_last75": float(np.mean(losses[-75:])), "seconds": time.perf_counter() - t0}
 
@@ -79,11 +80,14 @@ def main(argv: list[str]) -> None:
     from udc_render.errors import UdcError
     from udc_render.io.files import save_text
     usage = ("python -m restore.studies.early_training DATA --display D --variant type:crop_px:lr[:json] "
-             "[--variant ...] [--steps 300] [--out out/early_training]")
+             "[--variant ...] [--steps 300] [--autocast bf16] [--out out/early_training]")
     pos, o = parse_options(argv, usage, repeated=("variant",))
     if len(pos) != 1 or "display" not in o or not o["variant"]:
         sys.exit(f"usage: {usage}")
     data, display, steps, out = Path(pos[0]), o["display"], int(o.get("steps", 300)), Path(o.get("out", "out/early_training"))
+    autocast = o.get("autocast")
+    if autocast not in (None, "bf16"):
+        sys.exit(f"error: --autocast = {autocast!r}: expected bf16 (or leave it out for float32)")
     path = out / "results.jsonl"
     try:
         variants = [parse_variant(v) for v in o["variant"]]
@@ -91,14 +95,15 @@ def main(argv: list[str]) -> None:
         rows = [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
         for v in variants:
             if not any(r["variant"] == v["variant"] and r["display"] == display and r["steps"] == steps
-                       for r in rows):
-                rows.append(early_psnr(data, display, v, steps))
+                       and r.get("autocast") == autocast for r in rows):
+                rows.append(early_psnr(data, display, v, steps, autocast=autocast))
                 save_text(path, "".join(json.dumps(r) + "\n" for r in rows))
     except (UdcError, OSError) as exc:
         sys.exit(f"error: {exc}")
-    print("| variant | display | steps | val PSNR (dB) | loss, last 75 steps | s |\n|---|---|---|---|---|---|")
+    print("| variant | forward | display | steps | val PSNR (dB) | loss, last 75 steps | s |\n|---|---|---|---|---|---|---|")
     for r in rows:
-        print(f"| `{r['variant']}` | {r['display']} | {r['steps']} | {r['val_psnr_db']:.2f} | {r['loss_last75']:.4f} | "
+        print(f"| `{r['variant']}` | {r.get('autocast') or 'float32'} | {r['display']} | {r['steps']} | "
+              f"{r['val_psnr_db']:.2f} | {r['loss_last75']:.4f} | "
               f"{r['seconds']:.0f} |")
 
 

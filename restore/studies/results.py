@@ -97,7 +97,8 @@ def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, 
             settings = TrainSettings(model=cfg, display=d, epochs=b["epochs"][kind], batch=b["batch"],
                                      crop_px=b["crop_px"][kind], crops_per_pair=b["crops_per_pair"], lr=b["lr"],
                                      data_fingerprint=data_fingerprint(data), plateau_db=b.get("plateau_db"),
-                                     val_crop_px=b.get("val_crop_px"), clip_grad_norm=b.get("clip_grad_norm"))
+                                     val_crop_px=b.get("val_crop_px"), clip_grad_norm=b.get("clip_grad_norm"),
+                                     autocast=b.get("autocast"))
             if carry:
                 bring_back(carry / run.name, run, settings)
             train(data, run, settings, val_every=b.get("val_every", 10), progress=progress)

@@ -277,3 +277,48 @@ def test_gradient_clipping_bounds_the_update(tmp_path):
         w = torch.load(tmp_path / name / "model.pt", weights_only=False)["state_dict"]
         moved[name] = max(float((w[k].float() - start[k].float()).abs().max()) for k in start)
     assert moved["free"] > 5e-4 and moved["clipped"] < 1e-5
+
+
+def test_bf16_autocast_step_matches_float32_and_keeps_float32_weights():
+    """One train_step from the same weights and batch: the bfloat16 forward's loss agrees with float32's to
+    bfloat16's precision (8 significant bits; measured 0.007 %, asserted 2 %), the weights and Adam's
+    state stay float32, and the updates point the same way (cosine 0.996 measured, 0.9 asserted)."""
+    from restore.models import build_model
+    from restore.train import train_step
+    torch.manual_seed(0)
+    x, y = torch.rand(2, 4, 16, 16), torch.rand(2, 3, 32, 32)
+    results = {}
+    for autocast in (None, "bf16"):
+        torch.manual_seed(1)
+        model = build_model(TINY_UNET)
+        before = [p.detach().clone() for p in model.parameters()]
+        opt = torch.optim.Adam(model.parameters(), lr=1e-3)
+        s = TrainSettings(model=TINY_UNET, display="blur", autocast=autocast)
+        loss = train_step(model, opt, x, y, torch.nn.functional.l1_loss, s)
+        assert all(p.dtype == torch.float32 for p in model.parameters())
+        assert all(v.dtype == torch.float32 for st in opt.state.values() for v in st.values() if v.is_floating_point())
+        results[autocast] = loss, torch.cat([(p.detach() - b).flatten() for p, b in zip(model.parameters(), before)])
+    (l32, d32), (l16, d16) = results[None], results["bf16"]
+    assert math.isfinite(l16) and abs(l16 - l32) < 0.02 * l32
+    assert torch.nn.functional.cosine_similarity(d32, d16, dim=0) > 0.9
+
+
+def test_tiny_unet_trained_in_bf16_beats_the_identity(tmp_path):
+    """The first test's recipe with the forward in bfloat16: still > 2 dB above the identity."""
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 8), ("test", 2)), blur_px=3, noise=0.1)
+    s = TrainSettings(model=TINY_UNET, display="blur", epochs=30, batch=4, crop_px=48, crops_per_pair=2, lr=3e-3,
+                      autocast="bf16")
+    train(data, tmp_path / "run", s, progress=False)
+    model, _ = load_model(tmp_path / "run" / "model.pt", "cpu")
+    for p in list_pairs(data, "test", ["blur"]):
+        packed, gt = load_pair(p)
+        identity = demosaic_bilinear(unpack_rggb(packed)) / 0.5
+        assert _psnr(predict(model, packed, torch.device("cpu")), gt) > _psnr(identity, gt) + 2
+
+
+def test_an_unknown_autocast_is_refused_before_the_run_folder_is_used(tmp_path):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
+    s = TrainSettings(model=TINY_RESNET, display="blur", epochs=1, batch=2, crop_px=14, autocast="fp16")
+    with pytest.raises(TrainError, match="autocast = 'fp16': expected one of None, bf16"):
+        train(data, tmp_path / "run", s, progress=False)
+    assert not (tmp_path / "run").exists()
