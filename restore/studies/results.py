@@ -26,11 +26,14 @@ BUDGETS = {
               "models": {"unet": {"type": "unet", "width": 8}, "resnet": {"type": "resnet", "features": 8, "blocks": 2}}},
     # cpu: epoch caps, not targets; each model stops at the 0.1 dB plateau, which needs ≥ 4 validations in the
     # last fifth, so ≥ 30 epochs at val_every 2. Validation on the central 768-px square (a ResNet validation
-    # of 20 whole frames would take 6 min). Caps: about a working day of this machine if nothing plateaus.
-    "cpu": {"items": (150, 20, 30), "sensor_px": (2048, 1024), "epochs": {"unet": 80, "resnet": 50},
+    # of 20 whole frames would take 6 min). The forward in bfloat16 (half the step time on this CPU,
+    # bench_train) paid for the ResNet's cap of 80 (50 before: it had not plateaued there). Caps: about a
+    # working day of this machine if nothing plateaus.
+    "cpu": {"items": (150, 20, 30), "sensor_px": (2048, 1024), "epochs": {"unet": 80, "resnet": 80},
             "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (2048, 1024),
             "heldout_items": None, "lr": 2e-4, "plateau_db": 0.1, "val_every": 2, "val_crop_px": 768,
-            "clip_grad_norm": 0.5, "models": {"unet": None, "resnet": None}, "carry": "restore/trained/cpu"},
+            "clip_grad_norm": 0.5, "autocast": "bf16", "models": {"unet": None, "resnet": None},
+            "carry": "restore/trained/cpu"},
     "paper": {"items": (400, 40, 60), "sensor_px": (2048, 1024), "epochs": {"unet": 400, "resnet": 400},
               "crop_px": {"unet": 256, "resnet": 256}, "crops_per_pair": 1, "batch": 4, "face_sensor_px": (2048, 1024),
               "lr": 1e-4,
@@ -383,7 +386,9 @@ def training_section(b: dict, budget: str, out: Path) -> list[str]:
     clip = b.get("clip_grad_norm")
     return [f"Adam (0.9, 0.999, 1e-8), L1 loss, lr {b['lr']:g} halved at half the epoch cap, batch {b['batch']}, "
             + ("" if clip is None else f"gradient norm clipped at {clip:g}, ") +
-            f"{b['crops_per_pair']} random crops per pair and epoch with Bayer-preserving flips; UNet "
+            f"{b['crops_per_pair']} random crops per pair and epoch with Bayer-preserving flips, "
+            + ("the forward pass in bfloat16 (torch.autocast; weights, loss and Adam in float32; validation and "
+               "scoring in float32); " if b.get("autocast") == "bf16" else "") + f"UNet "
             f"{b['crop_px']['unet']}-px crops, at most {b['epochs']['unet']} epochs; ResNet {b['crop_px']['resnet']}-px "
             f"crops, at most {b['epochs']['resnet']} epochs. Each model stops at its plateau: validation PSNR "
             f"(linear, on the central {b.get('val_crop_px') or 'whole'}-px square of the {b['items'][1]} val frames, "
