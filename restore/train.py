@@ -12,8 +12,9 @@ An epoch is `crops_per_pair` random crops of every training pair. The run folder
     train_summary.json   epochs, steps, plateau, seconds: a finished run (the cap or the plateau reached) is
                      not loaded again, with or without its checkpoint (restore.studies.carry keeps none)
     loss.csv, loss.png   the loss log (mean training loss per epoch, validation PSNR)
-With plateau_db set, training stops at the first validation where the validation PSNR has spanned less
-than plateau_db over the last fifth of the steps (plateau_step); the summary says whether and where.
+With plateau_db set, training stops at the first validation where the validation PSNR's fitted line
+changes by less than plateau_db over the last fifth of the steps (plateau_step); the summary says whether
+and where. With autocast 'bf16' the forward pass runs in bfloat16 (train_step).
 Resumed training gives the same weights as an uninterrupted run on the same machine and threads:
 sample order and crops are seeded by (seed, epoch).
 """
@@ -60,8 +61,8 @@ class TrainSettings:
     loss: str = "l1"
     seed: int = 0
     data_fingerprint: str = ""
-    # Stop once validation PSNR has plateaued: it spans less than this (dB) over the last fifth of the steps
-    # (plateau_step); None: every epoch. Issue 15's criterion is 0.1 dB.
+    # Stop once validation PSNR has plateaued: its fitted line changes by less than this (dB) over the last
+    # fifth of the steps (plateau_step); None: every epoch. Issue 15's criterion is 0.1 dB.
     plateau_db: float | None = None
     # Validate on the central val_crop_px square of each val frame (None: the whole frame). A stopping signal
     # only: the test split is always scored whole (restore.evaluate). Keeps the ResNet's validations cheap.
