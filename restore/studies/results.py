@@ -221,12 +221,14 @@ def _scoring_source() -> bytes:
 def evaluate_rows(data: Path, models: dict, ev: Path, progress: bool) -> dict:
     """Input, DeP and every trained row on `data`'s test split into `ev`; returns its results.json, holding
     these rows only. Resumes: a row whose evaluation_stamp matches the one recorded in `ev`/stamps.json when
-    it was scored, and whose displays are all in results.json, is not scored again."""
+    it was scored, and whose displays are all in results.json, is not scored again. The seconds each row's
+    scoring took go to `ev`/row_seconds.json (evaluation_hours)."""
     from restore.data import dataset_displays
     from restore.evaluate import EvalSettings, evaluate, results_csv, results_markdown
     from udc_render.io.files import save_json, save_text
-    path, stamps_path = ev / "results.json", ev / "stamps.json"
+    path, stamps_path, seconds_path = ev / "results.json", ev / "stamps.json", ev / "row_seconds.json"
     stamps = json.loads(stamps_path.read_text()) if stamps_path.is_file() and path.is_file() else {}
+    seconds = json.loads(seconds_path.read_text()) if seconds_path.is_file() else {}
     rows = [("input", "input", dataset_displays(data)), ("dep", "dep", dataset_displays(data))]
     rows += [(row, str(p), [d]) for (row, d), p in models.items()]
     scored = json.loads(path.read_text())["methods"] if path.is_file() else {}  # before this call's rows
@@ -234,8 +236,11 @@ def evaluate_rows(data: Path, models: dict, ev: Path, progress: bool) -> dict:
         stamp = evaluation_stamp(data, method)
         if stamps.get(method) == stamp and all(d in scored.get(name, {}).get("displays", {}) for d in displays):
             continue
+        t = time.perf_counter()
         evaluate(data, method, ev, EvalSettings(name=None if method in ("input", "dep") else name), progress=progress)
+        seconds[name] = time.perf_counter() - t
         stamps[method] = stamp
+        save_json(seconds_path, seconds)
         save_json(stamps_path, stamps)
     results = json.loads(path.read_text())
     names = {name for name, _, _ in rows}
@@ -331,6 +336,52 @@ def dataset_hours(data: Path) -> float:
     dataset made in resumed parts counts every part."""
     rows = [json.loads(line) for line in (data / "timing.jsonl").read_text().splitlines() if line.strip()]
     return sum(r.get("seconds", 0.0) for r in rows) / 3600
+
+
+def evaluation_hours(ev: Path) -> float:
+    """The scoring time (h) of the rows in the evaluation folder `ev`: the seconds evaluate_rows recorded
+    for the latest scoring of each row (0 for a folder scored before they were recorded)."""
+    path = ev / "row_seconds.json"
+    return sum(json.loads(path.read_text()).values()) / 3600 if path.is_file() else 0.0
+
+
+def training_hours(out: Path) -> dict[tuple[str, str], float]:
+    """{(row, display): the run's wall time (h) from its train_summary.json, summed over resumed parts}."""
+    hours = {}
+    for row, _, _ in ROWS:
+        for d in DISPLAYS:
+            path = run_dir(out, row, d) / "train_summary.json"
+            if path.is_file() and json.loads(path.read_text()).get("seconds") is not None:
+                hours[(row, d)] = json.loads(path.read_text())["seconds"] / 3600
+    return hours
+
+
+WORKING_DAY_H = 8.0  # the issue's budget: "about one working day of this machine in total"
+
+
+def budget_section(out: Path, datasets: dict[str, Path], times: dict) -> list[str]:
+    """The run's machine time per stage, each summed from what the stage recorded of itself over every
+    invocation that did its work (datasets: the items' seconds; training: the models' summaries; scoring:
+    the rows' seconds), and the stages that are redone at every invocation from this one's times."""
+    rows = [(f"dataset, {p} profile", dataset_hours(f), "sum of the items' recorded seconds")
+            for p, f in datasets.items()]
+    trained = training_hours(out)
+    rows.append((f"training, {len(trained)} models", sum(trained.values()),
+                 "the models' train_summary.json (each in the table above)"))
+    heldout = out / "dataset_heldout"
+    rows += [("scoring, test split", evaluation_hours(out / "eval"), "sum of the rows' recorded seconds"),
+             ("held-out photographs: dataset", dataset_hours(heldout) if (heldout / "timing.jsonl").is_file() else 0.0,
+              "sum of the items' recorded seconds"),
+             ("held-out photographs: scoring", evaluation_hours(out / "eval_heldout"), "sum of the rows' recorded seconds"),
+             ("error by spatial frequency", times.get("error_bands_s", 0.0) / 3600, "this invocation (redone each time)"),
+             ("faces", times.get("faces_s", 0.0) / 3600, "this invocation (redone each time)")]
+    total = sum(h for _, h, _ in rows)
+    return ["| stage | machine time (h) | counted from |", "|---|---|---|",
+            *(f"| {name} | {h:.2f} | {how} |" for name, h, how in rows),
+            f"| **total** | **{total:.2f}** | |", "",
+            f"The issue's budget is about one working day ({WORKING_DAY_H:g} h) of this machine: this run took "
+            f"{total / WORKING_DAY_H:.2f} of it. Time lost to interrupted parts (an item or epoch under way when a "
+            "session ended) is not counted."]
 
 
 def copy_figures(out: Path, fig_dir: Path) -> dict[str, Path]:
@@ -477,6 +528,7 @@ def results_document(results: dict, heldout: dict, bands: dict, faces: dict, b: 
         "; the datasets' and models' own times, summed over resumed parts, are below.", "",
         "## Data", "", *data_section(b, data, datasets), "",
         f"## Training ({budget} budget)", "", *training_section(b, budget, out), "",
+        "## Machine time", "", *budget_section(out, datasets, times), "",
         *([f"![training curves]({fig['training_curves']})", ""] if "training_curves" in fig else []),
         "## Pipeline comparison (test split)", "",
         results_markdown(results), "",

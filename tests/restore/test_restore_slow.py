@@ -1,4 +1,5 @@
 """End-to-end restoration checks on rendered captures (slow: `pytest -m slow`)."""
+import json
 import numpy as np
 import pytest
 
@@ -41,6 +42,9 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     faces = {(row["condition"], row["display"]) for row in r["faces"]["rows"]}
     assert {("unet", "poled"), ("resnet", "toled"), ("unet ×k", "toled"), ("resnet ×k", "poled")} <= faces
     assert all(k > 0 for k in r["faces"]["level_gain"].values()) and "A `×k` row restores" in doc
+    row_seconds = {ev: json.loads((tmp_path / "res" / ev / "row_seconds.json").read_text()) for ev in ("eval", "eval_heldout")}
+    assert all(set(s) == set(methods) and min(s.values()) > 0 for s in row_seconds.values())
+    assert "## Machine time" in doc and "| scoring, test split |" in doc
 
     # a second run resumes every stage: nothing is rendered, trained or scored again (timing.jsonl, the loss
     # logs and the per-image scores untouched), and the manifests and models are the same bytes
@@ -52,6 +56,7 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     assert len(untouched) == 3 + 3 * 2 and all(p.stat().st_mtime_ns == t for p, t in untouched.items())
     assert len(same) == 3 + 3 * 2 and all(p.read_bytes() == b for p, b in same.items())
     assert len(scores) == 2 * 5 * 2 and all(p.stat().st_mtime_ns == t for p, t in scores.items())
+    assert all(json.loads((res / ev / "row_seconds.json").read_text()) == v for ev, v in row_seconds.items())
     for d in ("toled", "poled"):  # the same weights on the same pairs
         assert (again["results"]["methods"]["unet"]["displays"][d]["psnr_db_paper"] ==
                 methods["unet"]["displays"][d]["psnr_db_paper"])

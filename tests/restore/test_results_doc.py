@@ -64,3 +64,27 @@ def test_evaluation_stamp_follows_the_checkpoint_and_the_data(tmp_path):
     ckpt.write_bytes(b"weights a")
     (data / "manifest.jsonl").write_text(json.dumps({"item": 1, "split": "test"}) + "\n")  # other items
     assert evaluation_stamp(data, str(ckpt)) != first
+
+
+def test_machine_time_is_summed_from_what_each_stage_recorded(tmp_path):
+    """The budget table adds the datasets' item seconds, the models' summaries and the rows' scoring seconds
+    (each summed over resumed parts), plus this invocation's redone stages: a golden total."""
+    import json
+    from restore.studies.results import budget_section
+    out = tmp_path / "res"
+    datasets = {p: out / f"dataset_{p}" for p in ("physical", "paper")}
+    for i, folder in enumerate(datasets.values()):
+        folder.mkdir(parents=True)
+        (folder / "timing.jsonl").write_text("".join(json.dumps({"item": k, "seconds": 900.0 * (i + 1)}) + "\n"
+                                                     for k in range(4)))  # 1 h and 2 h
+    for name, seconds in (("unet_toled", 1800.0), ("resnet_poled", 5400.0)):
+        (out / "train" / name).mkdir(parents=True)
+        (out / "train" / name / "train_summary.json").write_text(json.dumps({"seconds": seconds}))
+    (out / "eval").mkdir()
+    (out / "eval" / "row_seconds.json").write_text(json.dumps({"input": 360.0, "dep": 3240.0}))  # 1 h
+    lines = budget_section(out, datasets, {"error_bands_s": 720.0, "faces_s": 1080.0})  # 0.2 h and 0.3 h
+    text = "\n".join(lines)
+    assert "| dataset, physical profile | 1.00 |" in text and "| dataset, paper profile | 2.00 |" in text
+    assert "| training, 2 models | 2.00 |" in text and "| scoring, test split | 1.00 |" in text
+    assert "| held-out photographs: dataset | 0.00 |" in text  # not made: nothing counted
+    assert "| **total** | **6.50** |" in text and "this run took 0.81 of it" in text
