@@ -102,10 +102,12 @@ def learning_rate(settings: TrainSettings, epoch: int) -> float:
     return settings.lr * (0.5 if epoch >= settings.epochs // 2 else 1.0)
 
 
-def plateau_step(log: list, threshold_db: float) -> int | None:
+def plateau_step(log: list, threshold_db: float, fit_window: float = PLATEAU_FIT_WINDOW,
+                 min_validations: int = PLATEAU_MIN_VALIDATIONS) -> int | None:
     """The first validated step S at which validation PSNR changes by less than threshold_db over a fifth of
     the steps: the least-squares line through the validations logged at steps ≥ (1 − PLATEAU_FIT_WINDOW) · S,
     at least PLATEAU_MIN_VALIDATIONS of them, has |slope| · PLATEAU_WINDOW · S < threshold_db. None before.
+    (fit_window and min_validations: other criteria, for restore.studies.plateau_criteria.)
 
     The line spans two fifths, not one: validation PSNR jitters by 0.1–0.4 dB between validations, and a line
     through the last fifth's four or five points stopped four of five cpu-budget UNets (epochs 32–50) whose
@@ -114,19 +116,20 @@ def plateau_step(log: list, threshold_db: float) -> int | None:
     T-OLED UNet at 21.87 dB while it was rising to 22.27 dB (restore.studies.continued_training)."""
     vals = [(r["step"], r["val_psnr_db"]) for r in log if r.get("val_psnr_db") is not None]
     for i, (step, _) in enumerate(vals):
-        change = trend_db_per_fifth(vals[:i + 1])
+        change = trend_db_per_fifth(vals[:i + 1], fit_window, min_validations)
         if change is not None and abs(change) < threshold_db:
             return step
     return None
 
 
-def trend_db_per_fifth(vals: list[tuple[float, float]]) -> float | None:
+def trend_db_per_fifth(vals: list[tuple[float, float]], fit_window: float = PLATEAU_FIT_WINDOW,
+                       min_validations: int = PLATEAU_MIN_VALIDATIONS) -> float | None:
     """The change in dB over a fifth of the steps of the line fitted through the (step, PSNR) validations of
-    the last two fifths of the steps, slope · PLATEAU_WINDOW · S at the last step S; None with fewer than
-    PLATEAU_MIN_VALIDATIONS of them."""
+    the last fit_window of the steps (two fifths), slope · PLATEAU_WINDOW · S at the last step S; None with
+    fewer than min_validations of them."""
     step = vals[-1][0]
-    window = np.array([(t, v) for t, v in vals if t >= (1 - PLATEAU_FIT_WINDOW) * step], dtype=np.float64)
-    if len(window) < PLATEAU_MIN_VALIDATIONS:
+    window = np.array([(t, v) for t, v in vals if t >= (1 - fit_window) * step], dtype=np.float64)
+    if len(window) < min_validations:
         return None
     return float(np.polyfit(window[:, 0], window[:, 1], 1)[0] * PLATEAU_WINDOW * step)
 
