@@ -32,18 +32,21 @@ def stops(loss_csv: Path, threshold_db: float = 0.1) -> dict:
     return {**row, "end": validated[vals[-1][0]], "trend_db": trend_db_per_fifth(vals)}
 
 
+def _cell(stop: tuple | None) -> str:
+    return "—" if stop is None else f"epoch {stop[0]}, {stop[1]:.2f} dB"
+
+
 def markdown(folder: Path, threshold_db: float = 0.1) -> str:
     """One row per run folder under `folder` (module doc)."""
     runs = sorted(p.parent for p in Path(folder).glob("*/loss.csv"))
     if not runs:
         raise ValueError(f"{folder}: no run folder with a loss.csv")
-    cell = lambda s: "—" if s is None else f"epoch {s[0]}, {s[1]:.2f} dB"  # noqa: E731
     lines = [f"| run | {' | '.join(CRITERIA)} | last validation | trend at the end (dB per fifth) |",
              "|---|" + "---|" * (len(CRITERIA) + 2)]
     for run in runs:
         r = stops(run / "loss.csv", threshold_db)
         trend = "—" if r["trend_db"] is None else f"{r['trend_db']:+.2f}"
-        lines.append(f"| {run.name} | {' | '.join(cell(r[n]) for n in CRITERIA)} | {cell(r['end'])} | {trend} |")
+        lines.append(f"| {run.name} | {' | '.join(_cell(r[n]) for n in CRITERIA)} | {_cell(r['end'])} | {trend} |")
     return "\n".join(lines)
 
 
