@@ -114,12 +114,17 @@ def plateau_step(log: list, threshold_db: float, fit_window: float = PLATEAU_FIT
     two-fifths trend still rose 0.13–0.31 dB per fifth (the float32 T-OLED UNet: 0.06 dB per fifth from its
     last 6 validations, 0.24 dB from its last 11). Before that, the span of three points stopped the grey run's
     T-OLED UNet at 21.87 dB while it was rising to 22.27 dB (restore.studies.continued_training)."""
-    vals = [(r["step"], r["val_psnr_db"]) for r in log if r.get("val_psnr_db") is not None]
+    vals = validations(log)
     for i, (step, _) in enumerate(vals):
         change = trend_db_per_fifth(vals[:i + 1], fit_window, min_validations)
         if change is not None and abs(change) < threshold_db:
             return step
     return None
+
+
+def validations(log: list) -> list[tuple[float, float]]:
+    """The (step, validation PSNR) pairs of a loss log, in its order."""
+    return [(r["step"], r["val_psnr_db"]) for r in log if r.get("val_psnr_db") is not None]
 
 
 def trend_db_per_fifth(vals: list[tuple[float, float]], fit_window: float = PLATEAU_FIT_WINDOW,

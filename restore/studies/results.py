@@ -457,7 +457,7 @@ def training_section(b: dict, budget: str, out: Path) -> list[str]:
 def training_table(out: Path, b: dict) -> list[str]:
     """One line per trained model from its train_summary.json and loss.csv: epochs, steps, wall time, whether
     validation PSNR reached the plateau (restore.train.plateau_step) and where, and its trend at the end."""
-    from restore.train import read_log, trend_db_per_fifth
+    from restore.train import read_log, trend_db_per_fifth, validations
     lines = ["| row | display | epochs (cap) | steps | wall time (h) | plateau | last val PSNR (dB) | "
              "trend at the end (dB per fifth of the steps) |", "|---|---|---|---|---|---|---|---|"]
     for row, _, _ in ROWS:
@@ -469,7 +469,7 @@ def training_table(out: Path, b: dict) -> list[str]:
             plateau = f"at step {t['plateau_step']}" if t.get("plateaued") else "**not reached**"
             val = "—" if t.get("val_psnr_db") is None else f"{t['val_psnr_db']:.2f}"
             hours = "—" if t.get("seconds") is None else f"{t['seconds'] / 3600:.2f}"
-            vals = [(r["step"], r["val_psnr_db"]) for r in read_log(run / "loss.csv") if r["val_psnr_db"] is not None]
+            vals = validations(read_log(run / "loss.csv"))
             trend = trend_db_per_fifth(vals) if vals else None
             lines.append(f"| {row} | {d} | {t['epochs']} ({t.get('epochs_planned', t['epochs'])}) | {t['steps']} | "
                          f"{hours} | {plateau} | {val} | {'—' if trend is None else f'{trend:+.2f}'} |")
