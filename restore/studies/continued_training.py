@@ -16,7 +16,6 @@ Prints the validations after the run's stop.
 """
 from __future__ import annotations
 
-import csv
 import dataclasses
 import json
 import shutil
@@ -42,7 +41,7 @@ def continued_settings(run: Path, epochs: int):
 def continue_run(run: Path, data: Path, out: Path, epochs: int, val_every: int = 4, progress: bool = True) -> list:
     """Continue `run` to `epochs` in `out` (resumes there); the log rows after the run's stop."""
     from udc_render.io.files import save_json
-    from restore.train import TrainError, data_fingerprint, train
+    from restore.train import TrainError, data_fingerprint, read_log, train
     run, out = Path(run), Path(out)
     settings, done = continued_settings(run, epochs)
     if settings.data_fingerprint and data_fingerprint(data) != settings.data_fingerprint:
@@ -61,9 +60,7 @@ def continue_run(run: Path, data: Path, out: Path, epochs: int, val_every: int =
         (out / "checkpoint.pt.part").replace(out / "checkpoint.pt")
         save_json(source, record)
     train(data, out, settings, val_every=val_every, progress=progress)
-    with (out / "loss.csv").open() as f:
-        rows = list(csv.DictReader(f))
-    return [r for r in rows if int(r["epoch"]) > done and r["val_psnr_db"]]
+    return [r for r in read_log(out / "loss.csv") if r["epoch"] > done and r["val_psnr_db"] is not None]
 
 
 def main(argv: list[str]) -> None:
@@ -80,8 +77,7 @@ def main(argv: list[str]) -> None:
         sys.exit(f"error: {exc}")
     print("| epoch | step | lr | loss | val PSNR (dB) |\n|---|---|---|---|---|")
     for r in rows:
-        print(f"| {r['epoch']} | {r['step']} | {float(r['lr']):.0e} | {float(r['loss']):.4f} | "
-              f"{float(r['val_psnr_db']):.2f} |")
+        print(f"| {r['epoch']:.0f} | {r['step']:.0f} | {r['lr']:.0e} | {r['loss']:.4f} | {r['val_psnr_db']:.2f} |")
 
 
 if __name__ == "__main__":

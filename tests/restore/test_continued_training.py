@@ -30,7 +30,7 @@ def test_continues_the_log_at_the_runs_final_rate_and_leaves_the_run_alone(finis
     assert [r["epoch"] for r in log] == [1, 2, 3, 4]
     assert log[:2] == _log(run)                              # the run's history, unchanged
     assert [r["lr"] for r in log[2:]] == [5e-4, 5e-4]        # cap 4: halved from epoch 2 on, the run's last rate
-    assert [int(r["epoch"]) for r in rows] == [3, 4] and all(r["val_psnr_db"] for r in rows)
+    assert [r["epoch"] for r in rows] == [3, 4] and all(r["val_psnr_db"] for r in rows)
     assert (run / "checkpoint.pt").read_bytes() == before
     again = continue_run(run, data, tmp_path / "cont", epochs=4, val_every=1, progress=False)  # resumes: nothing to do
     assert again == rows and _log(tmp_path / "cont") == log
