@@ -284,14 +284,13 @@ def ordering_checks(results: dict) -> list[tuple[str, bool, str]]:
 
 def training_logs(out: Path) -> dict[tuple[str, str], list[dict]]:
     """{(row, display): the run's loss.csv rows as numbers} for every run that has one."""
-    import csv
+    from restore.train import read_log
     logs = {}
     for row, _, _ in ROWS:
         for d in DISPLAYS:
             path = run_dir(out, row, d) / "loss.csv"
             if path.is_file():
-                with path.open() as f:
-                    logs[(row, d)] = [{k: float(v) if v else None for k, v in r.items()} for r in csv.DictReader(f)]
+                logs[(row, d)] = read_log(path)
     return logs
 
 
