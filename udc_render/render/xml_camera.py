@@ -91,8 +91,8 @@ def resolve_xml_camera(scene: Scene) -> Scene:
                           f"use_xml_camera = false with camera.origin_m")
     params = mi.traverse(sensor)
     for key in ("principal_point_offset_x", "principal_point_offset_y"):
-        if key in params and abs(float(params[key][0])) > 1e-9:
-            raise RenderError(f"{where}: {element} {key} = {float(params[key][0]):g}: expected 0 (the render's "
+        if key in params and abs(scalar_param(params, key)) > 1e-9:
+            raise RenderError(f"{where}: {element} {key} = {scalar_param(params, key):g}: expected 0 (the render's "
                               f"camera is centred on the optical axis)")
     m = np.array(sensor.world_transform().matrix, dtype=float).reshape(4, 4)
     rot = m[:3, :3]
@@ -102,12 +102,12 @@ def resolve_xml_camera(scene: Scene) -> Scene:
                           f"{np.linalg.det(rot):.3g}): expected a lookat, rotations and translations")
     origin, forward, up = m[:3, 3], m[:3, 2], m[:3, 1]
     target = _lookat_target(xml, origin, forward)
-    fov = float(params["x_fov"][0]) if "x_fov" in params else None
-    aperture = float(params["aperture_radius"][0]) if "aperture_radius" in params else None
+    fov = scalar_param(params, "x_fov") if "x_fov" in params else None
+    aperture = scalar_param(params, "aperture_radius") if "aperture_radius" in params else None
     if scene.lens.focus_distance_m is not None:
         focus, focus_from = scene.lens.focus_distance_m, "lens.focus_distance_m"
     elif cls == "ThinLensCamera":
-        focus, focus_from = float(params["focus_distance"][0]), "thinlens focus_distance"
+        focus, focus_from = scalar_param(params, "focus_distance"), "thinlens focus_distance"
     elif target is not None:
         focus, focus_from = float(np.linalg.norm(target - origin)), "lookat target"
     else:
@@ -124,6 +124,12 @@ def resolve_xml_camera(scene: Scene) -> Scene:
     return replace(scene, camera=replace(scene.camera, origin_m=record.origin_m, target_m=record.target_m, up=record.up),
                    lens=replace(scene.lens, focus_distance_m=record.focus_distance_m),
                    content=replace(content, xml_camera=record))
+
+
+def scalar_param(params, key: str) -> float:
+    """One number of a traversed Mitsuba object: the scalar variants give a Python float, the llvm ones
+    a one-element Float array; anything else (a vector, a transform) is an error, not a silent first element."""
+    return float(np.asarray(params[key], dtype=float).item())
 
 
 def _vec(v) -> tuple[float, float, float]:
