@@ -13,7 +13,7 @@ from psf import compute_kernels, layouts
 from psf.banding import banding_profile
 from psf.engine import KernelSet
 from udc_render.optics import OpticsError, apply_kernels, convolve_bands, fft_shape, phase_weights
-from udc_render.optics.convolution import phase_basis
+from udc_render.optics.field import phase_basis
 from udc_render.render import BandImage
 
 PITCH = 12.4  # µm: 8 × the paper's 1.55 µm, so the banding period (360 µm) is ~29 px

@@ -52,7 +52,7 @@ from scipy.optimize import minimize_scalar
 from psf.banding import PowerSeries
 from psf.engine import DEFAULT_FIELD_PHASES, field_shifts
 from udc_render.optics import displays as D
-from udc_render.optics.convolution import phase_weights
+from udc_render.optics import phase_weights
 from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
 from udc_render.render import render_scene
 from udc_render.scene import Bands, load_scene
@@ -118,7 +118,7 @@ def sinc2(h: int, phases: int) -> float:
 
 def site_positions_um(shape_hw, pitch_um: float) -> tuple[np.ndarray, np.ndarray]:
     """(x of the Gr columns, y of the Gr rows) in µm from the optical axis (frame centre), as the optics
-    place pixel centres (optics.convolution.field_weights)."""
+    place pixel centres (optics.field.field_weights)."""
     H, W = shape_hw
     x = (np.arange(W)[GR_SITE[1]::2] - (W - 1) / 2) * pitch_um
     y = (np.arange(H)[GR_SITE[0]::2] - (H - 1) / 2) * pitch_um
@@ -215,7 +215,7 @@ def interpolated_harmonics(series, weights, display, distance_mm: float, x_um: n
                            axis: str = "x") -> float:
     """Relative amplitude of harmonic `order` of the profile the synthesis' phase interpolation alone
     would give: Σ_k a_k P_k at the kernels' P × P field shifts (psf.engine.field_shifts), blended
-    bilinearly over the Gr pixels (optics.convolution.phase_weights), averaged across the bands, fit at
+    bilinearly over the Gr pixels (optics.field.phase_weights), averaged across the bands, fit at
     T = z_i p / d along `axis`."""
     d_um = distance_mm * 1000.0
     period = display.layout.period_um

@@ -17,7 +17,7 @@ Knobs, each against its own reference:
   display) vs the per-band reference: the error of collapsing wavelength into 3 channels.
 - ``phases``: field phases P = 1, 2, 3, 4, 6 per axis at d = 1 mm (T-OLED, 6 bands of 50 nm) vs P = 8.
 - ``field_rank``: the field-dependent convolution with a rank-r basis of each band's phase kernels
-  (optics.convolution.phase_basis), r = 1, 2, 3, 4, against every phase (P = 4), at the physical
+  (optics.field.phase_basis), r = 1, 2, 3, 4, against every phase (P = 4), at the physical
   profile's d (T-OLED and P-OLED, 6 bands of 50 nm). apply_s is what the rank saves.
 - ``precision``: float32 vs float64 optics FFTs and kernels (T-OLED, 10 nm bands).
 - ``supersample``: render.supersample s = 1, 2 vs 3 (T-OLED and glass, 6 bands): the render pixel's

@@ -1,0 +1,125 @@
+"""Optics stage: apply PSF kernels to rendered band images (docs/PHYSICS.md §1, §3, §4). Per band k:
+
+    y_k = g_k · (x_k ⊗ k_k),    g_k = T_display(λ_k) · transmittance_k · (1 − energy_outside_k)
+
+- Light that the PSF sends outside the kernel window is lost (energy_outside), not renormalised.
+- Glass (no display): pass the bare-lens KernelSet (transmittance 1) and transmission None (T = 1).
+- d = 0 (or no field kernels): one kernel per band (optics.convolution); d > 0: field phases blended
+  (optics.field); very bright pixels convolved apart in float64 (optics.bright).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from udc_render.optics.bright import BrightPixels
+from udc_render.optics.convolution import OpticsError, _check_margin, _precision, convolve_bands, fft_shape
+from udc_render.optics.field import FieldBasis, convolve_field, field_weights
+
+PITCH_RTOL = 1e-6
+
+
+@dataclass(frozen=True)
+class OpticsResult:
+    """Irradiance at the sensor per band, sensor frame only.
+
+    images          [K, H, W] float32, same units as the band images × (dimensionless gains);
+                    [C, H, W] channel sums Σ_k w_ck y_k when apply_kernels was given channel_weights
+    pitch_um        sensor-plane pixel pitch of images
+    wavelengths_nm  [K] kernel wavelengths
+    gains           [K] g_k = transmission_k · transmittance_k · (1 − energy_outside_k)
+    transmission    [K] display spectral transmission T(λ_k) that was applied
+    applied         what was done: model, blend, precision, fft_shape, margin_px, kernel_px, phases, ...
+    """
+    images: np.ndarray
+    pitch_um: float
+    wavelengths_nm: np.ndarray
+    gains: np.ndarray
+    transmission: np.ndarray
+    applied: dict = field(default_factory=dict)
+
+
+def _check_finite(bands: np.ndarray, names=None) -> None:
+    bad = ~np.isfinite(bands).reshape(bands.shape[0], -1).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        name = names[k] if names is not None else f"band {k}"
+        n = int((~np.isfinite(bands[k])).sum())
+        raise OpticsError(f"{name} (index {k}) holds {n} NaN or infinite value(s); the optics need finite input")
+
+
+def _transmission(transmission, K: int) -> np.ndarray:
+    t = np.ones(K) if transmission is None else np.asarray(transmission, dtype=np.float64)
+    t = np.broadcast_to(t, (K,)).astype(np.float64) if t.ndim == 0 else t
+    if t.shape != (K,) or not np.all(np.isfinite(t)) or np.any(t < 0):
+        raise OpticsError(f"transmission must be None, a scalar or [K={K}] finite values ≥ 0, "
+                          f"got shape {t.shape}")
+    return t
+
+
+
+def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "float32", workers: int | None = None,
+                  blend: str = "source", field: bool = True, distance_mm: float | None = None,
+                  image_distance_um: float | None = None, period_um=None,
+                  field_rank: int | None = None, channel_weights=None, spectra: np.ndarray | None = None,
+                  field_basis: FieldBasis | None = None, bright: BrightPixels | None = None) -> OpticsResult:
+    """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
+
+    y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (optics.convolution).
+    transmission: T(λ_k), None (= 1, T-OLED flat or glass), a scalar, or [K].
+    field: use field kernels when the KernelSet has them (d > 0); False forces the mean kernel.
+    distance_mm, image_distance_um, period_um (x, y): override the KernelSet's d, z_i and display period.
+    field_rank: d > 0: a rank-r basis of each band's phase kernels (convolve_field; None: exact).
+    channel_weights [C, K]: images are the channel sums Σ_k w_ck y_k [C, H, W] (one inverse FFT per
+    channel; blend 'source'); spectra: band_spectra of the band image, shared between calls (d = 0 path).
+    field_basis: the kernel set's rank-`field_rank` bases for this grid, made once (field_basis).
+    bright: very bright pixels, convolved apart in float64 (optics.bright; pipeline.bright_pixels).
+    """
+    _precision(precision)  # validate early: one-line error for an unknown precision
+    bands = np.asarray(band_image.bands)
+    if bands.ndim != 3:
+        raise OpticsError(f"band image must be [K, H, W], got shape {bands.shape}")
+    K, H, W = bands.shape
+    edges = np.asarray(band_image.edges_nm, dtype=np.float64)
+    wl = np.asarray(kernel_set.wavelengths_nm, dtype=np.float64)
+    names = [f"band {0.5 * (edges[k] + edges[k + 1]):g} nm" for k in range(K)] if edges.size == K + 1 else None
+    _check_finite(bands, names)
+    if kernel_set.kernels.shape[0] != K or wl.size != K:
+        raise OpticsError(f"{K} band images but {kernel_set.kernels.shape[0]} kernels: one kernel per band needed")
+    if edges.size == K + 1:
+        outside = (wl < edges[:-1] - 1e-9) | (wl > edges[1:] + 1e-9)
+        if outside.any():
+            k = int(np.argmax(outside))
+            raise OpticsError(f"kernel {k} at {wl[k]:g} nm lies outside band {k} [{edges[k]:g}, {edges[k + 1]:g}] nm")
+    pitch = float(band_image.pitch_um)
+    if not abs(kernel_set.pixel_um - pitch) <= PITCH_RTOL * pitch:
+        raise OpticsError(f"kernel pixel {kernel_set.pixel_um:g} µm differs from the band image pitch {pitch:g} µm "
+                          f"(relative tolerance {PITCH_RTOL:g}); compute kernels at pixel_um={pitch:g}")
+    m = int(band_image.margin_px)
+    S = kernel_set.size_px
+    _check_margin(m, S, (H, W))
+    t = _transmission(transmission, K)
+    gains = t * np.asarray(kernel_set.transmittance, float) * (1.0 - np.asarray(kernel_set.energy_outside, float))
+
+    d_mm = float(kernel_set.distance_mm if distance_mm is None else distance_mm)
+    applied = {"convolution": "linear, FFT (scipy.fft rfft2), margin cropped", "precision": precision,
+               "output": "bands" if channel_weights is None else "channel sums Σ_k w_ck y_k (Fourier space)",
+               "fft_shape": list(fft_shape((H, W), S, m)), "margin_px": m, "kernel_px": S,
+               "gain": "T · transmittance · (1 − energy_outside)", "distance_mm": d_mm, "workers": workers,
+               "bright_pixels": 0 if bright is None else int(bright.mask.sum())}
+    has_field = kernel_set.field_kernels is not None or field_basis is not None
+    use_field = field and has_field and d_mm > 0
+    if not use_field:
+        why = ("field kernels disabled" if has_field and not field else "d = 0 or no field kernels: one kernel per band")
+        applied.update(model="field-independent", skipped=[f"field-dependent blur ({why})"])
+        images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra, bright)
+    else:
+        wy, wx, geometry = field_weights(kernel_set, (H, W), pitch, d_mm, image_distance_um, period_um)
+        images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
+                                          gains, blend, precision, workers, field_rank, channel_weights, field_basis,
+                                          bright)
+        if field_rank is not None:
+            applied.update(field_rank=int(field_rank), field_rank_kernel_residual=residual)
+        applied.update(model="field-dependent", blend=blend, **geometry)
+    return OpticsResult(np.ascontiguousarray(images, dtype=np.float32), pitch, wl.copy(), gains, t, applied)
