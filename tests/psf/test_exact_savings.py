@@ -12,6 +12,7 @@ import pytest
 from psf import Lens, MicrographLayout, compute_kernels, fourier, layouts
 from psf.banding import even_order_autocorrelation, order_autocorrelation
 from psf.engine import PAPER_SENSOR_UM
+from psf.plan import make_plan
 
 GOLDEN = Path(__file__).parent / "golden" / "kernels_v1.npz"
 WL = (450.0, 640.0)
@@ -122,7 +123,7 @@ def _sources(display, **kw):
     args = dict(wavelengths_nm=[405.0], size_px=63, distance_mm=2.0, sensor_um=PAPER_SENSOR_UM) | kw
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return compute_kernels.__globals__["_plan"](display, Lens(), np.asarray(args.pop("wavelengths_nm")), 1.55,
+        return make_plan(display, Lens(), np.asarray(args.pop("wavelengths_nm")), 1.55,
                                                     args.pop("size_px"), args.pop("distance_mm"), None, "mft", 256,
                                                     "float32", True, "band_limited", args.pop("sensor_um"), []).sources
 
