@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from udc_render.studies import defocus as D
+from udc_render.studies import defocus_measures as D
 from udc_render.studies.report import machine_text, md_table, pyplot, save_plot, write_tables
 
 NAMES = {"glass": "glass", "toled": "T-OLED", "poled": "P-OLED", "toled_gap": f"T-OLED d={D.D_GAP_MM:g} mm"}
@@ -78,7 +78,7 @@ def blur_lines(rows: list[dict], wl: float, displays: tuple) -> list[str]:
     for v in sorted({r["vergence_per_m"] for r in rows}):
         line = {}
         for disp in displays:
-            r = D._at(rows, disp, wl, v)
+            r = D.row_at(rows, disp, wl, v)
             line.update({"z": mm(r["object_distance_mm"]), "b": r["coc_geom_px"], "wd": r["disc_width_geom_px"],
                          f"{disp}_w": r["esf_width_px"], f"{disp}_eq": r["disc_equiv_px"],
                          f"{disp}_m": r["mtf_ref"], f"{disp}_m50": r["mtf50_cpp"]})
@@ -95,10 +95,10 @@ def display_effect_lines(result: dict, wl: float) -> list[str]:
     """What the display changes, in the run's own numbers at wavelength wl."""
     rows, dof = result["rows"], {r["display"]: r for r in result["dof"] if r["wavelength_nm"] == wl}
     v_f = D.focus_vergence_per_m()
-    g = D._at(rows, "glass", wl, v_f)
+    g = D.row_at(rows, "glass", wl, v_f)
     out = []
     for disp in result["meta"]["cfg"].displays[1:]:
-        r, d = D._at(rows, disp, wl, v_f), dof[disp]
+        r, d = D.row_at(rows, disp, wl, v_f), dof[disp]
         absolute = (f"absolute DoF {d['abs_width_per_m']:.3g} m⁻¹ against the glass's "
                     f"{dof['glass']['abs_width_per_m']:.3g} m⁻¹" if not math.isnan(d["abs_width_per_m"])
                     else f"no absolute DoF (its in-focus reference MTF is below {D.ABS_MTF:g})")
