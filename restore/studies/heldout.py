@@ -14,6 +14,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from restore.studies.datasets import dataset_job
+from udc_render.dataset import run_dataset
+
 
 def _motorcycle():
     import skimage.data
@@ -48,8 +51,6 @@ def write_held_out(folder: Path, count: int | None = None) -> Path:
 def make_held_out_dataset(out: Path, sensor_px: tuple[int, int], count: int | None, progress: bool) -> Path:
     """The held-out photographs through glass, T-OLED and P-OLED, physical profile, test split only,
     made or resumed in out/dataset_heldout (images in out/heldout_images); returns the dataset folder."""
-    from udc_render.dataset import run_dataset
-    from restore.studies.results import dataset_job
     images = write_held_out(out / "heldout_images", count)
     folder, n = out / "dataset_heldout", len(list(images.glob("*.png")))
     run_dataset(dataset_job("physical", sensor_px, folder, (0, 0, n), images), progress=progress)

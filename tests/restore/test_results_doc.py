@@ -1,5 +1,5 @@
 """The results document's ordering checks are computed from the tables (restore.studies.results)."""
-from restore.studies.results import PAPER_SYN_GAP_DB, ordering_checks
+from restore.studies.orderings import PAPER_SYN_GAP_DB, ordering_checks
 
 
 def _results(psnr: dict) -> dict:
@@ -39,7 +39,7 @@ def test_face_table_puts_the_papers_recall_beside_ours():
 
 
 def test_face_exposure_text_is_computed_from_the_face_table():
-    from restore.studies.results import faces_levels_text
+    from restore.studies.results_document import faces_levels_text
     table = {"chart_level": {"toled": 0.163, "poled": 0.055}, "train_level": {"toled": 0.347, "poled": 0.116},
              "level_gain": {"toled": 0.347 / 0.163, "poled": 0.116 / 0.055}}
     text = faces_levels_text(table)[0]
@@ -48,9 +48,9 @@ def test_face_exposure_text_is_computed_from_the_face_table():
 
 
 def test_evaluation_stamp_follows_the_checkpoint_and_the_data(tmp_path):
-    """A row is scored again (restore.studies.results.evaluate_rows) exactly when its stamp changes."""
+    """A row is scored again (restore.studies.scoring.evaluate_rows) exactly when its stamp changes."""
     import json
-    from restore.studies.results import evaluation_stamp
+    from restore.studies.scoring import evaluation_stamp
     data = tmp_path / "data"
     data.mkdir()
     (data / "manifest.jsonl").write_text(json.dumps({"item": 0, "split": "test"}) + "\n")
@@ -70,7 +70,7 @@ def test_machine_time_is_summed_from_what_each_stage_recorded(tmp_path):
     """The budget table adds the datasets' item seconds, the models' summaries and the rows' scoring seconds
     (each summed over resumed parts), plus this invocation's redone stages: a golden total."""
     import json
-    from restore.studies.results import budget_section
+    from restore.studies.results_document import budget_section
     out = tmp_path / "res"
     datasets = {p: out / f"dataset_{p}" for p in ("physical", "paper")}
     for i, folder in enumerate(datasets.values()):
@@ -94,7 +94,8 @@ def test_training_table_reports_each_models_trend_at_the_end(tmp_path):
     """A model stopped by its epoch cap while still rising shows the plateau as not reached and its rise per
     fifth of the steps: here 0.05 dB per validation of 150 steps, at step 2400 a fifth is 480 steps: +0.16 dB."""
     import json
-    from restore.studies.results import BUDGETS, run_dir, training_table
+    from restore.studies.budgets import BUDGETS, run_dir
+    from restore.studies.results_document import training_table
     from restore.train import LOG_COLUMNS
     from udc_render.io.files import csv_text
     run = run_dir(tmp_path, "unet", "toled")

@@ -1,0 +1,41 @@
+"""The budgets of `udc-render results` (restore.studies.results), the displays and rows they train and
+where each row's run lives. Light on purpose: the CLI reads BUDGETS when it builds its parser.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+BUDGETS = {
+    "quick": {"items": (4, 1, 2), "sensor_px": (256, 128), "epochs": {"unet": 2, "resnet": 1},
+              "crop_px": {"unet": 64, "resnet": 32}, "crops_per_pair": 1, "batch": 2, "face_sensor_px": (512, 256),
+              "heldout_items": 2, "lr": 1e-4, "plateau_db": 0.1, "val_every": 1,
+              "models": {"unet": {"type": "unet", "width": 8}, "resnet": {"type": "resnet", "features": 8, "blocks": 2}}},
+    # cpu: epoch caps, not targets; each model stops at the 0.1 dB plateau, which needs ≥ 6 validations in the
+    # last two fifths, so ≥ 26 epochs at val_every 2. Validation on the central 768-px square (a ResNet validation
+    # of 20 whole frames would take 6 min). The forward in bfloat16 (half the step time on this CPU,
+    # bench_train) paid for the ResNet's cap of 80 (50 before: it had not plateaued there). Caps: about a
+    # working day of this machine if nothing plateaus.
+    "cpu": {"items": (150, 20, 30), "sensor_px": (2048, 1024), "epochs": {"unet": 80, "resnet": 80},
+            "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (2048, 1024),
+            "heldout_items": None, "lr": 2e-4, "plateau_db": 0.1, "val_every": 2, "val_crop_px": 768,
+            "clip_grad_norm": 0.5, "autocast": "bf16", "models": {"unet": None, "resnet": None},
+            "carry": "restore/trained/cpu"},
+    "paper": {"items": (400, 40, 60), "sensor_px": (2048, 1024), "epochs": {"unet": 400, "resnet": 400},
+              "crop_px": {"unet": 256, "resnet": 256}, "crops_per_pair": 1, "batch": 4, "face_sensor_px": (2048, 1024),
+              "lr": 1e-4,
+              "models": {"unet": None, "resnet": None}},
+}
+DISPLAYS = ("toled", "poled")
+DISPLAY_NAMES = {"toled": "T-OLED", "poled": "P-OLED"}
+PROFILES = ("physical", "paper")  # udc_render.profiles: the captures, and the paper's synthesis (UNet (Syn))
+
+
+# (row, model kind, the profile whose pairs train it): the paper's rows; UNet (Syn) is trained on the paper's
+# own synthesis and tested on the physical captures, as the paper's synthetic-to-real row.
+# Trained in this order: the ResNet, the slowest, last.
+ROWS = (("unet", "unet", "physical"), ("unet_syn", "unet", "paper"), ("resnet", "resnet", "physical"))
+
+
+def run_dir(out: Path, row: str, display: str) -> Path:
+    """The training run folder of one row's model for one display."""
+    return out / "train" / f"{row}_{display}"
