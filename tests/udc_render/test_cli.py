@@ -75,7 +75,7 @@ def test_cache_hit_gives_identical_kernels(tmp_path, capsys):
     (["--size", "-3"], "odd"),
     (["--pixel-um", "-1"], "--pitch-um must be > 0"),
     (["--distance-mm", "-2"], "--distance-mm must be ≥ 0"),
-    (["--display", "hexagon"], "not none, toled, poled"),
+    (["--display", "hexagon"], "--display = 'hexagon': expected glass (or none), toled, poled"),
     (["--display", "missing.png"], "no such file"),
     (["--wavelengths-nm", "450,abc"], "comma-separated"),
     (["--method", "fft"], "invalid choice"),

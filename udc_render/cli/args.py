@@ -115,6 +115,19 @@ def out_dir(path: Path, option: str = "--out") -> Path:
     return path
 
 
+def add_display_argument(p: argparse.ArgumentParser, what: str, several: bool = False,
+                         micrograph: str = "1 µm pixels, amplitude values", unset: str = "", **kw) -> None:
+    """--display in the one vocabulary of every command (udc_render.optics.displays.load_display);
+    `what`: what the command does with it; `several`: comma-separated, each item the same;
+    `micrograph`: how a micrograph image's tile is read; `unset`: what no --display means [the default]."""
+    from udc_render.optics.displays import ALLOWED
+    each = "comma-separated displays, each " if several else ""
+    unset = unset or kw.get("default")
+    p.add_argument("--display", help=f"{what}: {each}{ALLOWED}. A micrograph image is a display of that layout "
+                                     f"({micrograph}; T = 1, gain 1, d = 0; named by its file's stem)"
+                                     + (f" [{unset}]" if unset else ""), **kw)
+
+
 def add_scene_arguments(r: argparse.ArgumentParser, scene_option: bool = False) -> None:
     """Overrides of a scene file's settings (applied by scene_from_args); the scene itself is a
     positional argument, or --scene when `scene_option`."""
@@ -156,9 +169,8 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     """Knobs shared by synth and dataset (demo: the defaults)."""
     from udc_render.pipeline import DEFAULT_DEFOCUS_TOLERANCE_PX
     from udc_render.profiles import DEFAULT_PROFILE, PHYSICAL_DISTANCE_MM, PROFILES
-    p.add_argument("--display", default="toled",
-                   help="comma-separated: glass, toled, poled or display files (.toml); the glass "
-                        "capture is always made too [toled]")
+    add_display_argument(p, "the displays to capture through; the glass capture is always made too",
+                         several=True, default="toled")
     p.add_argument("--profile", choices=tuple(PROFILES), default=DEFAULT_PROFILE,
                    help=f"paper: the paper's synthesis (form per_channel, d = 0, no defect pixels); physical: form "
                         f"spectral, d = {PHYSICAL_DISTANCE_MM:g} mm for the preset displays, dead and hot pixels "

@@ -5,13 +5,13 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from udc_render.cli.args import UserError, add_sensor_arguments, out_dir, synth_config
+from udc_render.cli.args import UserError, add_display_argument, add_sensor_arguments, out_dir, synth_config
 
 
 def register(sub) -> None:
     c = sub.add_parser("calibrate", help="run the paper's calibration protocols (γ, noise, PSF, MTF) on the "
                                          "virtual rig; exit 1 if a check misses its tolerance")
-    c.add_argument("--display", required=True, help="toled, poled or a display file (.toml)")
+    add_display_argument(c, "the display to calibrate (not glass: the reference; d = 0 only)", required=True)
     c.add_argument("--out", type=Path, default=Path("out/calibrate"), help="output folder [out/calibrate]")
     c.add_argument("--quick", action="store_true", help="reduced rig (512×128 px, 161-px kernels, 15 bands): smoke run")
     add_sensor_arguments(c)
@@ -24,8 +24,8 @@ def run(args: argparse.Namespace) -> int:
     from udc_render.optics.displays import load_display
     display = load_display(args.display)
     if display.is_glass:
-        raise UserError(f"--display = {args.display!r}: expected toled, poled or a display file (.toml); "
-                        "glass is the reference")
+        raise UserError(f"--display = {args.display!r}: expected toled, poled, a display file (.toml) or a "
+                        "micrograph image; glass is the reference")
     if display.distance_mm > 0:
         raise UserError(f"--display = {args.display!r}: distance_mm = {display.distance_mm:g}: calibration "
                         "supports the principal-plane model (d = 0) only")

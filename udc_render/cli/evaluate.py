@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from udc_render.cli.args import out_dir, positive
+from udc_render.cli.args import add_display_argument, out_dir, positive
 from udc_render.cli.train import set_threads
 
 
@@ -13,7 +13,9 @@ def register(sub) -> None:
     e.add_argument("--model", required=True, help="input (the degraded capture), dep, or a model.pt/checkpoint.pt")
     e.add_argument("--out", type=Path, required=True, help="results folder (rows of several runs are merged)")
     e.add_argument("--split", default="test", choices=("train", "val", "test"), help="split to score [test]")
-    e.add_argument("--display", help="comma-separated displays [a checkpoint's own; all of the dataset's for dep]")
+    add_display_argument(e, "the displays to score, by their names in the dataset (a file: the name it gives; any "
+                            "other word: a display name of the dataset)", several=True,
+                         unset="a checkpoint's own; all of the dataset's for dep")
     e.add_argument("--image-prefix", help="score only the items whose image starts with this, e.g. builtin: "
                                           "(the scikit-image photographs) or pattern:dead_leaves [all]")
     e.add_argument("--name", help="row name in the tables [input, dep, or the model type]")
@@ -30,8 +32,10 @@ def register(sub) -> None:
 def run(args) -> int:
     out_dir(args.out)
     from restore.evaluate import EvalSettings, evaluate
+    from udc_render.optics.displays import display_name
     set_threads(args.threads)
-    settings = EvalSettings(split=args.split, displays=tuple(args.display.split(",")) if args.display else None,
+    displays = tuple(display_name(t) for t in args.display.split(",") if t.strip()) if args.display else None
+    settings = EvalSettings(split=args.split, displays=displays or None,
                             name=args.name, device=args.device, previews=args.previews, denoiser=args.denoiser,
                             kernel_px=args.kernel_px, image_prefix=args.image_prefix)
     entry = evaluate(args.data, args.model, args.out, settings, progress=not args.quiet)

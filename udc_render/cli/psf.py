@@ -1,6 +1,6 @@
 """`udc-render psf`: wave-optics kernels of a display in front of the lens, written as files.
 
-    udc-render psf --display {none,toled,poled,PATH} --wavelengths-nm 450,520,640 --out DIR
+    udc-render psf --display {glass,none,toled,poled,FILE.toml,IMAGE} --wavelengths-nm 450,520,640 --out DIR
 """
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ from pathlib import Path
 
 from psf.engine import DEFAULT_FIELD_PHASES, METHODS, PAPER_SENSOR_UM, PRECISIONS, AliasingWarning, UnderSamplingWarning
 from psf.pupil import MASK_RASTERS
-from udc_render.cli.args import UserError, float_list, float_pair, non_negative, odd_size, out_dir, positive
+from udc_render.cli.args import (UserError, add_display_argument, float_list, float_pair, non_negative, odd_size,
+                                 out_dir, positive)
 
 
 def _bands(text):
@@ -28,8 +29,10 @@ def _bands(text):
 def register(sub) -> None:
     p = sub.add_parser("psf", help="wave-optics PSF kernels of a display in front of a lens")
     p.set_defaults(run=run)
-    p.add_argument("--display", default="toled",
-                   help="none (bare lens), toled, poled, or a micrograph file (PNG/TIFF/EXR) [toled]")
+    add_display_argument(p, "the display whose layout is in front of the lens (glass and none: the bare lens; a "
+                            "display file's transmission and gain do not enter the kernels)", default="toled",
+                         micrograph="pixels of --micrograph-pixel-um, values as --micrograph-values, tiles turned "
+                                    "by --tile-rotation")
     spec = p.add_mutually_exclusive_group()
     spec.add_argument("--wavelengths-nm", type=float_list, default=[450.0, 520.0, 640.0],
                       help="monochromatic kernels at these wavelengths [450,520,640]")
@@ -41,8 +44,9 @@ def register(sub) -> None:
     p.add_argument("--weight", default="E",
                    help="weight spectrum for --bands-nm and --camera: E (flat), a colour-science illuminant "
                         "such as D65, or a CSV (wavelength_nm, weight) [E]")
-    p.add_argument("--distance-mm", type=non_negative("--distance-mm"), default=0.0,
-                   help="display-to-lens distance d; 0 = principal-plane model [0]")
+    p.add_argument("--distance-mm", type=non_negative("--distance-mm"),
+                   help="display-to-lens distance d; 0 = principal-plane model; given, it wins over a display "
+                        "file's distance_mm [a display file's distance_mm, else 0]")
     p.add_argument("--pitch-um", "--pixel-um", dest="pitch_um", type=positive("--pitch-um"), default=3.1,
                    help="sensor pixel pitch (old spelling --pixel-um) [3.1]")
     p.add_argument("--kernel-px", "--size", dest="kernel_px", type=odd_size("--kernel-px"), default=255,
@@ -73,21 +77,18 @@ def register(sub) -> None:
     p.add_argument("--out", type=Path, default=Path("out/psf"), help="output folder [out/psf]")
 
 
-def make_display(args):
-    from psf import MicrographLayout, layouts
-    if args.display == "none":
-        return None
-    if args.display in layouts.BUILTIN:
-        return layouts.BUILTIN[args.display]()
-    path = Path(args.display)
-    if path.suffix.lower() not in (".png", ".tif", ".tiff", ".exr"):
-        raise UserError(f"--display: '{args.display}' is not none, toled, poled or a .png/.tif/.tiff/.exr file")
-    return MicrographLayout.load(path, args.micrograph_pixel_um, args.micrograph_values, args.tile_rotation,
-                                 args.tile_seed)
+def layout_and_distance(args):
+    """The --display's psf layout (None: the bare lens) and the distance d: --distance-mm when given,
+    else the display's own (a display file's distance_mm; 0 for the presets and micrographs)."""
+    from udc_render.optics.displays import load_display
+    display = load_display(args.display, pixel_um=args.micrograph_pixel_um, values=args.micrograph_values,
+                           random_rotation=args.tile_rotation, seed=args.tile_seed)
+    return display.layout, display.distance_mm if args.distance_mm is None else args.distance_mm
 
 
 def compute(args, display, lens, bar):
-    """(KernelSet, from_cache) for the kind of kernels asked: bands, camera channels or wavelengths."""
+    """(KernelSet, from_cache) for the kind of kernels asked: bands, camera channels or wavelengths;
+    args.distance_mm is the resolved distance (layout_and_distance)."""
     from psf import compute_kernels
     from psf.cache import cached
     from psf.spectral import auto_step_nm, band_kernels, channel_kernels, load_weight
@@ -114,7 +115,7 @@ def run(args) -> int:
     from psf import Lens
     from udc_render.io.kernels import write_kernel_files
     out = out_dir(args.out)
-    display = make_display(args)
+    display, args.distance_mm = layout_and_distance(args)
     lens = Lens(args.focal_length_um, args.aperture_um, args.focus_distance_mm, args.object_distance_mm)
     with warnings.catch_warnings(record=True) as caught, tqdm(desc="psf kernels", unit="kernel", disable=None) as bar:
         warnings.simplefilter("always", AliasingWarning)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from udc_render.cli.args import UserError, out_dir, positive
+from udc_render.cli.args import UserError, add_display_argument, out_dir, positive
 
 
 def _even(text: str) -> int:
@@ -26,7 +26,8 @@ def register(sub) -> None:
     p.add_argument("--data", type=Path, required=True, help="a folder written by `udc-render dataset`")
     p.add_argument("--model", required=True, choices=("unet", "resnet"), help="the model type")
     p.add_argument("--config", type=Path, help="a model TOML file: type = ... and the model's arguments")
-    p.add_argument("--display", required=True, help="the display whose captures to restore (e.g. toled, poled)")
+    add_display_argument(p, "the display whose captures to restore, by its name in the dataset (a file: the "
+                            "name it gives; any other word: a display name of the dataset)", required=True)
     p.add_argument("--out", type=Path, required=True, help="run folder (re-run the same command to resume)")
     p.add_argument("--epochs", type=positive("--epochs", int), default=400, help="epochs [400, the paper's]")
     p.add_argument("--batch", type=positive("--batch", int), default=4, help="crops per step [4]")
@@ -51,18 +52,19 @@ def run(args) -> int:
     out_dir(args.out)
     from restore.models import RESNET_CONFIG, UNET_CONFIG, load_config
     from restore.train import TrainSettings, data_fingerprint, train
+    from udc_render.optics.displays import display_name
     set_threads(args.threads)
     cfg = dict({"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}[args.model])
     if args.config:
         cfg = load_config(args.config)
         if cfg.get("type") != args.model:
             raise UserError(f"{args.config}: type = {cfg.get('type')!r} but --model is {args.model!r}")
-    settings = TrainSettings(model=cfg, display=args.display, epochs=args.epochs, batch=args.batch,
+    settings = TrainSettings(model=cfg, display=display_name(args.display), epochs=args.epochs, batch=args.batch,
                              crop_px=args.crop_px, crops_per_pair=args.crops_per_pair, lr=args.lr,
                              loss=args.loss, seed=args.seed, data_fingerprint=data_fingerprint(args.data),
                              autocast=args.autocast)
     s = train(args.data, args.out, settings, args.device, args.checkpoint_s, progress=not args.quiet)
-    print(f"trained {cfg['type']} on {s['train_pairs']} {args.display} pairs, {s['epochs']} epochs ({s['steps']} "
+    print(f"trained {cfg['type']} on {s['train_pairs']} {settings.display} pairs, {s['epochs']} epochs ({s['steps']} "
           f"steps) on {s['device']}: final loss {s['final_loss']:.4g}"
           + (f", validation PSNR {s['val_psnr_db']:.2f} dB" if s["val_psnr_db"] is not None else "")
           + f"; {args.out / 'model.pt'}")

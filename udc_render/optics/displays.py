@@ -22,7 +22,8 @@ Presets (docs/PHYSICS.md §2):
   disagrees with its own γ and gain (0.029 × 25 = 0.73, not 0.34); we reproduce γ (what the captures
   show), which implies ≈ 1.4 % through the whole stack (``study realism`` reports it).
 
-A display file (TOML) describes any other display; see ``load_display`` and scenes/README.md.
+A display file (TOML) describes any other display, and a micrograph image is a display of that
+layout; ``load_display`` reads every command's --display (scenes/README.md).
 """
 from __future__ import annotations
 
@@ -40,6 +41,9 @@ from udc_render.optics.gamma import channel_gamma, white_weights
 PAPER_GAMMA = {"glass": (1.0, 1.0, 1.0), "toled": (0.97, 0.97, 0.97), "poled": (0.34, 0.34, 0.20)}
 PAPER_GAIN = {"glass": 1.0, "toled": 6.0, "poled": 25.0}
 PRESETS = ("glass", "toled", "poled")
+MICROGRAPH_SUFFIXES = (".png", ".tif", ".tiff", ".exr")
+ALLOWED = (f"glass (or none), toled, poled, a display file (.toml) or a micrograph image "
+           f"({'/'.join(MICROGRAPH_SUFFIXES)})")
 TRANSMISSION_TYPES = ("flat", "edge", "polyimide", "csv")
 
 # Fitted by fit_toled_transmission / fit_poled_transmission for the default rig (monitor white D65,
@@ -145,7 +149,7 @@ def preset(name: str) -> Display:
         return Display("toled", layouts.toled(), Transmission("flat", TOLED_T), PAPER_GAIN["toled"])
     if name == "poled":
         return Display("poled", layouts.poled(), poled_transmission(), PAPER_GAIN["poled"])
-    raise DisplayError(f"--display = {name!r}: expected one of {', '.join(PRESETS)} or a display file (.toml)")
+    raise DisplayError(f"--display = {name!r}: expected {ALLOWED}")
 
 
 def poled_transmission(scale=POLED_SCALE, edge_nm=POLED_EDGE_NM, cathode_nm=POLED_CATHODE_NM,
@@ -155,22 +159,49 @@ def poled_transmission(scale=POLED_SCALE, edge_nm=POLED_EDGE_NM, cathode_nm=POLE
                         cathode_nm=cathode_nm)
 
 
-def load_display(spec: str) -> Display:
-    """A preset name (glass, toled, poled) or a display TOML file (scenes/README.md, 'Display files')."""
-    if spec in PRESETS:
-        return preset(spec)
+def load_display(spec: str, **micrograph) -> Display:
+    """The one vocabulary of every command's --display: a preset (glass, or none: the bare lens; toled;
+    poled), a display TOML file (scenes/README.md, 'Display files') or a micrograph image
+    (``micrograph_display``; `micrograph`: its keyword arguments)."""
+    if spec in PRESETS or spec == "none":
+        return preset("glass" if spec == "none" else spec)
     path = Path(spec)
-    if path.suffix.lower() != ".toml":
-        raise DisplayError(f"--display = {spec!r}: expected one of {', '.join(PRESETS)} or a display file (.toml)")
-    return parse_display(read_toml(path, DisplayError, "display file"), path)
+    suffix = path.suffix.lower()
+    if suffix != ".toml" and suffix not in MICROGRAPH_SUFFIXES:
+        raise DisplayError(f"--display = {spec!r}: expected {ALLOWED}")
+    if not path.is_file():
+        raise DisplayError(f"--display = {spec!r}: no such file; expected {ALLOWED}")
+    if suffix == ".toml":
+        return parse_display(read_toml(path, DisplayError, "display file"), path)
+    return micrograph_display(path, **micrograph)
+
+
+def display_name(spec: str) -> str:
+    """The name a --display has in a dataset (train, evaluate): a preset's, a display file's or a
+    micrograph's (load_display); any other word is taken as a dataset's display name as it is."""
+    if spec == "none" or Path(spec).suffix.lower() in (".toml", *MICROGRAPH_SUFFIXES):
+        return load_display(spec).name
+    return spec
+
+
+def micrograph_display(path: Path, pixel_um: float = 1.0, values: str = "amplitude", random_rotation: bool = False,
+                       seed: int = 0) -> Display:
+    """A transmission micrograph as a display, named by the file's stem: what a display file with only
+    ``[display.layout] type = "micrograph"`` gives (T = 1, gain 1, d = 0), with the tile's pixel size,
+    values and random tile rotation of ``psf.MicrographLayout.load``."""
+    if " " in path.stem:
+        raise DisplayError(f"--display = {str(path)!r}: a micrograph display is named by its file's stem: expected "
+                           "a file name without spaces")
+    layout = MicrographLayout.load(path, pixel_um, values, random_rotation, seed)
+    return Display(path.stem, layout, Transmission("flat", 1.0), 1.0, 0.0, source=str(path))
 
 
 def load_displays(specs: str, distance_mm: float | None = None) -> list[Display]:
-    """Glass first, then each display of the comma-separated `specs` once (presets or files), with
+    """Glass first, then each display of the comma-separated `specs` (load_display) once, with
     the display-to-lens distance override applied to all but glass."""
     names = [t.strip() for t in specs.split(",") if t.strip()]
     if not names:
-        raise DisplayError(f"--display = {specs!r}: expected glass, toled, poled or display files, comma-separated")
+        raise DisplayError(f"--display = {specs!r}: expected comma-separated displays, each {ALLOWED}")
     out = [load_display("glass")]
     for n in names:
         d = load_display(n)
