@@ -45,6 +45,7 @@ def test_out_that_cannot_be_a_folder_is_one_line_at_once(command, where, tmp_pat
 @pytest.mark.parametrize("argv,says", [
     (["render", "{bad}"], "not UTF-8"),
     (["synth", "monitor", "--display", "{bad_display}"], "not UTF-8"),
+    (["psf", "--display", "{bad_display}"], "not UTF-8"),
     (["synth", "monitor", "--sensor-config", "{bad}"], "not UTF-8"),
 ])
 def test_non_utf8_toml_is_one_line(argv, says, tmp_path, capsys):
