@@ -10,6 +10,7 @@ from udc_render.cli import main
 from udc_render.optics import displays as D
 from udc_render.scene.geometry import psf_lens
 from udc_render.studies import banding as B
+from udc_render.studies import banding_fit as F
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +31,7 @@ def test_quick_study_writes_its_files(quick):
     out, rows = quick
     for name in ("study_banding.csv", "study_banding.md", "study_banding.png"):
         assert (out / name).stat().st_size > 0
-    assert list(rows[0]) == B.COLUMNS
+    assert list(rows[0]) == F.COLUMNS
     assert {r["display"] for r in rows} == {"toled", "poled"}
     md = (out / "study_banding.md").read_text()
     assert "visible per pixel" in md and "sinc²" in md
@@ -77,7 +78,7 @@ def test_fit_period_recovers_a_synthetic_band_profile():
     x = (np.arange(256) - 127.5) * 3.1
     period = 301.7
     y = 1 + 0.01 * np.cos(2 * np.pi * x / period + 0.4) + 0.004 * np.cos(4 * np.pi * x / period - 1.0)
-    fit, amps = B.fit_period(x, y)
+    fit, amps = F.fit_period(x, y)
     assert abs(fit / period - 1) < 1e-4
     assert abs(amps[1] / 0.01 - 1) < 1e-3 and abs(amps[2] / 0.004 - 1) < 1e-3
 
@@ -88,4 +89,4 @@ def test_sinc2_is_the_linear_interpolation_factor():
         u = np.arange(4096) / 4096
         interp = np.interp(u, np.arange(P + 1) / P, np.cos(2 * np.pi * np.arange(P + 1) / P))
         a1 = 2 * abs(np.fft.rfft(interp)[1]) / u.size
-        assert abs(a1 - B.sinc2(1, P)) < 1e-4
+        assert abs(a1 - F.sinc2(1, P)) < 1e-4

@@ -47,29 +47,20 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from scipy.optimize import minimize_scalar
+from tqdm import tqdm
 
-from psf.banding import PowerSeries
-from psf.engine import DEFAULT_FIELD_PHASES, field_shifts
+from psf.engine import DEFAULT_FIELD_PHASES
 from udc_render.optics import displays as D
-from udc_render.optics import phase_weights
 from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
 from udc_render.render import render_scene
 from udc_render.scene import Bands, load_scene
 from udc_render.scene.geometry import psf_lens
-from udc_render.sensor import SensorConfig, band_electron_weights
-from udc_render.studies.report import machine_text, md_table, pyplot, save_plot, write_tables
+from udc_render.studies.banding_fit import (AXES, COLUMNS, DISPLAYS, analytic_harmonics, band_series, fit_period,
+                                           flat_profile, green_band_weights, green_sites, interpolated_harmonics,
+                                           noise_sigma_dn, period_formula_um, sinc2, site_positions_um)
+from udc_render.studies.banding_report import markdown, plot
+from udc_render.studies.report import write_tables
 
-DISPLAYS = ("toled", "poled")
-AXES = ("x", "y")
-GREEN = 1  # camera channel index (R, G, B) of the Gr sites
-GR_SITE = (0, 1)  # RGGB: Gr at even rows, odd columns
-HARMONICS = 3
-COLUMNS = ["axis", "display", "distance_mm", "field_phases", "period_formula_um", "period_formula_px", "period_fit_um",
-           "period_error_rel", "harmonic_order", "periods_in_frame", "a1_measured_rel", "a1_analytic_rel",
-           "a1_interpolated_rel", "ratio_measured_analytic", "ratio_measured_interpolated", "sinc2_interp", "mean_dn",
-           "a1_dn", "sigma_dn", "rows_averaged", "snr_pixel", "snr_averaged", "regime", "visible_pixel",
-           "visible_averaged", "kernel_s", "synth_s"]
 FULL = {"sensor": (1024, 128), "step_nm": 20.0, "margin_um": None,
         "distances_mm": {"toled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0), "poled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0)},
         "phases": (2, 3, 6), "phase_display": "toled", "phase_distance_mm": 4.0,
@@ -100,135 +91,6 @@ def flat_band_image(band_image):
     K, H, W = band_image.bands.shape
     centre = band_image.bands[:, H // 2, W // 2].astype(np.float32)
     return replace(band_image, bands=np.ascontiguousarray(np.broadcast_to(centre[:, None, None], (K, H, W))))
-
-
-def period_formula_um(z_i_um: float, period_um: float, distance_mm: float) -> float:
-    """Band period on the sensor T = z_i · p / d (µm)."""
-    return z_i_um * period_um / (distance_mm * 1000.0)
-
-
-def sinc2(h: int, phases: int) -> float:
-    """sinc²(h / P): what linear interpolation between P samples per period keeps of harmonic h."""
-    return float(np.sinc(h / phases) ** 2)
-
-
-# ----------------------------------------------------------------------------------------------
-# Measuring a profile
-
-
-def site_positions_um(shape_hw, pitch_um: float) -> tuple[np.ndarray, np.ndarray]:
-    """(x of the Gr columns, y of the Gr rows) in µm from the optical axis (frame centre), as the optics
-    place pixel centres (optics.field.field_weights)."""
-    H, W = shape_hw
-    x = (np.arange(W)[GR_SITE[1]::2] - (W - 1) / 2) * pitch_um
-    y = (np.arange(H)[GR_SITE[0]::2] - (H - 1) / 2) * pitch_um
-    return x, y
-
-
-def green_sites(mosaic: np.ndarray) -> np.ndarray:
-    """The Gr sites [H/2, W/2] of an RGGB mosaic."""
-    return np.asarray(mosaic, np.float64)[GR_SITE[0]::2, GR_SITE[1]::2]
-
-
-def flat_profile(clean_dn: np.ndarray, glass_dn: np.ndarray, axis: str = "x") -> np.ndarray:
-    """The Gr sites of clean_dn / glass_dn averaged across the bands (column means for bands along x,
-    row means along y), divided by its mean."""
-    p = (green_sites(clean_dn) / green_sites(glass_dn)).mean(axis=0 if axis == "x" else 1)
-    return p / p.mean()
-
-
-def harmonic_design(x_um: np.ndarray, period_um: float, harmonics: int = HARMONICS) -> np.ndarray:
-    """Columns 1, cos(2πhx/T), sin(2πhx/T) for h = 1…H."""
-    cols = [np.ones_like(x_um)]
-    for h in range(1, harmonics + 1):
-        ph = 2 * np.pi * h * x_um / period_um
-        cols += [np.cos(ph), np.sin(ph)]
-    return np.stack(cols, axis=1)
-
-
-def harmonic_fit(x_um, y, period_um: float, harmonics: int = HARMONICS) -> tuple[np.ndarray, float]:
-    """(relative amplitudes |c_h| / c0 for h = 0…H (entry 0 is c0), residual sum of squares) of the
-    least-squares fit at period T."""
-    coef, *_ = np.linalg.lstsq(harmonic_design(x_um, period_um, harmonics), y, rcond=None)
-    resid = y - harmonic_design(x_um, period_um, harmonics) @ coef
-    amps = np.concatenate([[coef[0]], np.hypot(coef[1::2], coef[2::2]) / coef[0]])
-    return amps, float(resid @ resid)
-
-
-def fft_peak_period_um(x_um: np.ndarray, y: np.ndarray, pad: int = 16) -> float:
-    """Period of the largest peak of |FFT(y − mean)| (zero-padded pad×) above the lowest whole-frame bin."""
-    n = y.size
-    spec = np.abs(np.fft.rfft(y - y.mean(), n=pad * n))
-    spec[:pad] = 0.0  # below one period per frame: a gradient
-    dx = float(x_um[1] - x_um[0])
-    return pad * n * dx / int(np.argmax(spec))
-
-
-def fit_period(x_um: np.ndarray, y: np.ndarray, harmonics: int = HARMONICS) -> tuple[float, np.ndarray]:
-    """(period T (µm), relative amplitudes) of y: the residual of harmonic_fit minimised over T within
-    ± one unpadded FFT bin of the FFT peak (bounded Brent search); the expected period is not used."""
-    span = float(x_um[-1] - x_um[0] + (x_um[1] - x_um[0]))
-    f0 = 1.0 / fft_peak_period_um(x_um, y)
-    lo, hi = max(f0 - 1.0 / span, 0.5 / span), f0 + 1.0 / span
-    best = minimize_scalar(lambda f: harmonic_fit(x_um, y, 1.0 / f, harmonics)[1], bounds=(lo, hi),
-                           method="bounded", options={"xatol": 1e-6 / span})
-    period = 1.0 / float(best.x)
-    return period, harmonic_fit(x_um, y, period, harmonics)[0]
-
-
-def noise_sigma_dn(capture) -> float:
-    """Per-pixel noise σ (DN): std of mosaic_dn − clean_dn over the Gr sites."""
-    return float((green_sites(capture.mosaic_dn) - green_sites(capture.clean_dn)).std())
-
-
-# ----------------------------------------------------------------------------------------------
-# The analytic profile
-
-
-def green_band_weights(band_image, display, exposure_s: float) -> np.ndarray:
-    """a_k = w_Gk · L_k · T_k: electrons of a green pixel per unit transmitted power fraction, band k."""
-    w = band_electron_weights(band_image.edges_nm, SensorConfig(exposure_s=exposure_s))[GREEN]
-    return w * band_image.white_bands() * display.transmission.band_means(band_image.edges_nm)
-
-
-def band_series(display, lens, centres_nm, distance_mm: float) -> list[PowerSeries]:
-    """P_k(s) of every band centre at distance d (psf.banding.PowerSeries)."""
-    return [PowerSeries(display.layout, lens, wl * 1e-3, distance_mm * 1000.0) for wl in centres_nm]
-
-
-def analytic_harmonics(series, weights, display, distance_mm: float, across_um: np.ndarray, z_i_um: float,
-                       axis: str = "x", samples: int = 64, harmonics: int = HARMONICS) -> np.ndarray:
-    """Relative harmonic amplitudes h = 1…H along `axis` of Σ_k a_k P_k(s) averaged over the positions
-    across_um on the other axis, s = (x, y) · d / z_i: P sampled at `samples` shifts over one period
-    along the axis (exact DFT below samples / 2), the mean across taken, the DFT along."""
-    a = AXES.index(axis)
-    shifts = np.zeros((across_um.size, samples, 2))
-    shifts[..., a] = (np.arange(samples) * display.layout.period_um[a] / samples)[None, :]
-    shifts[..., 1 - a] = (across_um * distance_mm * 1000.0 / z_i_um)[:, None]
-    total = sum(a * ps(shifts).mean(axis=0) for ps, a in zip(series, weights))
-    spec = np.abs(np.fft.rfft(total)) / samples
-    return 2 * spec[1:harmonics + 1] / spec[0]
-
-
-def interpolated_harmonics(series, weights, display, distance_mm: float, x_um: np.ndarray, y_um: np.ndarray,
-                           z_i_um: float, phases: int, frame_um: tuple[float, float], order: int = 1,
-                           axis: str = "x") -> float:
-    """Relative amplitude of harmonic `order` of the profile the synthesis' phase interpolation alone
-    would give: Σ_k a_k P_k at the kernels' P × P field shifts (psf.engine.field_shifts), blended
-    bilinearly over the Gr pixels (optics.field.phase_weights), averaged across the bands, fit at
-    T = z_i p / d along `axis`."""
-    d_um = distance_mm * 1000.0
-    period = display.layout.period_um
-    shifts = field_shifts(period, d_um, z_i_um, phases, frame_um)  # [P, P, 2]: rows y, columns x
-    power = sum(a * ps(shifts) for ps, a in zip(series, weights))
-    periodic = [span * d_um / z_i_um >= p for span, p in zip(frame_um, period)]
-    wx = phase_weights(x_um, shifts[0, :, 0], d_um, z_i_um, period[0], periodic[0])
-    wy = phase_weights(y_um, shifts[:, 0, 1], d_um, z_i_um, period[1], periodic[1])
-    a = AXES.index(axis)
-    prof = (wy.T @ power @ wx).mean(axis=a)  # [rows y, columns x]: across the bands
-    amps, _ = harmonic_fit((x_um, y_um)[a], prof / prof.mean(), period_formula_um(z_i_um, period[a], distance_mm),
-                           max(HARMONICS, order))
-    return float(amps[order])
 
 
 # ----------------------------------------------------------------------------------------------
@@ -372,7 +234,6 @@ def visible_range(rows: list[dict], name: str, curve: tuple, rig: Rig) -> dict:
 
 def run_study(out: Path, quick: bool = False, progress: bool = True) -> list[dict]:
     """Run every (display, distance, phases) capture, write study_banding.{csv,md,png} into out, return the rows."""
-    from tqdm import tqdm
     cfg = QUICK if quick else FULL
     out = Path(out)
     t0 = time.perf_counter()
@@ -404,120 +265,3 @@ def example_profile(rig: Rig, rows: list[dict], images: dict):
     pick = min(rs, key=lambda r: abs(r["periods_in_frame"] - 3))
     prof, img = images[pick["distance_mm"]]
     return "toled", pick["distance_mm"], rig.x_um, prof, img
-
-
-# ----------------------------------------------------------------------------------------------
-# Report
-
-
-def _fmt_range(r) -> str:
-    return "none" if r is None else f"{r[0]:.3g}–{r[1]:.3g} mm"
-
-
-def markdown(rows: list[dict], ranges: list[dict], rig: Rig, cfg: dict, elapsed_s: float) -> str:
-    """study_banding.md: set-up, criteria, one table row per capture and the visible ranges."""
-    w, h = cfg["sensor"]
-    k = rig.band_image.bands.shape[0]
-    lines = ["# Banding of a flat field against the display-to-lens distance", "",
-             f"Monitor rig showing `pattern:white` (framing fill, the panel's spectrum extended over the render "
-             f"margin), {w} × {h} px of {rig.pitch_um:g} µm, {k} bands of {cfg['step_nm']:g} nm, default synthesis "
-             f"(blend 'source', field rank 2, Poisson + read noise), auto exposure {rig.exposure_s * 1e3:.3g} ms. "
-             f"z_i = {rig.z_i_um:.1f} µm (bands along y: the sensor turned to {h} × {w} px, framed anew). "
-             "Measured on the green (Gr) sites: the mean across the bands (column mean for x) of clean_dn / glass, "
-             f"least-squares fit of a sinusoid + {HARMONICS - 1} harmonics with the period free (FFT start, bounded "
-             "search); analytic: psf.banding.PowerSeries of the same rows and bands, T = z_i · p / d. "
-             "Regenerate with `udc-render study banding --out DIR`.", "",
-             "Criteria: bands are **visible per pixel** when the first harmonic A1 · mean ≥ σ, the per-pixel noise "
-             "(std of the noisy minus the clean mosaic, Gr sites) at that level; **visible averaged** when "
-             f"A1 · mean ≥ σ / √N after averaging the N = {rig.across_um.size} Gr sites of this frame along the "
-             "bands (rows for bands along x; the y runs turn the sensor to portrait, N the same). "
-             "A period longer than the frame is a gradient, not bands; below 4 px it is not resolved.", "",
-             "The ratio measured / analytic is expected below 1: the synthesis interpolates P(s) linearly "
-             "between P field phases per axis, keeping sinc²(h/P) of harmonic h (0.81 for h = 1, P = 4), and "
-             "blend 'source' smooths the weighted source with the PSF. The sampling also aliases harmonics "
-             "h = mP ± 1 into the first: where the exact first harmonic is weak against them (T-OLED along y) "
-             "the synthesis' first harmonic exceeds the exact one. harmonic_order > 1: the fit found the "
-             "period T/order (the first harmonic vanishes), compared with the analytic harmonic of that order. "
-             "A1 interp.: the analytic P(s) sampled at the kernels' P × P field shifts and blended bilinearly "
-             "as the synthesis does (no PSF, no rank-2 basis): the ratio to it is what the rest of the optics "
-             "changes.", ""]
-    lines += md_table(rows, [("axis", "bands along"), ("display", "display"), ("distance_mm", "d mm"),
-                             ("field_phases", "P"),
-                             ("period_formula_px", "T formula px"), ("period_error_rel", "T fit error"),
-                             ("harmonic_order", "order"), ("a1_measured_rel", "A1 measured"),
-                             ("a1_analytic_rel", "A1 analytic"), ("a1_interpolated_rel", "A1 interp."),
-                             ("ratio_measured_analytic", "ratio"), ("ratio_measured_interpolated", "ratio to interp."),
-                             ("sinc2_interp", "sinc²(h/P)"), ("a1_dn", "A1 DN"), ("sigma_dn", "σ DN"),
-                             ("snr_pixel", "A1/σ"), ("regime", "regime"), ("visible_pixel", "visible/pixel"),
-                             ("visible_averaged", "visible averaged"), ("kernel_s", "kernel s")],
-                      {"period_error_rel": lambda v: "" if v is None else f"{v:+.2e}"})
-    lines += ["", "Visible ranges on the analytic grid of d, which holds the distance where the period equals "
-              "the frame (the strongest analytic harmonic × the median measured/analytic ratio, against the "
-              "measured σ / mean; its period within [4 px, frame]):", ""]
-    lines += md_table([{**r, "pixel": _fmt_range(r["pixel"]), "averaged": _fmt_range(r["averaged"])} for r in ranges],
-                      [("display", "display"), ("ratio_used", "ratio used"), ("noise_rel", "σ / mean"),
-                       ("a1_max_rel", "strongest harmonic (× ratio), max over d"), ("pixel", "visible per pixel"),
-                       ("averaged", f"visible averaged over {rig.across_um.size} rows")])
-    return "\n".join(lines + ["", machine_text(elapsed_s) + "."]) + "\n"
-
-
-def plot(rows: list[dict], curves: dict, rig: Rig, example, path: Path) -> None:
-    """study_banding.png: period and first harmonic against d (measured points, analytic curves, the
-    noise level), the ratio against P, and a flat-field example."""
-    plt = pyplot()
-    fig, axes = plt.subplots(1, 4, figsize=(19, 4.2))
-    ax_t, ax_a, ax_p, ax_e = axes
-    for name, colour in zip(DISPLAYS, ("C0", "C1")):
-        rs = [r for r in rows if r["display"] == name and r["axis"] == "x"
-              and r["field_phases"] == DEFAULT_FIELD_PHASES]
-        ds, harmonics = curves[name]
-        a1 = harmonics[:, 0]
-        p = D.preset(name).layout.period_um[0]
-        ax_t.loglog(ds, [period_formula_um(rig.z_i_um, p, d) / rig.pitch_um for d in ds], "-", color=colour,
-                    label=f"{name}: z_i p / d")
-        b = [r for r in rs if r["regime"] == "bands"]
-        ax_t.loglog([r["distance_mm"] for r in b], [r["period_fit_um"] * r["harmonic_order"] / rig.pitch_um for r in b],
-                    "o", color=colour, label=f"{name}: fit × order")
-        ax_a.loglog(ds, np.maximum(a1, 1e-9), "-", color=colour, label=f"{name}: analytic h = 1")
-        if np.any(harmonics.max(axis=1) > 1.5 * a1):
-            ax_a.loglog(ds, harmonics.max(axis=1), "-.", color=colour, lw=0.8, label=f"{name}: analytic, strongest h")
-        ax_a.loglog([r["distance_mm"] for r in b], [max(r["a1_measured_rel"], 1e-9) for r in b], "o", color=colour,
-                    label=f"{name}: measured")
-        noise = float(np.median([r["sigma_dn"] / r["mean_dn"] for r in rs]))
-        ys = [r for r in rows if r["display"] == name and r["axis"] == "y" and r["regime"] == "bands"]
-        if ys:
-            ax_t.loglog([r["distance_mm"] for r in ys], [r["period_fit_um"] * r["harmonic_order"] / rig.pitch_um
-                                                         for r in ys], "s", mfc="none", color=colour,
-                        label=f"{name}: fit × order, along y")
-            ax_a.loglog([r["distance_mm"] for r in ys], [max(r["a1_measured_rel"], 1e-9) for r in ys], "s", mfc="none",
-                        color=colour, label=f"{name}: measured along y")
-            ax_a.loglog([r["distance_mm"] for r in ys], [max(r["a1_analytic_rel"], 1e-9) for r in ys], "x",
-                        color=colour, label=f"{name}: analytic along y")
-        ax_a.axhline(noise, color=colour, ls="--", lw=0.8, label=f"{name}: σ / mean (per pixel)")
-        ax_a.axhline(noise / math.sqrt(rig.across_um.size), color=colour, ls=":", lw=0.8, label=f"{name}: averaged")
-    ax_t.axhline(rig.frame_um / rig.pitch_um, color="k", lw=0.8, ls="--", label="frame width")
-    ax_t.set(xlabel="display-to-lens distance d (mm)", ylabel="band period on the sensor (px)", title="period")
-    ax_a.set(xlabel="display-to-lens distance d (mm)", ylabel="first harmonic / mean", title="amplitude (green)")
-    ph = sorted((r for r in rows if r["display"] == rig.cfg["phase_display"] and r["axis"] == "x"
-                 and r["distance_mm"] == rig.cfg["phase_distance_mm"] and r["regime"] == "bands"),
-                key=lambda r: r["field_phases"])
-    Ps = np.linspace(3, 8, 100)
-    ax_p.plot(Ps, np.sinc(1 / Ps) ** 2, "k-", lw=0.8, label="sinc²(1/P) (a pure sinusoid, P ≥ 3)")
-    label = f"{rig.cfg['phase_display']}, d = {rig.cfg['phase_distance_mm']:g} mm"
-    ax_p.plot([r["field_phases"] for r in ph], [r["ratio_measured_analytic"] for r in ph], "o-",
-              label=f"{label}: measured")
-    ax_p.plot([r["field_phases"] for r in ph], [r["a1_interpolated_rel"] / r["a1_analytic_rel"] for r in ph], "s--",
-              mfc="none", label=f"{label}: P(s) interpolated alone")
-    ax_p.set(xlabel="field phases P per axis", ylabel="A1 measured / analytic", title="interpolation in phase")
-    if example is not None:
-        name, d, x, prof, img = example
-        ax_e.plot(x, prof, lw=0.8)
-        ax_e.set(xlabel="x on the sensor (µm)", ylabel="column mean / glass / mean",
-                 title=f"{name}, d = {d:g} mm: flat-field profile")
-        inset = ax_e.inset_axes([0.0, 1.12, 1.0, 0.25])
-        inset.imshow(img / img.mean(), cmap="gray", aspect="auto")
-        inset.set_axis_off()
-    for ax in axes[:3]:
-        ax.grid(True, which="both", alpha=0.25)
-        ax.legend(fontsize=7)
-    save_plot(fig, path)
