@@ -1,13 +1,18 @@
 """The `udc-render` command line: one thin module per command, each parsing its options and calling
 one library or experiment function.
 
-    udc-render psf --display {none,toled,poled,PATH} --wavelengths-nm 450,520,640 --out DIR
+    udc-render psf --display toled --wavelengths-nm 450,520,640 --out DIR
     udc-render render SCENE --out DIR [--spp N | --noise 0.01] [--bands-nm 400:700:10]
     udc-render synth SCENE --display toled[,poled,FILE] --out DIR;   udc-render demo [--out DIR]
     udc-render dataset --builtin | --images DIR --count N --out DIR [--workers N | --scheduler ADDR]
     udc-render calibrate --display toled --out DIR
-    udc-render study {psf,render,capture} --out DIR [--quick]
+    udc-render study {psf,render,capture,realism,defocus,banding} --out DIR [--quick]
     udc-render train / evaluate / results   (restore/)
+    udc-render --version
+
+Every --display takes the same things (udc_render.optics.displays.load_display): glass (or none),
+toled, poled, a display file (.toml) or a micrograph image (.png/.tif/.tiff/.exr); comma-separated
+where a command takes several.
 
 A user error (UdcError, and the psf package's errors) prints one line naming the option, file or key,
 the value and what is allowed, and exits 2; no traceback. Output folders are made and checked
@@ -16,6 +21,7 @@ before any computation.
 from __future__ import annotations
 
 import sys
+from importlib.metadata import PackageNotFoundError, version
 
 from psf.engine import PSFError
 from psf.layouts import LayoutError
@@ -28,9 +34,21 @@ COMMANDS = (psf, render, synth, dataset, calibrate, study, train, evaluate, resu
 USER_ERRORS = (UdcError, PSFError, LayoutError, LensError)
 
 
+def package_version() -> str:
+    """The installed distribution's version, else the package's own (a source tree not installed)."""
+    try:
+        return version("udc-render")
+    except PackageNotFoundError:
+        from udc_render import __version__
+        return __version__
+
+
 def build_parser() -> Parser:
     parser = Parser(prog="udc-render", description="Physically based under-display camera simulation.")
-    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}",
+                        help="print the version and exit")
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser,
+                                help="the command; udc-render COMMAND --help for its options")
     for command in COMMANDS:
         command.register(sub)
     return parser

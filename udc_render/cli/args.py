@@ -144,9 +144,19 @@ def add_scene_arguments(r: argparse.ArgumentParser, scene_option: bool = False) 
                          help="target relative RMS noise; spp is chosen from pilot renders (e.g. 0.01)")
     r.add_argument("--bands-nm", help="LOW:HIGH:STEP in nm [the scene's bands, default 400:700:10]")
     r.add_argument("--seed", type=int, help="render seed [the scene's render.seed, 0]")
-    r.add_argument("--path", choices=RENDER_PATHS, help="render path [auto: analytic (exact, no Monte Carlo) for the monitor alone through a pinhole]")
-    r.add_argument("--sampler", choices=SAMPLERS, help="Mitsuba's sampler for the Monte Carlo paths [the scene's "
-                   "render.sampler, multijitter]; each pass is an independent randomisation (study render: samplers)")
+    r.add_argument("--path", choices=RENDER_PATHS,
+                   help="render path (udc_render/render/job.py): auto: analytic for the monitor alone through a "
+                        "pinhole, rgb_matrix for the monitor through a thin lens, else spectral; analytic: the "
+                        "exact pixel-area means of the panel, no Monte Carlo (monitor and pinhole only); "
+                        "rgb_matrix: one Mitsuba RGB render of the panel's drive levels times the primaries' band "
+                        "means (exact for the monitor alone); spectral: Mitsuba's spectral variant, the bands "
+                        "rendered directly (3D scenes, XML) [the scene's render.path, auto]")
+    r.add_argument("--sampler", choices=SAMPLERS,
+                   help="Mitsuba's sampler for the Monte Carlo paths, spp rounded up as it needs: independent: "
+                        "independent uniform samples; stratified: one jittered sample per cell of a square grid; "
+                        "multijitter: multi-jittered (default); orthogonal: orthogonal-array jittered (a prime² "
+                        "count); ldsampler: a low-discrepancy sequence; each pass is an independent "
+                        "randomisation (study render: samplers) [the scene's render.sampler, multijitter]")
     r.add_argument("--image", help="what the monitor shows: an image file, builtin:NAME or pattern:NAME")
     r.add_argument("--sensor-px", type=float_pair("--sensor-px"), help="sensor width,height in pixels")
     r.add_argument("--pitch-um", type=positive("--pitch-um"), help="sensor pixel pitch in µm")
@@ -188,7 +198,9 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--field-rank", type=field_rank, default=argparse.SUPPRESS,
                    help="d > 0: convolve with a rank-R basis of each band's phase kernels (R FFT pairs per band "
                         "instead of one per phase; the kernel residual is recorded), or 'exact' [2]")
-    p.add_argument("--precision", choices=("float32", "float64"), default="float32", help="optics FFTs [float32]")
+    p.add_argument("--precision", choices=("float32", "float64"), default="float32",
+                   help="the optics' FFT convolutions: float32: single precision (default); float64: double "
+                        "precision [float32]")
     p.add_argument("--defocus-tolerance-px", type=defocus_tolerance, default=argparse.SUPPRESS,
                    help="depth layers: the largest error in a pixel's blur-circle diameter, render pixels (fewer "
                         f"layers when larger; udc_render/optics/layers.py), or 'off' (every pixel in focus) "
@@ -198,7 +210,10 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
 def add_sensor_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--sensor-config", type=Path,
                    help="TOML file of sensor-model keys (gain is per display; see udc_render/sensor/config.py)")
-    p.add_argument("--noise-model", choices=("poisson", "gaussian", "none"), help="[poisson]")
+    p.add_argument("--noise-model", choices=("poisson", "gaussian", "none"),
+                   help="sensor noise (udc_render/sensor/noise.py): poisson: Poisson shot noise plus Gaussian read "
+                        "noise in electrons; gaussian: its heteroscedastic Gaussian approximation (variance read + "
+                        "shot × signal); none: the noise-free signal, quantised [the sensor config's, poisson]")
     p.add_argument("--noise-seed", type=int, default=0, help="seed of the sensor noise [0]")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the kernel cache")
     p.add_argument("--cache-dir", type=Path, help="kernel cache folder [$UDC_RENDER_CACHE or ~/.cache/udc-render/psf]")

@@ -12,7 +12,8 @@ def register(sub) -> None:
     e.add_argument("--data", type=Path, required=True, help="a folder written by `udc-render dataset`")
     e.add_argument("--model", required=True, help="input (the degraded capture), dep, or a model.pt/checkpoint.pt")
     e.add_argument("--out", type=Path, required=True, help="results folder (rows of several runs are merged)")
-    e.add_argument("--split", default="test", choices=("train", "val", "test"), help="split to score [test]")
+    e.add_argument("--split", default="test", choices=("train", "val", "test"),
+                   help="the dataset split to score: train, val (validation) or test [test]")
     add_display_argument(e, "the displays to score, by their names in the dataset (a file: the name it gives; any "
                             "other word: a display name of the dataset)", several=True,
                          unset="a checkpoint's own; all of the dataset's for dep")

@@ -51,11 +51,20 @@ def register(sub) -> None:
                    help="sensor pixel pitch (old spelling --pixel-um) [3.1]")
     p.add_argument("--kernel-px", "--size", dest="kernel_px", type=odd_size("--kernel-px"), default=255,
                    help="kernel size in pixels, odd (old spelling --size) [255]")
-    p.add_argument("--focal-length-um", type=positive("--focal-length-um"), default=6000.0)
-    p.add_argument("--aperture-um", type=positive("--aperture-um"), default=3333.0)
-    p.add_argument("--focus-distance-mm", type=positive("--focus-distance-mm"), default=math.inf)
-    p.add_argument("--object-distance-mm", type=positive("--object-distance-mm"), default=math.inf)
-    p.add_argument("--method", choices=METHODS, default="mft", help="Fraunhofer transform [mft]")
+    p.add_argument("--focal-length-um", type=positive("--focal-length-um"), default=6000.0,
+                   help="focal length f of the lens in µm [6000, the paper's]")
+    p.add_argument("--aperture-um", type=positive("--aperture-um"), default=3333.0,
+                   help="aperture diameter D in µm [3333: f/1.8]")
+    p.add_argument("--focus-distance-mm", type=positive("--focus-distance-mm"), default=math.inf,
+                   help="distance the lens is focused at; the sensor sits at its image [inf]")
+    p.add_argument("--object-distance-mm", type=positive("--object-distance-mm"), default=math.inf,
+                   help="distance of the object; away from the focus distance the kernels are defocused "
+                        "(paraxial pupil phase) [inf]")
+    p.add_argument("--method", choices=METHODS, default="mft",
+                   help="Fraunhofer transform to the pixels: mft: matrix Fourier transform of the pupil's "
+                        "autocorrelation, exact pixel integration at any pitch (default); czt: the same sum by "
+                        "chirp-z; paper: the paper's recipe (padded DFT intensity, down-sampled to the pixels "
+                        "by area) [mft]")
     p.add_argument("--pupil-samples", type=positive("--pupil-samples", int), default=None,
                    help="samples across the aperture [auto: ≥ 1024 and alias-free]")
     p.add_argument("--field-phases", type=positive("--field-phases", int), default=None,
@@ -64,11 +73,17 @@ def register(sub) -> None:
                    type=float_pair("--sensor-extent-um"), default=PAPER_SENSOR_UM,
                    help="image width,height in µm: field phases span what it sees of a banding period "
                         "(old spelling --sensor-um) [3174.4,1587.2, the paper's 2048×1024 × 1.55 µm]")
-    p.add_argument("--precision", choices=tuple(PRECISIONS), default="float32")
-    p.add_argument("--mask-raster", choices=MASK_RASTERS, default="band_limited")
+    p.add_argument("--precision", choices=tuple(PRECISIONS), default="float32",
+                   help="float32: complex64 FFTs and products (default); float64: complex128 [float32]")
+    p.add_argument("--mask-raster", choices=MASK_RASTERS, default="band_limited",
+                   help="how the display's mask is sampled on the pupil grid: band_limited: its exact Fourier "
+                        "series cut at the grid's band, nothing aliases (default); area: area-weighted cell "
+                        "averages, then de-apodised [band_limited]")
     p.add_argument("--micrograph-pixel-um", type=positive("--micrograph-pixel-um"), default=1.0,
                    help="pixel size of a micrograph display in µm [1.0]")
-    p.add_argument("--micrograph-values", choices=("amplitude", "intensity"), default="amplitude")
+    p.add_argument("--micrograph-values", choices=("amplitude", "intensity"), default="amplitude",
+                   help="what a micrograph image's pixels are: amplitude: the amplitude transmission (default); "
+                        "intensity: the power transmission (its square root is taken) [amplitude]")
     p.add_argument("--tile-rotation", action="store_true", help="rotate each micrograph tile randomly")
     p.add_argument("--tile-seed", "--seed", dest="tile_seed", type=int, default=0,
                    help="seed of the tile rotations (old spelling --seed) [0]")

@@ -24,7 +24,9 @@ def set_threads(n: int | None) -> None:
 def register(sub) -> None:
     p = sub.add_parser("train", help="train a restorer (UNet or ResNet) on one display's pairs of a dataset")
     p.add_argument("--data", type=Path, required=True, help="a folder written by `udc-render dataset`")
-    p.add_argument("--model", required=True, choices=("unet", "resnet"), help="the model type")
+    p.add_argument("--model", required=True, choices=("unet", "resnet"),
+                   help="the model type (restore/models.py): unet: the paper's UNet with two sub-encoders; resnet: "
+                        "the paper's ResNet baseline")
     p.add_argument("--config", type=Path, help="a model TOML file: type = ... and the model's arguments")
     add_display_argument(p, "the display whose captures to restore, by its name in the dataset (a file: the "
                             "name it gives; any other word: a display name of the dataset)", required=True)
@@ -35,10 +37,12 @@ def register(sub) -> None:
     p.add_argument("--crops-per-pair", type=positive("--crops-per-pair", int), default=1,
                    help="random crops of each pair per epoch [1]")
     p.add_argument("--lr", type=positive("--lr"), default=1e-4, help="learning rate [1e-4], halved at half the epochs")
-    p.add_argument("--loss", choices=("l1", "l1+ssim"), default="l1", help="training loss [l1]")
+    p.add_argument("--loss", choices=("l1", "l1+ssim"), default="l1",
+                   help="training loss: l1: mean absolute error (default); l1+ssim: L1 + (1 − SSIM) [l1]")
     p.add_argument("--seed", type=int, default=0, help="initialisation, crops and order [0]")
-    p.add_argument("--autocast", choices=("bf16",), help="the forward pass in bfloat16 (weights and Adam in "
-                                                          "float32): 2× faster on a CPU with AVX512-BF16 [float32]")
+    p.add_argument("--autocast", choices=("bf16",),
+                   help="bf16: the forward pass in bfloat16 (weights and Adam in float32), 2× faster on a CPU "
+                        "with AVX512-BF16 [off: float32]")
     p.add_argument("--device", default="auto", help="auto (a GPU when present), cpu, cuda, cuda:N [auto]")
     p.add_argument("--threads", type=positive("--threads", int), help="CPU threads for torch [torch's default]")
     p.add_argument("--checkpoint-s", type=positive("--checkpoint-s"), default=60.0,
