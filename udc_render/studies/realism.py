@@ -34,6 +34,9 @@ from psf import Lens, compute_kernels, layouts
 from udc_render.io.plots import mtf_lines, pyplot
 from udc_render.optics import displays as D
 from udc_render.studies.report import md_table, save_plot, write_tables
+from udc_render.studies import realism_capture as rc
+from udc_render.studies.realism_banding import banding_row
+from udc_render.studies.realism_paper import dep_order_row
 
 WAVELENGTHS_NM = (450.0, 550.0, 650.0)
 PIXEL_UM = 1.55  # the paper's sensor
@@ -233,7 +236,6 @@ def capture_part(cfg: dict, quick: bool, progress: bool) -> tuple[list[dict], li
     """(rows, per-display data, banding sweep) of the capture observables (studies.realism_capture):
     γ, input/DeP PSNR/SSIM and banding for cfg's capture configurations, DeP's display order, and the
     presets' banding over the distances d."""
-    from udc_render.studies import realism_capture as rc
     rows, data = [], []
     for c in cfg["capture_configs"]:
         r, d = rc.capture_rows(c.display(), quick=quick, progress=progress, label=c.label, pitch_um=c.pitch_um)
@@ -241,12 +243,12 @@ def capture_part(cfg: dict, quick: bool, progress: bool) -> tuple[list[dict], li
     presets = {c.kind: [row for row in rows if row["display"] == c.label]
                for c in cfg["capture_configs"] if not c.knobs and not c.disorder}
     if "toled" in presets and "poled" in presets:
-        rows.append(rc.dep_order_row(presets["toled"], presets["poled"]))
+        rows.append(dep_order_row(presets["toled"], presets["poled"]))
     sweep = []
     for kind in ("toled", "poled"):
         for d_mm in cfg["distances_mm"]:
             if d_mm > 0:
-                row, b = rc.banding_row(D.preset(kind).with_distance(d_mm))
+                row, b = banding_row(D.preset(kind).with_distance(d_mm))
                 rows.append(row)
                 sweep.append((f"{kind}", b))
     rc.clear_render_cache()
@@ -255,7 +257,6 @@ def capture_part(cfg: dict, quick: bool, progress: bool) -> tuple[list[dict], li
 
 def run_study(out_dir, quick: bool = False, progress: bool = True) -> list[dict]:
     """Write study_realism.csv, .md, .png and study_realism_capture.png into out_dir; returns the rows."""
-    from udc_render.studies import realism_capture as rc
     cfg, out = (QUICK if quick else FULL), Path(out_dir)
     rows, observed = psf_rows(cfg, progress)
     rows += transmission_fit_rows(cfg["urbach_widths_nm"]) if cfg["urbach_widths_nm"] else []
