@@ -49,82 +49,33 @@ kernels use pitch / s and the sensor bins s × s, leaving an extra box of 1/s pi
 """
 from __future__ import annotations
 
-import math
 import time
 import zlib
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
+from tqdm import tqdm
 
-from psf import KernelSet, compute_kernels
-from psf.cache import cached
-from psf.engine import DEFAULT_FIELD_PHASES
-from psf.spectral import channel_kernels
-from udc_render.errors import UdcError
-from udc_render.optics import FieldBasis, field_basis, field_weights, live_phases
 from udc_render.optics.layers import DefocusGeometry, DepthLayers, LayerError, choose_layers, one_layer
 from udc_render.optics import gamma
 from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.render import BandImage, render_scene, resolve_xml_camera
 from udc_render.scene import Monitor, Scene
-from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens, render_grid
-from udc_render.sensor import (Capture, DefectConfig, SensorConfig, band_electron_weights, capture, capture_electrons,
+from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens
+from udc_render.sensor import (Capture, SensorConfig, band_electron_weights, capture, capture_electrons,
                                electrons_rgb, mosaic_of, rgb_to_rggb)
+from udc_render.synth_config import (DEFAULT_DEFOCUS_TOLERANCE_PX, EXPOSURE_FILL, EXPOSURE_PERCENTILE, FORMS,
+                                     SynthConfig, SynthError)
+from udc_render.synth_kernels import (Kernels, band_kernel_set, compact_kernels, display_channel_kernels,
+                                      display_kernels, plan_kernels, scene_object_distance_m)
 from udc_render.views import View, bin_pixels, bright_pixels, layered_electrons, per_channel_blur
 
-FORMS = ("spectral", "per_channel")
-EXPOSURE_FILL = 0.8
-EXPOSURE_PERCENTILE = 99.5
-# Depth layers: the largest error in a pixel's blur-circle diameter, in render pixels (optics.layers).
-# `study capture` (layers: a near ramp over a far plane, against the per-pixel reference): the error at the
-# near object's edge falls linearly with the tolerance, 0.68 % at 1 px (8 layers; 0.36 % at 0.5 px with 13,
-# 1.6 % at 4 px with 3). 1 px keeps the built-in room at 2048 × 1024 within 3× its one-layer optics
-# (benchmarks/bench_layers.py: 0.5 px gives it 3 layers and 3.7×).
-DEFAULT_DEFOCUS_TOLERANCE_PX = 1.0
-
-
-
-class SynthError(UdcError):
-    """Settings the synthesis cannot honour; one line."""
-
-
-@dataclass(frozen=True)
-class SynthConfig:
-    """Knobs of the synthesis (defaults: the paper's rig; every one is recorded in the sidecars)."""
-    form: str = "spectral"
-    sensor: SensorConfig = field(default_factory=SensorConfig)  # gain is replaced by each display's
-    exposure_s: float | None = None  # None: auto (module doc)
-    precision: str = "float32"  # optics FFTs
-    kernel_precision: str = "float32"
-    field_phases: int | None = None  # d > 0: phases per axis (None: the engine's default, 4)
-    blend: str = "source"
-    # d > 0: rank of each band's phase-kernel basis (None: every phase, exact). 2, from `study capture`
-    # (field_rank) and the full-frame check in README: 4.8× faster than every phase at 4e-4 relative RMS
-    # (T-OLED, d = 2 mm; P-OLED 1e-4), a hundredth of the sensor noise, 3 % of the bands' amplitude.
-    field_rank: int | None = 2
-    seed: int = 0
-    use_cache: bool = True
-    kernel_cache: str | None = None  # kernel cache folder (None: psf.cache's default); how, not what: not recorded
-    defects: DefectConfig | None = None  # dead and hot pixels of the sensor (None: none)
-    # Depth layers (optics.layers): largest blur-diameter error, render px; None: no defocus at all
-    # (every pixel in focus, the kernels of the focus distance)
-    defocus_tolerance_px: float | None = DEFAULT_DEFOCUS_TOLERANCE_PX
-    bright_split: bool = True  # very bright pixels convolved apart in float64 (bright_pixels)
-    # The profile that chose form, distance and defects (udc_render.profiles.resolve_profile): a JSON
-    # record {name, sets, options, applied}, kept in synth.json; None when no profile was used.
-    profile: dict | None = field(default=None, hash=False)
-
-    def __post_init__(self):
-        if self.form not in FORMS:
-            raise SynthError(f"form = {self.form!r}: expected one of {', '.join(FORMS)}")
-        if self.defects is not None and not isinstance(self.defects, DefectConfig):
-            raise SynthError(f"defects = {self.defects!r}: expected a sensor.defects.DefectConfig or None")
-        if self.exposure_s is not None and not (self.exposure_s > 0 and math.isfinite(self.exposure_s)):
-            raise SynthError(f"exposure_s = {self.exposure_s!r}: expected a positive number of seconds or auto")
-        tol = self.defocus_tolerance_px
-        if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
-                                or not tol >= 0.05):
-            raise SynthError(f"defocus_tolerance_px = {tol!r}: expected a number of pixels ≥ 0.05, or None (no defocus)")
+# The settings (synth_config) and the kernels (synth_kernels) are part of the pipeline's public names.
+__all__ = ["DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "EXPOSURE_PERCENTILE", "FORMS", "Kernels", "SynthConfig",
+           "SynthError", "SynthResult", "auto_exposure_s", "band_kernel_set", "capture_scene", "capture_views",
+           "check_grid", "compact_kernels", "depth_layers", "display_channel_kernels", "display_gamma",
+           "display_kernels", "layer_kernels", "noise_seed", "plan_kernels", "scene_object_distance_m",
+           "sensor_for_scene", "synthesize"]
 
 
 @dataclass(frozen=True)
@@ -136,100 +87,6 @@ class SynthResult:
     meta: dict  # synth.json: scene, render, exposure, seeds
     display_meta: dict[str, dict]  # <display>/capture.json additions: display, optics, kernels, γ
     timing: dict = field(default_factory=dict)  # seconds; kept out of the files (identical runs, identical bytes)
-
-
-@dataclass(frozen=True)
-class Kernels:
-    """The kernel sets a synthesis needs, by display name ('glass': the bare lens, always there):
-    band kernels at the band centres (spectral form, and the analytic γ of display files) and
-    camera-weighted channel kernels (per-channel form)."""
-    grid: RenderGrid
-    band: dict[str, KernelSet]
-    channel: dict[str, KernelSet] = field(default_factory=dict)
-    field_bases: dict[str, FieldBasis] = field(default_factory=dict)  # compact_kernels: rank-r phase bases
-    object_distance_m: float = math.nan  # the distance the kernels are focused for (scene_object_distance_m)
-
-
-def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um: tuple[float, float],
-                    cfg: SynthConfig, label: str = "", progress: bool = False) -> KernelSet:
-    """psf.KernelSet at the band centres of `grid` (field phases when d > 0), through the kernel cache."""
-    from tqdm import tqdm
-    size = grid.kernel_size_px
-    if size < 3:
-        raise SynthError(f"render margin {grid.margin_px} px leaves no room for a kernel: raise render.margin_um")
-    d_mm = distance_mm if layout is not None else 0.0
-    phases = (cfg.field_phases or DEFAULT_FIELD_PHASES) ** 2 if d_mm > 0 else 1
-    with tqdm(total=phases * grid.centres_nm.size, desc=f"kernels {label}", unit="kernel",
-              disable=not progress, leave=False) as bar:  # ticks only when the kernels are not cached
-        ks, _ = cached(compute_kernels, "mono", layout, lens, cfg.use_cache, cache_dir=cfg.kernel_cache,
-                       wavelengths_nm=grid.centres_nm, pixel_um=grid.pitch_um, size_px=size, distance_mm=d_mm,
-                       field_phases=cfg.field_phases, precision=cfg.kernel_precision, sensor_um=frame_um,
-                       progress=bar.update)
-    return ks
-
-
-def scene_object_distance_m(scene: Scene) -> float:
-    """The object distance the scene itself fixes: the monitor's plane (the camera sits on its centre
-    line); for 3D scenes, and for any thin-lens render (its defocus is in the render), the focus distance."""
-    if isinstance(scene.content, Monitor) and scene.lens.model == "pinhole":
-        return monitor_distance_m(scene)
-    return camera_geometry(scene).focus_distance_m
-
-
-def display_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
-                    progress: bool = False, object_distance_m: float | None = None) -> KernelSet:
-    """The band kernels of `display` for `scene` (its lens and frame) on `grid`, for objects at
-    `object_distance_m` (None: the focus distance)."""
-    frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
-    return band_kernel_set(display.layout, psf_lens(scene, object_distance_m), grid, display.distance_mm, frame_um,
-                           cfg, display.name, progress)
-
-
-def display_channel_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
-                            object_distance_m: float | None = None) -> KernelSet:
-    """Channel-effective kernels [3] (camera-weighted under D65) for the per-channel form."""
-    ks, _ = cached(channel_kernels, "channel", display.layout, psf_lens(scene, object_distance_m), cfg.use_cache,
-                   cache_dir=cfg.kernel_cache, camera=cfg.sensor.camera, illuminant="D65", step_nm=None,
-                   pixel_um=grid.pitch_um, size_px=grid.kernel_size_px, distance_mm=0.0,
-                   precision=cfg.kernel_precision)
-    return ks
-
-
-def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progress: bool = False,
-                 object_distance_m: float | None = None) -> Kernels:
-    """Every kernel set the synthesis of `scene` through `displays` needs, from the scene alone, for
-    objects at `object_distance_m` (None: scene_object_distance_m; the focus distance when
-    cfg.defocus_tolerance_px is None)."""
-    grid = render_grid(scene)
-    z = object_distance_m
-    if z is None:
-        z = camera_geometry(scene).focus_distance_m if cfg.defocus_tolerance_px is None else scene_object_distance_m(scene)
-    glass = Display("glass", None)
-    band = {"glass": display_kernels(glass, scene, grid, cfg, progress, z)}
-    channel = {}
-    for d in displays:
-        if d.name not in band and (cfg.form == "spectral" or d.source != "preset"):  # per_channel: analytic γ
-            band[d.name] = display_kernels(d, scene, grid, cfg, progress, z)
-        if cfg.form == "per_channel":
-            channel[d.name] = display_channel_kernels(d, scene, grid, cfg, z)
-    return Kernels(grid, band, channel, object_distance_m=float(z))
-
-
-def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels:
-    """The kernels with each d > 0 set's phase kernels [K, P, P, S, S] replaced by their rank-r bases on
-    the scene's render grid (optics.field_basis; the same numbers convolve_field would make per call):
-    a dataset worker keeps 2/16 of the memory and makes the SVDs once. Unchanged when the field rank is
-    None (exact: every phase kernel is used)."""
-    if cfg.field_rank is None:
-        return kernels
-    cam = camera_geometry(scene)
-    band, bases = dict(kernels.band), {}
-    for name, ks in kernels.band.items():
-        if ks.field_kernels is not None and ks.distance_mm > 0:
-            wy, wx, _ = field_weights(ks, (cam.height_px, cam.width_px), kernels.grid.pitch_um, ks.distance_mm)
-            bases[name] = field_basis(ks.field_kernels, live_phases(wy, wx), cfg.field_rank)
-            band[name] = replace(ks, field_kernels=None)
-    return replace(kernels, band=band, field_bases=bases)
 
 
 def sensor_for_scene(sensor: SensorConfig, scene: Scene) -> SensorConfig:
@@ -323,7 +180,6 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
                item: int = 0, progress: bool = False, kernels: Kernels | None = None) -> SynthResult:
     """The ground truth and one capture per display from one render, with the kernels planned for its
     scene (plan_kernels; planned here when not given) and for each of its depth layers (module doc)."""
-    from tqdm import tqdm
     names = [d.name for d in displays]
     if len(set(names)) != len(names):
         raise SynthError(f"displays {names}: names must be distinct (they name the output folders)")

@@ -1,14 +1,13 @@
 """The import layers (docs/ARCHITECTURE.md): psf ← udc_render stages ← restore ← experiments ← cli.
 
 Every import in the source (top-level and inside functions) is read with ast; a module may import
-only from its own layer or the layers below it, and the package import graph has no cycle.
+only from its own layer or the layers below it, neither the package nor the module import graph has
+a cycle, and no module is longer than MAX_LINES.
 """
 from __future__ import annotations
 
 import ast
 from pathlib import Path
-
-import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -18,7 +17,8 @@ LAYERS = [
     ("psf",),
     ("udc_render.errors", "udc_render.io.files", "udc_render.metrics", "udc_render"),
     ("udc_render.scene", "udc_render.scenes", "udc_render.content", "udc_render.render", "udc_render.optics",
-     "udc_render.sensor", "udc_render.io", "udc_render.views", "udc_render.pipeline", "udc_render.dataset",
+     "udc_render.sensor", "udc_render.io", "udc_render.views", "udc_render.synth_config", "udc_render.synth_kernels",
+     "udc_render.pipeline", "udc_render.dataset",
      "udc_render.profiles"),
     ("restore",),
     ("udc_render.studies", "udc_render.calibration", "restore.studies"),
@@ -26,8 +26,11 @@ LAYERS = [
 ]
 
 
-def module_name(path: Path) -> str:
-    rel = path.relative_to(ROOT).with_suffix("")
+MAX_LINES = 400
+
+
+def module_name(path: Path, root: Path = ROOT) -> str:
+    rel = path.relative_to(root).with_suffix("")
     parts = list(rel.parts)
     if parts[0] == "scenes":
         parts = ["udc_render", "scenes", *parts[1:]]
@@ -45,26 +48,70 @@ def layer_of(module: str) -> int | None:
     return best
 
 
-def project_imports(path: Path) -> set[str]:
-    """Absolute names of the project modules imported anywhere in the file."""
+def imported_names(path: Path, root: Path = ROOT) -> list[tuple[str, list[str]]]:
+    """(absolute module, the names taken from it) of every import anywhere in the file; `import a.b`
+    takes no names."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    me = module_name(path)
+    me = module_name(path, root)
     package = me if path.name == "__init__.py" else me.rpartition(".")[0]
-    out = set()
+    out = []
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):
-            out |= {a.name for a in node.names}
+            out += [(a.name, []) for a in node.names]
         elif isinstance(node, ast.ImportFrom):
             base = node.module or ""
             if node.level:
                 up = package.split(".")[: len(package.split(".")) - node.level + 1]
                 base = ".".join(up + ([base] if base else []))
-            out.add(base)
-    return {m for m in out if m.split(".")[0] in ("psf", "udc_render", "restore")}
+            out.append((base, [a.name for a in node.names]))
+    return out
 
 
-def sources() -> list[Path]:
-    return sorted(p for d in ("psf", "udc_render", "restore", "scenes") for p in (ROOT / d).rglob("*.py"))
+def project_imports(path: Path, root: Path = ROOT) -> set[str]:
+    """Absolute names of the project modules imported anywhere in the file."""
+    return {m for m, _ in imported_names(path, root) if m.split(".")[0] in ("psf", "udc_render", "restore")}
+
+
+def sources(root: Path = ROOT) -> list[Path]:
+    return sorted(p for d in ("psf", "udc_render", "restore", "scenes") for p in (root / d).rglob("*.py"))
+
+
+def module_graph(root: Path = ROOT) -> dict[str, set[str]]:
+    """Module → the project modules it imports (top level and inside functions); `from pkg import name`
+    counts as an import of the module pkg.name when there is one, else of pkg."""
+    paths = sources(root)
+    modules = {module_name(p, root) for p in paths}
+    graph = {}
+    for path in paths:
+        targets = set()
+        for base, names in imported_names(path, root):
+            subs = {f"{base}.{n}" for n in names if f"{base}.{n}" in modules}
+            targets |= subs
+            if base in modules and (not names or len(subs) < len(names)):
+                targets.add(base)
+        graph[module_name(path, root)] = targets - {module_name(path, root)}
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """A cycle of the directed graph as [a, b, …, a], or None (depth-first search)."""
+    state, stack = {}, []
+
+    def visit(n):
+        state[n] = "open"
+        stack.append(n)
+        for m in sorted(graph.get(n, ())):
+            if state.get(m) == "open":
+                return stack[stack.index(m):] + [m]
+            if m not in state and (cycle := visit(m)):
+                return cycle
+        state[n] = "done"
+        stack.pop()
+        return None
+    for n in sorted(graph):
+        if n not in state and (cycle := visit(n)):
+            return cycle
+    return None
 
 
 def test_every_source_module_has_a_layer():
@@ -106,21 +153,35 @@ def test_no_import_cycle_between_subpackages():
     for path in sources():
         me = unit(module_name(path))
         graph.setdefault(me, set()).update(unit(t) for t in project_imports(path) if unit(t) != me)
-    seen, stack = {}, []
+    cycle = find_cycle(graph)
+    assert cycle is None, "import cycle: " + " → ".join(cycle)
 
-    def visit(n):
-        seen[n] = "open"
-        stack.append(n)
-        for m in graph.get(n, ()):
-            if seen.get(m) == "open":
-                pytest.fail("import cycle: " + " → ".join(stack[stack.index(m):] + [m]))
-            if m not in seen:
-                visit(m)
-        seen[n] = "done"
-        stack.pop()
-    for n in list(graph):
-        if n not in seen:
-            visit(n)
+
+def test_no_import_cycle_between_modules():
+    """The graph of modules (psf.engine, udc_render.studies.defocus, …) is acyclic."""
+    cycle = find_cycle(module_graph())
+    assert cycle is None, "import cycle: " + " → ".join(cycle)
+
+
+def test_module_cycles_are_caught(tmp_path):
+    """The check itself: psf.alpha imports psf.beta (`from psf import beta`), whose function imports
+    psf.alpha back: reported; `from psf import gamma_value` (a name, not a module) is an edge to psf."""
+    pkg = tmp_path / "psf"
+    pkg.mkdir()
+    (pkg / "__init__.py").write_text("gamma_value = 1\n")
+    (pkg / "alpha.py").write_text("from psf import beta, gamma_value\n")
+    (pkg / "beta.py").write_text("def f():\n    from .alpha import x\n    return x\n")
+    graph = module_graph(tmp_path)
+    assert graph == {"psf": set(), "psf.alpha": {"psf", "psf.beta"}, "psf.beta": {"psf.alpha"}}
+    assert find_cycle(graph) == ["psf.alpha", "psf.beta", "psf.alpha"]
+    (pkg / "beta.py").write_text("def f():\n    return 0\n")
+    assert find_cycle(module_graph(tmp_path)) is None
+
+
+def test_modules_are_short():
+    """Every module at most MAX_LINES lines: split by content, not grown."""
+    long = {module_name(p): n for p in sources() if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES}
+    assert not long, long
 
 
 def test_layers_catch_an_upward_import(tmp_path):

@@ -1,0 +1,63 @@
+"""The synthesis settings (SynthConfig) of udc_render.pipeline and its error; re-exported there.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from udc_render.errors import UdcError
+from udc_render.sensor import DefectConfig, SensorConfig
+
+FORMS = ("spectral", "per_channel")
+EXPOSURE_FILL = 0.8
+EXPOSURE_PERCENTILE = 99.5
+# Depth layers: the largest error in a pixel's blur-circle diameter, in render pixels (optics.layers).
+# `study capture` (layers: a near ramp over a far plane, against the per-pixel reference): the error at the
+# near object's edge falls linearly with the tolerance, 0.68 % at 1 px (8 layers; 0.36 % at 0.5 px with 13,
+# 1.6 % at 4 px with 3). 1 px keeps the built-in room at 2048 × 1024 within 3× its one-layer optics
+# (benchmarks/bench_layers.py: 0.5 px gives it 3 layers and 3.7×).
+DEFAULT_DEFOCUS_TOLERANCE_PX = 1.0
+
+
+
+class SynthError(UdcError):
+    """Settings the synthesis cannot honour; one line."""
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """Knobs of the synthesis (defaults: the paper's rig; every one is recorded in the sidecars)."""
+    form: str = "spectral"
+    sensor: SensorConfig = field(default_factory=SensorConfig)  # gain is replaced by each display's
+    exposure_s: float | None = None  # None: auto (module doc)
+    precision: str = "float32"  # optics FFTs
+    kernel_precision: str = "float32"
+    field_phases: int | None = None  # d > 0: phases per axis (None: the engine's default, 4)
+    blend: str = "source"
+    # d > 0: rank of each band's phase-kernel basis (None: every phase, exact). 2, from `study capture`
+    # (field_rank) and the full-frame check in README: 4.8× faster than every phase at 4e-4 relative RMS
+    # (T-OLED, d = 2 mm; P-OLED 1e-4), a hundredth of the sensor noise, 3 % of the bands' amplitude.
+    field_rank: int | None = 2
+    seed: int = 0
+    use_cache: bool = True
+    kernel_cache: str | None = None  # kernel cache folder (None: psf.cache's default); how, not what: not recorded
+    defects: DefectConfig | None = None  # dead and hot pixels of the sensor (None: none)
+    # Depth layers (optics.layers): largest blur-diameter error, render px; None: no defocus at all
+    # (every pixel in focus, the kernels of the focus distance)
+    defocus_tolerance_px: float | None = DEFAULT_DEFOCUS_TOLERANCE_PX
+    bright_split: bool = True  # very bright pixels convolved apart in float64 (bright_pixels)
+    # The profile that chose form, distance and defects (udc_render.profiles.resolve_profile): a JSON
+    # record {name, sets, options, applied}, kept in synth.json; None when no profile was used.
+    profile: dict | None = field(default=None, hash=False)
+
+    def __post_init__(self):
+        if self.form not in FORMS:
+            raise SynthError(f"form = {self.form!r}: expected one of {', '.join(FORMS)}")
+        if self.defects is not None and not isinstance(self.defects, DefectConfig):
+            raise SynthError(f"defects = {self.defects!r}: expected a sensor.defects.DefectConfig or None")
+        if self.exposure_s is not None and not (self.exposure_s > 0 and math.isfinite(self.exposure_s)):
+            raise SynthError(f"exposure_s = {self.exposure_s!r}: expected a positive number of seconds or auto")
+        tol = self.defocus_tolerance_px
+        if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
+                                or not tol >= 0.05):
+            raise SynthError(f"defocus_tolerance_px = {tol!r}: expected a number of pixels ≥ 0.05, or None (no defocus)")

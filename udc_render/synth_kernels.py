@@ -1,0 +1,113 @@
+"""The PSF kernels of a synthesis (udc_render.pipeline): per display, the band kernel sets of the scene's
+render grid (psf.compute_kernels, cached), the camera-channel kernels of the per-channel form, and the
+compact rank-r bases a dataset worker keeps. Re-exported by udc_render.pipeline.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+
+from tqdm import tqdm
+
+from psf import KernelSet, compute_kernels
+from psf.cache import cached
+from psf.engine import DEFAULT_FIELD_PHASES
+from psf.spectral import channel_kernels
+from udc_render.optics import FieldBasis, field_basis, field_weights, live_phases
+from udc_render.optics.displays import Display
+from udc_render.scene import Monitor, Scene
+from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens, render_grid
+from udc_render.synth_config import SynthConfig, SynthError
+
+
+@dataclass(frozen=True)
+class Kernels:
+    """The kernel sets a synthesis needs, by display name ('glass': the bare lens, always there):
+    band kernels at the band centres (spectral form, and the analytic γ of display files) and
+    camera-weighted channel kernels (per-channel form)."""
+    grid: RenderGrid
+    band: dict[str, KernelSet]
+    channel: dict[str, KernelSet] = field(default_factory=dict)
+    field_bases: dict[str, FieldBasis] = field(default_factory=dict)  # compact_kernels: rank-r phase bases
+    object_distance_m: float = math.nan  # the distance the kernels are focused for (scene_object_distance_m)
+
+
+def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um: tuple[float, float],
+                    cfg: SynthConfig, label: str = "", progress: bool = False) -> KernelSet:
+    """psf.KernelSet at the band centres of `grid` (field phases when d > 0), through the kernel cache."""
+    size = grid.kernel_size_px
+    if size < 3:
+        raise SynthError(f"render margin {grid.margin_px} px leaves no room for a kernel: raise render.margin_um")
+    d_mm = distance_mm if layout is not None else 0.0
+    phases = (cfg.field_phases or DEFAULT_FIELD_PHASES) ** 2 if d_mm > 0 else 1
+    with tqdm(total=phases * grid.centres_nm.size, desc=f"kernels {label}", unit="kernel",
+              disable=not progress, leave=False) as bar:  # ticks only when the kernels are not cached
+        ks, _ = cached(compute_kernels, "mono", layout, lens, cfg.use_cache, cache_dir=cfg.kernel_cache,
+                       wavelengths_nm=grid.centres_nm, pixel_um=grid.pitch_um, size_px=size, distance_mm=d_mm,
+                       field_phases=cfg.field_phases, precision=cfg.kernel_precision, sensor_um=frame_um,
+                       progress=bar.update)
+    return ks
+
+
+def scene_object_distance_m(scene: Scene) -> float:
+    """The object distance the scene itself fixes: the monitor's plane (the camera sits on its centre
+    line); for 3D scenes, and for any thin-lens render (its defocus is in the render), the focus distance."""
+    if isinstance(scene.content, Monitor) and scene.lens.model == "pinhole":
+        return monitor_distance_m(scene)
+    return camera_geometry(scene).focus_distance_m
+
+
+def display_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
+                    progress: bool = False, object_distance_m: float | None = None) -> KernelSet:
+    """The band kernels of `display` for `scene` (its lens and frame) on `grid`, for objects at
+    `object_distance_m` (None: the focus distance)."""
+    frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
+    return band_kernel_set(display.layout, psf_lens(scene, object_distance_m), grid, display.distance_mm, frame_um,
+                           cfg, display.name, progress)
+
+
+def display_channel_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
+                            object_distance_m: float | None = None) -> KernelSet:
+    """Channel-effective kernels [3] (camera-weighted under D65) for the per-channel form."""
+    ks, _ = cached(channel_kernels, "channel", display.layout, psf_lens(scene, object_distance_m), cfg.use_cache,
+                   cache_dir=cfg.kernel_cache, camera=cfg.sensor.camera, illuminant="D65", step_nm=None,
+                   pixel_um=grid.pitch_um, size_px=grid.kernel_size_px, distance_mm=0.0,
+                   precision=cfg.kernel_precision)
+    return ks
+
+
+def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progress: bool = False,
+                 object_distance_m: float | None = None) -> Kernels:
+    """Every kernel set the synthesis of `scene` through `displays` needs, from the scene alone, for
+    objects at `object_distance_m` (None: scene_object_distance_m; the focus distance when
+    cfg.defocus_tolerance_px is None)."""
+    grid = render_grid(scene)
+    z = object_distance_m
+    if z is None:
+        z = camera_geometry(scene).focus_distance_m if cfg.defocus_tolerance_px is None else scene_object_distance_m(scene)
+    glass = Display("glass", None)
+    band = {"glass": display_kernels(glass, scene, grid, cfg, progress, z)}
+    channel = {}
+    for d in displays:
+        if d.name not in band and (cfg.form == "spectral" or d.source != "preset"):  # per_channel: analytic γ
+            band[d.name] = display_kernels(d, scene, grid, cfg, progress, z)
+        if cfg.form == "per_channel":
+            channel[d.name] = display_channel_kernels(d, scene, grid, cfg, z)
+    return Kernels(grid, band, channel, object_distance_m=float(z))
+
+
+def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels:
+    """The kernels with each d > 0 set's phase kernels [K, P, P, S, S] replaced by their rank-r bases on
+    the scene's render grid (optics.field_basis; the same numbers convolve_field would make per call):
+    a dataset worker keeps 2/16 of the memory and makes the SVDs once. Unchanged when the field rank is
+    None (exact: every phase kernel is used)."""
+    if cfg.field_rank is None:
+        return kernels
+    cam = camera_geometry(scene)
+    band, bases = dict(kernels.band), {}
+    for name, ks in kernels.band.items():
+        if ks.field_kernels is not None and ks.distance_mm > 0:
+            wy, wx, _ = field_weights(ks, (cam.height_px, cam.width_px), kernels.grid.pitch_um, ks.distance_mm)
+            bases[name] = field_basis(ks.field_kernels, live_phases(wy, wx), cfg.field_rank)
+            band[name] = replace(ks, field_kernels=None)
+    return replace(kernels, band=band, field_bases=bases)
