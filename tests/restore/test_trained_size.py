@@ -1,0 +1,31 @@
+"""The shipped weights (restore/trained) stay bounded: each retrain adds its float16 model.pt files to the
+git history (the cpu run's six: 77 MB, about 71 MB packed), so they are replaced only when RESULTS.md is
+regenerated, and the folder holds the models and their small records only."""
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+MAX_TOTAL_MB = 80  # today 74 MB: 4 UNets of 17.9 MB and 2 ResNets of 2.8 MB (float16 state dicts)
+SMALL = {".json": 64_000, ".csv": 64_000, ".png": 256_000}  # bytes per file beside model.pt
+
+
+def tracked() -> list[Path]:
+    try:
+        out = subprocess.run(["git", "ls-files", "restore/trained"], cwd=ROOT, capture_output=True, text=True, check=True)
+    except (OSError, subprocess.CalledProcessError):
+        pytest.skip("not a git checkout")
+    return [ROOT / line for line in out.stdout.splitlines() if (ROOT / line).is_file()]
+
+
+def test_shipped_weights_are_bounded():
+    files = tracked()
+    total = sum(p.stat().st_size for p in files)
+    assert total <= MAX_TOTAL_MB * 1e6, f"restore/trained holds {total / 1e6:.1f} MB > {MAX_TOTAL_MB} MB"
+
+
+def test_only_models_and_small_records_are_shipped():
+    bad = [str(p.relative_to(ROOT)) for p in tracked()
+           if p.name != "model.pt" and not (p.suffix in SMALL and p.stat().st_size <= SMALL[p.suffix])]
+    assert not bad, bad
