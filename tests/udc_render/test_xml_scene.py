@@ -1,11 +1,16 @@
 """A user's Mitsuba 3 XML scene through `udc-render synth` with the camera pose of its own sensor
 (render.resolve_xml_camera), and the one-line refusals of what it cannot take."""
 import json
+import math
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from udc_render.cli import main
+from udc_render.io.band_image import load_band_image
 from udc_render.render import resolve_xml_camera
 from udc_render.scene import load_scene
 
@@ -54,6 +59,7 @@ def _cache(tmp_path, monkeypatch):
     monkeypatch.setenv("UDC_RENDER_CACHE", str(tmp_path / "cache"))
 
 
+@pytest.mark.fallback
 def test_synth_renders_the_xml_scene_from_its_own_camera(tmp_path, capsys):
     """`udc-render synth` on a Cornell box whose scene file has no camera: the pose is the XML's lookat,
     the focus its target, the field of view the scene's lens and sensor; the captures are written."""
@@ -95,6 +101,7 @@ REFUSED = {  # name: (write_scene arguments, fragments of the one line besides t
 
 
 @pytest.mark.parametrize("name", list(REFUSED))
+@pytest.mark.fallback
 def test_unsupported_xml_camera_is_one_line_before_any_work(tmp_path, capsys, name):
     kwargs, fragments = REFUSED[name]
     scene = write_scene(tmp_path, name, **kwargs)
@@ -116,6 +123,7 @@ def test_a_file_mitsuba_cannot_load_is_one_line(tmp_path, capsys):
         assert frag in line, (frag, line)
 
 
+@pytest.mark.fallback
 def test_thinlens_gives_pose_and_focus_and_its_aperture_is_not_used(tmp_path):
     """A thinlens sensor: its focus distance is taken, its aperture only recorded (the render stays the
     scene's lens model: the wave optics adds the defocus from the rendered depth)."""
@@ -137,6 +145,7 @@ def test_thinlens_gives_pose_and_focus_and_its_aperture_is_not_used(tmp_path):
     assert r.lens.focus_distance_m == 7.0 and r.content.xml_camera.focus_from == "lens.focus_distance_m"
 
 
+@pytest.mark.fallback
 def test_pose_without_a_readable_lookat_focuses_at_infinity(tmp_path):
     """A to_world of rotations and translations: the pose is the same, but with no target distance the
     focus is at infinity (and the target at 1 m along the axis)."""
@@ -163,3 +172,62 @@ def test_dataset_refuses_images_for_the_xml_scene_in_one_line(tmp_path, capsys):
                  "--quiet"]) == 2
     line = one_error_line(capsys.readouterr().err)
     assert "cbox.toml" in line and "--builtin is for a monitor scene" in line and "mitsuba_xml" in line
+
+
+# ---------------------------------------------------------------- the scalar variants (no LLVM) and llvm
+
+# `udc-render synth` on the box: the paper's profile (d = 0: cheap kernels), noise off, and 16 spp of the
+# independent sampler, so that every render pixel is an independent estimate (the z-test below)
+CBOX_SYNTH = ["--display", "toled", "--profile", "paper", "--noise-model", "none", "--spp", "16", "--sampler",
+              "independent", "--keep-render", "--quiet"]
+Z_MAX = 4.5  # two-sided p = 6.8e-6 per band
+
+
+def synth_in_a_process(scene, out, cache, variant: str | None, seed: int):
+    """The band render of `udc-render synth` run in a fresh process (the variant is chosen once per
+    process) with UDC_RENDER_VARIANT = `variant`, or unset: the llvm variants where LLVM works."""
+    env = {k: v for k, v in os.environ.items() if k != "UDC_RENDER_VARIANT"}
+    env.update({"UDC_RENDER_CACHE": str(cache)}, **({"UDC_RENDER_VARIANT": variant} if variant else {}))
+    r = subprocess.run([sys.executable, "-m", "udc_render.cli", "synth", str(scene), *CBOX_SYNTH, "--seed", str(seed),
+                        "--out", str(out)], env=env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return load_band_image(out / "render")
+
+
+@pytest.fixture(scope="module")
+def cbox_scalar(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("cbox")
+    scene = write_scene(folder)
+    return scene, synth_in_a_process(scene, folder / "scalar", folder / "cache", "scalar", seed=1)
+
+
+@pytest.mark.fallback
+def test_cornell_box_synth_on_the_scalar_variants(cbox_scalar):
+    """The standard Cornell box through `udc-render synth` on the scalar variants (the TypeError of
+    issue 28): finite, non-negative, lit band images, and the depth on the axis is the back wall's."""
+    scene, b = cbox_scalar
+    assert b.meta["variant"] == "scalar_spectral" and b.meta["backend"] == "scalar"
+    assert np.all(np.isfinite(b.bands)) and b.bands.min() >= 0
+    assert np.all(b.bands.mean((1, 2)) > 0.01) and np.all(b.bands.std((1, 2)) > 0)  # lit, with structure
+    origin, target = np.array(ORIGIN), np.array(TARGET)
+    forward = (target - origin) / np.linalg.norm(target - origin)
+    back_wall = (-1.0 - origin[2]) / forward[2]  # (p − origin) · forward where the axis meets z = −1
+    h, w = b.depth_m.shape  # even: the four central pixels straddle the axis; the plane's depth is linear
+    assert b.depth_m[h // 2 - 1:h // 2 + 1, w // 2 - 1:w // 2 + 1].mean() == pytest.approx(back_wall, rel=1e-4)
+
+
+@pytest.mark.fallback
+def test_cornell_box_on_the_scalar_variants_matches_llvm(cbox_scalar, tmp_path):
+    """Scalar and llvm renders of the box (another seed) are two independent Monte Carlo estimates of
+    the same image: per band, the mean of their difference over the pixels is within Z_MAX of its own
+    standard error, and the RMS difference is √2 × the renders' pass-estimated noise within a factor 1.6."""
+    scene, scalar = cbox_scalar
+    llvm = synth_in_a_process(scene, tmp_path / "llvm", tmp_path / "cache", None, seed=2)
+    if not llvm.meta["variant"].startswith("llvm_"):
+        pytest.skip(f"no working LLVM on this machine ({llvm.meta['backend_reason']}): nothing to compare with")
+    d = (scalar.bands.astype(np.float64) - llvm.bands).reshape(len(scalar.bands), -1)
+    z = d.mean(1) / (d.std(1, ddof=1) / math.sqrt(d.shape[1]))
+    assert np.all(np.abs(z) < Z_MAX), z
+    rms = np.linalg.norm(d) / np.linalg.norm(llvm.bands.astype(np.float64))
+    expected = math.hypot(scalar.meta["noise_rel"], llvm.meta["noise_rel"])
+    assert 1 / 1.6 < rms / expected < 1.6, (rms, expected)
