@@ -68,6 +68,7 @@ def reference(scene, tmp_path_factory, render_cache):
     return out, set(render_cache.glob("*.npz")) - before
 
 
+@pytest.mark.fallback
 def test_items_are_views_from_jittered_poses_with_one_focus(reference):
     out, kernel_files = reference
     m = manifest(out)

@@ -85,6 +85,7 @@ def astronaut(udc, tmp_module):
 # ---------------------------------------------------------------- radiometry
 
 
+@pytest.mark.fallback
 def test_white_monitor_spectral_path_equals_the_analytic_band_integrals(white_spectral):
     s, b = white_spectral
     assert b.meta["render_path"] == "spectral" and b.meta["variant"].endswith("_spectral")
@@ -104,6 +105,7 @@ def test_white_monitor_spectral_path_equals_the_analytic_band_integrals(white_sp
     assert float(np.sum(z ** 2)) < 80
 
 
+@pytest.mark.fallback
 def test_white_monitor_rgb_path_is_exact(udc, tmp_path):
     """The rgb path's only approximation is pixel coverage; a panel filling the frame covers every
     pixel, so each pixel equals the analytic band value up to float32 rounding (a few ulp: 1e-6)."""
@@ -117,6 +119,7 @@ def test_white_monitor_rgb_path_is_exact(udc, tmp_path):
     assert b.meta["noise_rel"] == 0.0  # nothing varies between passes
 
 
+@pytest.mark.fallback
 def test_rgb_matrix_and_spectral_paths_agree_on_an_image(astronaut):
     s, a, b = astronaut
     A, B = frame64(a), frame64(b)
@@ -359,6 +362,7 @@ def test_same_seed_is_bit_identical_and_another_seed_differs(astronaut, path):
 # ---------------------------------------------------------------- depth
 
 
+@pytest.mark.fallback
 def test_monitor_depth_is_the_axial_distance_where_the_centre_ray_hits(udc, tmp_path):
     s = scene_of(udc, tmp_path, framing="fill", render={"spp": 1, "path": "rgb_matrix", "depth": True})
     b = render_scene(s, progress=False)
@@ -379,6 +383,7 @@ def test_monitor_depth_is_the_axial_distance_where_the_centre_ray_hits(udc, tmp_
     assert render_scene(s.with_render(depth=None), progress=False).depth_m is None
 
 
+@pytest.mark.fallback
 def test_room_depth_is_finite_and_hits_the_back_wall_on_the_axis(tmp_path):
     # the room at 32 × 16 px of 99.2 µm (64 × 1.55 µm: the paper's field of view), 1 spp, 3 bands
     doc = {"content": {"type": "room"}, "camera": {"origin_m": [0.0, 1.1, 3.4], "target_m": [0.0, 0.2, -2.0]},
@@ -502,6 +507,7 @@ XML = """<scene version="3.0.0">
 """
 
 
+@pytest.mark.fallback
 def test_user_xml_scene_renders_spectrally_from_its_own_camera(tmp_path):
     """A constant sky of 1 W·sr⁻¹·m⁻²·nm⁻¹, a diffuse panel of albedo 0.5 (whose upper hemisphere
     sees only the sky: radiance 0.5 exactly) and a black emitter of radiance 2, in z = 0, seen from
@@ -648,6 +654,7 @@ def rel_err(a, b) -> float:
     return float(np.linalg.norm(a - b) / np.linalg.norm(b))
 
 
+@pytest.mark.fallback
 def test_analytic_path_is_what_mitsuba_converges_to(analytic_and_mitsuba):
     """auto picks the exact area integral for the monitor through a pinhole; Mitsuba's high-spp render
     of the same scene differs from it by no more than Mitsuba's own noise (geometry, orientation,

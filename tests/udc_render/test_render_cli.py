@@ -31,6 +31,7 @@ def one_error_line(err: str) -> str:
 # ---------------------------------------------------------------- a tiny render through the CLI
 
 
+@pytest.mark.fallback
 def test_render_writes_exr_json_and_preview(tmp_path, capsys):
     scene = tmp_path / "mon.toml"
     scene.write_text(MONITOR + "[render]\nspp = 16\n")  # the command line overrides spp, sensor and pitch
@@ -56,6 +57,7 @@ def test_render_writes_exr_json_and_preview(tmp_path, capsys):
     assert iio.imread(out / "preview.png").shape == (32, 64, 3)
 
 
+@pytest.mark.fallback
 def test_render_overrides_path_bands_image_and_seed(tmp_path):
     scene = tmp_path / "mon.toml"
     scene.write_text(SENSOR + MONITOR + '[render]\nmargin_um = 0\n')
@@ -81,7 +83,9 @@ def test_noise_target_from_the_command_line(tmp_path):
     assert meta["spp_from_noise_target"] == 0.05 and abs(meta["noise_rel"] / 0.05 - 1) < 0.35
 
 
-@pytest.mark.parametrize("name", ["room", "hdr", pytest.param("monitor", marks=pytest.mark.slow)])
+@pytest.mark.parametrize("name", [pytest.param("room", marks=pytest.mark.fallback),
+                                  pytest.param("hdr", marks=pytest.mark.fallback),
+                                  pytest.param("monitor", marks=pytest.mark.slow)])
 def test_shipped_scenes_render_by_name(tmp_path, name):
     """Each shipped scene by its bare name, shrunk to 32 × 16 px of 99.2 µm (the paper's field of
     view), 1 spp, 3 bands. 3D scenes also write depth (0.5–7 m inside the rooms; inf through the HDR room's window).

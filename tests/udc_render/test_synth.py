@@ -223,6 +223,7 @@ def test_banding_period_in_the_capture(udc, tmp_path, render_cache):
 # ---------------------------------------------------------------- files and commands
 
 
+@pytest.mark.fallback
 def test_synth_files_round_trip_and_are_byte_identical(udc, tmp_path, render_cache):
     from udc_render.cli import main
     import OpenEXR
