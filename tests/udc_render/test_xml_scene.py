@@ -12,6 +12,7 @@ import pytest
 from udc_render.cli import main
 from udc_render.io.band_image import load_band_image
 from udc_render.render import resolve_xml_camera
+from udc_render.render.xml_camera import scalar_param
 from udc_render.scene import load_scene
 
 from tests.udc_render.cornell_box import CBOX, LOOKAT, ORIGIN, SENSOR, TARGET, UP
@@ -199,6 +200,14 @@ def cbox_scalar(tmp_path_factory):
     folder = tmp_path_factory.mktemp("cbox")
     scene = write_scene(folder)
     return scene, synth_in_a_process(scene, folder / "scalar", folder / "cache", "scalar", seed=1)
+
+
+def test_scalar_param_takes_a_float_or_a_one_element_array_and_nothing_else():
+    """The scalar variants traverse to Python floats, the llvm ones to one-element Float arrays."""
+    params = {"scalar": 0.25, "llvm": np.array([0.25], np.float32), "vector": np.array([0.25, 1.0])}
+    assert scalar_param(params, "scalar") == scalar_param(params, "llvm") == 0.25
+    with pytest.raises(ValueError):
+        scalar_param(params, "vector")
 
 
 @pytest.mark.fallback
