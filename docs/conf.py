@@ -1,0 +1,84 @@
+"""Sphinx configuration of the udc-render documentation site (docs/).
+
+Build: .venv/bin/sphinx-build -W -b html docs docs/_build/html
+The test suite builds it with -W --keep-going (tests/docs/test_docs_build.py).
+"""
+from __future__ import annotations
+
+import sys
+import types
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+project = "udc-render"
+author = "the udc-render authors"
+copyright = "2026, the udc-render authors"
+try:
+    from importlib.metadata import version as _version
+    release = _version("udc-render")
+except Exception:  # not installed: the docs still build from the source tree
+    release = "0.1.0"
+
+extensions = [
+    "myst_parser",
+    "sphinx.ext.autodoc",
+    "sphinx.ext.autosummary",
+    "sphinx.ext.mathjax",
+]
+
+source_suffix = {".md": "markdown", ".rst": "restructuredtext"}
+root_doc = "index"
+exclude_patterns = ["_build", "Thumbs.db", ".DS_Store",
+                    # a table without a title of its own: included by studies/restore.md
+                    "figures/restore_studies/dep_misfit.md"]
+templates_path = ["_templates"]
+
+# MyST: the project's Markdown is included as is (docs/*.md, RESULTS.md, scenes/README.md,
+# benchmarks/README.md). Headings get anchors so pages can link to sections.
+myst_enable_extensions = ["colon_fence", "dollarmath", "deflist"]
+myst_heading_anchors = 3
+# The as-is pages skip heading levels in places (a "###" right under a "#"); that is style, not an error.
+suppress_warnings = ["myst.header"]
+
+html_theme = "furo"
+html_title = f"udc-render {release}"
+html_static_path: list[str] = []
+
+# ---------------------------------------------------------------- API reference
+# docs/api/index.md lists the three packages under `autosummary :recursive:`, so every module,
+# including modules added or renamed later, gets its page (written to docs/api/generated/, ignored by git).
+autosummary_generate = True
+autosummary_imported_members = False
+autodoc_default_options = {"members": True, "undoc-members": False, "show-inheritance": True,
+                           "ignore-module-all": True}  # a package page documents what it defines, not its re-exports
+autodoc_member_order = "bysource"
+autodoc_typehints = "none"   # signatures stay as written; no cross-reference warnings from types
+
+# `python -m udc_render.cli` runs the command line on import (udc_render/cli/__main__.py), and
+# autosummary imports every submodule it finds: stand a placeholder in for it, marked as a mock
+# so that autosummary skips it.
+_main = types.ModuleType("udc_render.cli.__main__")
+_main.__sphinx_mock__ = True
+sys.modules.setdefault("udc_render.cli.__main__", _main)
+
+
+def _literal_docstring(app, what, name, obj, options, lines):
+    """Render every docstring as a literal block.
+
+    The docstrings are free-form text written for the terminal (`help()`), with formulas such as
+    `|x|`, `*`, `_` and indented continuation lines, which reStructuredText reads as markup
+    (substitution references, emphasis, definition lists) and warns about. Shown verbatim they read
+    as their authors wrote them, and the build stays free of warnings under -W.
+    """
+    if not lines:
+        return
+    text = [line.rstrip() for line in lines]
+    while text and not text[-1]:
+        text.pop()
+    lines[:] = ["::", ""] + ["    " + line if line else "" for line in text] + [""]
+
+
+def setup(app):
+    app.connect("autodoc-process-docstring", _literal_docstring)
