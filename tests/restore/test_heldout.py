@@ -26,7 +26,7 @@ def test_write_held_out_writes_each_image_once(tmp_path):
 
 
 def test_heldout_section_checks_its_own_table(tmp_path):
-    from restore.studies.results import heldout_section
+    from restore.studies.results_document import heldout_section
     table = {"input": (15.0, 12.0), "dep": (20.0, 18.0), "unet": (30.0, 25.0)}  # (T-OLED, P-OLED)
     results = {"protocols": {"paper": "linear"}, "methods": {
         name: {"params": None, "macs_g": None, "displays": {
