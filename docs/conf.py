@@ -77,7 +77,7 @@ def _literal_docstring(app, what, name, obj, options, lines):
     text = [line.rstrip() for line in lines]
     while text and not text[-1]:
         text.pop()
-    lines[:] = ["::", ""] + ["    " + line if line else "" for line in text] + [""]
+    lines[:] = [".. code-block:: text", ""] + ["    " + line if line else "" for line in text] + [""]
 
 
 def setup(app):
