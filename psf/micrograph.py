@@ -14,6 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+import OpenEXR
+from imageio import v3 as iio
 
 from .layouts import LayoutError
 
@@ -23,7 +25,6 @@ SUFFIXES = {".png", ".tif", ".tiff", ".exr"}
 
 
 def _read_exr(path: Path) -> np.ndarray:
-    import OpenEXR
     with OpenEXR.File(str(path)) as f:
         channels = f.channels()
         if "RGB" in channels:
@@ -46,7 +47,6 @@ def read_transmission_image(path: str | Path) -> np.ndarray:
         if path.suffix.lower() == ".exr":
             img = _read_exr(path)
         else:
-            from imageio import v3 as iio
             raw = iio.imread(path, plugin="pillow" if path.suffix.lower() == ".png" else "tifffile")
             img = raw.astype(np.float64)
             if np.issubdtype(raw.dtype, np.integer):

@@ -21,15 +21,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from restore.data import DataError, Pair, dataset_displays, list_pairs, load_pair
+from restore.dep import dep_restore
 from restore.metrics import image_metrics
-from udc_render.metrics import BORDER_TEXT, PROTOCOLS, border_px
-from udc_render.metrics import encode_srgb
-from udc_render.io.previews import daylight_balance
-from udc_render.sensor import demosaic_bilinear
 from udc_render.io.files import csv_text, save_figure, save_json, save_text
-from udc_render.sensor import unpack_rggb
+from udc_render.io.plots import pyplot
+from udc_render.io.previews import daylight_balance
+from udc_render.metrics import BORDER_TEXT, PROTOCOLS, border_px, encode_srgb
+from udc_render.sensor import demosaic_bilinear, unpack_rggb
 
 MAC_INPUT_SHAPE = (1, 4, 512, 1024)  # the paper's: 512 × 1024 × 4 packed RAW
 ROW_ORDER = ("input", "dep", "resnet", "unet_syn", "unet")  # the paper's Table 2 order; unet_syn: UNet (Syn)
@@ -107,7 +108,6 @@ class DepRestorer(InputRestorer):
             self.kernels[d] = known_kernels_rggb(pairs[0], self.settings.kernel_px)
 
     def restore(self, packed: np.ndarray, pair: Pair) -> tuple[np.ndarray, float, dict]:
-        from restore.dep import dep_restore
         kwargs = {} if self.settings.denoiser is None else {"denoiser": self.settings.denoiser}
         t0 = time.perf_counter()
         res = dep_restore(packed, self.gamma[pair.display], self.kernels[pair.display],
@@ -136,6 +136,7 @@ class ModelRestorer:
 
     def restore(self, packed: np.ndarray, pair: Pair) -> tuple[np.ndarray, float, dict]:
         import torch
+
         from restore.train import predict
         dev = next(self.model.parameters()).device
         t0 = time.perf_counter()
@@ -159,7 +160,6 @@ RESTORERS = {"input": InputRestorer, "dep": DepRestorer, "model": ModelRestorer}
 
 def preview_panel(panels: list[tuple[str, np.ndarray]], balance: np.ndarray, path: Path, title: str) -> None:
     """Side-by-side sRGB previews (degraded | restored | ground truth) with labels."""
-    from udc_render.io.plots import pyplot
     plt = pyplot()
     h, w = panels[0][1].shape[1:]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 4.2 * h / w + 0.5))
@@ -206,7 +206,6 @@ def _score_display(restorer, display: str, pairs: list[Pair], lp, folder: Path, 
                    progress: bool) -> dict:
     """Score one display's pairs (`lp`: the LPIPS model): <folder>/metrics_<display>.csv and the first
     `previews` previews; returns the display's entry (metric means, median ms/MP, the restorer's notes)."""
-    from tqdm import tqdm
     balance, rows, notes = daylight_balance(), [], {}
     bar = tqdm(pairs, desc=f"evaluate {restorer.name} {display}", unit="image", disable=not progress)
     for i, p in enumerate(bar):

@@ -14,6 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from udc_render.metrics import border_px, display_referred, paper_linear, psnr_db
+from udc_render.sensor import mosaic_of, pack_rggb
+
 
 def ssim(a: np.ndarray, b: np.ndarray) -> float:
     """SSIM of two [C, H, W] images in [0, 1] (module doc)."""
@@ -33,7 +35,6 @@ def lpips_distance(a: np.ndarray, b: np.ndarray, model) -> float:
 def _paper_pair(restored: np.ndarray, gt: np.ndarray, packed: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """The paper protocol's images: linear, [0, 1] of the white level, border cropped; the packed RAW
     against the ground truth's RGGB samples when `packed` is given (the input row), else camera RGB."""
-    from udc_render.sensor import mosaic_of, pack_rggb
     if packed is not None:
         a, b = paper_linear(packed), pack_rggb(paper_linear(mosaic_of(gt)))
     else:

@@ -17,7 +17,9 @@ from pathlib import Path
 import torch
 import torch.nn.functional as F
 from torch import nn
+
 from udc_render.errors import UdcError
+from udc_render.io.files import read_toml
 
 
 class ModelConfigError(UdcError):
@@ -229,7 +231,6 @@ def model_config(model: nn.Module) -> dict:
 def load_config(path) -> dict:
     """A model config from a TOML file (top-level keys: `type` and the model's arguments), checked by
     building the model on the meta device (no memory, no compute)."""
-    from udc_render.io.files import read_toml
     config = read_toml(path, ModelConfigError, "model config")
     with torch.device("meta"):
         build_model(config, source=str(Path(path)))

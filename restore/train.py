@@ -33,12 +33,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from restore.data import PairDataset, largest_crop_px, list_pairs, load_pair, read_manifest
 from restore.losses import loss_fn
 from restore.models import build_model, model_config
-from udc_render.io.files import atomic_path, csv_text, save_figure, save_json, save_text
 from udc_render.errors import UdcError
+from udc_render.io.files import atomic_path, csv_text, save_figure, save_json, save_text
+from udc_render.io.plots import pyplot
 from udc_render.metrics import psnr_db
 
 LOG_COLUMNS = ["epoch", "step", "lr", "loss", "val_psnr_db", "seconds"]
@@ -278,7 +280,6 @@ def save_torch(path: Path, obj) -> None:
 
 
 def plot_loss(log: list, path: Path) -> None:
-    from udc_render.io.plots import pyplot
     plt = pyplot()
     if not log:
         return
@@ -300,7 +301,6 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
           val_every: int = 10, progress: bool = True) -> dict:
     """Train (or resume) in `out`; returns a summary (epochs, final loss, validation PSNR, seconds).
     Nothing is written in `out` before the settings, the run folder and every pair have been checked."""
-    from tqdm import tqdm
     data_dir, out = Path(data_dir), Path(out)
     if settings.epochs < 1 or settings.batch < 1:
         raise TrainError(f"epochs = {settings.epochs}, batch = {settings.batch}: expected integers ≥ 1")

@@ -22,10 +22,15 @@ import shutil
 import sys
 from pathlib import Path
 
+from restore.studies.options import parse_options
+from udc_render.errors import UdcError
+from udc_render.io.files import save_json
+
 
 def continued_settings(run: Path, epochs: int):
     """(the run's TrainSettings with the cap `epochs` and no plateau stop, the run's epochs done)."""
     import torch
+
     from restore.train import TrainError, TrainSettings, checkpoint_errors
     path = run / "train.json"
     if not path.is_file() or not (run / "checkpoint.pt").is_file():
@@ -40,7 +45,6 @@ def continued_settings(run: Path, epochs: int):
 
 def continue_run(run: Path, data: Path, out: Path, epochs: int, val_every: int = 4, progress: bool = True) -> list:
     """Continue `run` to `epochs` in `out` (resumes there); the log rows after the run's stop."""
-    from udc_render.io.files import save_json
     from restore.train import TrainError, data_fingerprint, read_log, train
     run, out = Path(run), Path(out)
     settings, done = continued_settings(run, epochs)
@@ -64,8 +68,6 @@ def continue_run(run: Path, data: Path, out: Path, epochs: int, val_every: int =
 
 
 def main(argv: list[str]) -> None:
-    from restore.studies.options import parse_options
-    from udc_render.errors import UdcError
     usage = ("python -m restore.studies.continued_training RUN DATA --epochs N --out FOLDER "
              "[--val-every 4]")
     pos, o = parse_options(argv, usage)

@@ -19,11 +19,18 @@ prints a Markdown table and writes <out>/dep_misfit.json and dep_misfit.png.
 """
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
+
+from restore.dep import dep_restore
+from restore.studies.options import parse_options
+from udc_render.errors import UdcError
+from udc_render.io.files import save_figure, save_json
+from udc_render.io.plots import pyplot
+from udc_render.metrics import psnr_db
+from udc_render.sensor import demosaic_bilinear, unpack_rggb
 
 MISFITS = (0.0, 0.02, 0.05, 0.1, -0.05)
 
@@ -47,11 +54,8 @@ def misfit_psnr(data_dir: Path, display: str, misfits, split: str = "val", items
                 crop_px: int = 512) -> dict:
     """{"input": dB, ε: dB, ...}: mean PSNR over the crops (module doc)."""
     from restore.data import list_pairs, load_pair
-    from restore.dep import dep_restore
     from restore.known import known_gamma_rggb, known_kernels_rggb
     from restore.train import centre_crop
-    from udc_render.metrics import psnr_db
-    from udc_render.sensor import demosaic_bilinear, unpack_rggb
     pairs = list_pairs(Path(data_dir), split, [display])[:items]
     crops = [centre_crop(*load_pair(p), crop_px) for p in pairs]
     gamma, kernels = known_gamma_rggb(pairs[0]), known_kernels_rggb(pairs[0])
@@ -66,8 +70,6 @@ def misfit_psnr(data_dir: Path, display: str, misfits, split: str = "val", items
 
 
 def plot(rows: dict, path: Path) -> None:
-    from udc_render.io.files import save_figure
-    from udc_render.io.plots import pyplot
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(6, 4))
     for display, row in rows.items():
@@ -83,9 +85,6 @@ def plot(rows: dict, path: Path) -> None:
 
 
 def main(argv: list[str]) -> None:
-    from restore.studies.options import parse_options
-    from udc_render.errors import UdcError
-    from udc_render.io.files import save_json
     usage = ("python -m restore.studies.dep_misfit DATA [--display D ...] [--misfit 0,0.02,0.05,0.1] "
              "[--split val] [--items 4] [--crop-px 512] [--out out/dep_misfit]")
     pos, o = parse_options(argv, usage, repeated=("display",))

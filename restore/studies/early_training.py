@@ -24,6 +24,10 @@ from pathlib import Path
 
 import numpy as np
 
+from restore.studies.options import parse_options
+from udc_render.errors import UdcError
+from udc_render.io.files import save_text
+
 BATCH, CROPS_PER_PAIR, CLIP_GRAD_NORM, SEED = 4, 2, 0.5, 0  # restore.studies.results.BUDGETS["cpu"]
 
 
@@ -47,6 +51,7 @@ def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop
     """Train `variant` for `steps` steps from seed 0 (restore.train.train_step; `autocast`: its forward
     precision); its validation PSNR, mean loss of the last 75 steps and seconds."""
     import torch
+
     from restore.data import PairDataset, list_pairs, load_pair
     from restore.losses import loss_fn
     from restore.models import build_model
@@ -76,9 +81,6 @@ def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop
 
 
 def main(argv: list[str]) -> None:
-    from restore.studies.options import parse_options
-    from udc_render.errors import UdcError
-    from udc_render.io.files import save_text
     usage = ("python -m restore.studies.early_training DATA --display D --variant type:crop_px:lr[:json] "
              "[--variant ...] [--steps 300] [--autocast bf16] [--out out/early_training]")
     pos, o = parse_options(argv, usage, repeated=("variant",))

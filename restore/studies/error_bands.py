@@ -22,6 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
+from restore.studies.options import parse_options
+from udc_render.errors import UdcError
+from udc_render.io.files import save_figure
+from udc_render.io.plots import pyplot
+
 OCTAVE_EDGES = (0.0, 1 / 64, 1 / 32, 1 / 16, 1 / 8, 1 / 4, 1 / 2, 2 ** -0.5)  # cycles / px; the last: the corner
 
 
@@ -98,8 +103,6 @@ def markdown(bands: dict[str, np.ndarray], transfer: np.ndarray, edges=OCTAVE_ED
 
 
 def plot(bands: dict[str, np.ndarray], transfer: np.ndarray, path: Path, title: str, edges=OCTAVE_EDGES) -> None:
-    from udc_render.io.files import save_figure
-    from udc_render.io.plots import pyplot
     plt = pyplot()
     centres = np.sqrt(np.maximum(edges[:-1], edges[1] / 2) * np.array(edges[1:]))
     fig, ax = plt.subplots(figsize=(6.4, 4.0))
@@ -119,8 +122,6 @@ def plot(bands: dict[str, np.ndarray], transfer: np.ndarray, path: Path, title: 
 
 
 def main(argv: list[str]) -> None:
-    from restore.studies.options import parse_options
-    from udc_render.errors import UdcError
     usage = "python -m restore.studies.error_bands DATA --display D --method M [--method M ...] [--split val] " \
             "[--items 6] [--crop-px 512] [--out out/error_bands]"
     pos, o = parse_options(argv, usage, repeated=("method",))

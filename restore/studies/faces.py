@@ -16,14 +16,19 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 
 from restore.data import Pair, load_packed
+from restore.dep import dep_restore
 from restore.mtcnn import MTCNN, box_iou, recall
-from udc_render.io.previews import daylight_balance, preview_srgb
-from udc_render.sensor import demosaic_bilinear
+from restore.studies.face_chart import STUDY_CONTRAST, STUDY_FACE_PX, face_chart
+from udc_render.io.capture import write_synthesis
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
-from udc_render.sensor import unpack_rggb
+from udc_render.io.plots import pyplot
+from udc_render.io.previews import daylight_balance, preview_srgb
+from udc_render.scene import load_scene
+from udc_render.sensor import demosaic_bilinear, unpack_rggb
 
 CHART_PX = (1920, 1080)
 
@@ -45,7 +50,6 @@ def chart_boxes_on_sensor(boxes: np.ndarray, meta: dict, chart_px=CHART_PX) -> n
 
 
 def _overlay(panels: list, path: Path) -> None:
-    from udc_render.io.plots import pyplot
     plt = pyplot()
     from matplotlib.patches import Rectangle
     cols = 3
@@ -75,15 +79,11 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
     green level (fraction of white): each model gets a second row, "<type> ×k", on the capture scaled by
     k = train_level / the chart capture's green level and its output divided by k (a diagnostic of the
     models' exposure range, not a method of the paper). Returns the recall table."""
-    import imageio.v3 as iio
     import torch
-    from restore.dep import dep_restore
-    from restore.studies.face_chart import face_chart
+
     from restore.known import known_gamma_rggb, known_kernels_rggb
     from restore.train import load_model, predict
-    from udc_render.io.capture import write_synthesis
     from udc_render.optics.displays import preset
-    from udc_render.scene import load_scene
     from udc_render.pipeline import SynthConfig, capture_scene
     out, models = Path(out), models or {}
     out.mkdir(parents=True, exist_ok=True)
@@ -129,7 +129,6 @@ def face_experiment(out: Path, models: dict | None = None, sensor_px=(1024, 512)
                      "mean_iou_of_matches": float(iou[iou >= 0.5].mean()) if np.any(iou >= 0.5) else None})
         panels.append((f"{condition} · {d}: recall {matched}/{total}", img, truth, found))
     _overlay(panels, out / "detections.png")
-    from restore.studies.face_chart import STUDY_CONTRAST, STUDY_FACE_PX
     chart_args = {"face_px": list(STUDY_FACE_PX), "contrast": list(STUDY_CONTRAST),
                   **{k: list(v) for k, v in (chart or {}).items()}}
     table = {"rows": rows, "sensor_px": list(sensor_px), "chart_px": list(CHART_PX), "faces": int(len(truth)),

@@ -14,8 +14,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import imageio.v3 as iio
+
 from restore.studies.datasets import dataset_job
 from udc_render.dataset import run_dataset
+from udc_render.io.files import atomic_path
 
 
 def _motorcycle():
@@ -37,8 +40,6 @@ def load_held_out(name: str):
 def write_held_out(folder: Path, count: int | None = None) -> Path:
     """The first `count` (None: all) HELD_OUT images as PNG in `folder` (atomic writes; existing
     files kept); returns the folder."""
-    import imageio.v3 as iio
-    from udc_render.io.files import atomic_path
     folder.mkdir(parents=True, exist_ok=True)
     for name in list(HELD_OUT)[:count]:
         path = folder / f"{name}.png"

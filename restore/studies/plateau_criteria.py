@@ -17,6 +17,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from restore.studies.options import parse_options
+
 CRITERIA = {"last fifth, ≥ 4 (until 2026-11-25)": (0.2, 4), "last two fifths, ≥ 6 (today)": (0.4, 6)}
 
 
@@ -51,7 +53,6 @@ def markdown(folder: Path, threshold_db: float = 0.1) -> str:
 
 
 def main(argv: list[str]) -> None:
-    from restore.studies.options import parse_options
     usage = "python -m restore.studies.plateau_criteria FOLDER [--threshold-db 0.1]"
     pos, o = parse_options(argv, usage)
     if len(pos) != 1:

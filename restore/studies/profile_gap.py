@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from udc_render.metrics import psnr_db
+
 SATURATED, BLOCK_PX = 0.98, 8
 
 
@@ -29,7 +31,6 @@ def block_means(x: np.ndarray, k: int = BLOCK_PX) -> np.ndarray:
 
 def capture_gap(a: np.ndarray, b: np.ndarray) -> dict:
     """The gap between two packed captures [4, H, W] of the same item (module doc)."""
-    from udc_render.metrics import psnr_db
     a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
     hot = ((a >= SATURATED) & (b < 0.9)) | ((b >= SATURATED) & (a < 0.9))
     mse_cool = float(np.mean((a - b)[~hot] ** 2))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from restore.studies.budgets import BUDGETS, DISPLAYS, ROWS, run_dir
 from restore.studies.orderings import ordering_checks
+from udc_render.io.files import save_text
 
 __all__ = ["BUDGETS", "ordering_checks", "run_results"]  # what `udc-render results` reads
 
@@ -84,7 +85,6 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
                             b["face_sensor_px"], progress=progress, train_level=training_levels(data))
     times["faces_s"] = time.perf_counter() - t
     times["total_s"] = time.perf_counter() - t0
-    from udc_render.io.files import save_text
     targets = [(out / "RESULTS.md", out / "figures")]  # (document, its figures' folder)
     if write:
         targets.append((Path(write), Path(write).parent / "docs" / "figures" / "results"))

@@ -48,14 +48,26 @@ def layer_of(module: str) -> int | None:
     return best
 
 
-def imported_names(path: Path, root: Path = ROOT) -> list[tuple[str, list[str]]]:
-    """(absolute module, the names taken from it) of every import anywhere in the file; `import a.b`
+def import_nodes(tree: ast.AST, in_functions: bool | None = None) -> list[ast.Import | ast.ImportFrom]:
+    """The import statements of a module: all (None), those inside functions (True) or outside (False)."""
+    out, todo = [], [(tree, False)]
+    while todo:
+        node, inside = todo.pop()
+        if isinstance(node, (ast.Import, ast.ImportFrom)) and in_functions in (None, inside):
+            out.append(node)
+        inside = inside or isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+        todo += [(child, inside) for child in ast.iter_child_nodes(node)]
+    return sorted(out, key=lambda n: n.lineno)
+
+
+def imported_names(path: Path, root: Path = ROOT, in_functions: bool | None = None) -> list[tuple[str, list[str]]]:
+    """(absolute module, the names taken from it) of the file's imports (import_nodes); `import a.b`
     takes no names."""
     tree = ast.parse(path.read_text(encoding="utf-8"))
     me = module_name(path, root)
     package = me if path.name == "__init__.py" else me.rpartition(".")[0]
     out = []
-    for node in ast.walk(tree):
+    for node in import_nodes(tree, in_functions):
         if isinstance(node, ast.Import):
             out += [(a.name, []) for a in node.names]
         elif isinstance(node, ast.ImportFrom):

@@ -10,11 +10,15 @@ the panel's own primaries, as a monitor without colour management does.
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
+import png  # pypng: exact 16-bit decoding
 
 from udc_render.content import charts
+from udc_render.content.resample import resample, resize_matrix
 from udc_render.errors import UdcError
 
 BUILTIN_IMAGES = ("astronaut", "coffee", "chelsea", "rocket", "camera", "immunohistochemistry")
@@ -138,7 +142,6 @@ def _is_png16(path: Path) -> bool:
 
 
 def _read_png16(path: Path) -> np.ndarray:
-    import png  # pypng: exact 16-bit decoding
     w, h, rows, info = png.Reader(filename=str(path)).asDirect()
     planes = info["planes"]
     a = np.vstack([np.asarray(r, dtype=np.uint16) for r in rows]).reshape(h, w, planes)
@@ -146,8 +149,6 @@ def _read_png16(path: Path) -> np.ndarray:
 
 
 def _read_any(path: Path) -> np.ndarray:
-    import warnings
-    import imageio.v3 as iio
     with warnings.catch_warnings():  # probing a non-image wakes imageio's deprecated legacy plugins
         warnings.simplefilter("ignore", DeprecationWarning)
         return iio.imread(path)
@@ -156,7 +157,6 @@ def _read_any(path: Path) -> np.ndarray:
 def fit_to_panel(code: np.ndarray, cols: int, rows: int) -> tuple[np.ndarray, dict]:
     """Rotate (portrait on landscape or vice versa) and resize [r, c, 3] to fit inside the panel,
     centred with black bars. Returns code values [3, rows, cols] and what was done."""
-    from udc_render.content.resample import resample, resize_matrix
     rotated = (code.shape[0] > code.shape[1]) != (rows > cols) and code.shape[0] != code.shape[1]
     if rotated:
         code = np.rot90(code)  # a quarter turn counter-clockwise

@@ -56,14 +56,17 @@ import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from tqdm import tqdm
+
 from udc_render.dataset.executors import Shared, executor
 from udc_render.dataset.plan import (BUILTIN_THEN, DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M, SPLITS,
                                      DatasetError, Task, Views, image_list, plan_tasks)
-from udc_render.dataset.threads import parent_blas_threads
 from udc_render.dataset.store import check_job, clean_stale, locked, write_manifest
+from udc_render.dataset.threads import parent_blas_threads
 from udc_render.optics.displays import Display
 from udc_render.pipeline import SynthConfig, plan_kernels
 from udc_render.scene import Monitor, Scene
+from udc_render.scene.geometry import camera_geometry
 
 JOB_VERSION = 2  # 2: raw.dng replaces raw.png and packed.tiff; previews optional
 
@@ -130,7 +133,6 @@ def _shared(job: DatasetJob, out: Path) -> Shared:
     fixed at the base pose's (lens.focus_distance_m), so every item has the same in-focus kernels."""
     from psf.cache import cache_dir
     from udc_render.render import resolve_xml_camera
-    from udc_render.scene.geometry import camera_geometry
     cfg = job.cfg
     if cfg.use_cache and cfg.kernel_cache is None:  # workers must load the parent's kernels: pin the folder
         cfg = replace(cfg, kernel_cache=str(cache_dir().resolve()))
@@ -155,7 +157,6 @@ def _views(job: DatasetJob, shared: Shared) -> Views | None:
 
 def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None, progress: bool = True) -> dict:
     """Make the missing items of `job` (resuming an earlier run); returns counts and the wall time."""
-    from tqdm import tqdm
     images, source = image_list(job.images_dir) if job.is_monitor else (None, None)
     out = Path(job.out).resolve()
     shared = _shared(job, out)

@@ -3,19 +3,23 @@ scheduler: a window of submitted items, results as they finish."""
 from __future__ import annotations
 
 import contextlib
+import multiprocessing
 import os
 import resource
 import shutil
 import socket
 import tempfile
 import time
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import dataclass, replace
 from itertools import islice
 from pathlib import Path
 
 from udc_render.dataset.plan import DatasetError, Task
-from udc_render.dataset.threads import blas_threads, blas_threads_env, set_worker_threads, threads_per_worker
 from udc_render.dataset.store import TMP_PREFIX, item_record
+from udc_render.dataset.threads import blas_threads, blas_threads_env, set_worker_threads, threads_per_worker
+from udc_render.io.capture import write_synthesis
+from udc_render.io.files import current_umask, save_json
 from udc_render.optics.displays import Display
 from udc_render.pipeline import Kernels, SynthConfig
 from udc_render.scene import Monitor, Scene
@@ -74,8 +78,6 @@ def cache_layer_kernels(band_image, scene: Scene, shared: Shared, kernels: Kerne
 def make_item(shared: Shared, task: Task) -> dict:
     """Render and synthesise one item into a temporary folder, then rename it into place.
     Runs in this process, a pool process or a Dask worker; returns run times (s) for the log."""
-    from udc_render.io.capture import write_synthesis
-    from udc_render.io.files import current_umask, save_json
     from udc_render.pipeline import synthesize
     from udc_render.render import render_scene
     t0 = time.perf_counter()
@@ -137,8 +139,6 @@ def executor(workers: int, scheduler: str | None, shared: Shared):
     if workers == 1:
         yield lambda tasks: (make_item(shared, t) for t in tasks)
         return
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
     threads = threads_per_worker(workers)
     # BLAS threads change the kernels' bits (psf's matrix products): a monitor's kernels all come from this
     # process, so its workers get a share of the cores; a 3D scene's workers compute their off-focus layers'

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from udc_render.content.monitor_image import BUILTIN_IMAGES
 from udc_render.errors import UdcError
 
 SPLITS = ("train", "val", "test")
@@ -88,7 +89,6 @@ def pose_record(pose: Pose) -> dict:
 def image_list(images_dir: Path | None) -> tuple[list[tuple[str, str]], str]:
     """[(spec, label)] of the images to cycle through, and their source (the folder or 'builtin');
     images_dir None: the built-in images and charts."""
-    from udc_render.content.monitor_image import BUILTIN_IMAGES
     if images_dir is None:
         return [(s, s) for s in [f"builtin:{n}" for n in BUILTIN_IMAGES] + list(BUILTIN_CHARTS)], "builtin"
     folder = Path(images_dir).resolve()

@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import os
 
+from threadpoolctl import threadpool_info, threadpool_limits
+
 BLAS_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
@@ -35,7 +37,6 @@ def set_worker_threads(threads: int) -> None:
 def parent_blas_threads() -> int | None:
     """The thread count of the BLAS numpy loaded in this process (threadpoolctl reads the library itself:
     the environment may have changed since it was loaded, e.g. by a Dask LocalCluster), or None."""
-    from threadpoolctl import threadpool_info
     counts = [i["num_threads"] for i in threadpool_info() if i.get("user_api") == "blas"]
     return int(counts[0]) if counts and counts[0] >= 1 else None
 
@@ -48,7 +49,6 @@ def blas_threads(threads: int | None):
     if not threads:
         yield
         return
-    from threadpoolctl import threadpool_limits
     with threadpool_limits(limits=int(threads), user_api="blas"):
         yield
 

@@ -24,10 +24,11 @@ from pathlib import Path
 import numpy as np
 
 from udc_render.errors import UdcError
+from udc_render.io.dng import DngError, read_dng_mosaic, save_dng
 from udc_render.io.exr import read_exr, save_exr
 from udc_render.io.files import save_json, save_text
-from udc_render.io.dng import DngError, read_dng_mosaic, save_dng
 from udc_render.io.images import write_png
+from udc_render.io.plots import plot_side_by_side
 from udc_render.io.previews import daylight_balance, preview_srgb
 from udc_render.metrics import PROTOCOLS, display_referred, paper_linear, psnr_db
 from udc_render.sensor import CHANNELS, demosaic_bilinear, mosaic_of, pack_rggb
@@ -94,7 +95,6 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True, p
     save_json(out / "summary.json", summary)
     save_text(out / "summary.md", summary_markdown(summary))
     if side_by_side:
-        from udc_render.io.plots import plot_side_by_side
         plot_side_by_side(images, summary, out / "side_by_side.png")
     return summary
 

@@ -33,9 +33,12 @@ from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
+import tifffile
 
+from udc_render.content import spectra
 from udc_render.errors import UdcError
 from udc_render.io.files import atomic_path
+from udc_render.sensor import photon_weights
 
 RATIONAL_DENOMINATOR = 10000  # DNG matrices and neutrals as n / 10000 (4 decimals, as Adobe's converter)
 ILLUMINANT_D65 = 21  # EXIF LightSource code of D65
@@ -60,8 +63,6 @@ def checker_responses(camera: str) -> tuple[np.ndarray, np.ndarray]:
     c = Σ_k q_k L̄_k Δλ (q: photon_weights, the sensor's quantum efficiency per joule), XYZ = Σ_k x̄_k L̄_k Δλ
     (x̄_k: band means of the CIE 1931 2° CMFs), L = reflectance × D65, L̄ the band means. Units are arbitrary (only ratios matter)."""
     import colour
-    from udc_render.content import spectra
-    from udc_render.sensor import photon_weights
     patches = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
     d65 = spectra.illuminant("D65")
     radiance = np.stack([spectra.colourchecker(n) * d65 for n in patches] + [d65])
@@ -138,7 +139,6 @@ def _check_mosaic(path: Path, mosaic_dn, black_level_dn: int, white_level_dn: in
 def save_dng(path: Path, mosaic_dn: np.ndarray, camera: str, black_level_dn: int, white_level_dn: int,
              compression: int | None = COMPRESSION, compression_level: int | None = None) -> None:
     """Write an RGGB mosaic [H, W] uint16 (DN) as a DNG (module doc), atomically."""
-    import tifffile
     path = Path(path)
     m = _check_mosaic(path, mosaic_dn, black_level_dn, white_level_dn)
     args = {} if compression is None else {"compression": compression}
@@ -151,7 +151,6 @@ def save_dng(path: Path, mosaic_dn: np.ndarray, camera: str, black_level_dn: int
 
 def read_dng_mosaic(path: Path) -> DngMosaic:
     """The mosaic and levels of a DNG written by save_dng (read with tifffile)."""
-    import tifffile
     path = Path(path)
     try:
         with tifffile.TiffFile(path) as tif:

@@ -4,13 +4,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import OpenEXR
 
 from udc_render.io.files import atomic_path
 
 
 def save_exr(path, channels: dict) -> None:
     """Linear float32 image channels [H, W] (named, e.g. 'psf_450nm') as one ZIP-compressed OpenEXR."""
-    import OpenEXR
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     data = {name: np.ascontiguousarray(a, dtype=np.float32) for name, a in channels.items()}
     with atomic_path(path, ".exr") as tmp:
@@ -21,7 +21,6 @@ def save_exr(path, channels: dict) -> None:
 def read_exr(path: str | Path) -> dict[str, np.ndarray]:
     """{channel name: [H, W] float32} of an EXR file. OpenEXR ≥ 3.3 groups R, G, B (and A) into one
     [H, W, 3|4] channel named 'RGB' / 'RGBA': it is split back into R, G, B (A)."""
-    import OpenEXR
     out = {}
     with OpenEXR.File(str(path)) as f:
         for name, ch in f.channels().items():

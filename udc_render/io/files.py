@@ -2,9 +2,12 @@
 so an interrupted run never leaves a half file that looks whole."""
 from __future__ import annotations
 
+import csv
+import io
 import json
 import os
 import tempfile
+import tomllib
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -35,7 +38,6 @@ def current_umask() -> int:
 
 def read_toml(path, error_cls, what: str) -> dict:
     """Parse a TOML file; unreadable or invalid files raise error_cls with one line naming `what`."""
-    import tomllib
     try:
         return tomllib.loads(Path(path).read_text(encoding="utf-8"))
     except OSError as e:
@@ -58,8 +60,6 @@ def save_text(path, text: str) -> None:
 
 def csv_text(rows: list[dict], columns: list[str]) -> str:
     """Rows as CSV with the given columns (None and missing as empty cells)."""
-    import csv
-    import io
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=columns, extrasaction="ignore", lineterminator="\n")
     w.writeheader()

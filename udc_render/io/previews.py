@@ -5,7 +5,7 @@ import numpy as np
 
 from udc_render.content import spectra
 from udc_render.metrics import encode_srgb
-
+from udc_render.sensor import photon_weights
 
 XYZ_TO_SRGB = np.array([[3.2404542, -1.5371385, -0.4985314],
                         [-0.9692660, 1.8760108, 0.0415560],
@@ -22,7 +22,6 @@ def preview_rgb(bands: np.ndarray, edges_nm) -> tuple[np.ndarray, float]:
 
 def daylight_balance(camera: str = "Nikon 5100 (NPL)") -> np.ndarray:
     """[3] channel gains that make D65 neutral in this camera (for previews only; RAW is never balanced)."""
-    from udc_render.sensor import photon_weights
     edges = np.arange(380.0, 781.0, 5.0)
     d65 = spectra.band_means(spectra.illuminant("D65"), edges)
     resp = photon_weights(edges, camera) @ (d65 * np.diff(edges))

@@ -32,15 +32,17 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from udc_render.content import spectra
 from udc_render.content.monitor_image import DisplayImageError, panel_drive
 from udc_render.render import mitsuba_scene as ms
+from udc_render.render.analytic import monitor_area_means, monitor_depth_m
 from udc_render.render.band_image import BandImage, band_names
 from udc_render.render.errors import RenderError
-from udc_render.render.xml_camera import load_xml, resolve_xml_camera
 from udc_render.render.variants import set_variant
-from udc_render.scene import Monitor, MitsubaXML, Scene
+from udc_render.render.xml_camera import load_xml, resolve_xml_camera
+from udc_render.scene import MitsubaXML, Monitor, Scene
 from udc_render.scene.geometry import CameraGeometry, axial_depth_m, camera_geometry
 
 PILOT_SPP = 4
@@ -256,7 +258,6 @@ def _grid_meta(scene: Scene, geom: CameraGeometry, edges: np.ndarray, depth) -> 
 
 def render_analytic(scene: Scene) -> BandImage:
     """The monitor's exact pixel-area means (render.analytic): no Monte Carlo, no Mitsuba, no noise."""
-    from udc_render.render.analytic import monitor_area_means, monitor_depth_m
     t0 = time.perf_counter()
     g = camera_geometry(scene)
     drive, _, matrix, content_meta = monitor_content(scene, g)
@@ -279,7 +280,6 @@ def render_analytic(scene: Scene) -> BandImage:
 
 def render_scene(scene: Scene, progress: bool = True) -> BandImage:
     """Render `scene` to a :class:`BandImage` (see the module docstring for the paths and units)."""
-    from tqdm import tqdm
     t0 = time.perf_counter()
     path = choose_path(scene)
     if path == "analytic":

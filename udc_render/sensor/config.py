@@ -10,6 +10,7 @@ from typing import Literal
 import numpy as np
 
 from udc_render.errors import UdcError
+from udc_render.io.files import read_toml
 
 
 class SensorError(UdcError):
@@ -133,7 +134,6 @@ class SensorConfig:
     @classmethod
     def from_toml(cls, path: str | Path) -> "SensorConfig":
         """From a TOML file of sensor keys; errors name the file and the key."""
-        from udc_render.io.files import read_toml
         data = read_toml(path, SensorError, "sensor config")
         try:
             return cls.from_dict(data)

@@ -35,12 +35,13 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from udc_render.optics import displays as D
+from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
 from udc_render.render import render_scene
 from udc_render.scene import Bands, load_scene
 from udc_render.sensor import SensorConfig
-from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
 from udc_render.studies import capture_depth
 from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
 
@@ -165,7 +166,6 @@ def _jobs(cfg: dict) -> list[tuple]:
 
 def run_study(out_dir, quick: bool = False, progress: bool = True) -> list[dict]:
     """Run every knob against its reference, write study_capture.{csv,md,png} into out_dir, return the rows."""
-    from tqdm import tqdm
     cfg = QUICK if quick else FULL
     out = Path(out_dir)
     runs = _Runs(cfg)

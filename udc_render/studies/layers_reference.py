@@ -19,6 +19,7 @@ import numpy as np
 
 from udc_render.optics.layers import Compositor, DefocusGeometry, occluder_kernels
 from udc_render.render import BandImage
+from udc_render.scene.geometry import camera_geometry
 from udc_render.sensor import band_electron_weights
 
 REFERENCE_STEP_PX = 0.02  # β resolution of the reference's depths (render px of blur diameter)
@@ -27,7 +28,6 @@ REFERENCE_STEP_PX = 0.02  # β resolution of the reference's depths (render px o
 def near_over_far(scene, far_m: float, near_m: tuple[float, float], seed: int = 0) -> BandImage:
     """Band radiance [K, H, W] and depth of a textured far plane and a nearer textured square (its middle
     third of the frame) whose distance runs linearly from near_m[0] (left) to near_m[1] (right)."""
-    from udc_render.scene.geometry import camera_geometry
     g = camera_geometry(scene)
     edges = np.asarray(scene.bands.edges_nm, float)
     K, H, W = edges.size - 1, g.height_px, g.width_px

@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+from tqdm.auto import tqdm
+
 from psf import Lens, compute_kernels, layouts
 from psf.engine import auto_pupil_samples
 from psf.spectral import auto_step_nm, band_kernels
@@ -207,7 +209,6 @@ def _row(job: Job, t: Timed) -> dict:
 
 def run_study(out_dir: Path, quick: bool = False, progress: bool = True) -> list[dict]:
     """Run every knob's sweep, write study_psf.{csv,md,png} into out_dir and return the rows."""
-    from tqdm.auto import tqdm
 
     cfg = QUICK if quick else FULL
     out_dir = Path(out_dir)

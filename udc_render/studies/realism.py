@@ -25,18 +25,22 @@ paper's 1.55 µm pixels, d = 0, averaged over the three wavelengths, give:
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from psf import Lens, compute_kernels, layouts
 from udc_render.io.plots import mtf_lines, pyplot
-from udc_render.optics import displays as D
-from udc_render.studies.report import md_table, save_plot, write_tables
+from udc_render.optics import displays as D, gamma as G
+from udc_render.scene import load_scene
+from udc_render.scene.geometry import psf_lens
+from udc_render.sensor import rgb_to_rggb
 from udc_render.studies import realism_capture as rc
 from udc_render.studies.realism_banding import banding_row
 from udc_render.studies.realism_paper import dep_order_row
+from udc_render.studies.report import md_table, save_plot, write_tables
 
 WAVELENGTHS_NM = (450.0, 550.0, 650.0)
 PIXEL_UM = 1.55  # the paper's sensor
@@ -76,7 +80,6 @@ class Config:
 
     def display(self) -> D.Display:
         """The preset with this layout (its T(λ) and gain)."""
-        from dataclasses import replace
         return replace(D.preset(self.kind), layout=self.layout(), source=f"study realism: {self.label}")
 
 
@@ -176,10 +179,6 @@ def pitch_order_row() -> dict:
 def transmission_fit_rows(widths_nm) -> list[dict]:
     """The P-OLED polyimide × cathode fit at each Urbach width on the default rig: γ and T(λ)."""
     from psf.cache import cached
-    from udc_render.optics import gamma as G
-    from udc_render.scene import load_scene
-    from udc_render.scene.geometry import psf_lens
-    from udc_render.sensor import rgb_to_rggb
     lens, edges = psf_lens(load_scene("monitor")), np.arange(400.0, 701.0, 10.0)
     gains = {}
     for name, lay in (("glass", None), ("poled", layouts.poled())):
@@ -224,7 +223,6 @@ def plot(observed: dict, path: Path) -> None:
 
 
 def psf_rows(cfg: dict, progress: bool) -> tuple[list[dict], dict]:
-    from tqdm import tqdm
     observed = {c: observe(c, cfg["kernel_px"]) for c in tqdm(cfg["configs"], desc="realism: kernels",
                                                                disable=not progress)}
     glass = next(o for c, o in observed.items() if c.kind == "glass")

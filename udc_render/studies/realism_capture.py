@@ -57,8 +57,16 @@ from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
+from restore.dep import dep_restore
+from restore.metrics import paper_metrics
+from udc_render.io.plots import pyplot, save_plot
 from udc_render.optics.displays import Display
+from udc_render.optics.gamma import display_gamma
+from udc_render.scene.geometry import psf_lens
+from udc_render.scene.overrides import with_overrides
+from udc_render.sensor import rgb_to_rggb
 from udc_render.studies.realism_banding import banding_row
 from udc_render.studies.realism_paper import (PAPER_DEP, default_scene, dep_verdict, display_label, display_pitch_um,
                                               gamma_verdict, paper_gamma_rggb)
@@ -112,7 +120,6 @@ def display_models(display: Display, scene, cfg=None) -> tuple:
     kernels at the packed pitch, half the synthesis kernel's size)."""
     from restore.known import packed_channel_kernels, rggb_kernels
     from udc_render.pipeline import SynthConfig, plan_kernels
-    from udc_render.scene.geometry import psf_lens
     cfg = cfg or SynthConfig()
     kernels = plan_kernels(scene, [display], cfg)
     size = (kernels.grid.kernel_size_px // 2) | 1  # restore.known's default: the synthesis kernel's field of view
@@ -125,11 +132,7 @@ def score_image(display: Display, scene, models: tuple, item: int = 0, cfg=None)
     """One image: synthesise the capture through `display` from the (cached) render with `models`
     (display_models), score the input, restore with DeP (known kernels and γ) and score it (paper
     protocol)."""
-    from restore.dep import dep_restore
-    from restore.metrics import paper_metrics
-    from udc_render.optics.gamma import display_gamma
     from udc_render.pipeline import SynthConfig, synthesize
-    from udc_render.sensor import rgb_to_rggb
     cfg = cfg or SynthConfig()
     kernels, dep_kernels = models
     t0 = time.perf_counter()
@@ -189,8 +192,6 @@ def capture_rows(display: Display, images: tuple[str, ...] | None = None, quick:
     the layout's period along x; a disordered supercell's is cells × the pitch). scene: the base scene
     (default: the monitor at 2048 × 1024; tests pass a small one). quick_rig: γ on the quick rig
     (biased low, module doc; for tests)."""
-    from tqdm import tqdm
-    from udc_render.scene.overrides import with_overrides
     if display.is_glass:
         raise ValueError("capture_rows: the display is glass (γ = 1, nothing to restore): give a display")
     images = tuple(images or (QUICK_IMAGES if quick else IMAGES))
@@ -225,7 +226,6 @@ def capture_rows(display: Display, images: tuple[str, ...] | None = None, quick:
 def plot_capture(results: list[dict], path: Path, bandings: list[tuple[str, dict]] = ()) -> None:
     """One figure of capture_rows' data dicts: γ regressions, input vs DeP PSNR, banding profiles (of the
     results and of `bandings`, (label, banding() dict) pairs, e.g. a sweep over d)."""
-    from udc_render.io.plots import pyplot, save_plot
     plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(17, 4.4))
     markers = dict(zip(CHANNELS, "o^vs"))

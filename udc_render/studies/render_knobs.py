@@ -78,6 +78,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
+from tqdm.auto import tqdm
 
 from udc_render.content import spectra
 from udc_render.render import render_scene
@@ -300,7 +301,6 @@ def measure(runs: list[Run], scenes: dict[str, Scene], cfg: Config, bar) -> list
 
 def run_study(out_dir, quick: bool = False, progress: bool = True) -> list[dict]:
     """Run the sweeps, write study_render.{csv,md,png,json} into out_dir and return the rows."""
-    from tqdm.auto import tqdm
 
     cfg = QUICK if quick else FULL
     out_dir = Path(out_dir)
