@@ -34,32 +34,6 @@ OPTIONAL = {
     "fcntl": "POSIX only",
 }
 
-# Light imports inside functions of files that another change is editing (the CLI and optics.displays):
-# to be moved to the top there. An entry that no longer occurs fails the test: remove it.
-PENDING = {
-    ("udc_render.cli", "udc_render"),
-    ("udc_render.cli.args", "dataclasses"),
-    ("udc_render.cli.args", "udc_render.scene"),
-    ("udc_render.cli.args", "udc_render.scene.overrides"),
-    ("udc_render.cli.args", "udc_render.sensor"),
-    ("udc_render.cli.calibrate", "udc_render.io.files"),
-    ("udc_render.cli.dataset", "udc_render.cli.args"),
-    ("udc_render.cli.dataset", "udc_render.dataset.plan"),
-    ("udc_render.cli.dataset", "udc_render.scene"),
-    ("udc_render.cli.psf", "argparse"),
-    ("udc_render.cli.psf", "tqdm"),
-    ("udc_render.cli.psf", "udc_render.io.kernels"),
-    ("udc_render.cli.render", "udc_render.io.band_image"),
-    ("udc_render.cli.results", "restore.studies.results"),
-    ("udc_render.cli.synth", "udc_render.io.band_image"),
-    ("udc_render.cli.synth", "udc_render.io.capture"),
-    ("udc_render.cli.synth", "udc_render.scene"),
-    ("udc_render.cli.synth", "udc_render.scene.overrides"),
-    ("udc_render.cli.train", "argparse"),
-    ("udc_render.optics.displays", "dataclasses"),
-}
-
-
 def _among(module: str, names) -> bool:
     return any(module == n or module.startswith(n + ".") for n in names)
 
@@ -97,6 +71,5 @@ def test_function_level_imports_save_a_real_cost():
         for base, names in imported_names(path, in_functions=True):
             if not _allowed(_targets(base, names, modules), heavy):
                 light.add((module_name(path), base))
-    bad = sorted(f"{m}: {t}" for m, t in light - PENDING)
+    bad = sorted(f"{m}: {t}" for m, t in light)
     assert not bad, "imported inside a function, but light (move it to the top):\n" + "\n".join(bad)
-    assert not PENDING - light, f"moved to the top: remove from PENDING {sorted(PENDING - light)}"

@@ -26,6 +26,7 @@ from importlib.metadata import PackageNotFoundError, version
 from psf.engine import PSFError
 from psf.layouts import LayoutError
 from psf.lens import LensError
+from udc_render import __version__
 from udc_render.cli import calibrate, dataset, evaluate, psf, render, results, study, synth, train
 from udc_render.cli.args import Parser
 from udc_render.errors import UdcError
@@ -39,7 +40,6 @@ def package_version() -> str:
     try:
         return version("udc-render")
     except PackageNotFoundError:
-        from udc_render import __version__
         return __version__
 
 

@@ -5,9 +5,13 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 
 from udc_render.errors import UdcError
+from udc_render.scene import RENDER_PATHS, SAMPLERS, load_scene
+from udc_render.scene.overrides import with_overrides
+from udc_render.sensor import SensorConfig
 
 
 class UserError(UdcError):
@@ -131,7 +135,6 @@ def add_display_argument(p: argparse.ArgumentParser, what: str, several: bool = 
 def add_scene_arguments(r: argparse.ArgumentParser, scene_option: bool = False) -> None:
     """Overrides of a scene file's settings (applied by scene_from_args); the scene itself is a
     positional argument, or --scene when `scene_option`."""
-    from udc_render.scene import RENDER_PATHS, SAMPLERS
     if scene_option:
         r.add_argument("--scene", default="monitor", help="a scene file (TOML) or a built-in scene's name: a monitor "
                        "scene (one image per item) or a 3D one, room, hdr or a Mitsuba XML scene (one view per item) "
@@ -167,8 +170,6 @@ def scene_from_args(args):
     """The scene file with the command line's overrides applied (scene.overrides), and a Mitsuba XML
     scene's camera taken from its file (render.resolve_xml_camera: once, before kernels and render)."""
     from udc_render.render import resolve_xml_camera
-    from udc_render.scene import load_scene
-    from udc_render.scene.overrides import with_overrides
     return resolve_xml_camera(with_overrides(
         load_scene(args.scene), spp=args.spp, noise=args.noise, seed=args.seed, path=getattr(args, "path", None),
         bands_nm=args.bands_nm, image=getattr(args, "image", None), sensor_px=args.sensor_px, pitch_um=args.pitch_um,
@@ -221,9 +222,7 @@ def add_sensor_arguments(p: argparse.ArgumentParser) -> None:
 
 def synth_config(args):
     """SynthConfig from the capture options (absent options take the defaults)."""
-    from dataclasses import replace
     from udc_render.pipeline import SynthConfig
-    from udc_render.sensor import SensorConfig
     sensor = SensorConfig()
     if getattr(args, "sensor_config", None) is not None:
         sensor = SensorConfig.from_toml(args.sensor_config)

@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from udc_render.cli.args import UserError, add_display_argument, add_sensor_arguments, out_dir, synth_config
+from udc_render.io.files import save_json
 
 
 def register(sub) -> None:
@@ -20,7 +21,6 @@ def register(sub) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from udc_render.calibration.protocols import calibrate, format_table, plot_all
-    from udc_render.io.files import save_json
     from udc_render.optics.displays import load_display
     display = load_display(args.display)
     if display.is_glass:

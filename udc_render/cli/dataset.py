@@ -15,8 +15,10 @@ import argparse
 import math
 from pathlib import Path
 
-from udc_render.cli.args import (UserError, add_capture_arguments, add_scene_arguments, capture_setup, positive,
-                                 scene_from_args)
+from udc_render.cli.args import (UserError, add_capture_arguments, add_scene_arguments, capture_setup, out_dir,
+                                 positive, scene_from_args)
+from udc_render.dataset.plan import DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M
+from udc_render.scene import Monitor
 
 
 def _split(text: str) -> tuple[int, int, int]:
@@ -42,7 +44,6 @@ def _jitter(name: str):
 
 
 def register(sub) -> None:
-    from udc_render.dataset.plan import DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M
     p = sub.add_parser("dataset", help="many capture pairs: one monitor image or one view of a 3D scene per item "
                                        "through every display (sharded, resumable, parallel)")
     p.set_defaults(run=run, path=None, image=None)
@@ -89,9 +90,6 @@ def split_counts(count: int | None, split: tuple[int, int, int] | None) -> tuple
 def dataset_job(args):
     """The DatasetJob that the parsed `udc-render dataset` arguments describe (also benchmarks/bench_dataset.py)."""
     from udc_render.dataset import DatasetJob
-    from udc_render.cli.args import out_dir
-    from udc_render.dataset.plan import DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M
-    from udc_render.scene import Monitor
     split = split_counts(args.count, args.split)
     cfg, displays = capture_setup(args)
     scene = scene_from_args(args)

@@ -4,19 +4,22 @@
 """
 from __future__ import annotations
 
+import argparse
 import math
 import sys
 import warnings
 from pathlib import Path
 
+from tqdm import tqdm
+
 from psf.engine import DEFAULT_FIELD_PHASES, METHODS, PAPER_SENSOR_UM, PRECISIONS, AliasingWarning, UnderSamplingWarning
 from psf.pupil import MASK_RASTERS
 from udc_render.cli.args import (UserError, add_display_argument, float_list, float_pair, non_negative, odd_size,
                                  out_dir, positive)
+from udc_render.io.kernels import write_kernel_files
 
 
 def _bands(text):
-    import argparse
     try:
         bands = [tuple(float(v) for v in b.split("-")) for b in text.split(",") if b.strip()]
     except ValueError:
@@ -126,9 +129,7 @@ def compute(args, display, lens, bar):
 
 
 def run(args) -> int:
-    from tqdm import tqdm
     from psf import Lens
-    from udc_render.io.kernels import write_kernel_files
     out = out_dir(args.out)
     display, args.distance_mm = layout_and_distance(args)
     lens = Lens(args.focal_length_um, args.aperture_um, args.focus_distance_mm, args.object_distance_mm)

@@ -4,6 +4,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from udc_render.cli.args import add_scene_arguments, out_dir, scene_from_args
+from udc_render.io.band_image import save_band_image
 
 
 def register(sub) -> None:
@@ -14,7 +15,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from udc_render.io.band_image import save_band_image
     from udc_render.render import render_scene
     scene = scene_from_args(args)
     out = out_dir(args.out)

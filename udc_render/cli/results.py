@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from restore.studies.results import BUDGETS, ordering_checks, run_results
 from udc_render.cli.args import out_dir
 
 
 def register(sub) -> None:
-    from restore.studies.results import BUDGETS
     p = sub.add_parser("results", help="dataset → train → evaluate (test split, held-out photographs) → face detection "
                                        "→ RESULTS.md (resumable)")
     p.add_argument("--out", type=Path, default=Path("out/results"), help="work folder [out/results]")
@@ -24,7 +24,6 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
-    from restore.studies.results import BUDGETS, ordering_checks, run_results
     out_dir(args.out)
     carry = args.carry or BUDGETS[args.budget].get("carry")
     if carry:

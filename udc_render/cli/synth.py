@@ -11,6 +11,10 @@ from pathlib import Path
 
 from udc_render.cli.args import (add_capture_arguments, add_scene_arguments, capture_setup, float_pair, out_dir,
                                  scene_from_args)
+from udc_render.io.band_image import save_band_image
+from udc_render.io.capture import write_synthesis
+from udc_render.scene import load_scene
+from udc_render.scene.overrides import with_overrides
 
 DEMO_DISPLAYS = "glass,toled,poled"
 
@@ -37,8 +41,6 @@ def register(sub) -> None:
 
 def synth_and_write(scene, displays, cfg, out: Path, quiet: bool, keep_render: bool = False) -> dict:
     """Plan the kernels, render, synthesise, write; print the summary table."""
-    from udc_render.io.band_image import save_band_image
-    from udc_render.io.capture import write_synthesis
     from udc_render.pipeline import plan_kernels, synthesize
     from udc_render.profiles import describe
     from udc_render.render import render_scene
@@ -83,8 +85,6 @@ def run_synth(args) -> int:
 
 
 def run_demo(args) -> int:
-    from udc_render.scene import load_scene
-    from udc_render.scene.overrides import with_overrides
     scene = with_overrides(load_scene("monitor"), image=args.image, sensor_px=args.sensor_px)
     cfg, displays = capture_setup(argparse.Namespace(profile=args.profile), DEMO_DISPLAYS)
     synth_and_write(scene, displays, cfg, out_dir(args.out), args.quiet)

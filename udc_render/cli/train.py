@@ -2,13 +2,13 @@
 (torch is imported when the command runs, not when the command line is built)."""
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 from udc_render.cli.args import UserError, add_display_argument, out_dir, positive
 
 
 def _even(text: str) -> int:
-    import argparse
     v = positive("--crop-px", int)(text)
     if v % 2:
         raise argparse.ArgumentTypeError(f"--crop-px = {v}: expected an even number (whole RGGB cells)")

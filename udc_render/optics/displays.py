@@ -28,7 +28,7 @@ layout; ``load_display`` reads every command's --display (scenes/README.md).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -138,7 +138,6 @@ class Display:
                 "transmission": self.transmission.describe()}
 
     def with_distance(self, distance_mm: float) -> "Display":
-        from dataclasses import replace
         return replace(self, distance_mm=float(distance_mm))
 
 
