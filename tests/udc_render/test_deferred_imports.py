@@ -34,6 +34,7 @@ OPTIONAL = {
     "fcntl": "POSIX only",
 }
 
+
 def _among(module: str, names) -> bool:
     return any(module == n or module.startswith(n + ".") for n in names)
 
