@@ -44,7 +44,8 @@ suppress_warnings = ["myst.header"]
 
 html_theme = "furo"
 html_title = f"udc-render {release}"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["docstrings.css"]  # a smaller font for the docstrings' literal blocks
 
 # ---------------------------------------------------------------- API reference
 # docs/api/index.md lists the three packages under `autosummary :recursive:`, so every module,
@@ -64,20 +65,31 @@ _main.__sphinx_mock__ = True
 sys.modules.setdefault("udc_render.cli.__main__", _main)
 
 
+def _escaped(line: str) -> str:
+    """One line as plain reStructuredText text: every character that could be markup backslash-escaped."""
+    return "".join("\\" + c if not (c.isalnum() or c.isspace()) else c for c in line)
+
+
 def _literal_docstring(app, what, name, obj, options, lines):
-    """Render every docstring as a literal block.
+    """Render a docstring as its summary paragraph (escaped prose, which autosummary's tables show)
+    followed by the rest as a literal block.
 
     The docstrings are free-form text written for the terminal (`help()`), with formulas such as
     `|x|`, `*`, `_` and indented continuation lines, which reStructuredText reads as markup
     (substitution references, emphasis, definition lists) and warns about. Shown verbatim they read
     as their authors wrote them, and the build stays free of warnings under -W.
     """
-    if not lines:
-        return
     text = [line.rstrip() for line in lines]
     while text and not text[-1]:
         text.pop()
-    lines[:] = [".. code-block:: text", ""] + ["    " + line if line else "" for line in text] + [""]
+    if not text:
+        return
+    cut = text.index("") if "" in text else len(text)
+    summary, rest = text[:cut], text[cut + 1:]
+    out = [_escaped(line.strip()) for line in summary] + [""]
+    if rest:
+        out += [".. code-block:: text", ""] + ["    " + line if line else "" for line in rest] + [""]
+    lines[:] = out
 
 
 def setup(app):
