@@ -13,12 +13,12 @@ Cases
   airy   bare circular aperture; reference = analytic ρ² (A/(λf))² (2J₁(v)/v)² / A, v = πD|u|/(λf).
   toled  psf.layouts.toled() × aperture; reference = engine MFT, float64, pupil_samples 4096.
   toled-pixint  compute_kernels at its defaults (pixel-integrated, 3 λ), with method='czt' and with
-         method='paper' (2× zero-padded FFT, area down-sampling by r), vs hcipy sub-sampled and
-         binned; reference = compute_kernels float64 at 4096.
+         method='paper' (2× zero-padded FFT, cubic down-sampling by the printed r: psf.paper), vs hcipy
+         sub-sampled and binned; reference = compute_kernels float64 at 4096.
 Methods
   engine-mft / engine-czt   fourier.point_kernel: direct MFT (or chirp-z) of g, |U|² ρ², what
                             compute_kernels(pixel_integration=False) runs; de-apodised for the bare lens
-  (the paper's recipe bins by pixel area, so it is timed in the pixel-integrated case below)
+  (the paper's recipe runs through compute_kernels, so it is timed in the pixel-integrated case below)
   hcipy                     FraunhoferPropagator(make_pupil_grid, make_uniform_grid) (MFT inside)
   poppy                     matrixDFT.matrix_dft, ADJUSTABLE centring, nlamD = S ρ n δ / (λ f)
 Each timed call starts from g and does all the work (peers get fresh objects: no cached matrices).

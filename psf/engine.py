@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.fft as sfft
 
-from . import fourier
+from . import fourier, paper
 from .banding import PowerSeries
 from .errors import AliasingWarning, PSFError, UnderSamplingWarning  # noqa: F401 (re-exported)
 from .lens import Lens
@@ -46,11 +46,16 @@ class KernelSet:
                                   (point-sampled kernels: the Riemann estimate Σ ρ² I(u_j), which is
                                   negative where pixels undersample an Airy core; see pixel_integration)
     transmittance      [K]        power through display and aperture / power through the bare aperture
-    ratio_r            [K]        the paper's down-sampling ratio r = δ_N N ρ / (λ f), N δ_N = aperture
+    ratio_r            [K]        the paper's down-sampling ratio r: the formula's δ_N N ρ / (λ f), N δ_N =
+                                  aperture; method 'paper': the printed r it resamples by (psf.paper)
     field_kernels      [K, P, P, S, S] per field phase (d > 0 only), each unit sum
     field_power        [K, P, P]  transmitted power per phase / its mean (the banding samples)
     field_shifts_um    [P, P, 2]  mask shift (x, y) of each phase; image position = shift · z_i / d
                                   (see field_shifts: a whole period, or the part the sensor sees)
+    field_series       [K, 2n+1, m+1] complex: field_power's exact series at any shift s (periodic display,
+                                  d > 0): half weights k_y = −n…n, k_x = 0…m of P(s) / the phases' mean power
+                                  (psf.banding.PowerSeries.truncated, one orders box for every band;
+                                  evaluated by psf.banding.power_grid / power_lattice)
     period_um          (x, y)     the display's period (None: bare lens)
     distance_mm, image_distance_um   the display-to-lens gap d and the lens-to-sensor distance z_i
     """
@@ -68,6 +73,7 @@ class KernelSet:
     period_um: tuple[float, float] | None = None
     distance_mm: float = 0.0
     image_distance_um: float = math.nan
+    field_series: np.ndarray | None = None
 
     @property
     def size_px(self) -> int:
@@ -141,7 +147,7 @@ def _one_kernel(plan: Plan, wave: _Wave, g: np.ndarray, state: dict) -> np.ndarr
     pg, lam, z, S = plan.pgrid, wave.lam_nm * 1e-3, plan.lens.image_distance_um, plan.size_px
     deapodize = plan.deapodize and wave.defocus is None
     if plan.method == "paper":
-        kern, r_used = fourier.paper_kernel(g, pg.dx_um, pg.dy_um, lam, z, plan.pixel_um, S)
+        kern, r_used = paper.paper_kernel(g, pg.dx_um, pg.dy_um, wave.lam_nm, plan.lens, plan.pixel_um, S)
         if r_used < 1 and not state.get("warned_r"):
             warnings.warn(f"paper recipe under-sampled at {wave.lam_nm:g} nm: r = {r_used:.3g} < 1, the DFT grid is "
                           f"coarser than the {plan.pixel_um} µm pixel", UnderSamplingWarning, stacklevel=4)
@@ -161,7 +167,8 @@ def _one_kernel(plan: Plan, wave: _Wave, g: np.ndarray, state: dict) -> np.ndarr
 
 def _wavelength(plan: Plan, lam_nm: np.float64, state: dict, progress) -> tuple:
     """(kernel [S, S], energy outside, transmittance, field kernels [P, P, S, S] | None, field power
-    [P, P] | None) at one wavelength: the power-weighted sum over the field phases."""
+    [P, P] | None, its series (KernelSet.field_series) | None) at one wavelength: the power-weighted sum
+    over the field phases."""
     lens, P, S = plan.lens, plan.phases, plan.size_px
     wave = _wave(plan, lam_nm)
     pg = plan.pgrid
@@ -191,7 +198,19 @@ def _wavelength(plan: Plan, lam_nm: np.float64, state: dict, progress) -> tuple:
     bare_power = math.pi * lens.aperture_um ** 2 / 4
     field_k = (kernels / windows[..., None, None]).astype(np.finfo(plan.cdtype).dtype) if plan.use_field else None
     field_p = power / power.mean() if plan.use_field else None
-    return mean_kernel, 1.0 - acc_window / acc_power, acc_power / P ** 2 / bare_power, field_k, field_p
+    series = wave.series.truncated() / power.mean() if plan.use_field and wave.series is not None else None
+    return mean_kernel, 1.0 - acc_window / acc_power, acc_power / P ** 2 / bare_power, field_k, field_p, series
+
+
+def _common_box(series: list) -> np.ndarray:
+    """The half weights [2n+1, m+1] of every wavelength zero-padded to the largest orders box, stacked."""
+    n = max(h.shape[0] for h in series) // 2
+    m = max(h.shape[1] for h in series) - 1
+    out = np.zeros((len(series), 2 * n + 1, m + 1), complex)
+    for k, h in enumerate(series):
+        c = h.shape[0] // 2
+        out[k, n - c:n + c + 1, :h.shape[1]] = h
+    return out
 
 
 def _assemble(plan: Plan, results: list, precision: str, mask_raster: str, sensor_um, notes: list) -> KernelSet:
@@ -199,7 +218,8 @@ def _assemble(plan: Plan, results: list, precision: str, mask_raster: str, senso
     lens, wl, pg = plan.lens, plan.wl, plan.pgrid
     kernels = np.stack([r[0] for r in results])
     outside, trans = np.array([r[1] for r in results]), np.array([r[2] for r in results])
-    ratio = lens.aperture_um * plan.pixel_um / (wl * 1e-3 * lens.focal_length_um)
+    ratio_of = paper.paper_ratio_r if plan.method == "paper" else paper.formula_ratio_r
+    ratio = np.array([ratio_of(float(lam), lens, plan.pixel_um) for lam in wl])
     if trans.max() < 1e-6:
         notes.append(f"almost nothing is transmitted (transmittance {trans.max():.2e}): the aperture sees "
                      f"little or no display opening; kernels are normalised all the same")
@@ -215,9 +235,10 @@ def _assemble(plan: Plan, results: list, precision: str, mask_raster: str, senso
     field_k = np.stack([r[3] for r in results]).astype(out_dtype, copy=False) if plan.use_field else None
     field_p = np.stack([r[4] for r in results]) if plan.use_field else None
     period = None if plan.display is None else tuple(float(v) for v in plan.display.period_um)
+    series = _common_box([r[5] for r in results]) if results[0][5] is not None else None
     return KernelSet(kernels.astype(out_dtype), wl, plan.pixel_um, outside, trans, ratio, params, field_k, field_p,
                      plan.shifts if plan.use_field else None, notes, period, plan.d_um / 1000.0,
-                     lens.image_distance_um)
+                     lens.image_distance_um, series)
 
 
 def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.0, 520.0, 640.0),

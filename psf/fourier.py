@@ -18,7 +18,7 @@ from scipy.signal import czt
 
 __all__ = ["WORKERS", "LAG_TRANSFORMS", "padded_shape", "power_spectrum", "lags_from_power", "autocorrelation_half",
            "PixelMFT", "pixel_kernel", "lag_transform", "point_kernel",
-           "point_field", "paper_kernel"]
+           "point_field"]
 
 WORKERS = -1  # scipy.fft threads: all cores
 
@@ -229,33 +229,3 @@ def point_field(g: np.ndarray, x_um: np.ndarray, y_um: np.ndarray, dx_um: float,
     ex = np.exp(-2j * np.pi * np.outer(u_um, x_um) / scale)
     ey = np.exp(-2j * np.pi * np.outer(v_um, y_um) / scale)
     return ey @ g @ ex.T * (dx_um * dy_um / scale)
-
-
-def _bin_matrix(centres_um: np.ndarray, width_um: float, grid_um: np.ndarray, step_um: float) -> np.ndarray:
-    """[len(centres), len(grid)] overlap (µm) of pixels [c ± width/2] with grid cells [g ± step/2]."""
-    lo = np.maximum(centres_um[:, None] - width_um / 2, grid_um[None, :] - step_um / 2)
-    hi = np.minimum(centres_um[:, None] + width_um / 2, grid_um[None, :] + step_um / 2)
-    return np.clip(hi - lo, 0.0, None)
-
-
-def paper_kernel(g: np.ndarray, dx_um: float, dy_um: float, wavelength_um: float, distance_um: float,
-                 pixel_um: float, size_px: int, pad_factor: int = 2) -> tuple[np.ndarray, float]:
-    """The paper's recipe (Zhou et al. 2021, eq. 4-6): DFT of the pupil, |·|², down-sample by r.
-
-    The pupil is zero-padded pad_factor×; the DFT intensity, one constant value per DFT cell of
-    λz/(Lδ), is down-sampled to the pixels by area (each pixel sums the cells it overlaps, as an
-    area-averaging resize does). Returns (kernel, r) with the paper's r = δ_N N ρ / (λ z), N δ_N
-    the pupil crop width along x.
-    """
-    ny, nx = g.shape
-    L = sfft.next_fast_len(pad_factor * max(nx, ny))
-    scale = wavelength_um * distance_um
-    intensity = np.abs(sfft.fftshift(sfft.fft2(g, s=(L, L), workers=WORKERS))) ** 2 * (dx_um * dy_um / scale) ** 2
-    du_x, du_y = scale / (L * dx_um), scale / (L * dy_um)
-    # |DFT|² is unchanged by the pupil's offset (a linear phase); fftshift puts u = 0 at L//2.
-    cells = np.arange(L) - L // 2
-    u = (np.arange(size_px) - size_px // 2) * pixel_um
-    bx = _bin_matrix(u, pixel_um, cells * du_x, du_x)
-    by = _bin_matrix(u, pixel_um, cells * du_y, du_y)
-    r = nx * dx_um * pixel_um / scale
-    return by @ intensity @ bx.T, r

@@ -126,9 +126,10 @@ def test_aperture_between_openings_transmits_nothing_measurable():
 # ---------------------------------------------------------------------------------------------
 
 def test_paper_recipe_warns_when_r_below_one():
-    with pytest.warns(UnderSamplingWarning, match="r = 0.505"):
+    # the printed r: the formula's 0.505 × 0.899 (psf.paper.paper_ratio_r at 550 nm)
+    with pytest.warns(UnderSamplingWarning, match="r = 0.454"):
         ks = compute_kernels(None, LENS, [550.0], pixel_um=0.5, size_px=63, pupil_samples=512, method="paper")
-    np.testing.assert_allclose(ks.ratio_r, 0.505, atol=1e-3)
+    np.testing.assert_allclose(ks.ratio_r, 0.454, atol=1e-3)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # r = 3.4 at 3.1 µm: no warning
         compute_kernels(None, LENS, [550.0], pixel_um=3.1, size_px=63, pupil_samples=512, method="paper")

@@ -108,8 +108,9 @@ def _method_section(rows: list[dict], meta: dict, cfg: Config) -> list[str]:
     lines = [f"## {KNOB_TITLES['method']}", "",
              "T-OLED, band_limited, float32, S = {0}. Same reference as knob 1 (N = {1} mft float64); the mft "
              "rows are the very runs of knob 1 (same call, measured once). "
-             "'paper' = the paper's recipe as psf.fourier.paper_kernel implements it (2× zero-padded FFT of the "
-             "pupil, |·|², down-sampled to the pixels). L1_same_N_ref (paper only): against the float64 MFT "
+             "'paper' = the paper's recipe as printed, psf.paper.paper_kernel (2× zero-padded FFT of the "
+             "pupil, |·|², cubic down-sampling by the printed r: the pattern sampled at 0.90 ρ, so its error "
+             "is mostly that scale). L1_same_N_ref (paper only): against the float64 MFT "
              "at the same N, i.e. the recipe's own error with the pupil sampling error taken out."
              .format(cfg.size_px, cfg.pupil_ref_n), ""]
     lines += _table(rows, [("series", "method"), ("value", "N")] + BASE_COLS[1:3]
