@@ -22,7 +22,13 @@ from .errors import PSFError
 from .lens import Lens
 from .propagation import angular_spectrum_tf
 
-__all__ = ["order_autocorrelation", "even_order_autocorrelation", "orders", "disc_quadrant", "PowerSeries", "banding_profile"]
+__all__ = ["order_autocorrelation", "even_order_autocorrelation", "orders", "disc_quadrant", "PowerSeries", "power_grid",
+           "power_lattice", "banding_profile"]
+
+# PowerSeries.truncated: the bound on the dropped weights, relative to the mean power w_0. 1e-5 keeps
+# 413 × 200 of the T-OLED's 3169 × 1585 half weights at 400 nm (measured error 3.5e-7 of w_0, 1e-4 keeps
+# 91 × 32 at 1e-5): 1e-3 of its bands' amplitude.
+SERIES_RTOL = 1e-5
 
 
 def order_autocorrelation(c: np.ndarray) -> np.ndarray:
@@ -114,18 +120,71 @@ class PowerSeries:
         return np.concatenate([np.conj(self._half[::-1, :0:-1]), self._half], axis=1)
 
     def __call__(self, shifts_um: np.ndarray) -> np.ndarray:
-        """Transmitted power (µm² × unit irradiance) at mask shifts [..., 2] (x, y) in µm:
-        Re Σ_ky e_y Σ_kx W γ e_x, evaluated on the grid of the distinct x and y shifts (two matrix products;
-        a field-phase grid or a line of shifts costs one pass over W) and gathered."""
+        """Transmitted power (µm² × unit irradiance) at mask shifts [..., 2] (x, y) in µm: power_grid on
+        the grid of the distinct x and y shifts (a field-phase grid or a line of shifts costs one pass
+        over the weights), gathered."""
         s = np.asarray(shifts_um, dtype=np.float64)
         xs, ix = np.unique(s[..., 0], return_inverse=True)
         ys, iy = np.unique(s[..., 1], return_inverse=True)
-        kx = self.kx[self.kx.size // 2:]
-        ex = np.exp(-2j * np.pi * np.outer(kx, xs) / self.period_um[0])  # [Kx/2, nx]
-        ex[1:] *= 2.0
-        ey = np.exp(-2j * np.pi * np.outer(ys, self.ky) / self.period_um[1])  # [ny, Ky]
-        grid = (ey @ (self._half @ ex)).real                                 # [ny, nx]
+        grid = power_grid(self._half, self.period_um, xs, ys)
         return grid[iy.reshape(s.shape[:-1]), ix.reshape(s.shape[:-1])]
+
+    def truncated(self, rtol: float = SERIES_RTOL) -> np.ndarray:
+        """The half weights [2ny+1, nx+1] (k_y = −ny…ny, k_x = 0…nx) of the smallest orders box whose
+        dropped weights sum (× γ) to at most rtol · w_0: rows |k_y| > ny and columns k_x > nx each drop
+        at most rtol/2, so |P − P_box| ≤ rtol · w_0 at every shift (the mean power w_0 is kept)."""
+        mag = np.abs(self._half) * np.where(np.arange(self._half.shape[1]) > 0, 2.0, 1.0)[None, :]
+        c = self._half.shape[0] // 2
+        budget = 0.5 * rtol * abs(self._half[c, 0])
+        rows = mag[c:].sum(axis=1) + mag[c::-1].sum(axis=1) * (np.arange(c + 1) > 0)  # |k_y| = 0…2my
+        cols = mag.sum(axis=0)
+        ny = _smallest_kept(rows, budget)
+        nx = _smallest_kept(cols, budget)
+        return self._half[c - ny:c + ny + 1, :nx + 1].copy()
+
+
+def _smallest_kept(mass: np.ndarray, budget: float) -> int:
+    """The smallest n with Σ_{i > n} mass_i ≤ budget."""
+    tail = np.concatenate([np.cumsum(mass[::-1])[::-1][1:], [0.0]])  # tail[n] = Σ_{i > n}
+    return int(np.argmax(tail <= budget))
+
+
+def power_grid(half: np.ndarray, period_um, xs_um: np.ndarray, ys_um: np.ndarray) -> np.ndarray:
+    """P on the grid [ys, xs] of mask shifts (µm) from half weights [2ny+1, nx+1] (k_y = −ny…ny, k_x = 0…nx):
+    Re Σ_ky e_y Σ_kx γ w e_x with γ = 2 for k_x > 0 (w_{−k} = w_k*): two matrix products."""
+    ny, nx = half.shape[0] // 2, half.shape[1] - 1
+    ex = np.exp(-2j * np.pi * np.outer(np.arange(nx + 1), xs_um) / period_um[0])  # [nx+1, X]
+    ex[1:] *= 2.0
+    ey = np.exp(-2j * np.pi * np.outer(ys_um, np.arange(-ny, ny + 1)) / period_um[1])  # [Y, 2ny+1]
+    return (ey @ (half @ ex)).real
+
+
+def _chirp_sum(x: np.ndarray, m: int, frequency: float) -> np.ndarray:
+    """X[..., j] = Σ_n x[..., n] e^{−2πi f n j} for j = 0…m−1 (last axis; the chirp z-transform by
+    Bluestein's identity nj = (n² + j² − (j − n)²)/2: three FFTs of length ≥ n + m − 1)."""
+    n = x.shape[-1]
+    L = sfft.next_fast_len(n + m - 1)
+    k = np.arange(max(n, m), dtype=np.float64)
+    chirp = np.exp(-1j * np.pi * frequency * k ** 2)  # e^{−πi f k²}
+    kernel = np.zeros(L, complex)
+    kernel[:m] = np.conj(chirp[:m])
+    kernel[L - n + 1:] = np.conj(chirp[1:n][::-1])
+    conv = sfft.ifft(sfft.fft(x * chirp[:n], n=L, axis=-1, workers=fourier.WORKERS) * sfft.fft(kernel), axis=-1,
+                     workers=fourier.WORKERS)
+    return conv[..., :m] * chirp[:m]
+
+
+def power_lattice(half: np.ndarray, period_um, x0_um: float, dx_um: float, nx: int, y0_um: float, dy_um: float,
+                  ny: int) -> np.ndarray:
+    """power_grid [ny, nx] on the lattice of shifts x0 + i dx, y0 + j dy, by two chirp sums (_chirp_sum):
+    O(N log N) where power_grid's products cost ny · nx · (rows of half)."""
+    ky = np.arange(half.shape[0]) - half.shape[0] // 2
+    kx = np.arange(half.shape[1])
+    start = half * np.where(kx > 0, 2.0, 1.0) * np.exp(-2j * np.pi * kx * x0_um / period_um[0])[None, :]
+    along_x = _chirp_sum(start, nx, dx_um / period_um[0])                            # [rows ky, nx]
+    along_x *= np.exp(-2j * np.pi * ky * y0_um / period_um[1])[:, None]
+    grid = _chirp_sum(along_x.T, ny, dy_um / period_um[1]).T  # [ny, nx]: e^{−2πi (ky − ky_0) j dy / p_y}
+    return (grid * np.exp(-2j * np.pi * ky[0] * dy_um * np.arange(ny) / period_um[1])[:, None]).real
 
 
 def banding_profile(display, lens: Lens | None = None, wavelength_nm: float = 520.0, distance_mm: float = 1.0,

@@ -46,13 +46,16 @@ def combine(ks: KernelSet, weights: np.ndarray, centres_nm, extra_params: dict) 
         field_k = np.einsum("ck,kpqij->cpqij", ww, ks.field_kernels.astype(np.float64))
         field_k /= field_k.sum(axis=(-2, -1), keepdims=True)
         field_p = np.einsum("ck,kpq->cpq", w * trans[None, :], ks.field_power) / (w * trans[None, :]).sum(axis=1)[:, None, None]
+    series = None
+    if ks.field_series is not None:  # linear in the weights, as field_power
+        series = np.einsum("ck,kyx->cyx", w * trans[None, :], ks.field_series) / (w * trans[None, :]).sum(axis=1)[:, None, None]
     wt = w * trans[None, :]
     params = dict(ks.params, **extra_params, sample_wavelengths_nm=ks.wavelengths_nm.tolist())
     return KernelSet(kern.astype(ks.kernels.dtype), np.asarray(centres_nm, dtype=np.float64), ks.pixel_um,
                      1.0 - ww.sum(axis=1) / wt.sum(axis=1), wt.sum(axis=1) / w.sum(axis=1),
                      np.einsum("ck,k->c", w, ks.ratio_r) / w.sum(axis=1), params,
                      None if field_k is None else field_k.astype(ks.kernels.dtype), field_p,
-                     ks.field_shifts_um, list(ks.notes), ks.period_um, ks.distance_mm, ks.image_distance_um)
+                     ks.field_shifts_um, list(ks.notes), ks.period_um, ks.distance_mm, ks.image_distance_um, series)
 
 
 def auto_step_nm(lo_nm: float, size_px: int) -> float:

@@ -10,9 +10,12 @@ import pytest
 import scipy.signal
 
 from psf import compute_kernels, layouts
-from psf.banding import banding_profile
+from dataclasses import replace
+
+from psf.banding import SERIES_RTOL, PowerSeries, banding_profile
+from psf.lens import Lens
 from psf.engine import KernelSet
-from udc_render.optics import OpticsError, apply_kernels, convolve_bands, fft_shape, phase_weights
+from udc_render.optics import OpticsError, apply_kernels, convolve_bands, fft_shape, field_power_map, phase_weights
 from udc_render.optics.field import phase_basis
 from udc_render.render import BandImage
 
@@ -205,10 +208,32 @@ def test_flat_field_banding_period_and_amplitude(toled_d1, blend):
     assert a1 / mean == pytest.approx(expected, rel=0.2)
 
 
-def test_output_blend_is_exact_interpolated_power(toled_d1):
-    """blend='output' on a flat field gives gain · P interpolated linearly (periodically) between phases."""
+def test_output_blend_is_the_exact_power_series(toled_d1):
+    """blend='output' on a flat field gives gain · P(s(x)) / P̄ at every pixel: psf.banding's whole series
+    (not the kernel set's truncated one) at each pixel's shift, P̄ the mean over the phases; within the
+    truncation's bound SERIES_RTOL · w_0 / P̄."""
     ks = toled_d1
     r = apply_kernels(flat_field(ks), ks, blend="output", precision="float64")
+    assert r.applied["field_power"].startswith("exact series")
+    z = ks.params["image_distance_um"]
+    series = PowerSeries(layouts.toled(pitch_um=60.0), Lens(), 0.52, 1000.0)  # the fixture's default lens
+    H, W = r.images.shape[1:]
+    x_um = (np.arange(W) - (W - 1) / 2) * PITCH
+    y_um = (np.arange(H) - (H - 1) / 2) * PITCH
+    shifts = np.stack(np.broadcast_arrays(x_um[None, :], y_um[:, None]), -1) * 1000.0 / z
+    mean_phases = series(ks.field_shifts_um).mean()
+    expect = series(shifts) / mean_phases
+    assert np.ptp(expect) > 1e-3                           # there are bands to get right
+    bound = SERIES_RTOL * series.weights[series.ky.size // 2, series.kx.size // 2].real / mean_phases
+    np.testing.assert_allclose(r.images[0], r.gains[0] * expect, rtol=0, atol=r.gains[0] * bound)
+
+
+def test_output_blend_without_series_is_exact_interpolated_power(toled_d1):
+    """Without the series (kernels made before it): blend='output' on a flat field gives gain · P
+    interpolated linearly (periodically) between phases."""
+    ks = replace(toled_d1, field_series=None)
+    r = apply_kernels(flat_field(ks), ks, blend="output", precision="float64")
+    assert r.applied["field_power"].startswith("the phases' powers")
     P = ks.field_power.shape[-1]
     p, z = layouts.toled(pitch_um=60.0).pitch_x_um, ks.params["image_distance_um"]
     H, W = r.images.shape[1:]
@@ -233,7 +258,8 @@ def test_field_source_blend_conserves_energy(toled_d1):
     p, z = layouts.toled(pitch_um=60.0).pitch_x_um, ks.params["image_distance_um"]
     wx = phase_weights((np.arange(W) - (W - 1) / 2) * PITCH, ks.field_shifts_um[0, :, 0], 1000.0, z, p, True)
     wy = phase_weights((np.arange(H) - (H - 1) / 2) * PITCH, ks.field_shifts_um[:, 0, 1], 1000.0, z, p, True)
-    power = np.einsum("jy,ji,ix->yx", wy, ks.field_power[0], wx)   # P(s(x)) at every source pixel
+    power = field_power_map(ks, (H, W), PITCH, 1.0, z, (p, p)).band(0, np.float64)  # P(s(x)) at every source pixel
+    assert np.abs(wx.sum(0) - 1).max() < 1e-12 and np.abs(wy.sum(0) - 1).max() < 1e-12  # the blend adds no power
     total = r.images.sum(dtype=np.float64)                # float32 images: 2e-7 relative
     assert total == pytest.approx(r.gains[0] * (x[0] * power).sum(), rel=2e-7)
     assert abs(total / (r.gains[0] * x.sum()) - 1) > 2e-6   # 10× the tolerance: the modulation counts

@@ -5,7 +5,7 @@
 - Light that the PSF sends outside the kernel window is lost (energy_outside), not renormalised.
 - Glass (no display): pass the bare-lens KernelSet (transmittance 1) and transmission None (T = 1).
 - d = 0 (or no field kernels): one kernel per band (optics.convolution); d > 0: field phases blended
-  (optics.field); very bright pixels convolved apart in float64 (optics.bright).
+  (optics.field) with the exact transmitted power at every pixel (optics.field_power); very bright pixels convolved apart in float64 (optics.bright).
 """
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ import numpy as np
 from udc_render.optics.bright import BrightPixels
 from udc_render.optics.convolution import OpticsError, _check_margin, _precision, convolve_bands, fft_shape
 from udc_render.optics.field import FieldBasis, convolve_field, field_weights
+from udc_render.optics.field_power import field_power_map
 
 PITCH_RTOL = 1e-6
 
@@ -116,9 +117,13 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra, bright)
     else:
         wy, wx, geometry = field_weights(kernel_set, (H, W), pitch, d_mm, image_distance_um, period_um)
+        power_map = field_power_map(kernel_set, (H, W), pitch, d_mm, geometry["image_distance_um"],
+                                    geometry["period_um"])
         images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
                                           gains, blend, precision, workers, field_rank, channel_weights, field_basis,
-                                          bright)
+                                          bright, power_map)
+        applied["field_power"] = ("exact series at each pixel's shift (optics.field_power)" if power_map is not None
+                                  else "the phases' powers, interpolated (the kernel set has no field_series)")
         if field_rank is not None:
             applied.update(field_rank=int(field_rank), field_rank_kernel_residual=residual)
         applied.update(model="field-dependent", blend=blend, **geometry)

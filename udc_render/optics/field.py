@@ -8,7 +8,8 @@ phases q (KernelSet.field_*):
     blend='source' (default):  y = g · Σ_q k_q ⊗ (w_q · P_q · x)      (the PSF belongs to the source point)
     blend='output'          :  y = g · Σ_q w_q · P_q · (k_q ⊗ x)      (weights at the output pixel)
 
-w_q(x) are bilinear (tensor-product linear) interpolation weights in phase, periodic over the display
+With the exact series of the kernel set (optics.field_power, the default), P_q is replaced by the exact
+power m(s(x)) at each pixel's own shift. w_q(x) are bilinear (tensor-product linear) interpolation weights in phase, periodic over the display
 period when the phases span a whole period, clamped at the end phases when they span only the part
 of the display the sensor sees (psf.engine.field_shifts). 'source' conserves energy exactly
 (Σ y = g · Σ x · P(s(x))); a flat field then shows the banding profile smoothed by the PSF.
@@ -23,6 +24,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from udc_render.optics.bright import BrightPixels, bright_blur, dimmed
+from udc_render.optics.field_power import PowerMap
 from udc_render.optics.convolution import (OpticsError, _channel_weights, _check_margin, _kernel_spectrum, _Output,
                                            _precision, _workers, fft_shape)
 
@@ -67,8 +69,10 @@ def _axis_is_periodic(shifts: np.ndarray, period_um: float) -> bool:
 
 def phase_basis(kernels: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray, float]:
     """Rank-r basis of n phase kernels [n, S, S]: k_q ≈ Σ_r c_qr B_r (truncated SVD through the n × n Gram
-    matrix M Mᵀ = U Σ² Uᵀ; B = Σ⁻¹ Uᵀ M, c = U Σ). Returns (B [r, S, S], c [n, r], relative residual
-    √(Σ_{>r} σ²/Σ σ²), the Frobenius error of the truncated kernels over their norm)."""
+    matrix M Mᵀ = U Σ² Uᵀ; B = Σ⁻¹ Uᵀ M, c = U Σ, each row of c then scaled so that k̃_q has k_q's sum (1 for field kernels):
+    the truncation changes the kernels' shape, not their power, which would print its own bands: T-OLED
+    at d = 9.6 mm, rank 2, first harmonic 1.15× without the scaling, tests/udc_render/test_field_power.py).
+    Returns (B [r, S, S], c [n, r], the Frobenius error of the k̃_q over the kernels' norm)."""
     n, S = kernels.shape[0], kernels.shape[-1]
     M = kernels.reshape(n, S * S).astype(np.float64)
     vals, U = np.linalg.eigh(M @ M.T)
@@ -77,8 +81,11 @@ def phase_basis(kernels: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray,
     r = max(1, min(int(rank), int(np.count_nonzero(vals > vals[0] * 1e-30))))
     sigma = np.sqrt(vals[:r])
     basis = (U[:, :r].T @ M) / sigma[:, None]
-    residual = float(np.sqrt(vals[r:].sum() / vals.sum())) if vals.sum() > 0 else 0.0
-    return basis.reshape(r, S, S), U[:, :r] * sigma[None, :], residual
+    coeffs = U[:, :r] * sigma[None, :]
+    coeffs *= (M.sum(axis=1) / (coeffs @ basis.sum(axis=1)))[:, None]  # Σ k̃_q = Σ k_q: the power stays the blend's
+    norm = float(np.linalg.norm(M))
+    residual = float(np.linalg.norm(M - coeffs @ basis)) / norm if norm > 0 else 0.0
+    return basis.reshape(r, S, S), coeffs, residual
 
 
 @dataclass(frozen=True)
@@ -115,11 +122,18 @@ def _basis_map(coeff_r: np.ndarray, live, power: np.ndarray, wy: np.ndarray, wx:
     return wy.T.astype(dtype, copy=False) @ (c.astype(dtype) @ wx.astype(dtype, copy=False))
 
 
+def _times(weight_map: np.ndarray, exact: np.ndarray | None) -> np.ndarray:
+    """The weight map times the exact power map (in place), or as it is without one."""
+    if exact is not None:
+        weight_map *= exact
+    return weight_map
+
+
 def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np.ndarray, weights_y: np.ndarray,
                    weights_x: np.ndarray, margin_px: int, gains=None, blend: str = "source",
                    precision: str = "float32", workers: int | None = None, rank: int | None = None,
                    channel_weights=None, basis: FieldBasis | None = None,
-                   bright: BrightPixels | None = None) -> tuple[np.ndarray, float]:
+                   bright: BrightPixels | None = None, power_map: PowerMap | None = None) -> tuple[np.ndarray, float]:
     """Field-varying blur: y_k = g_k Σ_{j,i} k_kji ⊗ (w_j(row) w_i(col) P_kji x_k)  (blend='source'),
     or g_k Σ_{j,i} w_j w_i P_kji (k_kji ⊗ x_k) (blend='output'). Frame cropped as convolve_bands.
 
@@ -131,6 +145,8 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     (blend 'source' only): the channel images Σ_k w_ck y_k, summed in Fourier space (C inverse FFTs).
     basis: the rank-r bases made beforehand (field_basis; field_kernels may then be None).
     bright: pixels left out of the FFTs and convolved apart in float64 (optics.bright).
+    power_map: the exact power m_k(s(x)) at every pixel (optics.field_power) in place of the phases' P_kji:
+    the weight maps become w_j w_i m_k (None: the sampled powers, interpolated).
     Returns (the images, the largest relative kernel residual over the bands; 0 when exact).
     """
     dtype = _precision(precision)
@@ -159,15 +175,17 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     worst = 0.0
     for k in range(K):
         x = dimmed(bands[k], bright, dtype)
+        exact = None if power_map is None else power_map.band(k, dtype)
+        power = field_power[k] if exact is None else np.ones(wy.shape[:1] + wx.shape[:1])
         if rank is None:
-            def phase_terms(k=k):  # lazily: one weight map in memory at a time
-                return ((field_kernels[k, j, i], wy[j][:, None] * wx[i][None, :], dtype(field_power[k, j, i]))
+            def phase_terms(k=k, exact=exact, power=power):  # lazily: one weight map in memory at a time
+                return ((field_kernels[k, j, i], _times(wy[j][:, None] * wx[i][None, :], exact), dtype(power[j, i]))
                         for j, i in live)
         else:
             b_k, coeff, residual = ((basis.bases[k], basis.coeffs[k], basis.residuals[k]) if basis is not None
                                     else phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank))
             worst = max(worst, residual)
-            maps = [(b_k[r], _basis_map(coeff[:, r], live, field_power[k], wy, wx, dtype), dtype(1.0))
+            maps = [(b_k[r], _times(_basis_map(coeff[:, r], live, power, wy, wx, dtype), exact), dtype(1.0))
                     for r in range(b_k.shape[0])]
 
             def phase_terms(maps=maps):

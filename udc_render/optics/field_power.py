@@ -1,0 +1,61 @@
+"""The exact transmitted power of the d > 0 field blend at every pixel's own mask shift (docs/PHYSICS.md §4).
+
+The field blend (optics.field) takes the kernels k_q and their powers P_q at a few field phases q and
+weights them bilinearly in phase, w_q(x). With the sampled powers its power modulation is Σ_q w_q(x) P_q,
+a linear interpolation of P(s) that keeps sinc²(h/P) of harmonic h (0.81 of the first at the default P = 4)
+and folds harmonics P ± h onto it: the T-OLED's first harmonic at d = 9.6 mm came out 0.77 of the exact one.
+Here the kernels' shape still comes from the phases, their power from the exact series at each pixel:
+
+    y = g · Σ_q k_q ⊗ (w_q(x) · m(s(x)) · x)      (blend 'source'; 'output': g · Σ_q w_q m (k_q ⊗ x))
+    m(s) = P(s) / P̄ = Re Σ_k γ_k ŵ_k e^{−2πi k·s/p},   ŵ_k = b_k(d) Â(k/p) / P̄   (psf.banding)
+
+with s(x) = x · d / z_i, γ_k = 2 for k_x > 0 (the half k_x ≥ 0 of the Hermitian weights: KernelSet.field_series)
+and P̄ the phases' mean power, which the gain g carries (g ∝ P̄). Why this form:
+- exact for the power: m(s_q) = P_q at the phases, and every pixel gets P at its own shift, every harmonic
+  (up to the orders box of psf.banding.SERIES_RTOL: |m − m_box| ≤ 1e-5 of the mean);
+- conserving: Σ_q w_q = 1, so the weighted source carries exactly m(s(x)) · x and blend 'source' keeps
+  Σ y = g Σ x m(s(x)); over a period g · m averages to T · w_0 / P_bare, the exact mean power (k = 0 term);
+- cheap: the render grid's shifts form a lattice (x0 + i·dx, y0 + j·dy), on which m costs two chirp
+  z-transforms per band (psf.banding.power_lattice, O(N log N)), one multiply into the phase weight maps.
+Fourier interpolation of the P phase samples instead keeps only |h| < P/2 and aliases the rest (not exact
+for a display with sharp edges); more phases cost P² kernels each.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from psf.banding import power_lattice
+
+
+@dataclass(frozen=True)
+class PowerMap:
+    """m_k on the render grid [H, W]: the series [K, 2n+1, m+1] (KernelSet.field_series) on the lattice of
+    mask shifts x0 + i·dx (columns), y0 + j·dy (rows), µm."""
+    series: np.ndarray
+    period_um: tuple[float, float]
+    x0_um: float
+    dx_um: float
+    width_px: int
+    y0_um: float
+    dy_um: float
+    height_px: int
+
+    def band(self, k: int, dtype=np.float32) -> np.ndarray:
+        """m_k(s(x)) [H, W] of band k, in dtype."""
+        return power_lattice(self.series[k], self.period_um, self.x0_um, self.dx_um, self.width_px, self.y0_um,
+                             self.dy_um, self.height_px).astype(dtype)
+
+
+def field_power_map(kernel_set, shape_hw, pitch_um: float, distance_mm: float, image_distance_um: float,
+                    period_um: tuple[float, float]) -> PowerMap | None:
+    """The PowerMap of a render grid of shape (H, W) (pixel centres from the optical axis at the grid centre,
+    as optics.field.field_weights places them), or None when the kernel set has no series (an aperiodic
+    display, or kernels made before it: the blend then interpolates the phases' powers)."""
+    if kernel_set.field_series is None:
+        return None
+    H, W = shape_hw
+    step_um = pitch_um * distance_mm * 1000.0 / image_distance_um
+    return PowerMap(np.asarray(kernel_set.field_series), tuple(period_um), -(W - 1) / 2 * step_um, step_um, int(W),
+                    -(H - 1) / 2 * step_um, step_um, int(H))
