@@ -19,7 +19,8 @@ from .kernel_io import load_kernels, save_kernels
 
 __all__ = ["ENGINE_VERSION", "cache_dir", "cache_key", "entry_path", "load", "store", "cached"]
 
-ENGINE_VERSION = "psf-2"  # psf-2: KernelSet.period_um, distance_mm, image_distance_um
+ENGINE_VERSION = "psf-4"  # psf-2: KernelSet.period_um, distance_mm, image_distance_um; psf-3: field_series;
+# psf-4: method 'paper' is the recipe as printed (psf.paper)
 
 
 def cache_dir() -> Path:

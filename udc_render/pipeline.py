@@ -12,8 +12,9 @@ One render serves every display (the scene does not change); per display:
   kernels (psf at the band centres), multiplied by T(λ_k) · transmittance_k · (1 − energy
   outside_k), and integrated by the camera's sensitivities into an RGGB mosaic (udc_render.sensor).
 - form 'per_channel' (the paper's y = γ x ⊗ k + n): x is the un-blurred camera RGB of the render,
-  blurred with the three channel-effective kernels (psf.spectral.channel_kernels, weighted by the
-  camera and D65) and scaled by the display's γ (the paper's values for the presets, the analytic
+  blurred with three channel kernels (SynthConfig.channel_kernels: 'paper', the paper's recipe at 640 /
+  520 / 450 nm, psf.paper; 'camera', psf.spectral.channel_kernels weighted by the camera and D65) and
+  scaled by the display's γ (the paper's values for the presets, the analytic
   γ of optics.gamma for a display file).
 
 Ground truth ('gt'): what the clean capture would record without noise and without the mosaic: the
@@ -64,14 +65,14 @@ from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens
 from udc_render.sensor import (Capture, SensorConfig, band_electron_weights, capture, capture_electrons,
                                electrons_rgb, mosaic_of, rgb_to_rggb)
-from udc_render.synth_config import (DEFAULT_DEFOCUS_TOLERANCE_PX, EXPOSURE_FILL, EXPOSURE_PERCENTILE, FORMS,
-                                     SynthConfig, SynthError)
+from udc_render.synth_config import (CHANNEL_KERNELS, DEFAULT_DEFOCUS_TOLERANCE_PX, EXPOSURE_FILL,
+                                     EXPOSURE_PERCENTILE, FORMS, SynthConfig, SynthError)
 from udc_render.synth_kernels import (Kernels, band_kernel_set, compact_kernels, display_channel_kernels,
                                       display_kernels, plan_kernels, scene_object_distance_m)
 from udc_render.views import View, bin_pixels, bright_pixels, layered_electrons, per_channel_blur
 
 # The settings (synth_config) and the kernels (synth_kernels) are part of the pipeline's public names.
-__all__ = ["DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "EXPOSURE_PERCENTILE", "FORMS", "Kernels", "SynthConfig",
+__all__ = ["CHANNEL_KERNELS", "DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "EXPOSURE_PERCENTILE", "FORMS", "Kernels", "SynthConfig",
            "SynthError", "SynthResult", "auto_exposure_s", "band_kernel_set", "capture_scene", "capture_views",
            "check_grid", "compact_kernels", "depth_layers", "display_channel_kernels", "display_gamma",
            "display_kernels", "layer_kernels", "noise_seed", "plan_kernels", "scene_object_distance_m",
@@ -215,7 +216,8 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
                                 f"SeedSequence([{cfg.seed}, {item}, crc32('{d.name}')])", **extra}
         bar.update()
     bar.close()
-    meta = {"form": cfg.form, "exposure_s": exposure, "exposure_rule": how, "seed": cfg.seed, "item": item,
+    meta = {"form": cfg.form, "channel_kernels": cfg.channel_kernels if cfg.form == "per_channel" else None,
+            "exposure_s": exposure, "exposure_rule": how, "seed": cfg.seed, "item": item,
             "gt": "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, "
                   "/ full well (1.0 = white level at gain 1), not clipped", "gt_optics": gt_optics,
             "depth_layers": layers.describe(), "bright_pixels": 0 if bright is None else int(bright.mask.sum()),
@@ -273,4 +275,5 @@ def _per_channel_capture(band_image, rgb, d: Display, per_layer: list[Kernels], 
     sensor = replace(base_sensor, gain=d.gain, form="per_channel",
                      gamma_rggb=tuple(g / d.gain for g in rgb_to_rggb(gamma)))
     cap = capture(blurred, None, sensor, rng, defects=cfg.defects)
-    return cap, {"gamma_rgb": list(gamma), "gamma_source": why, "channel_kernels": "camera × D65 weighted"}
+    return cap, {"gamma_rgb": list(gamma), "gamma_source": why,
+                 "channel_kernels": CHANNEL_KERNELS[cfg.channel_kernels]}

@@ -8,15 +8,20 @@ over-exposed pixels. A profile fixes the synthesis choices that decide those gap
 profile    form                                          display-to-lens distance     sensor defects
 =========  ============================================  ===========================  ======================
 paper      ``per_channel``: the paper's y = γ x ⊗ k + n   0 (the display at the lens's none
-           with 3 channel kernels and its measured γ      principal plane)
+           with its measured γ and channel kernels        principal plane)
+           ``paper``: its recipe at 640 / 520 / 450 nm
 physical   ``spectral``: band kernels, T(λ), the          PHYSICAL_DISTANCE_MM for the dead and hot pixels
 (default)  camera's sensitivities                         preset displays              (sensor.defects defaults)
 =========  ============================================  ===========================  ======================
 
+The per-channel form's kernels (SynthConfig.channel_kernels): ``paper``, the paper's recipe as printed
+(l.258–263: one wavelength per channel, its printed r, cubic down-sampling; psf.paper, the very kernels
+of `udc-render psf --method paper`), or ``camera``, the camera's sensitivities × D65 over the visible
+(psf.spectral.channel_kernels), which the physical profile keeps for an explicit ``--form per_channel``.
 The transmission gap is the displays' T(λ) (optics.displays), the same under both profiles.
 
 resolve_profile applies a profile to a SynthConfig and the displays; explicit options win: a
-``form`` replaces the profile's form, a ``distance_mm`` replaces the distance of every display (as
+``form`` replaces the profile's form, a ``channel_kernels`` its channel kernels, a ``distance_mm`` replaces the distance of every display (as
 ``--distance-mm`` always did). The profile's distance applies to the presets (toled, poled); a
 display file keeps its own ``distance_mm`` (default 0). The per-channel form has no field-dependent
 kernels (its channel kernels are at d = 0): under it the profile's distance is not applied, and an
@@ -54,21 +59,22 @@ class Profile:
     """The synthesis choices a profile fixes (module doc)."""
     name: str
     form: str  # pipeline.FORMS
+    channel_kernels: str  # the per-channel form's kernels (synth_config.CHANNEL_KERNELS)
     distance_mm: float  # display-to-lens distance of the preset displays
     defects: DefectConfig | None  # sensor defect pixels (None: none)
     summary: str
 
     def sets(self) -> dict:
         """What the profile sets, as plain JSON values."""
-        return {"form": self.form, "distance_mm": self.distance_mm,
+        return {"form": self.form, "channel_kernels": self.channel_kernels, "distance_mm": self.distance_mm,
                 "defects": None if self.defects is None else asdict(self.defects)}
 
 
 PROFILES = {
-    "paper": Profile("paper", "per_channel", 0.0, None,
-                     "the paper's synthesis: y = γ x ⊗ k + n (3 channel kernels, its γ), display at the lens, "
+    "paper": Profile("paper", "per_channel", "paper", 0.0, None,
+                     "the paper's synthesis: y = γ x ⊗ k + n (its 3 channel kernels, its γ), display at the lens, "
                      "no defect pixels"),
-    "physical": Profile("physical", "spectral", PHYSICAL_DISTANCE_MM, DefectConfig(),
+    "physical": Profile("physical", "spectral", "camera", PHYSICAL_DISTANCE_MM, DefectConfig(),
                         "band kernels and T(λ), the preset displays at the display-to-lens distance, "
                         "dead and hot pixels"),
 }
@@ -82,13 +88,17 @@ def get_profile(name: str) -> Profile:
 
 
 def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: str | None = None,
-                    distance_mm: float | None = None) -> tuple[SynthConfig, list[Display]]:
-    """(cfg with the profile's form and defects and its record, the displays with their distance)
-    under profile `name`; `form` and `distance_mm` are explicit options (None: not given), which win
-    over the profile (module doc). `displays` as loaded, without a distance override."""
+                    distance_mm: float | None = None,
+                    channel_kernels: str | None = None) -> tuple[SynthConfig, list[Display]]:
+    """(cfg with the profile's form, channel kernels and defects and its record, the displays with their
+    distance) under profile `name`; `form`, `distance_mm` and `channel_kernels` are explicit options
+    (None: not given), which win over the profile (module doc). `displays` as loaded, without a distance
+    override."""
     p = get_profile(name)
     final_form = form if form is not None else p.form
-    options = {k: v for k, v in (("form", form), ("distance_mm", distance_mm)) if v is not None}
+    kernels = channel_kernels if channel_kernels is not None else p.channel_kernels
+    options = {k: v for k, v in (("form", form), ("channel_kernels", channel_kernels), ("distance_mm", distance_mm))
+               if v is not None}
     notes = []
     if distance_mm is not None:
         if final_form == "per_channel" and distance_mm > 0:
@@ -104,11 +114,11 @@ def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: 
         distance, applies_to = p.distance_mm, "the preset displays (display files keep their own distance_mm)"
         displays = [d.with_distance(distance) if d.source == "preset" and not d.is_glass else d for d in displays]
     record = {"name": p.name, "sets": p.sets(), "options": options,
-              "applied": {"form": final_form, "distance_mm": distance, "distance_applies_to": applies_to,
-                          "defects": p.sets()["defects"]}}
+              "applied": {"form": final_form, "channel_kernels": kernels, "distance_mm": distance,
+                          "distance_applies_to": applies_to, "defects": p.sets()["defects"]}}
     if notes:
         record["notes"] = notes
-    return replace(cfg, form=final_form, defects=p.defects, profile=record), displays
+    return replace(cfg, form=final_form, channel_kernels=kernels, defects=p.defects, profile=record), displays
 
 
 def describe(record: dict | None) -> str:
@@ -119,6 +129,8 @@ def describe(record: dict | None) -> str:
     d = a["defects"]
     defects = "none" if d is None else (f"dead {d['dead_fraction']:g}, hot {d['hot_fraction']:g} "
                                         f"({d['hot_dark_e_per_s']:g} e-/s), seed {d['seed']}")
-    mark = {k: " (option)" if k in o else "" for k in ("form", "distance_mm")}
-    return (f"profile {record['name']}: form {a['form']}{mark['form']}, display-to-lens distance "
+    mark = {k: " (option)" if k in o else "" for k in ("form", "channel_kernels", "distance_mm")}
+    kernels = (f" (channel kernels {a['channel_kernels']}{mark['channel_kernels']})"
+               if a["form"] == "per_channel" else "")
+    return (f"profile {record['name']}: form {a['form']}{mark['form']}{kernels}, display-to-lens distance "
             f"{a['distance_mm']:g} mm{mark['distance_mm']} for {a['distance_applies_to']}, defect pixels: {defects}")

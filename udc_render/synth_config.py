@@ -9,6 +9,9 @@ from udc_render.errors import UdcError
 from udc_render.sensor import DefectConfig, SensorConfig
 
 FORMS = ("spectral", "per_channel")
+# The per-channel form's 3 kernels (synth_kernels.display_channel_kernels), each with its record in capture.json
+CHANNEL_KERNELS = {"paper": "the paper's recipe as printed at 640 / 520 / 450 nm (psf.paper, psf --method paper)",
+                   "camera": "camera × D65 weighted over the visible (psf.spectral.channel_kernels)"}
 EXPOSURE_FILL = 0.8
 EXPOSURE_PERCENTILE = 99.5
 # Depth layers: the largest error in a pixel's blur-circle diameter, in render pixels (optics.layers).
@@ -28,6 +31,7 @@ class SynthError(UdcError):
 class SynthConfig:
     """Knobs of the synthesis (defaults: the paper's rig; every one is recorded in the sidecars)."""
     form: str = "spectral"
+    channel_kernels: str = "camera"  # the per-channel form's kernels (CHANNEL_KERNELS)
     sensor: SensorConfig = field(default_factory=SensorConfig)  # gain is replaced by each display's
     exposure_s: float | None = None  # None: auto (module doc)
     precision: str = "float32"  # optics FFTs
@@ -53,6 +57,8 @@ class SynthConfig:
     def __post_init__(self):
         if self.form not in FORMS:
             raise SynthError(f"form = {self.form!r}: expected one of {', '.join(FORMS)}")
+        if self.channel_kernels not in CHANNEL_KERNELS:
+            raise SynthError(f"channel_kernels = {self.channel_kernels!r}: expected one of {', '.join(CHANNEL_KERNELS)}")
         if self.defects is not None and not isinstance(self.defects, DefectConfig):
             raise SynthError(f"defects = {self.defects!r}: expected a sensor.defects.DefectConfig or None")
         if self.exposure_s is not None and not (self.exposure_s > 0 and math.isfinite(self.exposure_s)):

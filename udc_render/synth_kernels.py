@@ -1,5 +1,5 @@
 """The PSF kernels of a synthesis (udc_render.pipeline): per display, the band kernel sets of the scene's
-render grid (psf.compute_kernels, cached), the camera-channel kernels of the per-channel form, and the
+render grid (psf.compute_kernels, cached), the 3 channel kernels of the per-channel form, and the
 compact rank-r bases a dataset worker keeps. Re-exported by udc_render.pipeline.
 """
 from __future__ import annotations
@@ -19,12 +19,14 @@ from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens, render_grid
 from udc_render.synth_config import SynthConfig, SynthError
 
+PAPER_CHANNEL_NM = (640.0, 520.0, 450.0)  # R, G, B: "the approximated center peaks" of the filters (l.263)
+
 
 @dataclass(frozen=True)
 class Kernels:
     """The kernel sets a synthesis needs, by display name ('glass': the bare lens, always there):
     band kernels at the band centres (spectral form, and the analytic γ of display files) and
-    camera-weighted channel kernels (per-channel form)."""
+    the per-channel form's 3 kernels (SynthConfig.channel_kernels)."""
     grid: RenderGrid
     band: dict[str, KernelSet]
     channel: dict[str, KernelSet] = field(default_factory=dict)
@@ -68,11 +70,18 @@ def display_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: Synth
 
 def display_channel_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
                             object_distance_m: float | None = None) -> KernelSet:
-    """Channel-effective kernels [3] (camera-weighted under D65) for the per-channel form."""
-    ks, _ = cached(channel_kernels, "channel", display.layout, psf_lens(scene, object_distance_m), cfg.use_cache,
-                   cache_dir=cfg.kernel_cache, camera=cfg.sensor.camera, illuminant="D65", step_nm=None,
-                   pixel_um=grid.pitch_um, size_px=grid.kernel_size_px, distance_mm=0.0,
-                   precision=cfg.kernel_precision)
+    """The per-channel form's kernels [3] (R, G, B) by cfg.channel_kernels: 'paper': the paper's recipe as
+    printed at PAPER_CHANNEL_NM (the very call `udc-render psf --method paper` makes); 'camera': the
+    camera's sensitivities × D65 (psf.spectral.channel_kernels)."""
+    lens = psf_lens(scene, object_distance_m)
+    common = dict(cache_dir=cfg.kernel_cache, pixel_um=grid.pitch_um, size_px=grid.kernel_size_px, distance_mm=0.0,
+                  precision=cfg.kernel_precision)
+    if cfg.channel_kernels == "paper":
+        ks, _ = cached(compute_kernels, "mono", display.layout, lens, cfg.use_cache, wavelengths_nm=PAPER_CHANNEL_NM,
+                       method="paper", **common)
+    else:
+        ks, _ = cached(channel_kernels, "channel", display.layout, lens, cfg.use_cache, camera=cfg.sensor.camera,
+                       illuminant="D65", step_nm=None, **common)
     return ks
 
 

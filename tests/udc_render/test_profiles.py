@@ -37,15 +37,18 @@ def _setup(*argv):
 def test_the_profiles_set_what_they_say():
     assert DEFAULT_PROFILE == "physical" and set(PROFILES) == {"paper", "physical"}
     paper, physical = PROFILES["paper"], PROFILES["physical"]
-    assert (paper.form, paper.distance_mm, paper.defects) == ("per_channel", 0.0, None)
-    assert (physical.form, physical.distance_mm, physical.defects) == ("spectral", PHYSICAL_DISTANCE_MM, DefectConfig())
+    assert (paper.form, paper.channel_kernels, paper.distance_mm, paper.defects) == ("per_channel", "paper", 0.0, None)
+    assert (physical.form, physical.channel_kernels, physical.distance_mm, physical.defects) == (
+        "spectral", "camera", PHYSICAL_DISTANCE_MM, DefectConfig())
     assert PHYSICAL_DISTANCE_MM > 0
     cfg, d = _setup("--display", "toled,poled")  # no --profile: the default
     assert cfg.profile["name"] == "physical" and cfg.form == "spectral" and cfg.defects == DefectConfig()
     assert [d[n].distance_mm for n in ("glass", "toled", "poled")] == [0.0, PHYSICAL_DISTANCE_MM, PHYSICAL_DISTANCE_MM]
     cfg, d = _setup("--display", "toled,poled", "--profile", "paper")
     assert cfg.profile["name"] == "paper" and cfg.form == "per_channel" and cfg.defects is None
+    assert cfg.channel_kernels == "paper" == cfg.profile["applied"]["channel_kernels"]
     assert all(v.distance_mm == 0.0 for v in d.values())
+    assert "form per_channel (channel kernels paper)" in describe(cfg.profile)
     assert f"profile physical: form spectral, display-to-lens distance {PHYSICAL_DISTANCE_MM:g} mm" in describe(_setup()[0].profile)
 
 
@@ -61,6 +64,11 @@ def test_explicit_options_override_the_profile():
     cfg, d = _setup("--profile", "physical", "--form", "per_channel")  # no field-dependent kernels in that form
     assert cfg.form == "per_channel" and cfg.defects == DefectConfig() and d["toled"].distance_mm == 0.0
     assert cfg.profile["applied"]["distance_mm"] == 0.0 and cfg.profile["notes"]
+    assert cfg.channel_kernels == "camera"  # the physical profile keeps the camera-weighted kernels
+    cfg, _ = _setup("--profile", "paper", "--channel-kernels", "camera")
+    assert cfg.form == "per_channel" and cfg.channel_kernels == "camera"
+    assert cfg.profile["options"] == {"channel_kernels": "camera"}
+    assert "(channel kernels camera (option))" in describe(cfg.profile)
     cfg, d = _setup("--profile", "paper", "--distance-mm", "0")
     assert d["toled"].distance_mm == 0.0 and cfg.form == "per_channel"
 
@@ -95,8 +103,8 @@ def _differing(a: dict, b: dict) -> set[str]:
 
 
 def test_profiles_differ_only_where_they_say(scene, tmp_path):
-    """One scene synthesised under each profile: synth.json differs in form, defects and the profile
-    record alone; each capture.json's display record only in the distance (glass: not at all); the
+    """One scene synthesised under each profile: synth.json differs in form, channel kernels, defects and
+    the profile record alone; each capture.json's display record only in the distance (glass: not at all); the
     physical captures carry the defect record, the paper's none. The same goes for a dataset's job.json."""
     out = {}
     for name in ("paper", "physical"):
@@ -104,7 +112,8 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
         assert main(["synth", str(scene), "--display", "toled", "--profile", name, "--quiet", "--out",
                      str(out[name])]) == 0
     synth = {n: json.loads((o / "synth.json").read_text()) for n, o in out.items()}
-    assert _differing(synth["paper"], synth["physical"]) == {"form", "defects", "profile"}
+    assert _differing(synth["paper"], synth["physical"]) == {"form", "channel_kernels", "defects", "profile"}
+    assert synth["paper"]["channel_kernels"] == "paper" and synth["physical"]["channel_kernels"] is None  # spectral
     assert synth["physical"]["profile"]["name"] == "physical" and synth["paper"]["profile"]["name"] == "paper"
     assert synth["physical"]["defects"] == asdict(DefectConfig()) and synth["paper"]["defects"] is None
     cap = {n: {v: json.loads((o / v / "capture.json").read_text()) for v in ("glass", "toled")} for n, o in out.items()}
@@ -124,7 +133,9 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
         job = DatasetJob(load_scene(scene), displays, cfg, out=tmp_path / "ds", split=(1, 0, 0))
         params[name] = job_params(job, _shared(job, tmp_path / "ds"), source, images)
     assert _differing(params["paper"], params["physical"]) == {"synth", "displays"}
-    assert _differing(params["paper"]["synth"], params["physical"]["synth"]) == {"form", "defects", "profile"}
+    assert _differing(params["paper"]["synth"], params["physical"]["synth"]) == {"form", "channel_kernels", "defects",
+                                                                                 "profile"}
+    assert params["paper"]["synth"]["channel_kernels"] == "paper"
 
 
 def test_demo_uses_the_default_profile(scene, tmp_path, monkeypatch):

@@ -185,13 +185,15 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--profile", choices=tuple(PROFILES), default=DEFAULT_PROFILE,
                    help=f"paper: the paper's synthesis (form per_channel, d = 0, no defect pixels); physical: form "
                         f"spectral, d = {PHYSICAL_DISTANCE_MM:g} mm for the preset displays, dead and hot pixels "
-                        f"(udc_render/profiles.py); --form and --distance-mm override it [{DEFAULT_PROFILE}]")
+                        f"(udc_render/profiles.py); --form, --channel-kernels and --distance-mm override it "
+                        f"[{DEFAULT_PROFILE}]")
     p.add_argument("--distance-mm", type=non_negative("--distance-mm"),
                    help="display-to-lens distance d for every display [the profile's for the presets, a display "
                         "file's own]")
     p.add_argument("--form", choices=("spectral", "per_channel"),
                    help="spectral: K band kernels and camera sensitivities (physical); per_channel: the "
                         "paper's y = γ x ⊗ k + n with 3 channel kernels [the profile's]")
+    add_channel_kernels_argument(p)
     add_sensor_arguments(p)
     p.add_argument("--exposure-s", type=positive("--exposure-s"),
                    help="exposure time [auto: the monitor's white at 0.8 of the full well through glass]")
@@ -206,6 +208,15 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
                    help="depth layers: the largest error in a pixel's blur-circle diameter, render pixels (fewer "
                         f"layers when larger; udc_render/optics/layers.py), or 'off' (every pixel in focus) "
                         f"[{DEFAULT_DEFOCUS_TOLERANCE_PX:g}]")
+
+
+def add_channel_kernels_argument(p: argparse.ArgumentParser) -> None:
+    from udc_render.pipeline import CHANNEL_KERNELS
+    p.add_argument("--channel-kernels", choices=tuple(CHANNEL_KERNELS),
+                   help="the per-channel form's 3 kernels: paper: the paper's recipe as printed, one wavelength "
+                        "per channel (640, 520, 450 nm), its r, cubic down-sampling (= udc-render psf --method "
+                        "paper); camera: the camera's sensitivities × D65 over the visible [the profile's: paper "
+                        "for paper, camera for physical]")
 
 
 def add_sensor_arguments(p: argparse.ArgumentParser) -> None:
@@ -240,10 +251,11 @@ def synth_config(args):
 
 def capture_setup(args, displays: str | None = None):
     """(SynthConfig, displays) of a capture command: the capture options under --profile (the default
-    profile when the command has none); --form and --distance-mm win over the profile
+    profile when the command has none); --form, --channel-kernels and --distance-mm win over the profile
     (udc_render.profiles). `displays`: the comma-separated displays [args.display]."""
     from udc_render.optics.displays import load_displays
     from udc_render.profiles import DEFAULT_PROFILE, resolve_profile
     return resolve_profile(getattr(args, "profile", DEFAULT_PROFILE), synth_config(args),
                            load_displays(displays if displays is not None else args.display),
-                           form=getattr(args, "form", None), distance_mm=getattr(args, "distance_mm", None))
+                           form=getattr(args, "form", None), distance_mm=getattr(args, "distance_mm", None),
+                           channel_kernels=getattr(args, "channel_kernels", None))

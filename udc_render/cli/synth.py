@@ -1,7 +1,7 @@
 """`udc-render synth` (one scene through one or more displays) and `udc-render demo` (the main job).
 
     udc-render synth SCENE --display toled[,poled,PATH] [--profile physical|paper] [--distance-mm D] --out DIR
-    udc-render demo [--out DIR] [--profile physical|paper]   (the default profile: physical)
+    udc-render demo [--out DIR] [--profile physical|paper] [--channel-kernels paper|camera]   (default profile: physical)
 """
 from __future__ import annotations
 
@@ -9,8 +9,8 @@ import argparse
 import time
 from pathlib import Path
 
-from udc_render.cli.args import (add_capture_arguments, add_scene_arguments, capture_setup, float_pair, out_dir,
-                                 scene_from_args)
+from udc_render.cli.args import (add_capture_arguments, add_channel_kernels_argument, add_scene_arguments,
+                                 capture_setup, float_pair, out_dir, scene_from_args)
 from udc_render.io.band_image import save_band_image
 from udc_render.io.capture import write_synthesis
 from udc_render.scene import load_scene
@@ -37,6 +37,7 @@ def register(sub) -> None:
     d.add_argument("--profile", choices=tuple(PROFILES), default=DEFAULT_PROFILE,
                    help=f"synthesis profile (udc_render/profiles.py; paper: d = 0, minutes faster on a cold "
                         f"kernel cache) [{DEFAULT_PROFILE}]")
+    add_channel_kernels_argument(d)
 
 
 def synth_and_write(scene, displays, cfg, out: Path, quiet: bool, keep_render: bool = False) -> dict:
@@ -86,6 +87,7 @@ def run_synth(args) -> int:
 
 def run_demo(args) -> int:
     scene = with_overrides(load_scene("monitor"), image=args.image, sensor_px=args.sensor_px)
-    cfg, displays = capture_setup(argparse.Namespace(profile=args.profile), DEMO_DISPLAYS)
+    cfg, displays = capture_setup(argparse.Namespace(profile=args.profile, channel_kernels=args.channel_kernels),
+                                  DEMO_DISPLAYS)
     synth_and_write(scene, displays, cfg, out_dir(args.out), args.quiet)
     return 0
