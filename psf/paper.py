@@ -64,20 +64,18 @@ def paper_kernel(g: np.ndarray, dx_um: float, dy_um: float, wavelength_nm: float
     """(kernel [S, S], r): the DFT intensity of the pupil field g [ny, nx] (pitch dx, dy), zero-padded
     PAD_FACTOR×, cubic-resampled by 1/r with the printed r (module doc), and r.
 
-    A DFT cell is λz/(Lδ) at the sensor (z the image distance); the recipe's pixel is r cells of λf/D,
-    i.e. r λ f / D µm. The kernel sums to the energy of the DFT cells inside the window (S recipe pixels
-    per axis), so that energy_outside keeps its meaning (point samples of an Airy core finer than the
-    pixel would sum to several times the energy)."""
+    The recipe's pixel is r cells of the DFT of the aperture's N δ_N = D, i.e. r L δ / D cells of this
+    L-point DFT; like the paper (the sensor at the focal plane) it ignores the image distance. The
+    kernel sums to the power on the DFT cells inside the window (S recipe pixels per axis), so that
+    energy_outside keeps its meaning (point samples of an Airy core finer than the pixel would sum to
+    several times the power)."""
     ny, nx = g.shape
     L = sfft.next_fast_len(PAD_FACTOR * max(nx, ny))
-    lam_um, z = wavelength_nm * 1e-3, lens.image_distance_um
-    scale = lam_um * z
     # |G|² dxdy/L²: the power on each DFT cell (Parseval: Σ = ∫|g|²); unchanged by the pupil's offset
     intensity = np.abs(sfft.fftshift(sfft.fft2(g, s=(L, L), workers=WORKERS))).astype(np.float64) ** 2 * (
         dx_um * dy_um / L ** 2)
     r = paper_ratio_r(wavelength_nm, lens, pixel_um)
-    recipe_pixel_um = r * lam_um * lens.focal_length_um / lens.aperture_um
-    step_x, step_y = recipe_pixel_um * L * dx_um / scale, recipe_pixel_um * L * dy_um / scale
+    step_x, step_y = r * L * dx_um / lens.aperture_um, r * L * dy_um / lens.aperture_um
     kernel = _cubic_samples(intensity, step_y, step_x, size_px)
     return kernel * (_window_energy(intensity, step_y, step_x, size_px) / kernel.sum()), r
 
