@@ -24,20 +24,25 @@ T = z_i · p / d (z_i the lens' image distance, p the display period along x), a
 k in green, the panel's white radiance, the stack's transmission; the kernel window's energy outside
 is left out), averaged over the same Gr rows and fitted at the known T, harmonic by harmonic.
 
-Expected ratio measured / analytic < 1: the synthesis samples P(s) at P field phases per axis and
-interpolates linearly, which multiplies harmonic h by sinc²(h/P) (0.81 for h = 1, P = 4), and the PSF
-smooths the weighted source (blend 'source'). The phases run measures the ratio against P.
+Expected (psf.banding, exact × the PSF): each band's harmonics times its kernel's OTF at the band
+frequency (banding_fit.kernel_otf; blend 'source' smooths the weighted source with the PSF). The blend
+takes its power from the exact series at every pixel's shift (optics.field_power), so measured / expected
+should be 1 whatever the phase count; the phases run measures it against P, with the exact series and
+with the phases' powers interpolated (power 'interpolated': the same kernels without their field_series,
+the blend before the series), which keeps sinc²(h/P) of harmonic h (0.81 for h = 1, P = 4) and aliases
+harmonics mP ± h onto it. synthesis_cost times the two at the default phases.
 
 Visibility: bands are visible per pixel when A1 · mean ≥ σ (first-harmonic amplitude at least the
 per-pixel noise at that level); averaged along the bands over the N Gr rows of the frame the criterion
 is A1 · mean ≥ σ / √N. A period longer than the frame is a gradient, not bands (not visible as bands);
 one below 4 px (the Nyquist limit of a colour channel sampled every 2 px) is not resolved.
 
-Outputs: study_banding.csv (one row per display, distance and field-phase count), study_banding.md
-(set-up, table, visible ranges) and study_banding.png (period and amplitude against d with the analytic
-curves; a flat-field example). ``quick``: 512 × 64 px, 3 bands of 100 nm, 60 µm render margin, one
-distance per display and P = 2 (CI smoke run). Kernels are computed with the cache off (a d > 0 set of the
-full run is 250 MB; nothing is written to disk).
+Outputs: study_banding.csv (one row per display, distance, field-phase count and power),
+study_banding.md (set-up, table, visible ranges, cost) and study_banding.png (period and amplitude
+against d with the analytic curves; measured / expected against P; a flat-field example). ``quick``:
+512 × 64 px, 3 bands of 100 nm, 60 µm render margin, one distance per display and P = 2 (CI smoke run),
+the cost from 3 syntheses each (5 in the full run). Kernels are computed with the cache off (a d > 0
+set of the full run is 250 MB; nothing is written to disk).
 """
 from __future__ import annotations
 
@@ -57,7 +62,7 @@ from udc_render.scene import Bands, load_scene
 from udc_render.scene.geometry import psf_lens
 from udc_render.studies.banding_fit import (AXES, COLUMNS, DISPLAYS, analytic_harmonics, band_series, fit_period,
                                            flat_profile, green_band_weights, green_sites, interpolated_harmonics,
-                                           noise_sigma_dn, period_formula_um, sinc2, site_positions_um)
+                                           kernel_otf, noise_sigma_dn, period_formula_um, sinc2, site_positions_um)
 from udc_render.studies.banding_report import markdown, plot
 from udc_render.studies.report import write_tables
 
@@ -65,11 +70,11 @@ FULL = {"sensor": (1024, 128), "step_nm": 20.0, "margin_um": None,
         "distances_mm": {"toled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0), "poled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0)},
         "phases": (2, 3, 6), "phase_display": "toled", "phase_distance_mm": 4.0,
         "curve_mm": (0.25, 20.0, 21), "curve_step_nm": 50.0,
-        "y_distances_mm": {"toled": (2.0, 4.0, 8.0), "poled": (1.0, 4.0)}}
+        "y_distances_mm": {"toled": (2.0, 4.0, 8.0), "poled": (1.0, 4.0)}, "cost_repeats": 5}
 QUICK = {"sensor": (512, 64), "step_nm": 100.0, "margin_um": 60.0,
          "distances_mm": {"toled": (6.0,), "poled": (3.0,)},
          "phases": (2,), "phase_display": "toled", "phase_distance_mm": 6.0,
-         "curve_mm": (1.0, 16.0, 5), "curve_step_nm": 100.0, "y_distances_mm": {"toled": (6.0,)}}
+         "curve_mm": (1.0, 16.0, 5), "curve_step_nm": 100.0, "y_distances_mm": {"toled": (6.0,)}, "cost_repeats": 3}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -109,6 +114,7 @@ class Rig:
         self.z_i_um = float(self.lens.image_distance_um)  # z_i: the lens focused on the panel (the kernels' own)
         self.pitch_um = float(self.scene.sensor.pitch_um)
         self.base = SynthConfig(use_cache=False)
+        self._last = (None, None, 0.0)  # (key, kernels, seconds): Rig.kernels' last set
         glass = D.preset("glass")
         res = synthesize(self.band_image, self.scene, [glass], self.base,
                          kernels=plan_kernels(self.scene, [glass], self.base))
@@ -127,14 +133,34 @@ class Rig:
         """The frame's extent along the bands' axis (µm)."""
         return self.frame_size_um[self.a]
 
-    def capture(self, display, phases: int | None):
-        """(capture, kernel seconds, synthesis seconds) of `display` with `phases` field phases."""
-        cfg = replace(self.base, field_phases=phases)
+    def kernels(self, display, phases: int | None, power: str = "series"):
+        """(kernels, seconds to make them) of `display` with `phases` field phases; the last set is kept for
+        the next call. power 'interpolated': the display's kernel set without its field_series, so that the
+        blend interpolates the phases' powers (the blend before the exact series)."""
+        key = (display.name, display.distance_mm, phases)
+        if self._last[0] != key:
+            t0 = time.perf_counter()
+            self._last = (key, plan_kernels(self.scene, [display], replace(self.base, field_phases=phases)),
+                          time.perf_counter() - t0)
+        _, kernels, seconds = self._last
+        if power == "interpolated":
+            kernels = replace(kernels, band={**kernels.band,
+                                             display.name: replace(kernels.band[display.name], field_series=None)})
+        return kernels, seconds
+
+    def synthesis(self, display, phases: int | None, power: str = "series"):
+        """(capture, kernel seconds, synthesis seconds) of `display` with `phases` field phases and the
+        blend's power from the exact series ('series') or the phases' powers ('interpolated')."""
+        kernels, kernel_s = self.kernels(display, phases, power)
         t0 = time.perf_counter()
-        kernels = plan_kernels(self.scene, [display], cfg)
-        t1 = time.perf_counter()
-        res = synthesize(self.band_image, self.scene, [display], cfg, kernels=kernels)
-        return res.captures[display.name], t1 - t0, time.perf_counter() - t1
+        res = synthesize(self.band_image, self.scene, [display], replace(self.base, field_phases=phases),
+                         kernels=kernels)
+        return res, kernel_s, time.perf_counter() - t0
+
+    def capture(self, display, phases: int | None, power: str = "series"):
+        """(capture, kernel seconds, synthesis seconds, the display's kernel set)."""
+        res, kernel_s, synth_s = self.synthesis(display, phases, power)
+        return res.captures[display.name], kernel_s, synth_s, self._last[1].band[display.name]
 
     def series(self, display, distance_mm: float, step_nm: float | None = None):
         """(P_k(s) series, green weights a_k) on the render's bands, or on bands of step_nm."""
@@ -152,18 +178,22 @@ class Rig:
         return analytic_harmonics(series, w, display, distance_mm, self.across_um, self.z_i_um, self.axis)
 
 
-def measure(rig: Rig, name: str, distance_mm: float, phases: int | None) -> tuple[dict, np.ndarray, np.ndarray]:
+def measure(rig: Rig, name: str, distance_mm: float, phases: int | None,
+            power: str = "series") -> tuple[dict, np.ndarray, np.ndarray]:
     """(one row, the flat-field profile, the clean Gr image): the capture of display `name` at distance_mm,
-    its measured bands against the analytic (exact, and with the synthesis' phase interpolation alone)."""
+    its measured bands against the analytic (exact; exact × the kernels' OTF, 'expected'; and with the
+    synthesis' phase interpolation alone). power: the blend's power ('series' or 'interpolated', Rig.kernels)."""
     display = D.preset(name).with_distance(distance_mm)
-    cap, kernel_s, synth_s = rig.capture(display, phases)
+    cap, kernel_s, synth_s, ks = rig.capture(display, phases, power)
     P = phases or DEFAULT_FIELD_PHASES
     T = period_formula_um(rig.z_i_um, display.layout.period_um[rig.a], distance_mm)
-    row = {"axis": rig.axis, "display": name, "distance_mm": distance_mm, "field_phases": P, "period_formula_um": T,
-           "period_formula_px": T / rig.pitch_um, "periods_in_frame": rig.frame_um / T,
+    row = {"axis": rig.axis, "display": name, "distance_mm": distance_mm, "field_phases": P, "field_power": power,
+           "period_formula_um": T, "period_formula_px": T / rig.pitch_um, "periods_in_frame": rig.frame_um / T,
            "kernel_s": round(kernel_s, 2), "synth_s": round(synth_s, 2)}
     series, weights = rig.series(display, distance_mm)
     analytic = analytic_harmonics(series, weights, display, distance_mm, rig.across_um, rig.z_i_um, rig.axis)
+    expected = analytic_harmonics(series, weights, display, distance_mm, rig.across_um, rig.z_i_um, rig.axis,
+                                  otf=kernel_otf(ks.kernels, ks.pixel_um, T, rig.axis))
     prof = flat_profile(cap.clean_dn, rig.glass_dn, rig.axis)
     mean_dn = float(green_sites(cap.clean_dn).mean())
     sigma = noise_sigma_dn(cap)
@@ -178,11 +208,14 @@ def measure(rig: Rig, name: str, distance_mm: float, phases: int | None) -> tupl
     order = max(1, int(round(T / period)))
     a1 = float(amps[1])
     a_ref = float(analytic[order - 1]) if order <= analytic.size else math.nan
+    a_exp = float(expected[order - 1]) if order <= expected.size else math.nan
     a_interp = interpolated_harmonics(series, weights, display, distance_mm, rig.x_um, rig.y_um, rig.z_i_um, P,
                                       rig.frame_size_um, order, rig.axis)
     row.update(regime="bands", period_fit_um=period, period_error_rel=period * order / T - 1, harmonic_order=order,
-               a1_measured_rel=a1, a1_analytic_rel=a_ref, a1_interpolated_rel=a_interp,
+               analytic_order=int(np.argmax(expected)) + 1, a1_measured_rel=a1, a1_analytic_rel=a_ref,
+               a1_expected_rel=a_exp, psf_mtf=a_exp / a_ref if a_ref > 0 else math.nan, a1_interpolated_rel=a_interp,
                ratio_measured_analytic=a1 / a_ref if a_ref > 0 else math.nan,
+               ratio_measured_expected=a1 / a_exp if a_exp > 0 else math.nan,
                ratio_measured_interpolated=a1 / a_interp if a_interp > 0 else math.nan,
                sinc2_interp=sinc2(order, P), a1_dn=a1 * mean_dn, snr_pixel=a1 * mean_dn / sigma,
                snr_averaged=a1 * mean_dn * math.sqrt(n_rows) / sigma, visible_pixel=bool(a1 * mean_dn >= sigma),
@@ -190,12 +223,15 @@ def measure(rig: Rig, name: str, distance_mm: float, phases: int | None) -> tupl
     return row, prof, green_sites(cap.clean_dn)
 
 
-def jobs(cfg: dict) -> list[tuple[str, str, float, int | None]]:
-    """(axis, display, distance mm, field phases) in run order: every distance at the default phases, the
-    phase-count runs, then the bands along y."""
-    out = [("x", n, d, None) for n in DISPLAYS for d in cfg["distances_mm"][n]]
-    out += [("x", cfg["phase_display"], cfg["phase_distance_mm"], p) for p in cfg["phases"]]
-    return out + [("y", n, d, None) for n in DISPLAYS for d in cfg["y_distances_mm"].get(n, ())]
+def jobs(cfg: dict) -> list[tuple[str, str, float, int | None, str]]:
+    """(axis, display, distance mm, field phases, power) in run order: every distance at the default phases,
+    the phase-count runs (the exact series and the interpolated powers, on the same kernels), then the
+    bands along y."""
+    out = [("x", n, d, None, "series") for n in DISPLAYS for d in cfg["distances_mm"][n]]
+    name, d = cfg["phase_display"], cfg["phase_distance_mm"]
+    out += [("x", name, d, p, power) for p in (*cfg["phases"], DEFAULT_FIELD_PHASES)
+            for power in ("series", "interpolated") if (p, power) != (DEFAULT_FIELD_PHASES, "series")]
+    return out + [("y", n, d, None, "series") for n in DISPLAYS for d in cfg["y_distances_mm"].get(n, ())]
 
 
 def analytic_curves(rig: Rig, cfg: dict) -> dict:
@@ -214,7 +250,7 @@ def visible_range(rows: list[dict], name: str, curve: tuple, rig: Rig) -> dict:
     """Where the bands of `name` are visible per pixel and after averaging along them: the strongest analytic
     harmonic h (period T/h) scaled by the median measured/analytic ratio, against σ / mean measured, with
     the period inside [4 px, frame]. Ranges are (first, last) curve distances that pass, or None."""
-    rs = [r for r in rows if r["display"] == name and r["axis"] == "x" and r["field_phases"] == DEFAULT_FIELD_PHASES]
+    rs = [r for r in rows if r["display"] == name and r["axis"] == "x" and is_default(r)]
     ratios = [r["ratio_measured_analytic"] for r in rs if np.isfinite(r.get("ratio_measured_analytic", math.nan))]
     ratio = float(np.median(ratios)) if ratios else 1.0
     noise_rel = float(np.median([r["sigma_dn"] / r["mean_dn"] for r in rs]))
@@ -232,6 +268,24 @@ def visible_range(rows: list[dict], name: str, curve: tuple, rig: Rig) -> dict:
             "pixel": span(a1 * ratio >= noise_rel), "averaged": span(a1 * ratio * math.sqrt(n_rows) >= noise_rel)}
 
 
+def is_default(row: dict) -> bool:
+    """A row at the default synthesis: the default field phases, the blend's power from the exact series."""
+    return row["field_phases"] == DEFAULT_FIELD_PHASES and row["field_power"] == "series"
+
+
+def synthesis_cost(rig: Rig, cfg: dict) -> dict:
+    """Median seconds of cfg['cost_repeats'] syntheses (kernels made beforehand) of the phase display at the
+    phase distance, default phases, with the exact series and with the interpolated powers (alternating)."""
+    display = D.preset(cfg["phase_display"]).with_distance(cfg["phase_distance_mm"])
+    seconds = {"series": [], "interpolated": []}
+    for _ in range(cfg["cost_repeats"]):
+        for power, runs in seconds.items():
+            runs.append(rig.synthesis(display, DEFAULT_FIELD_PHASES, power)[2])
+    med = {power: float(np.median(runs)) for power, runs in seconds.items()}
+    return {"series_s": med["series"], "interpolated_s": med["interpolated"],
+            "ratio": med["series"] / med["interpolated"], "repeats": cfg["cost_repeats"]}
+
+
 def run_study(out: Path, quick: bool = False, progress: bool = True) -> list[dict]:
     """Run every (display, distance, phases) capture, write study_banding.{csv,md,png} into out, return the rows."""
     cfg = QUICK if quick else FULL
@@ -239,18 +293,20 @@ def run_study(out: Path, quick: bool = False, progress: bool = True) -> list[dic
     t0 = time.perf_counter()
     rigs: dict[str, Rig] = {}
     rows, images = [], {}
-    for axis, name, d, p in tqdm(jobs(cfg), desc="study banding", unit="capture", disable=not progress):
+    for axis, name, d, p, power in tqdm(jobs(cfg), desc="study banding", unit="capture", disable=not progress):
         rig = rigs.get(axis) or rigs.setdefault(axis, Rig(cfg, axis))
-        row, prof, img = measure(rig, name, d, p)
+        row, prof, img = measure(rig, name, d, p, power)
         rows.append(row)
         if axis == "x" and name == "toled" and p is None:
             images[d] = (prof, img)
     rig = rigs["x"]
+    cost = synthesis_cost(rig, cfg)
     example = example_profile(rig, rows, images)
     curves = analytic_curves(rig, cfg)
     ranges = [visible_range(rows, n, curves[n], rig) for n in DISPLAYS]
     out.mkdir(parents=True, exist_ok=True)
-    write_tables(out, "study_banding", rows, COLUMNS, markdown(rows, ranges, rig, cfg, time.perf_counter() - t0))
+    write_tables(out, "study_banding", rows, COLUMNS,
+                 markdown(rows, ranges, rig, cfg, cost, time.perf_counter() - t0))
     plot(rows, curves, rig, example, out / "study_banding.png")
     return rows
 
@@ -258,8 +314,7 @@ def run_study(out: Path, quick: bool = False, progress: bool = True) -> list[dic
 def example_profile(rig: Rig, rows: list[dict], images: dict):
     """(display, d, x µm, profile, clean Gr image) of the T-OLED run (bands along x) nearest to 3 periods
     in the frame; images: {d: (profile, clean Gr image)} of those runs."""
-    rs = [r for r in rows if r["display"] == "toled" and r["field_phases"] == DEFAULT_FIELD_PHASES
-          and r["regime"] == "bands" and r["axis"] == "x"]
+    rs = [r for r in rows if r["display"] == "toled" and is_default(r) and r["regime"] == "bands" and r["axis"] == "x"]
     if not rs:
         return None
     pick = min(rs, key=lambda r: abs(r["periods_in_frame"] - 3))

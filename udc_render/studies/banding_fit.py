@@ -17,9 +17,10 @@ AXES = ("x", "y")
 GREEN = 1  # camera channel index (R, G, B) of the Gr sites
 GR_SITE = (0, 1)  # RGGB: Gr at even rows, odd columns
 HARMONICS = 3
-COLUMNS = ["axis", "display", "distance_mm", "field_phases", "period_formula_um", "period_formula_px", "period_fit_um",
-           "period_error_rel", "harmonic_order", "periods_in_frame", "a1_measured_rel", "a1_analytic_rel",
-           "a1_interpolated_rel", "ratio_measured_analytic", "ratio_measured_interpolated", "sinc2_interp", "mean_dn",
+COLUMNS = ["axis", "display", "distance_mm", "field_phases", "field_power", "period_formula_um", "period_formula_px",
+           "period_fit_um", "period_error_rel", "harmonic_order", "analytic_order", "periods_in_frame",
+           "a1_measured_rel", "a1_analytic_rel", "psf_mtf", "a1_expected_rel", "a1_interpolated_rel",
+           "ratio_measured_analytic", "ratio_measured_expected", "ratio_measured_interpolated", "sinc2_interp", "mean_dn",
            "a1_dn", "sigma_dn", "rows_averaged", "snr_pixel", "snr_averaged", "regime", "visible_pixel",
            "visible_averaged", "kernel_s", "synth_s"]
 
@@ -118,18 +119,31 @@ def band_series(display, lens, centres_nm, distance_mm: float) -> list[PowerSeri
     return [PowerSeries(display.layout, lens, wl * 1e-3, distance_mm * 1000.0) for wl in centres_nm]
 
 
+def kernel_otf(kernels: np.ndarray, pixel_um: float, period_um: float, axis: str = "x",
+               harmonics: int = HARMONICS) -> np.ndarray:
+    """OTF [K, H] of each band's kernel [K, S, S] (centred at S // 2, unit sum) along `axis` at the band
+    frequencies h / T, h = 1…H: Σ_u k(u) e^{−2πi h u · pixel / T} of the kernel summed across the axis."""
+    line = np.asarray(kernels, np.float64).sum(axis=1 if axis == "x" else 2)  # [K, S] along the axis
+    u_um = (np.arange(line.shape[-1]) - line.shape[-1] // 2) * pixel_um
+    h = np.arange(1, harmonics + 1)
+    return line @ np.exp(-2j * np.pi * np.outer(u_um, h) / period_um)
+
+
 def analytic_harmonics(series, weights, display, distance_mm: float, across_um: np.ndarray, z_i_um: float,
-                       axis: str = "x", samples: int = 64, harmonics: int = HARMONICS) -> np.ndarray:
+                       axis: str = "x", samples: int = 64, harmonics: int = HARMONICS,
+                       otf: np.ndarray | None = None) -> np.ndarray:
     """Relative harmonic amplitudes h = 1…H along `axis` of Σ_k a_k P_k(s) averaged over the positions
     across_um on the other axis, s = (x, y) · d / z_i: P sampled at `samples` shifts over one period
-    along the axis (exact DFT below samples / 2), the mean across taken, the DFT along."""
+    along the axis (exact DFT below samples / 2), the mean across taken, the DFT along. otf [K, H]
+    (kernel_otf): each band's harmonics times its kernel's OTF, the PSF's smoothing of the flat field
+    (blend 'source' at the kernels' mean shape)."""
     a = AXES.index(axis)
     shifts = np.zeros((across_um.size, samples, 2))
     shifts[..., a] = (np.arange(samples) * display.layout.period_um[a] / samples)[None, :]
     shifts[..., 1 - a] = (across_um * distance_mm * 1000.0 / z_i_um)[:, None]
-    total = sum(a * ps(shifts).mean(axis=0) for ps, a in zip(series, weights))
-    spec = np.abs(np.fft.rfft(total)) / samples
-    return 2 * spec[1:harmonics + 1] / spec[0]
+    spec = np.stack([a * np.fft.rfft(ps(shifts).mean(axis=0)) for ps, a in zip(series, weights)])  # [K, S/2+1]
+    lines = spec[:, 1:harmonics + 1] * (1.0 if otf is None else otf[:, :harmonics])
+    return 2 * np.abs(lines.sum(axis=0)) / abs(spec[:, 0].sum())
 
 
 def interpolated_harmonics(series, weights, display, distance_mm: float, x_um: np.ndarray, y_um: np.ndarray,

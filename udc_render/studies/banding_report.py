@@ -19,8 +19,9 @@ def _fmt_range(r) -> str:
     return "none" if r is None else f"{r[0]:.3g}–{r[1]:.3g} mm"
 
 
-def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, elapsed_s: float) -> str:
-    """study_banding.md: set-up, criteria, one table row per capture and the visible ranges."""
+def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, cost: dict, elapsed_s: float) -> str:
+    """study_banding.md: set-up, criteria, one table row per capture, the visible ranges and the cost of the
+    exact series (banding.synthesis_cost)."""
     w, h = cfg["sensor"]
     k = rig.band_image.bands.shape[0]
     lines = ["# Banding of a flat field against the display-to-lens distance", "",
@@ -37,22 +38,24 @@ def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, elapsed_s: fl
              f"A1 · mean ≥ σ / √N after averaging the N = {rig.across_um.size} Gr sites of this frame along the "
              "bands (rows for bands along x; the y runs turn the sensor to portrait, N the same). "
              "A period longer than the frame is a gradient, not bands; below 4 px it is not resolved.", "",
-             "The ratio measured / analytic is expected below 1: the synthesis interpolates P(s) linearly "
-             "between P field phases per axis, keeping sinc²(h/P) of harmonic h (0.81 for h = 1, P = 4), and "
-             "blend 'source' smooths the weighted source with the PSF. The sampling also aliases harmonics "
-             "h = mP ± 1 into the first: where the exact first harmonic is weak against them (T-OLED along y) "
-             "the synthesis' first harmonic exceeds the exact one. harmonic_order > 1: the fit found the "
-             "period T/order (the first harmonic vanishes), compared with the analytic harmonic of that order. "
-             "A1 interp.: the analytic P(s) sampled at the kernels' P × P field shifts and blended bilinearly "
-             "as the synthesis does (no PSF, no rank-2 basis): the ratio to it is what the rest of the optics "
-             "changes.", ""]
+             "power 'series' (the default): the blend takes its power from the exact series P(s) at every "
+             "pixel's own mask shift (optics.field_power); 'interpolated': the same kernels without their "
+             "series, the phases' powers interpolated bilinearly (the blend before the series), which keeps "
+             "sinc²(h/P) of harmonic h (0.81 for h = 1, P = 4) and aliases harmonics h = mP ± 1 onto it. "
+             "A1 expected: the analytic harmonic with each band's kernel OTF at the band frequency applied "
+             "(blend 'source' smooths the weighted source with the PSF; MTF = expected / analytic): "
+             "'ratio to expected' is the synthesis' error against the exact series. order: the harmonic the "
+             "fit found (period T/order), compared with the analytic harmonic of that order; order analytic: "
+             "the strongest expected harmonic. A1 interp.: the analytic P(s) sampled at the kernels' P × P field "
+             "shifts and blended bilinearly (no PSF, no rank-2 basis), what the 'interpolated' power gives.", ""]
     lines += md_table(rows, [("axis", "bands along"), ("display", "display"), ("distance_mm", "d mm"),
-                             ("field_phases", "P"),
+                             ("field_phases", "P"), ("field_power", "power"),
                              ("period_formula_px", "T formula px"), ("period_error_rel", "T fit error"),
-                             ("harmonic_order", "order"), ("a1_measured_rel", "A1 measured"),
-                             ("a1_analytic_rel", "A1 analytic"), ("a1_interpolated_rel", "A1 interp."),
-                             ("ratio_measured_analytic", "ratio"), ("ratio_measured_interpolated", "ratio to interp."),
-                             ("sinc2_interp", "sinc²(h/P)"), ("a1_dn", "A1 DN"), ("sigma_dn", "σ DN"),
+                             ("harmonic_order", "order"), ("analytic_order", "order analytic"),
+                             ("a1_measured_rel", "A1 measured"), ("a1_analytic_rel", "A1 analytic"),
+                             ("psf_mtf", "MTF"), ("a1_expected_rel", "A1 expected"),
+                             ("ratio_measured_expected", "ratio to expected"), ("a1_interpolated_rel", "A1 interp."),
+                             ("ratio_measured_interpolated", "ratio to interp."), ("a1_dn", "A1 DN"), ("sigma_dn", "σ DN"),
                              ("snr_pixel", "A1/σ"), ("regime", "regime"), ("visible_pixel", "visible/pixel"),
                              ("visible_averaged", "visible averaged"), ("kernel_s", "kernel s")],
                       {"period_error_rel": lambda v: "" if v is None else f"{v:+.2e}"})
@@ -63,6 +66,10 @@ def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, elapsed_s: fl
                       [("display", "display"), ("ratio_used", "ratio used"), ("noise_rel", "σ / mean"),
                        ("a1_max_rel", "strongest harmonic (× ratio), max over d"), ("pixel", "visible per pixel"),
                        ("averaged", f"visible averaged over {rig.across_um.size} rows")])
+    lines += ["", f"Cost of the exact series: a synthesis of the {cfg['phase_display']} at "
+              f"d = {cfg['phase_distance_mm']:g} mm, {DEFAULT_FIELD_PHASES} field phases, kernels made beforehand, "
+              f"median of {cost['repeats']}: {cost['series_s']:.3g} s with the exact series, "
+              f"{cost['interpolated_s']:.3g} s with the phases' powers interpolated ({cost['ratio']:.3g}×)."]
     return "\n".join(lines + ["", machine_text(elapsed_s) + "."]) + "\n"
 
 
@@ -73,8 +80,8 @@ def plot(rows: list[dict], curves: dict, rig, example, path: Path) -> None:
     fig, axes = plt.subplots(1, 4, figsize=(19, 4.2))
     ax_t, ax_a, ax_p, ax_e = axes
     for name, colour in zip(DISPLAYS, ("C0", "C1")):
-        rs = [r for r in rows if r["display"] == name and r["axis"] == "x"
-              and r["field_phases"] == DEFAULT_FIELD_PHASES]
+        rs = [r for r in rows if r["display"] == name and r["axis"] == "x" and r["field_phases"] == DEFAULT_FIELD_PHASES
+              and r["field_power"] == "series"]
         ds, harmonics = curves[name]
         a1 = harmonics[:, 0]
         p = D.preset(name).layout.period_um[0]
@@ -109,11 +116,16 @@ def plot(rows: list[dict], curves: dict, rig, example, path: Path) -> None:
     Ps = np.linspace(3, 8, 100)
     ax_p.plot(Ps, np.sinc(1 / Ps) ** 2, "k-", lw=0.8, label="sinc²(1/P) (a pure sinusoid, P ≥ 3)")
     label = f"{rig.cfg['phase_display']}, d = {rig.cfg['phase_distance_mm']:g} mm"
-    ax_p.plot([r["field_phases"] for r in ph], [r["ratio_measured_analytic"] for r in ph], "o-",
-              label=f"{label}: measured")
-    ax_p.plot([r["field_phases"] for r in ph], [r["a1_interpolated_rel"] / r["a1_analytic_rel"] for r in ph], "s--",
-              mfc="none", label=f"{label}: P(s) interpolated alone")
-    ax_p.set(xlabel="field phases P per axis", ylabel="A1 measured / analytic", title="interpolation in phase")
+    for power, style in (("series", "o-"), ("interpolated", "s-")):
+        rp = [r for r in ph if r["field_power"] == power]
+        ax_p.plot([r["field_phases"] for r in rp], [r["ratio_measured_expected"] for r in rp], style,
+                  label=f"{label}: measured, power {power}")
+    rp = [r for r in ph if r["field_power"] == "interpolated"]
+    ax_p.plot([r["field_phases"] for r in rp], [r["a1_interpolated_rel"] / r["a1_analytic_rel"] for r in rp], "s--",
+              mfc="none", label=f"{label}: P(s) interpolated alone (no PSF)")
+    ax_p.axhspan(0.95, 1.05, color="k", alpha=0.08, label="± 5 %")
+    ax_p.set(xlabel="field phases P per axis", ylabel="A1 measured / expected (exact series × MTF)",
+             title="the blend's power against the phase count")
     if example is not None:
         name, d, x, prof, img = example
         ax_e.plot(x, prof, lw=0.8)
