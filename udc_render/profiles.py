@@ -18,10 +18,15 @@ The per-channel form's kernels (SynthConfig.channel_kernels): ``paper``, the pap
 (l.258–263: one wavelength per channel, its printed r, cubic down-sampling; psf.paper, the very kernels
 of `udc-render psf --method paper`), or ``camera``, the camera's sensitivities × D65 over the visible
 (psf.spectral.channel_kernels), which the physical profile keeps for an explicit ``--form per_channel``.
-The transmission gap is the displays' T(λ) (optics.displays), the same under both profiles.
+The paper profile's noise is the paper's heteroscedastic Gaussian (PAPER_NOISE: variance λ_read + λ_shot·w,
+the λ of the simulated sensor at each display's gain); the physical profile keeps the sensor config's
+(Poisson shot noise and Gaussian read noise in electrons). An explicit noise model or sensor config file
+wins over the profile's noise. The transmission gap is the displays' T(λ) (optics.displays), the same
+under both profiles.
 
 resolve_profile applies a profile to a SynthConfig and the displays; explicit options win: a
-``form`` replaces the profile's form, a ``channel_kernels`` its channel kernels, a ``distance_mm`` replaces the distance of every display (as
+``form`` replaces the profile's form, a ``channel_kernels`` its channel kernels, a noise model its noise, a
+``distance_mm`` replaces the distance of every display (as
 ``--distance-mm`` always did). The profile's distance applies to the presets (toled, poled); a
 display file keeps its own ``distance_mm`` (default 0). The per-channel form has no field-dependent
 kernels (its channel kernels are at d = 0): under it the profile's distance is not applied, and an
@@ -48,6 +53,9 @@ from udc_render.pipeline import SynthConfig
 from udc_render.sensor.defects import DefectConfig
 
 PHYSICAL_DISTANCE_MM = 2.0
+# The paper's noise (l.176–178): heteroscedastic Gaussian, variance λ_read + λ_shot·w, its λ measured on its
+# camera (not printed): here the λ of the simulated sensor (sensor.noise.sensor_lambdas), at each display's gain.
+PAPER_NOISE = {"noise": "gaussian", "lambda_source": "sensor"}
 
 
 class ProfileError(UdcError):
@@ -62,19 +70,20 @@ class Profile:
     channel_kernels: str  # the per-channel form's kernels (synth_config.CHANNEL_KERNELS)
     distance_mm: float  # display-to-lens distance of the preset displays
     defects: DefectConfig | None  # sensor defect pixels (None: none)
+    noise: dict | None  # SensorConfig noise keys (None: the sensor config's)
     summary: str
 
     def sets(self) -> dict:
         """What the profile sets, as plain JSON values."""
         return {"form": self.form, "channel_kernels": self.channel_kernels, "distance_mm": self.distance_mm,
-                "defects": None if self.defects is None else asdict(self.defects)}
+                "defects": None if self.defects is None else asdict(self.defects), "noise": self.noise}
 
 
 PROFILES = {
-    "paper": Profile("paper", "per_channel", "paper", 0.0, None,
+    "paper": Profile("paper", "per_channel", "paper", 0.0, None, PAPER_NOISE,
                      "the paper's synthesis: y = γ x ⊗ k + n (its 3 channel kernels, its γ), display at the lens, "
                      "no defect pixels"),
-    "physical": Profile("physical", "spectral", "camera", PHYSICAL_DISTANCE_MM, DefectConfig(),
+    "physical": Profile("physical", "spectral", "camera", PHYSICAL_DISTANCE_MM, DefectConfig(), None,
                         "band kernels and T(λ), the preset displays at the display-to-lens distance, "
                         "dead and hot pixels"),
 }
@@ -88,37 +97,47 @@ def get_profile(name: str) -> Profile:
 
 
 def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: str | None = None,
-                    distance_mm: float | None = None,
-                    channel_kernels: str | None = None) -> tuple[SynthConfig, list[Display]]:
-    """(cfg with the profile's form, channel kernels and defects and its record, the displays with their
-    distance) under profile `name`; `form`, `distance_mm` and `channel_kernels` are explicit options
-    (None: not given), which win over the profile (module doc). `displays` as loaded, without a distance
-    override."""
+                    distance_mm: float | None = None, channel_kernels: str | None = None,
+                    noise_model: str | None = None, sensor_file: bool = False) -> tuple[SynthConfig, list[Display]]:
+    """(cfg with the profile's form, channel kernels, noise and defects and its record, the displays with
+    their distance) under profile `name`; `form`, `distance_mm`, `channel_kernels` and `noise_model` are
+    explicit options (None: not given), which win over the profile, as a sensor config file (`sensor_file`)
+    does over its noise (module doc). `displays` as loaded, without a distance override; cfg.sensor with
+    the options already applied."""
     p = get_profile(name)
     final_form = form if form is not None else p.form
     kernels = channel_kernels if channel_kernels is not None else p.channel_kernels
-    options = {k: v for k, v in (("form", form), ("channel_kernels", channel_kernels), ("distance_mm", distance_mm))
-               if v is not None}
-    notes = []
-    if distance_mm is not None:
-        if final_form == "per_channel" and distance_mm > 0:
-            raise ProfileError(f"--distance-mm {distance_mm:g} with form per_channel: the per-channel form (the "
-                               "paper's) puts the display at the lens (d = 0); use --form spectral for d > 0")
-        distance, applies_to = float(distance_mm), "every display (the option)"
-        displays = [d if d.is_glass else d.with_distance(distance) for d in displays]
-    elif final_form == "per_channel":
-        distance, applies_to = 0.0, "the preset displays (display files keep their own distance_mm)"
-        if p.distance_mm > 0:
-            notes.append("the per-channel form has no field-dependent kernels: the profile's distance is not applied")
-    else:
-        distance, applies_to = p.distance_mm, "the preset displays (display files keep their own distance_mm)"
-        displays = [d.with_distance(distance) if d.source == "preset" and not d.is_glass else d for d in displays]
+    options = {k: v for k, v in (("form", form), ("channel_kernels", channel_kernels), ("distance_mm", distance_mm),
+                                 ("noise", noise_model)) if v is not None}
+    if sensor_file:
+        options["sensor_config"] = "a file"
+    distance, applies_to, displays, notes = _distance(p, final_form, distance_mm, displays)
+    sensor = cfg.sensor if p.noise is None or noise_model is not None or sensor_file else replace(cfg.sensor, **p.noise)
     record = {"name": p.name, "sets": p.sets(), "options": options,
               "applied": {"form": final_form, "channel_kernels": kernels, "distance_mm": distance,
-                          "distance_applies_to": applies_to, "defects": p.sets()["defects"]}}
+                          "distance_applies_to": applies_to, "defects": p.sets()["defects"],
+                          "noise": {"noise": sensor.noise, "lambda_source": sensor.lambda_source}}}
     if notes:
         record["notes"] = notes
-    return replace(cfg, form=final_form, channel_kernels=kernels, defects=p.defects, profile=record), displays
+    return replace(cfg, form=final_form, channel_kernels=kernels, sensor=sensor, defects=p.defects,
+                   profile=record), displays
+
+
+def _distance(p: Profile, form: str, distance_mm: float | None, displays: list[Display]) -> tuple:
+    """(distance, what it applies to, the displays at it, notes) under profile p, form and the option."""
+    if distance_mm is not None:
+        if form == "per_channel" and distance_mm > 0:
+            raise ProfileError(f"--distance-mm {distance_mm:g} with form per_channel: the per-channel form (the "
+                               "paper's) puts the display at the lens (d = 0); use --form spectral for d > 0")
+        return (float(distance_mm), "every display (the option)",
+                [d if d.is_glass else d.with_distance(float(distance_mm)) for d in displays], [])
+    presets = "the preset displays (display files keep their own distance_mm)"
+    if form == "per_channel":
+        notes = (["the per-channel form has no field-dependent kernels: the profile's distance is not applied"]
+                 if p.distance_mm > 0 else [])
+        return 0.0, presets, displays, notes
+    return (p.distance_mm, presets,
+            [d.with_distance(p.distance_mm) if d.source == "preset" and not d.is_glass else d for d in displays], [])
 
 
 def describe(record: dict | None) -> str:
@@ -129,8 +148,9 @@ def describe(record: dict | None) -> str:
     d = a["defects"]
     defects = "none" if d is None else (f"dead {d['dead_fraction']:g}, hot {d['hot_fraction']:g} "
                                         f"({d['hot_dark_e_per_s']:g} e-/s), seed {d['seed']}")
-    mark = {k: " (option)" if k in o else "" for k in ("form", "channel_kernels", "distance_mm")}
+    mark = {k: " (option)" if k in o else "" for k in ("form", "channel_kernels", "distance_mm", "noise")}
     kernels = (f" (channel kernels {a['channel_kernels']}{mark['channel_kernels']})"
                if a["form"] == "per_channel" else "")
     return (f"profile {record['name']}: form {a['form']}{mark['form']}{kernels}, display-to-lens distance "
-            f"{a['distance_mm']:g} mm{mark['distance_mm']} for {a['distance_applies_to']}, defect pixels: {defects}")
+            f"{a['distance_mm']:g} mm{mark['distance_mm']} for {a['distance_applies_to']}, noise {a['noise']['noise']}"
+            f"{mark['noise']}, defect pixels: {defects}")

@@ -49,6 +49,9 @@ def test_the_profiles_set_what_they_say():
     assert cfg.channel_kernels == "paper" == cfg.profile["applied"]["channel_kernels"]
     assert all(v.distance_mm == 0.0 for v in d.values())
     assert "form per_channel (channel kernels paper)" in describe(cfg.profile)
+    assert (cfg.sensor.noise, cfg.sensor.lambda_source) == ("gaussian", "sensor")  # the paper's noise (l.178)
+    assert cfg.profile["applied"]["noise"] == {"noise": "gaussian", "lambda_source": "sensor"}
+    assert _setup()[0].sensor.noise == "poisson"  # physical: the sensor config's
     assert f"profile physical: form spectral, display-to-lens distance {PHYSICAL_DISTANCE_MM:g} mm" in describe(_setup()[0].profile)
 
 
@@ -69,6 +72,17 @@ def test_explicit_options_override_the_profile():
     assert cfg.form == "per_channel" and cfg.channel_kernels == "camera"
     assert cfg.profile["options"] == {"channel_kernels": "camera"}
     assert "(channel kernels camera (option))" in describe(cfg.profile)
+    cfg, _ = _setup("--profile", "paper", "--noise-model", "poisson")
+    assert cfg.sensor.noise == "poisson" and cfg.profile["options"] == {"noise": "poisson"}
+    assert "noise poisson (option)" in describe(cfg.profile)
+
+
+def test_a_sensor_config_file_keeps_its_noise(tmp_path):
+    f = tmp_path / "sensor.toml"
+    f.write_text('noise = "none"\n')
+    cfg, _ = _setup("--profile", "paper", "--sensor-config", str(f))
+    assert cfg.sensor.noise == "none" and cfg.profile["applied"]["noise"]["noise"] == "none"
+    assert cfg.profile["options"] == {"sensor_config": "a file"}
     cfg, d = _setup("--profile", "paper", "--distance-mm", "0")
     assert d["toled"].distance_mm == 0.0 and cfg.form == "per_channel"
 
@@ -104,7 +118,7 @@ def _differing(a: dict, b: dict) -> set[str]:
 
 def test_profiles_differ_only_where_they_say(scene, tmp_path):
     """One scene synthesised under each profile: synth.json differs in form, channel kernels, defects and
-    the profile record alone; each capture.json's display record only in the distance (glass: not at all); the
+    the profile record alone (the job's sensor record also in the noise); each capture.json's display record only in the distance (glass: not at all); the
     physical captures carry the defect record, the paper's none. The same goes for a dataset's job.json."""
     out = {}
     for name in ("paper", "physical"):
@@ -134,7 +148,9 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
         params[name] = job_params(job, _shared(job, tmp_path / "ds"), source, images)
     assert _differing(params["paper"], params["physical"]) == {"synth", "displays"}
     assert _differing(params["paper"]["synth"], params["physical"]["synth"]) == {"form", "channel_kernels", "defects",
-                                                                                 "profile"}
+                                                                                 "profile", "sensor"}
+    assert _differing(params["paper"]["synth"]["sensor"], params["physical"]["synth"]["sensor"]) == {
+        "noise", "lambda_source"}
     assert params["paper"]["synth"]["channel_kernels"] == "paper"
 
 

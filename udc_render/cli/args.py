@@ -183,7 +183,8 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     add_display_argument(p, "the displays to capture through; the glass capture is always made too",
                          several=True, default="toled")
     p.add_argument("--profile", choices=tuple(PROFILES), default=DEFAULT_PROFILE,
-                   help=f"paper: the paper's synthesis (form per_channel, d = 0, no defect pixels); physical: form "
+                   help=f"paper: the paper's synthesis (form per_channel with its channel kernels, d = 0, "
+                        f"heteroscedastic Gaussian noise, no defect pixels); physical: form "
                         f"spectral, d = {PHYSICAL_DISTANCE_MM:g} mm for the preset displays, dead and hot pixels "
                         f"(udc_render/profiles.py); --form, --channel-kernels and --distance-mm override it "
                         f"[{DEFAULT_PROFILE}]")
@@ -225,7 +226,8 @@ def add_sensor_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise-model", choices=("poisson", "gaussian", "none"),
                    help="sensor noise (udc_render/sensor/noise.py): poisson: Poisson shot noise plus Gaussian read "
                         "noise in electrons; gaussian: its heteroscedastic Gaussian approximation (variance read + "
-                        "shot × signal); none: the noise-free signal, quantised [the sensor config's, poisson]")
+                        "shot × signal); none: the noise-free signal, quantised [the profile's: gaussian for paper; else the "
+                        "sensor config's, poisson]")
     p.add_argument("--noise-seed", type=int, default=0, help="seed of the sensor noise [0]")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the kernel cache")
     p.add_argument("--cache-dir", type=Path, help="kernel cache folder [$UDC_RENDER_CACHE or ~/.cache/udc-render/psf]")
@@ -251,11 +253,14 @@ def synth_config(args):
 
 def capture_setup(args, displays: str | None = None):
     """(SynthConfig, displays) of a capture command: the capture options under --profile (the default
-    profile when the command has none); --form, --channel-kernels and --distance-mm win over the profile
+    profile when the command has none); --form, --channel-kernels, --distance-mm, --noise-model and
+    --sensor-config win over the profile
     (udc_render.profiles). `displays`: the comma-separated displays [args.display]."""
     from udc_render.optics.displays import load_displays
     from udc_render.profiles import DEFAULT_PROFILE, resolve_profile
     return resolve_profile(getattr(args, "profile", DEFAULT_PROFILE), synth_config(args),
                            load_displays(displays if displays is not None else args.display),
                            form=getattr(args, "form", None), distance_mm=getattr(args, "distance_mm", None),
-                           channel_kernels=getattr(args, "channel_kernels", None))
+                           channel_kernels=getattr(args, "channel_kernels", None),
+                           noise_model=getattr(args, "noise_model", None),
+                           sensor_file=getattr(args, "sensor_config", None) is not None)
