@@ -94,7 +94,7 @@ def test_toled_along_y_the_frame_sees_the_second_harmonic():
 def test_first_harmonic_within_5_percent_of_the_exact_series(quick):
     """T-OLED at the default power (the exact series, optics.field_power), every phase count and axis: the
     measured harmonic of the fit's order within 5 % of the exact series × the kernels' OTF (measured 0.976
-    along x at P = 4 and 2, 0.952 along y), nearer than to P(s) interpolated at the phases. The
+    along x at P = 4 and 2, 1.007 along y), nearer than to P(s) interpolated at the phases. The
     interpolated powers (the blend before the series, same kernels) understate it by 25 % or more
     (measured 0.73 at P = 4, 0.75 at P = 2) and follow P(s) interpolated alone instead."""
     _, rows = quick

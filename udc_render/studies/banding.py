@@ -15,7 +15,8 @@ Measured (green Gr sites of the RGGB mosaic, sample every 2 px along x):
   mosaic; the glass ratio removes any fall-off), divided by its mean;
 - period T and first harmonic: least squares of c0 + Σ_{h≤H} [a_h cos(2πhx/T) + b_h sin(2πhx/T)],
   T refined by a bounded scalar search of the residual around the zero-padded FFT peak (no use of
-  the expected period); A1 = √(a1² + b1²) / c0 (relative to the mean);
+  the expected period); A1 = √(a1² + b1²) / c0 (relative to the mean). Where the fit finds T/n
+  (order n = round(z_i p / d / T) > 1), A1 is harmonic n of the fit at n·T with n·H harmonics;
 - σ: the per-pixel noise, std(mosaic_dn − clean_dn) over the Gr sites (DN).
 
 Analytic (psf.banding.PowerSeries, exact for a periodic display): the band period on the sensor is
@@ -60,9 +61,10 @@ from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
 from udc_render.render import render_scene
 from udc_render.scene import Bands, load_scene
 from udc_render.scene.geometry import psf_lens
-from udc_render.studies.banding_fit import (AXES, COLUMNS, DISPLAYS, analytic_harmonics, band_series, fit_period,
-                                           flat_profile, green_band_weights, green_sites, interpolated_harmonics,
-                                           kernel_otf, noise_sigma_dn, period_formula_um, sinc2, site_positions_um)
+from udc_render.studies.banding_fit import (AXES, COLUMNS, DISPLAYS, HARMONICS, analytic_harmonics, band_series,
+                                           fit_period, flat_profile, green_band_weights, green_sites, harmonic_fit,
+                                           interpolated_harmonics, kernel_otf, noise_sigma_dn, period_formula_um, sinc2,
+                                           site_positions_um)
 from udc_render.studies.banding_report import markdown, plot
 from udc_render.studies.report import write_tables
 
@@ -204,9 +206,11 @@ def measure(rig: Rig, name: str, distance_mm: float, phases: int | None,
         row.update(regime="gradient (T > frame)" if T > rig.frame_um else "unresolved (T < 4 px)",
                    visible_pixel=False, visible_averaged=False)
         return row, prof, green_sites(cap.clean_dn)
-    period, amps = fit_period(rig.along_um, prof)
+    period, _ = fit_period(rig.along_um, prof)
     order = max(1, int(round(T / period)))
-    a1 = float(amps[1])
+    # harmonic `order` of the fundamental period · order, every harmonic up to order · H fitted with it (a fit
+    # at T/order leaves T's other harmonics out, and on a frame of 2.5 periods they leak into it)
+    a1 = float(harmonic_fit(rig.along_um, prof, period * order, HARMONICS * order)[0][order])
     a_ref = float(analytic[order - 1]) if order <= analytic.size else math.nan
     a_exp = float(expected[order - 1]) if order <= expected.size else math.nan
     a_interp = interpolated_harmonics(series, weights, display, distance_mm, rig.x_um, rig.y_um, rig.z_i_um, P,

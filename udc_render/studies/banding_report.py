@@ -55,7 +55,8 @@ def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, cost: dict, e
                              ("a1_measured_rel", "A1 measured"), ("a1_analytic_rel", "A1 analytic"),
                              ("psf_mtf", "MTF"), ("a1_expected_rel", "A1 expected"),
                              ("ratio_measured_expected", "ratio to expected"), ("a1_interpolated_rel", "A1 interp."),
-                             ("ratio_measured_interpolated", "ratio to interp."), ("a1_dn", "A1 DN"), ("sigma_dn", "σ DN"),
+                             ("ratio_measured_interpolated", "ratio to interp."), ("a1_dn", "A1 DN"),
+                             ("sigma_dn", "σ DN"),
                              ("snr_pixel", "A1/σ"), ("regime", "regime"), ("visible_pixel", "visible/pixel"),
                              ("visible_averaged", "visible averaged"), ("kernel_s", "kernel s")],
                       {"period_error_rel": lambda v: "" if v is None else f"{v:+.2e}"})
