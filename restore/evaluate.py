@@ -9,7 +9,8 @@ wall time (models: forward pass only, data on the device) per megapixel of outpu
 
 Methods (RESTORERS): 'input' (the degraded capture, bilinear demosaic ÷ γ: the identity baseline,
 with γ the split's own ratio of sums, restore.known.measured_gamma_rggb), 'dep' (restore.dep with
-the display's known kernels and γ, restore.known), or a checkpoint from `udc-render train`. Each run
+the display's γ and the paper's computed PSF, as the paper ran it), 'dep_exact' (DeP (exact kernel):
+the camera-weighted channel kernels; restore.known has both), or a checkpoint from `udc-render train`. Each run
 merges its rows into <out>/results.json and rewrites results.md and results.csv, the layout of the
 paper's pipeline comparison (rows: methods; columns: displays).
 """
@@ -33,7 +34,8 @@ from udc_render.metrics import BORDER_TEXT, PROTOCOLS, border_px, encode_srgb
 from udc_render.sensor import demosaic_bilinear, unpack_rggb
 
 MAC_INPUT_SHAPE = (1, 4, 512, 1024)  # the paper's: 512 × 1024 × 4 packed RAW
-ROW_ORDER = ("input", "dep", "resnet", "unet_syn", "unet")  # the paper's Table 2 order; unet_syn: UNet (Syn)
+ROW_ORDER = ("input", "dep", "dep_exact", "resnet", "unet_syn", "unet")  # the paper's Table 2 order, and DeP (exact
+# kernel) after its DeP; unet_syn: UNet (Syn)
 DISPLAY_TITLES = {"toled": "T-OLED", "poled": "P-OLED"}
 METRICS = {"paper": ("psnr_db_paper", "ssim_paper"), "srgb": ("psnr_db_srgb", "ssim_srgb", "lpips_srgb")}
 # the paper protocol's text describes udc_render.metrics.paper_linear, which keeps the border: restore.metrics
@@ -97,7 +99,8 @@ class InputRestorer:
 
 
 class DepRestorer(InputRestorer):
-    """'dep': restore.dep with the display's known kernels and γ (restore.known)."""
+    """'dep' and 'dep_exact': restore.dep with the display's γ and its kernels as restore.known gives them:
+    the paper's computed PSF ('dep') or the camera-weighted channel kernels ('dep_exact')."""
     scores_packed = False
 
     def prepare(self, pairs_by_display: dict) -> None:
@@ -105,7 +108,11 @@ class DepRestorer(InputRestorer):
         self.gamma, self.kernels = {}, {}
         for d, pairs in pairs_by_display.items():
             self.gamma[d] = known_gamma_rggb(pairs[0])
-            self.kernels[d] = known_kernels_rggb(pairs[0], self.settings.kernel_px)
+            self.kernels[d] = known_kernels_rggb(pairs[0], self.settings.kernel_px, source=self.kernel_source)
+
+    @property
+    def kernel_source(self) -> str:
+        return DEP_KERNEL_SOURCE[self.method]
 
     def restore(self, packed: np.ndarray, pair: Pair) -> tuple[np.ndarray, float, dict]:
         kwargs = {} if self.settings.denoiser is None else {"denoiser": self.settings.denoiser}
@@ -115,7 +122,8 @@ class DepRestorer(InputRestorer):
         return res.rgb, time.perf_counter() - t0, {"denoiser": res.denoiser}
 
     def describe(self) -> dict:
-        return dict(super().describe(), kernel_px={d: int(k.shape[-1]) for d, k in self.kernels.items()})
+        return dict(super().describe(), kernel_px={d: int(k.shape[-1]) for d, k in self.kernels.items()},
+                    kernels=self.kernel_source)
 
 
 class ModelRestorer:
@@ -155,7 +163,9 @@ class ModelRestorer:
 
 # method → factory(method, settings) of a restorer: `name`, `displays(data_dir)` (its default displays),
 # `prepare(pairs_by_display)`, `restore(packed, pair)` -> (restored [3, H, W], seconds, notes), `describe()`
-RESTORERS = {"input": InputRestorer, "dep": DepRestorer, "model": ModelRestorer}
+RESTORERS = {"input": InputRestorer, "dep": DepRestorer, "dep_exact": DepRestorer, "model": ModelRestorer}
+BUILTIN_METHODS = ("input", "dep", "dep_exact")  # every other method is a checkpoint's path
+DEP_KERNEL_SOURCE = {"dep": "paper", "dep_exact": "exact"}  # restore.known.DEP_KERNELS
 
 
 def preview_panel(panels: list[tuple[str, np.ndarray]], balance: np.ndarray, path: Path, title: str) -> None:
@@ -175,11 +185,11 @@ def preview_panel(panels: list[tuple[str, np.ndarray]], balance: np.ndarray, pat
 
 def evaluate(data_dir: Path, method: str, out: Path, settings: EvalSettings = EvalSettings(),
              progress: bool = True) -> dict:
-    """Score `method` ('input', 'dep' or a checkpoint path) as `settings` say; merge into
+    """Score `method` (BUILTIN_METHODS or a checkpoint path) as `settings` say; merge into
     <out>/results.json and rewrite the tables; returns its entry."""
     from restore.lpips import LPIPS
     data_dir, out = Path(data_dir), Path(out)
-    restorer = RESTORERS[method if method in ("input", "dep") else "model"](method, settings)
+    restorer = RESTORERS[method if method in BUILTIN_METHODS else "model"](method, settings)
     displays = restorer.displays(data_dir) if settings.displays is None else settings.displays
     pairs_by_display = {d: [p for p in list_pairs(data_dir, settings.split, [d])
                             if settings.image_prefix is None or (p.image or "").startswith(settings.image_prefix)]

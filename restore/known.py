@@ -1,10 +1,17 @@
 """What the deconvolution pipeline (DeP) is allowed to know about a display: its kernels and γ.
 
-Kernels: the channel-effective PSFs (camera × D65 weighted, psf.spectral.channel_kernels) of the
-display recorded in the capture's capture.json, for the lens recorded in synth.json, in focus,
-with the display at the principal plane (d = 0: a display at d > 0 makes the blur field-dependent,
-which DeP does not model), sampled at the packed plane's pitch (2 × the sensor pitch), the R kernel
-for R, the G kernel for Gr and Gb, B for B. Cached on disk like every kernel (psf.cache).
+Kernels (DEP_KERNELS), of the display recorded in the capture's capture.json, for the lens recorded in
+synth.json, in focus, with the display at the principal plane (d = 0: a display at d > 0 makes the blur
+field-dependent, which DeP does not model), sampled at the packed plane's pitch (2 × the sensor pitch),
+the R kernel for R, the G kernel for Gr and Gb, B for B, cached on disk like every kernel (psf.cache):
+- 'paper' (the default, the row 'dep'): the paper's computed PSF, "the pre-computed PSF" its DeP used
+  (l.277): its recipe as printed at 640 / 520 / 450 nm (psf.paper; `udc-render psf --method paper`),
+  the kernels of the paper profile's synthesis. On `physical` captures it is the misfit the paper's DeP
+  "suffers from" (l.410);
+- 'exact' (the row 'dep_exact', "DeP (exact kernel)"): the channel-effective PSFs of the camera's
+  sensitivities under D65 (psf.spectral.channel_kernels): the kernels of the per-channel synthesis with
+  camera kernels, and the closest channel kernels to the spectral form's band kernels at d = 0; the
+  upper bound a good PSF gives.
 
 γ: the γ that made the capture, by the one definition (udc_render.optics.gamma, what the paper's
 calibration measures): for the spectral form, band-wise from the display's and the bare lens's band
@@ -21,13 +28,14 @@ import json
 
 import numpy as np
 
-from psf import Lens
+from psf import Lens, compute_kernels
 from psf.cache import cached
 from psf.spectral import channel_kernels
 from restore.data import DataError, Pair, load_pair
 from udc_render.optics.displays import load_display, preset
 from udc_render.optics.gamma import display_gamma
 from udc_render.pipeline import SynthConfig, band_kernel_set
+from udc_render.synth_kernels import PAPER_CHANNEL_NM
 from udc_render.scene.geometry import RenderGrid
 from udc_render.sensor import mosaic_of, pack_rggb, rgb_to_rggb
 
@@ -42,15 +50,32 @@ def capture_display(pair: Pair):
     return preset(d["name"]) if d["source"] == "preset" else load_display(d["source"])
 
 
+DEP_KERNELS = ("paper", "exact")  # module doc
+
+
 @functools.lru_cache(maxsize=8)  # γ and the kernels of one pair read the same KernelSet
-def _channel_kernels(pair: Pair, size_px: int | None, use_cache: bool):
+def _channel_kernels(pair: Pair, size_px: int | None, use_cache: bool, source: str = "paper"):
+    if source not in DEP_KERNELS:
+        raise DataError(f"DeP kernels = {source!r}: expected one of {', '.join(DEP_KERNELS)}")
     synth = json.loads((pair.folder / "synth.json").read_text())
     sensor = json.loads((pair.folder / pair.display / "capture.json").read_text())["sensor"]
     size = size_px or (synth["kernel_size_px"] // 2) | 1
     if size % 2 == 0:
         raise DataError(f"kernel_px = {size}: expected an odd number of pixels (a centred kernel)")
-    return packed_channel_kernels(capture_display(pair).layout, Lens(**synth["lens"]), sensor["camera"],
-                                  float(sensor["pitch_um"]), size, use_cache)
+    layout, lens, pitch_um = capture_display(pair).layout, Lens(**synth["lens"]), float(sensor["pitch_um"])
+    if source == "paper":
+        return packed_paper_kernels(layout, lens, pitch_um, size, use_cache)
+    return packed_channel_kernels(layout, lens, sensor["camera"], pitch_um, size, use_cache)
+
+
+def packed_paper_kernels(layout, lens: Lens, sensor_pitch_um: float, size_px: int, use_cache: bool = True):
+    """The paper's computed PSF [3] (R, G, B at PAPER_CHANNEL_NM: the recipe as printed, d = 0) of `layout`
+    at the packed planes' pitch, size_px odd, through the kernel cache: the call `udc-render psf --method
+    paper --wavelengths-nm 640,520,450 --pitch-um 3.1` makes on the paper's rig (module doc)."""
+    ks, _ = cached(compute_kernels, "mono", layout, lens, use_cache, wavelengths_nm=PAPER_CHANNEL_NM,
+                   method="paper", pixel_um=2 * float(sensor_pitch_um), size_px=size_px, distance_mm=0.0,
+                   precision="float32")
+    return ks
 
 
 def packed_channel_kernels(layout, lens: Lens, camera: str, sensor_pitch_um: float, size_px: int,
@@ -69,10 +94,11 @@ def rggb_kernels(kernel_set) -> np.ndarray:
     return np.stack([k[0], k[1], k[1], k[2]]).astype(np.float32)
 
 
-def known_kernels_rggb(pair: Pair, size_px: int | None = None, use_cache: bool = True) -> np.ndarray:
-    """[4, k, k] unit-sum kernels at the packed-plane pitch for R, Gr, Gb, B (module doc).
-    size_px: odd; default half the synthesis kernel (the same field of view)."""
-    return rggb_kernels(_channel_kernels(pair, size_px, use_cache))
+def known_kernels_rggb(pair: Pair, size_px: int | None = None, use_cache: bool = True,
+                       source: str = "paper") -> np.ndarray:
+    """[4, k, k] unit-sum kernels at the packed-plane pitch for R, Gr, Gb, B; `source`: DEP_KERNELS
+    (module doc). size_px: odd; default half the synthesis kernel (the same field of view)."""
+    return rggb_kernels(_channel_kernels(pair, size_px, use_cache, source))
 
 
 def known_gamma_rggb(pair: Pair, use_cache: bool = True) -> np.ndarray:

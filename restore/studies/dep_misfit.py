@@ -58,7 +58,7 @@ def misfit_psnr(data_dir: Path, display: str, misfits, split: str = "val", items
     from restore.train import centre_crop
     pairs = list_pairs(Path(data_dir), split, [display])[:items]
     crops = [centre_crop(*load_pair(p), crop_px) for p in pairs]
-    gamma, kernels = known_gamma_rggb(pairs[0]), known_kernels_rggb(pairs[0])
+    gamma, kernels = known_gamma_rggb(pairs[0]), known_kernels_rggb(pairs[0], source="exact")
     gts = [np.clip(gt, 0, 1) for _, gt in crops]
     row = {"input": float(np.mean([psnr_db(np.clip(demosaic_bilinear(unpack_rggb(packed)), 0, 1), gt)
                                    for (packed, _), gt in zip(crops, gts)]))}

@@ -7,7 +7,7 @@ kernel (restore.known, at the packed pitch, so defined up to 1/4 cycle per senso
 
 Per display: the split's first `items` pairs, cropped to the central `crop_px` square (the validation
 crop of restore.train), clipped to [0, 1] like the PSNR. Methods are the restorers of restore.evaluate
-('input', 'dep', or a checkpoint path).
+('input', 'dep', 'dep_exact', or a checkpoint path).
 
     python -m restore.studies.error_bands DATA --display toled --method input --method PATH [...]
         [--split val] [--items 6] [--crop-px 512] [--out out/error_bands]
@@ -63,13 +63,13 @@ def method_bands(data_dir: Path, display: str, methods: dict[str, str], split: s
     """{name: [bands] MSE averaged over the split's first `items` pairs} for methods {name: 'input', 'dep' or a
     checkpoint path} (module doc)."""
     from restore.data import list_pairs, load_pair
-    from restore.evaluate import RESTORERS, EvalSettings
+    from restore.evaluate import BUILTIN_METHODS, RESTORERS, EvalSettings
     from restore.train import centre_crop
     every = list_pairs(Path(data_dir), split, [display])
     crops = [(p, centre_crop(*load_pair(p), crop_px)) for p in every[:items]]
     out = {}
     for name, method in methods.items():
-        restorer = RESTORERS[method if method in ("input", "dep") else "model"](method, EvalSettings(split=split))
+        restorer = RESTORERS[method if method in BUILTIN_METHODS else "model"](method, EvalSettings(split=split))
         restorer.prepare({display: every})
         out[name] = np.mean([band_mse(np.clip(restorer.restore(packed, p)[0], 0, 1) - np.clip(gt, 0, 1))
                              for p, (packed, gt) in crops], axis=0)
@@ -77,10 +77,10 @@ def method_bands(data_dir: Path, display: str, methods: dict[str, str], split: s
 
 
 def display_transfer(data_dir: Path, display: str, split: str = "val") -> np.ndarray:
-    """band_transfer of the display's known green kernel (restore.known, the split's first pair)."""
+    """band_transfer of the display's green kernel (restore.known's exact one, the split's first pair)."""
     from restore.data import list_pairs
     from restore.known import known_kernels_rggb
-    return band_transfer(known_kernels_rggb(list_pairs(Path(data_dir), split, [display])[0])[1])
+    return band_transfer(known_kernels_rggb(list_pairs(Path(data_dir), split, [display])[0], source="exact")[1])
 
 
 def weakest_band_text(bands: dict[str, np.ndarray], transfer: np.ndarray, edges=OCTAVE_EDGES) -> str:
@@ -124,6 +124,7 @@ def plot(bands: dict[str, np.ndarray], transfer: np.ndarray, path: Path, title: 
 def main(argv: list[str]) -> None:
     usage = "python -m restore.studies.error_bands DATA --display D --method M [--method M ...] [--split val] " \
             "[--items 6] [--crop-px 512] [--out out/error_bands]"
+    from restore.evaluate import BUILTIN_METHODS
     pos, o = parse_options(argv, usage, repeated=("method",))
     if len(pos) != 1 or "display" not in o or not o["method"]:
         sys.exit(f"usage: {usage}")
@@ -132,7 +133,7 @@ def main(argv: list[str]) -> None:
     try:
         out.mkdir(parents=True, exist_ok=True)
         transfer = display_transfer(data, display, split)
-        methods = {m if m in ("input", "dep") else Path(m).parent.name: m for m in o["method"]}
+        methods = {m if m in BUILTIN_METHODS else Path(m).parent.name: m for m in o["method"]}
         bands = method_bands(data, display, methods, split, items, crop_px)
     except (UdcError, OSError) as exc:
         sys.exit(f"error: {exc}")

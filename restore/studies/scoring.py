@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from restore.data import dataset_displays, list_pairs
-from restore.evaluate import EvalSettings, evaluate, results_csv, results_markdown
+from restore.evaluate import BUILTIN_METHODS, EvalSettings, evaluate, results_csv, results_markdown
 from restore.studies.budgets import DISPLAYS
 from restore.studies.error_bands import display_transfer, method_bands, plot
 from restore.train import data_fingerprint
@@ -28,7 +28,7 @@ def error_band_rows(data: Path, models: dict, folder: Path) -> dict:
     display's trained rows on the val split's central crops (restore.studies.error_bands); plots in `folder`."""
     res = {}
     for d in DISPLAYS:
-        methods = {"input": "input", "dep": "dep", **{row: str(p) for (row, md), p in models.items() if md == d}}
+        methods = {**{m: m for m in BUILTIN_METHODS}, **{row: str(p) for (row, md), p in models.items() if md == d}}
         transfer = display_transfer(data, d)
         bands = method_bands(data, d, methods, "val", BAND_ITEMS, BAND_CROP_PX)
         plot(bands, transfer, folder / f"error_bands_{d}.png",
@@ -51,10 +51,10 @@ def training_levels(data: Path) -> dict[str, float]:
 
 def evaluation_stamp(data: Path, method: str) -> str:
     """sha256 of what decides a row's scores: the dataset's manifest (restore.train.data_fingerprint), the
-    method ('input', 'dep', or the checkpoint's bytes) and the source of SCORING_MODULES. Deeper code (the
+    method (BUILTIN_METHODS' names, or the checkpoint's bytes) and the source of SCORING_MODULES. Deeper code (the
     optics behind DeP's known kernels) is not in it: a change there needs `rm -r <out>/eval*`."""
     h = hashlib.sha256(data_fingerprint(data).encode())
-    h.update(method.encode() if method in ("input", "dep") else Path(method).read_bytes())
+    h.update(method.encode() if method in BUILTIN_METHODS else Path(method).read_bytes())
     h.update(_scoring_source())
     return h.hexdigest()[:16]
 
@@ -73,7 +73,7 @@ def evaluate_rows(data: Path, models: dict, ev: Path, progress: bool) -> dict:
     path, stamps_path, seconds_path = ev / "results.json", ev / "stamps.json", ev / "row_seconds.json"
     stamps = json.loads(stamps_path.read_text()) if stamps_path.is_file() and path.is_file() else {}
     seconds = json.loads(seconds_path.read_text()) if seconds_path.is_file() else {}
-    rows = [("input", "input", dataset_displays(data)), ("dep", "dep", dataset_displays(data))]
+    rows = [(m, m, dataset_displays(data)) for m in BUILTIN_METHODS]
     rows += [(row, str(p), [d]) for (row, d), p in models.items()]
     scored = json.loads(path.read_text())["methods"] if path.is_file() else {}  # before this call's rows
     for name, method, displays in rows:
@@ -81,7 +81,7 @@ def evaluate_rows(data: Path, models: dict, ev: Path, progress: bool) -> dict:
         if stamps.get(method) == stamp and all(d in scored.get(name, {}).get("displays", {}) for d in displays):
             continue
         t = time.perf_counter()
-        evaluate(data, method, ev, EvalSettings(name=None if method in ("input", "dep") else name), progress=progress)
+        evaluate(data, method, ev, EvalSettings(name=None if method in BUILTIN_METHODS else name), progress=progress)
         seconds[name] = time.perf_counter() - t
         stamps[method] = stamp
         save_json(seconds_path, seconds)

@@ -1,4 +1,4 @@
-"""`udc-render evaluate --data DIR --model {input,dep,CHECKPOINT} --out DIR`: score a restorer."""
+"""`udc-render evaluate --data DIR --model {input,dep,dep_exact,CHECKPOINT} --out DIR`: score a restorer."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -10,16 +10,17 @@ from udc_render.cli.train import set_threads
 def register(sub) -> None:
     e = sub.add_parser("evaluate", help="score a restorer on a dataset split: PSNR, SSIM, LPIPS, MACs, ms/MP")
     e.add_argument("--data", type=Path, required=True, help="a folder written by `udc-render dataset`")
-    e.add_argument("--model", required=True, help="input (the degraded capture), dep, or a model.pt/checkpoint.pt")
+    e.add_argument("--model", required=True, help="input (the degraded capture), dep (DeP with the paper's computed PSF, as the paper ran it), "
+                                                "dep_exact (DeP with the camera-weighted exact kernels), or a model.pt/checkpoint.pt")
     e.add_argument("--out", type=Path, required=True, help="results folder (rows of several runs are merged)")
     e.add_argument("--split", default="test", choices=("train", "val", "test"),
                    help="the dataset split to score: train, val (validation) or test [test]")
     add_display_argument(e, "the displays to score, by their names in the dataset (a file: the name it gives; any "
                             "other word: a display name of the dataset)", several=True,
-                         unset="a checkpoint's own; all of the dataset's for dep")
+                         unset="a checkpoint's own; all of the dataset's for input and DeP")
     e.add_argument("--image-prefix", help="score only the items whose image starts with this, e.g. builtin: "
                                           "(the scikit-image photographs) or pattern:dead_leaves [all]")
-    e.add_argument("--name", help="row name in the tables [input, dep, or the model type]")
+    e.add_argument("--name", help="row name in the tables [input, dep, dep_exact, or the model type]")
     e.add_argument("--denoiser", help="DeP's denoiser [restore.dep's default]")
     e.add_argument("--kernel-px", type=positive("--kernel-px", int),
                    help="DeP's kernel size at the packed-plane pitch, odd [half the synthesis kernel: 257]")
