@@ -150,18 +150,21 @@ class Rig:
                                              display.name: replace(kernels.band[display.name], field_series=None)})
         return kernels, seconds
 
-    def synthesis(self, display, phases: int | None, power: str = "series"):
-        """(capture, kernel seconds, synthesis seconds) of `display` with `phases` field phases and the
-        blend's power from the exact series ('series') or the phases' powers ('interpolated')."""
+    def synthesis(self, display, phases: int | None, power: str = "series", rank: str | int = "default"):
+        """(capture, kernel seconds, synthesis seconds) of `display` with `phases` field phases, the
+        blend's power from the exact series ('series') or the phases' powers ('interpolated'), and field
+        rank `rank` ('default': the SynthConfig's; 'all': every phase kernel, SynthConfig.field_rank None)."""
         kernels, kernel_s = self.kernels(display, phases, power)
+        cfg = replace(self.base, field_phases=phases)
+        if rank != "default":
+            cfg = replace(cfg, field_rank=None if rank == "all" else int(rank))
         t0 = time.perf_counter()
-        res = synthesize(self.band_image, self.scene, [display], replace(self.base, field_phases=phases),
-                         kernels=kernels)
+        res = synthesize(self.band_image, self.scene, [display], cfg, kernels=kernels)
         return res, kernel_s, time.perf_counter() - t0
 
-    def capture(self, display, phases: int | None, power: str = "series"):
+    def capture(self, display, phases: int | None, power: str = "series", rank: str | int = "default"):
         """(capture, kernel seconds, synthesis seconds, the display's kernel set)."""
-        res, kernel_s, synth_s = self.synthesis(display, phases, power)
+        res, kernel_s, synth_s = self.synthesis(display, phases, power, rank)
         return res.captures[display.name], kernel_s, synth_s, self._last[1].band[display.name]
 
     def series(self, display, distance_mm: float, step_nm: float | None = None):
@@ -180,16 +183,18 @@ class Rig:
         return analytic_harmonics(series, w, display, distance_mm, self.across_um, self.z_i_um, self.axis)
 
 
-def measure(rig: Rig, name: str, distance_mm: float, phases: int | None,
-            power: str = "series") -> tuple[dict, np.ndarray, np.ndarray]:
+def measure(rig: Rig, name: str, distance_mm: float, phases: int | None, power: str = "series",
+            rank: str | int = "default") -> tuple[dict, np.ndarray, np.ndarray]:
     """(one row, the flat-field profile, the clean Gr image): the capture of display `name` at distance_mm,
     its measured bands against the analytic (exact; exact × the kernels' OTF, 'expected'; and with the
-    synthesis' phase interpolation alone). power: the blend's power ('series' or 'interpolated', Rig.kernels)."""
+    synthesis' phase interpolation alone). power: the blend's power ('series' or 'interpolated', Rig.kernels);
+    rank: the field rank (Rig.synthesis)."""
     display = D.preset(name).with_distance(distance_mm)
-    cap, kernel_s, synth_s, ks = rig.capture(display, phases, power)
+    cap, kernel_s, synth_s, ks = rig.capture(display, phases, power, rank)
     P = phases or DEFAULT_FIELD_PHASES
     T = period_formula_um(rig.z_i_um, display.layout.period_um[rig.a], distance_mm)
     row = {"axis": rig.axis, "display": name, "distance_mm": distance_mm, "field_phases": P, "field_power": power,
+           "field_rank": rig.base.field_rank if rank == "default" else rank,
            "period_formula_um": T, "period_formula_px": T / rig.pitch_um, "periods_in_frame": rig.frame_um / T,
            "kernel_s": round(kernel_s, 2), "synth_s": round(synth_s, 2)}
     series, weights = rig.series(display, distance_mm)
@@ -216,7 +221,7 @@ def measure(rig: Rig, name: str, distance_mm: float, phases: int | None,
     a_interp = interpolated_harmonics(series, weights, display, distance_mm, rig.x_um, rig.y_um, rig.z_i_um, P,
                                       rig.frame_size_um, order, rig.axis)
     row.update(regime="bands", period_fit_um=period, period_error_rel=period * order / T - 1, harmonic_order=order,
-               analytic_order=int(np.argmax(expected)) + 1, a1_measured_rel=a1, a1_analytic_rel=a_ref,
+               analytic_order=int(np.argmax(analytic)) + 1, a1_measured_rel=a1, a1_analytic_rel=a_ref,
                a1_expected_rel=a_exp, psf_mtf=a_exp / a_ref if a_ref > 0 else math.nan, a1_interpolated_rel=a_interp,
                ratio_measured_analytic=a1 / a_ref if a_ref > 0 else math.nan,
                ratio_measured_expected=a1 / a_exp if a_exp > 0 else math.nan,
@@ -227,15 +232,17 @@ def measure(rig: Rig, name: str, distance_mm: float, phases: int | None,
     return row, prof, green_sites(cap.clean_dn)
 
 
-def jobs(cfg: dict) -> list[tuple[str, str, float, int | None, str]]:
-    """(axis, display, distance mm, field phases, power) in run order: every distance at the default phases,
-    the phase-count runs (the exact series and the interpolated powers, on the same kernels), then the
-    bands along y."""
-    out = [("x", n, d, None, "series") for n in DISPLAYS for d in cfg["distances_mm"][n]]
+def jobs(cfg: dict) -> list[tuple[str, str, float, int | None, str, str]]:
+    """(axis, display, distance mm, field phases, power, field rank) in run order: every distance at the
+    default phases (the phase display also with every phase kernel, rank 'all', on the same kernels), the
+    phase-count runs (the exact series and the interpolated powers, on the same kernels), then the bands
+    along y."""
     name, d = cfg["phase_display"], cfg["phase_distance_mm"]
-    out += [("x", name, d, p, power) for p in (*cfg["phases"], DEFAULT_FIELD_PHASES)
+    out = [("x", n, dd, None, "series", rank) for n in DISPLAYS for dd in cfg["distances_mm"][n]
+           for rank in (("default", "all") if n == name else ("default",))]
+    out += [("x", name, d, p, power, "default") for p in (*cfg["phases"], DEFAULT_FIELD_PHASES)
             for power in ("series", "interpolated") if (p, power) != (DEFAULT_FIELD_PHASES, "series")]
-    return out + [("y", n, d, None, "series") for n in DISPLAYS for d in cfg["y_distances_mm"].get(n, ())]
+    return out + [("y", n, dd, None, "series", "default") for n in DISPLAYS for dd in cfg["y_distances_mm"].get(n, ())]
 
 
 def analytic_curves(rig: Rig, cfg: dict) -> dict:
@@ -273,8 +280,9 @@ def visible_range(rows: list[dict], name: str, curve: tuple, rig: Rig) -> dict:
 
 
 def is_default(row: dict) -> bool:
-    """A row at the default synthesis: the default field phases, the blend's power from the exact series."""
-    return row["field_phases"] == DEFAULT_FIELD_PHASES and row["field_power"] == "series"
+    """A row at the default synthesis: the default field phases and rank, the power from the exact series."""
+    return (row["field_phases"] == DEFAULT_FIELD_PHASES and row["field_power"] == "series"
+            and row["field_rank"] == SynthConfig().field_rank)
 
 
 def synthesis_cost(rig: Rig, cfg: dict) -> dict:
@@ -297,11 +305,11 @@ def run_study(out: Path, quick: bool = False, progress: bool = True) -> list[dic
     t0 = time.perf_counter()
     rigs: dict[str, Rig] = {}
     rows, images = [], {}
-    for axis, name, d, p, power in tqdm(jobs(cfg), desc="study banding", unit="capture", disable=not progress):
+    for axis, name, d, p, power, rank in tqdm(jobs(cfg), desc="study banding", unit="capture", disable=not progress):
         rig = rigs.get(axis) or rigs.setdefault(axis, Rig(cfg, axis))
-        row, prof, img = measure(rig, name, d, p, power)
+        row, prof, img = measure(rig, name, d, p, power, rank)
         rows.append(row)
-        if axis == "x" and name == "toled" and p is None:
+        if axis == "x" and name == "toled" and p is None and rank == "default":
             images[d] = (prof, img)
     rig = rigs["x"]
     cost = synthesis_cost(rig, cfg)

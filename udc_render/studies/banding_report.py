@@ -10,8 +10,11 @@ import numpy as np
 
 from psf.engine import DEFAULT_FIELD_PHASES
 from udc_render.optics import displays as D
+from udc_render.pipeline import SynthConfig
 from udc_render.studies.banding_fit import DISPLAYS, HARMONICS, period_formula_um
 from udc_render.studies.report import machine_text, md_table, pyplot, save_plot
+
+DEFAULT_RANK = SynthConfig().field_rank
 
 
 
@@ -42,18 +45,21 @@ def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, cost: dict, e
              "pixel's own mask shift (optics.field_power); 'interpolated': the same kernels without their "
              "series, the phases' powers interpolated bilinearly (the blend before the series), which keeps "
              "sinc²(h/P) of harmonic h (0.81 for h = 1, P = 4) and aliases harmonics h = mP ± 1 onto it. "
-             "A1 expected: the analytic harmonic with each band's kernel OTF at the band frequency applied "
-             "(blend 'source' smooths the weighted source with the PSF; MTF = expected / analytic): "
-             "'ratio to expected' is the synthesis' error against the exact series. order: the harmonic the "
-             "fit found (period T/order), compared with the analytic harmonic of that order; order analytic: "
-             "the strongest expected harmonic. A1 interp.: the analytic P(s) sampled at the kernels' P × P field "
-             "shifts and blended bilinearly (no PSF, no rank-2 basis), what the 'interpolated' power gives.", ""]
+             "'ratio to analytic' is the synthesis' error against the exact series. rank: the field rank "
+             "('all': every phase kernel, no basis). A1 expected: the analytic harmonic times each band's "
+             "phase-averaged kernel OTF at the band frequency (MTF = expected / analytic), what a kernel shape "
+             "independent of the phase would print; the rank-2 basis comes near it, every phase kernel "
+             "near the exact series. order: the harmonic the fit found (period T/order), compared with the "
+             "analytic harmonic of that order; order analytic: the strongest analytic harmonic. A1 interp.: the "
+             "analytic P(s) sampled at the kernels' P × P field shifts and blended bilinearly (no PSF, no rank-2 "
+             "basis), what the 'interpolated' power gives.", ""]
     lines += md_table(rows, [("axis", "bands along"), ("display", "display"), ("distance_mm", "d mm"),
-                             ("field_phases", "P"), ("field_power", "power"),
+                             ("field_phases", "P"), ("field_power", "power"), ("field_rank", "rank"),
                              ("period_formula_px", "T formula px"), ("period_error_rel", "T fit error"),
                              ("harmonic_order", "order"), ("analytic_order", "order analytic"),
                              ("a1_measured_rel", "A1 measured"), ("a1_analytic_rel", "A1 analytic"),
                              ("psf_mtf", "MTF"), ("a1_expected_rel", "A1 expected"),
+                             ("ratio_measured_analytic", "ratio to analytic"),
                              ("ratio_measured_expected", "ratio to expected"), ("a1_interpolated_rel", "A1 interp."),
                              ("ratio_measured_interpolated", "ratio to interp."), ("a1_dn", "A1 DN"),
                              ("sigma_dn", "σ DN"),
@@ -82,7 +88,7 @@ def plot(rows: list[dict], curves: dict, rig, example, path: Path) -> None:
     ax_t, ax_a, ax_p, ax_e = axes
     for name, colour in zip(DISPLAYS, ("C0", "C1")):
         rs = [r for r in rows if r["display"] == name and r["axis"] == "x" and r["field_phases"] == DEFAULT_FIELD_PHASES
-              and r["field_power"] == "series"]
+              and r["field_power"] == "series" and r["field_rank"] == DEFAULT_RANK]
         ds, harmonics = curves[name]
         a1 = harmonics[:, 0]
         p = D.preset(name).layout.period_um[0]
@@ -112,20 +118,21 @@ def plot(rows: list[dict], curves: dict, rig, example, path: Path) -> None:
     ax_t.set(xlabel="display-to-lens distance d (mm)", ylabel="band period on the sensor (px)", title="period")
     ax_a.set(xlabel="display-to-lens distance d (mm)", ylabel="first harmonic / mean", title="amplitude (green)")
     ph = sorted((r for r in rows if r["display"] == rig.cfg["phase_display"] and r["axis"] == "x"
-                 and r["distance_mm"] == rig.cfg["phase_distance_mm"] and r["regime"] == "bands"),
+                 and r["distance_mm"] == rig.cfg["phase_distance_mm"] and r["regime"] == "bands"
+                 and r["field_rank"] == DEFAULT_RANK),
                 key=lambda r: r["field_phases"])
     Ps = np.linspace(3, 8, 100)
     ax_p.plot(Ps, np.sinc(1 / Ps) ** 2, "k-", lw=0.8, label="sinc²(1/P) (a pure sinusoid, P ≥ 3)")
     label = f"{rig.cfg['phase_display']}, d = {rig.cfg['phase_distance_mm']:g} mm"
     for power, style in (("series", "o-"), ("interpolated", "s-")):
         rp = [r for r in ph if r["field_power"] == power]
-        ax_p.plot([r["field_phases"] for r in rp], [r["ratio_measured_expected"] for r in rp], style,
+        ax_p.plot([r["field_phases"] for r in rp], [r["ratio_measured_analytic"] for r in rp], style,
                   label=f"{label}: measured, power {power}")
     rp = [r for r in ph if r["field_power"] == "interpolated"]
     ax_p.plot([r["field_phases"] for r in rp], [r["a1_interpolated_rel"] / r["a1_analytic_rel"] for r in rp], "s--",
               mfc="none", label=f"{label}: P(s) interpolated alone (no PSF)")
     ax_p.axhspan(0.95, 1.05, color="k", alpha=0.08, label="± 5 %")
-    ax_p.set(xlabel="field phases P per axis", ylabel="A1 measured / expected (exact series × MTF)",
+    ax_p.set(xlabel="field phases P per axis", ylabel="A1 measured / exact series",
              title="the blend's power against the phase count")
     if example is not None:
         name, d, x, prof, img = example
