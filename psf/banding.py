@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 import scipy.fft as sfft
+from scipy.signal import czt
 from scipy.special import j1
 
 from . import fourier
@@ -160,18 +161,9 @@ def power_grid(half: np.ndarray, period_um, xs_um: np.ndarray, ys_um: np.ndarray
 
 
 def _chirp_sum(x: np.ndarray, m: int, frequency: float) -> np.ndarray:
-    """X[..., j] = Σ_n x[..., n] e^{−2πi f n j} for j = 0…m−1 (last axis; the chirp z-transform by
-    Bluestein's identity nj = (n² + j² − (j − n)²)/2: three FFTs of length ≥ n + m − 1)."""
-    n = x.shape[-1]
-    L = sfft.next_fast_len(n + m - 1)
-    k = np.arange(max(n, m), dtype=np.float64)
-    chirp = np.exp(-1j * np.pi * frequency * k ** 2)  # e^{−πi f k²}
-    kernel = np.zeros(L, complex)
-    kernel[:m] = np.conj(chirp[:m])
-    kernel[L - n + 1:] = np.conj(chirp[1:n][::-1])
-    conv = sfft.ifft(sfft.fft(x * chirp[:n], n=L, axis=-1, workers=fourier.WORKERS) * sfft.fft(kernel), axis=-1,
-                     workers=fourier.WORKERS)
-    return conv[..., :m] * chirp[:m]
+    """X[..., j] = Σ_n x[..., n] e^{−2πi f n j} for j = 0…m−1 (last axis): scipy's chirp z-transform
+    (Bluestein, N log N), the one psf.fourier's 'czt' method uses."""
+    return czt(x, m=m, w=np.exp(-2j * np.pi * frequency), a=1.0, axis=-1)
 
 
 def power_lattice(half: np.ndarray, period_um, x0_um: float, dx_um: float, nx: int, y0_um: float, dy_um: float,

@@ -28,16 +28,14 @@ import json
 
 import numpy as np
 
-from psf import Lens, compute_kernels
-from psf.cache import cached
-from psf.spectral import channel_kernels
+from psf import Lens
 from restore.data import DataError, Pair, load_pair
 from udc_render.optics.displays import load_display, preset
 from udc_render.optics.gamma import display_gamma
 from udc_render.pipeline import SynthConfig, band_kernel_set
-from udc_render.synth_kernels import PAPER_CHANNEL_NM
 from udc_render.scene.geometry import RenderGrid
 from udc_render.sensor import mosaic_of, pack_rggb, rgb_to_rggb
+from udc_render.synth_kernels import camera_channel_kernels, paper_channel_kernels
 
 
 def capture_display(pair: Pair):
@@ -69,22 +67,16 @@ def _channel_kernels(pair: Pair, size_px: int | None, use_cache: bool, source: s
 
 
 def packed_paper_kernels(layout, lens: Lens, sensor_pitch_um: float, size_px: int, use_cache: bool = True):
-    """The paper's computed PSF [3] (R, G, B at PAPER_CHANNEL_NM: the recipe as printed, d = 0) of `layout`
-    at the packed planes' pitch, size_px odd, through the kernel cache: the call `udc-render psf --method
-    paper --wavelengths-nm 640,520,450 --pitch-um 3.1` makes on the paper's rig (module doc)."""
-    ks, _ = cached(compute_kernels, "mono", layout, lens, use_cache, wavelengths_nm=PAPER_CHANNEL_NM,
-                   method="paper", pixel_um=2 * float(sensor_pitch_um), size_px=size_px, distance_mm=0.0,
-                   precision="float32")
-    return ks
+    """The paper's computed PSF [3] of `layout` at the packed planes' pitch (2 × sensor_pitch_um), size_px
+    odd (udc_render.synth_kernels.paper_channel_kernels; module doc)."""
+    return paper_channel_kernels(layout, lens, 2 * float(sensor_pitch_um), size_px, use_cache)
 
 
 def packed_channel_kernels(layout, lens: Lens, camera: str, sensor_pitch_um: float, size_px: int,
                            use_cache: bool = True):
     """The channel-effective KernelSet [3] (R, G, B; camera × D65, d = 0) of `layout` at the packed
-    planes' pitch (2 × sensor_pitch_um), size_px odd, through the kernel cache (module doc)."""
-    ks, _ = cached(channel_kernels, "channel", layout, lens, use_cache, camera=camera, illuminant="D65", step_nm=None,
-                   pixel_um=2 * float(sensor_pitch_um), size_px=size_px, distance_mm=0.0, precision="float32")
-    return ks
+    planes' pitch (2 × sensor_pitch_um), size_px odd (udc_render.synth_kernels.camera_channel_kernels)."""
+    return camera_channel_kernels(layout, lens, camera, 2 * float(sensor_pitch_um), size_px, use_cache)
 
 
 def rggb_kernels(kernel_set) -> np.ndarray:

@@ -74,14 +74,30 @@ def display_channel_kernels(display: Display, scene: Scene, grid: RenderGrid, cf
     printed at PAPER_CHANNEL_NM (the very call `udc-render psf --method paper` makes); 'camera': the
     camera's sensitivities × D65 (psf.spectral.channel_kernels)."""
     lens = psf_lens(scene, object_distance_m)
-    common = dict(cache_dir=cfg.kernel_cache, pixel_um=grid.pitch_um, size_px=grid.kernel_size_px, distance_mm=0.0,
-                  precision=cfg.kernel_precision)
+    common = dict(use_cache=cfg.use_cache, cache_dir=cfg.kernel_cache, precision=cfg.kernel_precision)
     if cfg.channel_kernels == "paper":
-        ks, _ = cached(compute_kernels, "mono", display.layout, lens, cfg.use_cache, wavelengths_nm=PAPER_CHANNEL_NM,
-                       method="paper", **common)
-    else:
-        ks, _ = cached(channel_kernels, "channel", display.layout, lens, cfg.use_cache, camera=cfg.sensor.camera,
-                       illuminant="D65", step_nm=None, **common)
+        return paper_channel_kernels(display.layout, lens, grid.pitch_um, grid.kernel_size_px, **common)
+    return camera_channel_kernels(display.layout, lens, cfg.sensor.camera, grid.pitch_um, grid.kernel_size_px,
+                                  **common)
+
+
+def paper_channel_kernels(layout, lens, pixel_um: float, size_px: int, use_cache: bool = True,
+                          cache_dir: str | None = None, precision: str = "float32") -> KernelSet:
+    """The paper's computed PSF [3] (R, G, B): its recipe as printed at PAPER_CHANNEL_NM, d = 0 (the call
+    `udc-render psf --method paper` makes), through the kernel cache."""
+    ks, _ = cached(compute_kernels, "mono", layout, lens, use_cache, cache_dir=cache_dir,
+                   wavelengths_nm=PAPER_CHANNEL_NM, method="paper", pixel_um=pixel_um, size_px=size_px,
+                   distance_mm=0.0, precision=precision)
+    return ks
+
+
+def camera_channel_kernels(layout, lens, camera: str, pixel_um: float, size_px: int, use_cache: bool = True,
+                           cache_dir: str | None = None, precision: str = "float32") -> KernelSet:
+    """The channel-effective kernels [3] (R, G, B) of the camera's sensitivities under D65, d = 0
+    (psf.spectral.channel_kernels), through the kernel cache."""
+    ks, _ = cached(channel_kernels, "channel", layout, lens, use_cache, cache_dir=cache_dir, camera=camera,
+                   illuminant="D65", step_nm=None, pixel_um=pixel_um, size_px=size_px, distance_mm=0.0,
+                   precision=precision)
     return ks
 
 

@@ -91,8 +91,9 @@ def resolve_xml_camera(scene: Scene) -> Scene:
                           f"use_xml_camera = false with camera.origin_m")
     params = mi.traverse(sensor)
     for key in ("principal_point_offset_x", "principal_point_offset_y"):
-        if key in params and abs(scalar_param(params, key)) > 1e-9:
-            raise RenderError(f"{where}: {element} {key} = {scalar_param(params, key):g}: expected 0 (the render's "
+        offset = scalar_param(params, key) if key in params else 0.0
+        if abs(offset) > 1e-9:
+            raise RenderError(f"{where}: {element} {key} = {offset:g}: expected 0 (the render's "
                               f"camera is centred on the optical axis)")
     m = np.array(sensor.world_transform().matrix, dtype=float).reshape(4, 4)
     rot = m[:3, :3]
