@@ -1,10 +1,12 @@
-"""`udc-render study {psf,render,capture,realism,defocus,banding} --out DIR [--quick]`: error-versus-run-time
+"""`udc-render study {psf,render,capture,realism,defocus,banding,gap} --out DIR [--quick]`: error-versus-run-time
 studies of the approximation knobs, and the defocus and banding studies users run."""
 from __future__ import annotations
 
 from pathlib import Path
 
-from udc_render.cli.args import out_dir
+import argparse
+
+from udc_render.cli.args import UserError, out_dir
 
 STUDIES = {
     "psf": "the PSF engine's knobs (pupil samples, precision, wavelength step, field phases, kernel size)",
@@ -13,7 +15,27 @@ STUDIES = {
     "realism": "the paper's observables of its real displays beside ours, over the unfixed layout parameters",
     "defocus": "through-focus PSFs, MTFs and depth of field of glass, T-OLED and P-OLED",
     "banding": "the bands a display a distance d in front of the lens prints on a flat field",
+    "gap": "the size of each effect beyond the paper's model (each on and off), and what it does to DeP",
 }
+
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
+
+
+def image_files(text: str) -> tuple[str, ...]:
+    """An argument type: comma-separated image files, or one folder searched recursively for IMAGE_SUFFIXES
+    (sorted); each must exist."""
+    parts = [p for p in text.split(",") if p]
+    if len(parts) == 1 and Path(parts[0]).is_dir():
+        found = sorted(str(p) for p in Path(parts[0]).rglob("*") if p.suffix.lower() in IMAGE_SUFFIXES)
+        if not found:
+            raise argparse.ArgumentTypeError(f"--images {text}: the folder holds no {'/'.join(IMAGE_SUFFIXES)} files")
+        return tuple(found)
+    missing = [p for p in parts if not Path(p).is_file()]
+    if not parts or missing:
+        raise argparse.ArgumentTypeError(f"--images {text}: no such file {missing[0] if missing else '(empty)'}; "
+                                         "expected image files, comma-separated, or a folder of them")
+    return tuple(parts)
 
 
 def register(sub) -> None:
@@ -24,10 +46,20 @@ def register(sub) -> None:
     s.add_argument("--out", type=Path, default=Path("out/study"),
                    help="output folder: study_<what>.csv, .md, .png [out/study]")
     s.add_argument("--quick", action="store_true", help="a reduced grid (smoke run)")
+    s.add_argument("--images", type=image_files, default=(),
+                   help="gap only: image files (comma-separated, or a folder searched for .png/.jpg/.tif) scored "
+                        "beside the dead leaves, e.g. DIV2K's validation photographs [none]")
 
 
 def run(args) -> int:
+    if args.images and args.what != "gap":
+        raise UserError(f"--images {','.join(map(str, args.images))}: only `study gap` takes images")
     out = out_dir(args.out)
+    if args.what == "gap":
+        from udc_render.studies.gap import run_study
+        run_study(out, quick=args.quick, images=args.images)
+        print(f"wrote {out}/study_gap.csv, study_gap.md, study_gap.png")
+        return 0
     if args.what == "realism":
         from udc_render.studies.realism import run_study
     elif args.what == "defocus":

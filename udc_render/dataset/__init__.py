@@ -155,8 +155,11 @@ def _views(job: DatasetJob, shared: Shared) -> Views | None:
                  tuple(map(float, job.target_jitter_m)))
 
 
-def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None, progress: bool = True) -> dict:
-    """Make the missing items of `job` (resuming an earlier run); returns counts and the wall time."""
+def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None, progress: bool = True,
+                splits: tuple[str, ...] | None = None) -> dict:
+    """Make the missing items of `job` (resuming an earlier run), only those of `splits` when given (the
+    items keep their ids, images and seeds; the manifest lists the complete ones); returns counts and the
+    wall time."""
     images, source = image_list(job.images_dir) if job.is_monitor else (None, None)
     out = Path(job.out).resolve()
     shared = _shared(job, out)
@@ -167,13 +170,14 @@ def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None,
     with executor(workers, scheduler, shared) as run_all, locked(out):
         check_job(out, job_params(job, shared, source, images, views))
         stale = clean_stale(out)
-        todo = [t for t in tasks if not (out / t.folder).is_dir()]
+        todo = [t for t in tasks if not (out / t.folder).is_dir() and (splits is None or t.split in splits)]
         if todo and shared.cfg.use_cache:
             # once, into the cache, before dispatching (a 3D scene: the in-focus ones; the synthesis plans
             # each item's other depth layers through the same cache)
             plan_kernels(shared.scene, shared.displays, shared.cfg)
         t0 = time.perf_counter()
-        bar = tqdm(total=job.count, initial=job.count - len(todo), desc="dataset", unit="item",
+        wanted = sum(1 for t in tasks if splits is None or t.split in splits)
+        bar = tqdm(total=wanted, initial=wanted - len(todo), desc="dataset", unit="item",
                    disable=None if progress else True)
         try:
             with open(out / "timing.jsonl", "a") as log:

@@ -1,0 +1,20 @@
+"""restore.studies.rescore: its section replaces the last one, or goes before the held-out section once."""
+from restore.studies.rescore import RESCORE_BEGIN, RESCORE_END, shipped_models, write_into
+
+
+def test_section_is_inserted_once_then_replaced(tmp_path):
+    doc = tmp_path / "RESULTS.md"
+    doc.write_text("# R\n\n## Pipeline comparison\n\nold\n\n## Held-out photographs\n\nheld\n")
+    write_into(doc, f"{RESCORE_BEGIN}\n## Re-scored\n\nfirst\n{RESCORE_END}")
+    text = doc.read_text()
+    assert text.index("first") < text.index("## Held-out photographs") and "old" in text and "held" in text
+    write_into(doc, f"{RESCORE_BEGIN}\n## Re-scored\n\nsecond\n{RESCORE_END}")
+    text = doc.read_text()
+    assert "second" in text and "first" not in text and text.count(RESCORE_BEGIN) == 1
+    assert text.endswith("held\n")
+
+
+def test_the_shipped_weights_are_found():
+    models = shipped_models()
+    assert {row for row, _ in models} == {"unet", "unet_syn", "resnet"}
+    assert all(p.name == "model.pt" and p.is_file() for p in models.values())

@@ -1,0 +1,70 @@
+"""The effects `udc-render study gap` switches (udc_render.studies.gap), each with the evidence for its size,
+and the DeP candidates it tries on the shipped profile's captures.
+
+An Effect switches one mechanism of the physical profile on (its shipped default, or for an effect that is
+off by default for want of a magnitude, the on-value named in `evidence`) or off, on a gap.Setup.
+"""
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import dataclass, replace
+from typing import Callable
+
+
+@dataclass(frozen=True)
+class Effect:
+    """One mechanism beyond the paper's model; switch(setup, on) → the setup with it on or off."""
+    name: str
+    evidence: str  # where its size comes from (one line)
+    default_on: bool  # on in the physical profile
+    switch: Callable
+    # what 'light moved' compares: 'clean' (the noise-free captures), 'packed' (the recorded ones: effects on
+    # the recorded values alone, e.g. defect pixels) or 'gt' (an effect on the ground truth alone)
+    compare: str = "clean"
+
+
+def _cfg(setup, **changes):
+    return replace(setup, cfg=replace(setup.cfg, **changes))
+
+
+def _distance(setup, on: bool):
+    from udc_render.profiles import PHYSICAL_DISTANCE_MM
+    d = PHYSICAL_DISTANCE_MM if on else 0.0
+    return replace(setup, displays=tuple(x.with_distance(d) for x in setup.displays))
+
+
+def _defects(setup, on: bool):
+    from udc_render.sensor.defects import DefectConfig
+    return _cfg(setup, defects=DefectConfig() if on else None)
+
+
+EFFECTS: tuple[Effect, ...] = (
+    Effect("display-to-lens distance 2 mm (bands)",
+           "the paper's real data shows bands of low to moderate visibility (l.498); d from `study realism`", True,
+           _distance),
+    Effect("dead and hot pixels", "impulse noise 'widely exists' in the real data (l.412); densities: "
+           "Chapman et al. 2011–2022 (sensor.defects)", True, _defects, compare="packed"),
+)
+
+
+@dataclass(frozen=True)
+class DepVariant:
+    """A way the paper's DeP could have run: its kernels ('paper', 'exact'), denoiser, a γ error."""
+    name: str
+    evidence: str
+    kernels: str = "paper"
+    denoiser: str = "nlm"
+    gamma_scale: float = 1.0
+
+    def available(self) -> bool:
+        return self.denoiser != "bm3d" or importlib.util.find_spec("bm3d") is not None
+
+
+DEP_VARIANTS: tuple[DepVariant, ...] = (
+    DepVariant("exact kernel", "the upper bound a perfect PSF gives (restore.known 'exact')", kernels="exact"),
+    DepVariant("γ 5 % high", "an inaccurate transmission (l.412): the paper prints γ to two digits (±1.5 % on "
+               "0.34, ±2.5 % on 0.20) from a 256-px white square; 5 % stands for that and a field-dependent T",
+               gamma_scale=1.05),
+    DepVariant("BM3D denoiser", "the paper's DeP denoised with BM3D (l.277); needs the optional bm3d package",
+               denoiser="bm3d"),
+)
