@@ -167,8 +167,8 @@ def with_image(setup: Setup, image: str) -> Setup:
     return replace(setup, scene=with_overrides(setup.scene, image=image))
 
 
-def rows_for_image(image: str, content: str, item: int, setups: dict, progress_bar=None) -> list[dict]:
-    """Every row (module doc) for one image, both displays."""
+def rows_for_image(image: str, content: str, item: int, setups: dict, progress_bar=None, rank: int = 0) -> list[dict]:
+    """Every row (module doc) for one image, both displays; `rank`: the image's place in its content group."""
     from udc_render.studies.gap_effects import DEP_VARIANTS, EFFECTS
     rows = []
     for di, name in enumerate(DISPLAYS):
@@ -193,7 +193,7 @@ def rows_for_image(image: str, content: str, item: int, setups: dict, progress_b
         rows.append({**common, "row": "physical (every default)", "kind": "profile", **score(shots["physical"], kern, item),
                      **versus(shots["physical"], shots["bare"])})
         for v in DEP_VARIANTS:
-            if not v.available():
+            if not v.available() or (v.images is not None and rank >= v.images):
                 continue
             k = kern if v.kernels == "paper" else dep_kernels(setups["physical"].displays[di], setups["physical"].scene,
                                                                setups["physical"].cfg, v.kernels)
@@ -214,7 +214,8 @@ def run_study(out_dir, quick: bool = False, images: tuple[str, ...] = (), progre
     bar = tqdm(total=len(content) * len(DISPLAYS) * len(EFFECTS), desc="study gap", unit="row", disable=not progress)
     rows = []
     for item, (image, kind) in enumerate(content):
-        rows += rows_for_image(image, kind, item, setups, bar)
+        rank = sum(1 for _, k in content[:item] if k == kind)
+        rows += rows_for_image(image, kind, item, setups, bar, rank)
     bar.close()
     write_report(Path(out_dir), rows, setups, c, time.perf_counter() - t0, quick)
     return rows

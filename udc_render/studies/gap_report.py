@@ -19,8 +19,10 @@ SHORTFALL_DB = (6.0, 10.0)  # how much worse the paper's real P-OLED is for DeP 
 
 
 def summarise(rows: list[dict]) -> list[dict]:
-    """Means over the images of each (row, display, content group), with DeP's change against the base row."""
+    """Means over the images of each (row, display, content group), with DeP's change against the base row
+    of the same display and image (a DeP candidate run on fewer images is compared on those)."""
     from udc_render.studies.gap import PAPER_DEP_DB
+    base = {(r["display"], r["image"]): r["dep_db"] for r in rows if r["kind"] == "base"}
     keys = list(dict.fromkeys((r["row"], r["display"], r["content"]) for r in rows))
     out = []
     for row, display, content in keys:
@@ -29,11 +31,9 @@ def summarise(rows: list[dict]) -> list[dict]:
         for k in ("capture_vs_base_db", "light_moved"):
             if k in rs[0]:
                 m[k] = float(np.mean([r[k] for r in rs]))
+        m["dep_change_db"] = float(np.mean([r["dep_db"] - base[(r["display"], r["image"])] for r in rs]))
         out.append({"row": row, "display": display, "content": content, "images": len(rs), "kind": rs[0]["kind"],
                     "paper_dep_db": PAPER_DEP_DB[display], **m})
-    for s in out:
-        base = next(b for b in out if b["kind"] == "base" and b["display"] == s["display"] and b["content"] == s["content"])
-        s["dep_change_db"] = s["dep_db"] - base["dep_db"]
     return out
 
 
