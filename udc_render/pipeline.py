@@ -21,7 +21,9 @@ Ground truth ('gt'): what the clean capture would record without noise and witho
 render through the glass panel (bare-lens kernels, gain 1), every camera channel at every pixel, in
 units of the white level (1.0 = white at gain 1 = the full well), linear, not clipped, and without
 the sensor's defect pixels (SynthConfig.defects, udc_render.sensor.defects: the same dead and hot
-pixels in every capture, glass included, and never in the ground truth).
+pixels in every capture, glass included, and never in the ground truth), nor its fixed-pattern noise
+(SynthConfig.fpn, udc_render.sensor.fpn: PRNU, DSNU, row/column offsets and dark current, the same maps
+in every capture).
 
 Exposure: 'auto' puts the monitor's full white at EXPOSURE_FILL of the full well in the brightest
 channel through glass at gain 1 (a fixed setting for every image, like the paper's rig; behind the
@@ -218,10 +220,11 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     bar.close()
     meta = {"form": cfg.form, "channel_kernels": cfg.channel_kernels if cfg.form == "per_channel" else None,
             "exposure_s": exposure, "exposure_rule": how, "seed": cfg.seed, "item": item,
-            "gt": "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, "
+            "gt": "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, no FPN, "
                   "/ full well (1.0 = white level at gain 1), not clipped", "gt_optics": gt_optics,
             "depth_layers": layers.describe(), "bright_pixels": 0 if bright is None else int(bright.mask.sum()),
             "defects": None if cfg.defects is None else asdict(cfg.defects), "profile": cfg.profile,
+            "fpn": None if cfg.fpn is None else asdict(cfg.fpn),
             "kernel_size_px": kernels.grid.kernel_size_px, "kernel_pixel_um": float(band_image.pitch_um),
             "kernel_precision": cfg.kernel_precision, "lens": psf_lens(scene).describe(),
             "render": {k: v for k, v in band_image.meta.items() if k != "seconds"}}
@@ -248,7 +251,7 @@ def _spectral_capture(band_image: BandImage, d: Display, view_electrons: tuple, 
     cap = capture_electrons(mosaic_of(e_rgb), sensor, rng, cfg.defects, {
         "input_shape": list(band_image.bands.shape), "input_pitch_um": float(band_image.pitch_um),
         "edges_nm": np.asarray(band_image.edges_nm, float).tolist(),
-        "input": "camera-channel electrons of the blurred bands (views.layered_electrons)"})
+        "input": "camera-channel electrons of the blurred bands (views.layered_electrons)"}, cfg.fpn)
     applied = dict(applied)
     gains = applied.pop("gains")
     return cap, {"optics": applied, "optics_gains": gains, "transmission_band_means": t.tolist()}
@@ -274,6 +277,6 @@ def _per_channel_capture(band_image, rgb, d: Display, per_layer: list[Kernels], 
     # DN = gain · (γ/gain) · x · R: the paper's γ includes the display's gain; electrons are γ/gain · x · FW
     sensor = replace(base_sensor, gain=d.gain, form="per_channel",
                      gamma_rggb=tuple(g / d.gain for g in rgb_to_rggb(gamma)))
-    cap = capture(blurred, None, sensor, rng, defects=cfg.defects)
+    cap = capture(blurred, None, sensor, rng, defects=cfg.defects, fpn=cfg.fpn)
     return cap, {"gamma_rgb": list(gamma), "gamma_source": why,
                  "channel_kernels": CHANNEL_KERNELS[cfg.channel_kernels]}

@@ -5,13 +5,15 @@ bands from the display-to-lens distance, an inaccurate transmission, and impulse
 over-exposed pixels. A profile fixes the synthesis choices that decide those gaps:
 
 =========  ============================================  ===========================  ======================
-profile    form                                          display-to-lens distance     sensor defects
+profile    form                                          display-to-lens distance     sensor defects, FPN
 =========  ============================================  ===========================  ======================
 paper      ``per_channel``: the paper's y = γ x ⊗ k + n   0 (the display at the lens's none
            with its measured γ and channel kernels        principal plane)
            ``paper``: its recipe at 640 / 520 / 450 nm
 physical   ``spectral``: band kernels, T(λ), the          PHYSICAL_DISTANCE_MM for the dead and hot pixels
-(default)  camera's sensitivities                         preset displays              (sensor.defects defaults)
+(default)  camera's sensitivities                         preset displays              (sensor.defects), fixed-
+                                                                                       pattern noise
+                                                                                       (sensor.fpn defaults)
 =========  ============================================  ===========================  ======================
 
 The per-channel form's kernels (SynthConfig.channel_kernels): ``paper``, the paper's recipe as printed
@@ -51,6 +53,7 @@ from udc_render.errors import UdcError
 from udc_render.optics.displays import Display
 from udc_render.pipeline import SynthConfig
 from udc_render.sensor.defects import DefectConfig
+from udc_render.sensor.fpn import FpnConfig
 
 PHYSICAL_DISTANCE_MM = 2.0
 # The paper's noise (l.176–178): heteroscedastic Gaussian, variance λ_read + λ_shot·w, its λ measured on its
@@ -72,20 +75,23 @@ class Profile:
     defects: DefectConfig | None  # sensor defect pixels (None: none)
     noise: dict | None  # SensorConfig noise keys (None: the sensor config's)
     summary: str
+    fpn: FpnConfig | None = None  # fixed-pattern noise: PRNU, DSNU, row/column offsets, dark current (None: none)
 
     def sets(self) -> dict:
         """What the profile sets, as plain JSON values."""
         return {"form": self.form, "channel_kernels": self.channel_kernels, "distance_mm": self.distance_mm,
-                "defects": None if self.defects is None else asdict(self.defects), "noise": self.noise}
+                "defects": None if self.defects is None else asdict(self.defects), "noise": self.noise,
+                "fpn": None if self.fpn is None else asdict(self.fpn)}
 
 
 PROFILES = {
     "paper": Profile("paper", "per_channel", "paper", 0.0, None, PAPER_NOISE,
                      "the paper's synthesis: y = γ x ⊗ k + n (its 3 channel kernels, its γ), display at the lens, "
-                     "no defect pixels"),
+                     "no defect pixels, no fixed-pattern noise"),
     "physical": Profile("physical", "spectral", "camera", PHYSICAL_DISTANCE_MM, DefectConfig(), None,
                         "band kernels and T(λ), the preset displays at the display-to-lens distance, "
-                        "dead and hot pixels"),
+                        "dead and hot pixels, fixed-pattern noise (PRNU, DSNU, row/column offsets, dark current)",
+                        fpn=FpnConfig()),
 }
 DEFAULT_PROFILE = "physical"
 
@@ -115,11 +121,11 @@ def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: 
     sensor = cfg.sensor if p.noise is None or noise_model is not None or sensor_file else replace(cfg.sensor, **p.noise)
     record = {"name": p.name, "sets": p.sets(), "options": options,
               "applied": {"form": final_form, "channel_kernels": kernels, "distance_mm": distance,
-                          "distance_applies_to": applies_to, "defects": p.sets()["defects"],
+                          "distance_applies_to": applies_to, "defects": p.sets()["defects"], "fpn": p.sets()["fpn"],
                           "noise": {"noise": sensor.noise, "lambda_source": sensor.lambda_source}}}
     if notes:
         record["notes"] = notes
-    return replace(cfg, form=final_form, channel_kernels=kernels, sensor=sensor, defects=p.defects,
+    return replace(cfg, form=final_form, channel_kernels=kernels, sensor=sensor, defects=p.defects, fpn=p.fpn,
                    profile=record), displays
 
 
@@ -148,9 +154,12 @@ def describe(record: dict | None) -> str:
     d = a["defects"]
     defects = "none" if d is None else (f"dead {d['dead_fraction']:g}, hot {d['hot_fraction']:g} "
                                         f"({d['hot_dark_e_per_s']:g} e-/s), seed {d['seed']}")
+    f = a.get("fpn")
+    fpn = "none" if f is None else (f"PRNU {f['prnu']:g}, DSNU {f['dsnu_e']:g} e-, rows/columns {f['row_offset_e']:g}/"
+                                    f"{f['column_offset_e']:g} e-, dark {f['dark_current_e_per_s']:g} e-/s, seed {f['seed']}")
     mark = {k: " (option)" if k in o else "" for k in ("form", "channel_kernels", "distance_mm", "noise")}
     kernels = (f" (channel kernels {a['channel_kernels']}{mark['channel_kernels']})"
                if a["form"] == "per_channel" else "")
     return (f"profile {record['name']}: form {a['form']}{mark['form']}{kernels}, display-to-lens distance "
             f"{a['distance_mm']:g} mm{mark['distance_mm']} for {a['distance_applies_to']}, noise {a['noise']['noise']}"
-            f"{mark['noise']}, defect pixels: {defects}")
+            f"{mark['noise']}, defect pixels: {defects}, fixed-pattern noise: {fpn}")

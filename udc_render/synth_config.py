@@ -6,7 +6,7 @@ import math
 from dataclasses import dataclass, field
 
 from udc_render.errors import UdcError
-from udc_render.sensor import DefectConfig, SensorConfig
+from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig
 
 FORMS = ("spectral", "per_channel")
 # The per-channel form's 3 kernels (synth_kernels.display_channel_kernels), each with its record in capture.json
@@ -46,6 +46,7 @@ class SynthConfig:
     use_cache: bool = True
     kernel_cache: str | None = None  # kernel cache folder (None: psf.cache's default); how, not what: not recorded
     defects: DefectConfig | None = None  # dead and hot pixels of the sensor (None: none)
+    fpn: FpnConfig | None = None  # fixed-pattern noise of the sensor: PRNU, DSNU, rows/columns, dark current (None: none)
     # Depth layers (optics.layers): largest blur-diameter error, render px; None: no defocus at all
     # (every pixel in focus, the kernels of the focus distance)
     defocus_tolerance_px: float | None = DEFAULT_DEFOCUS_TOLERANCE_PX
@@ -61,6 +62,8 @@ class SynthConfig:
             raise SynthError(f"channel_kernels = {self.channel_kernels!r}: expected one of {', '.join(CHANNEL_KERNELS)}")
         if self.defects is not None and not isinstance(self.defects, DefectConfig):
             raise SynthError(f"defects = {self.defects!r}: expected a sensor.defects.DefectConfig or None")
+        if self.fpn is not None and not isinstance(self.fpn, FpnConfig):
+            raise SynthError(f"fpn = {self.fpn!r}: expected a sensor.fpn.FpnConfig or None")
         if self.exposure_s is not None and not (self.exposure_s > 0 and math.isfinite(self.exposure_s)):
             raise SynthError(f"exposure_s = {self.exposure_s!r}: expected a positive number of seconds or auto")
         tol = self.defocus_tolerance_px

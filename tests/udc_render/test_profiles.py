@@ -13,7 +13,7 @@ from udc_render.cli import build_parser, main
 from udc_render.cli.args import capture_setup
 from udc_render.profiles import (DEFAULT_PROFILE, PHYSICAL_DISTANCE_MM, PROFILES, ProfileError, describe,
                                  resolve_profile)
-from udc_render.sensor import DefectConfig
+from udc_render.sensor import DefectConfig, FpnConfig
 
 pytestmark = pytest.mark.usefixtures("render_cache")
 
@@ -117,24 +117,26 @@ def _differing(a: dict, b: dict) -> set[str]:
 
 
 def test_profiles_differ_only_where_they_say(scene, tmp_path):
-    """One scene synthesised under each profile: synth.json differs in form, channel kernels, defects and
-    the profile record alone (the job's sensor record also in the noise); each capture.json's display record only in the distance (glass: not at all); the
-    physical captures carry the defect record, the paper's none. The same goes for a dataset's job.json."""
+    """One scene synthesised under each profile: synth.json differs in form, channel kernels, defects, fixed-pattern
+    noise and the profile record alone (the job's sensor record also in the noise); each capture.json's display record only in the distance (glass: not at all); the
+    physical captures carry the defect and FPN records, the paper's none. The same goes for a dataset's job.json."""
     out = {}
     for name in ("paper", "physical"):
         out[name] = tmp_path / name
         assert main(["synth", str(scene), "--display", "toled", "--profile", name, "--quiet", "--out",
                      str(out[name])]) == 0
     synth = {n: json.loads((o / "synth.json").read_text()) for n, o in out.items()}
-    assert _differing(synth["paper"], synth["physical"]) == {"form", "channel_kernels", "defects", "profile"}
+    assert _differing(synth["paper"], synth["physical"]) == {"form", "channel_kernels", "defects", "fpn", "profile"}
     assert synth["paper"]["channel_kernels"] == "paper" and synth["physical"]["channel_kernels"] is None  # spectral
     assert synth["physical"]["profile"]["name"] == "physical" and synth["paper"]["profile"]["name"] == "paper"
     assert synth["physical"]["defects"] == asdict(DefectConfig()) and synth["paper"]["defects"] is None
+    assert synth["physical"]["fpn"] == asdict(FpnConfig()) and synth["paper"]["fpn"] is None
     cap = {n: {v: json.loads((o / v / "capture.json").read_text()) for v in ("glass", "toled")} for n, o in out.items()}
     assert cap["paper"]["glass"]["display"] == cap["physical"]["glass"]["display"]
     assert _differing(cap["paper"]["toled"]["display"], cap["physical"]["toled"]["display"]) == {"distance_mm"}
     assert cap["physical"]["toled"]["display"]["distance_mm"] == PHYSICAL_DISTANCE_MM
     assert cap["paper"]["toled"]["defects"] is None and cap["physical"]["toled"]["defects"]["seed"] == 0
+    assert cap["paper"]["toled"]["fpn"] is None and cap["physical"]["toled"]["fpn"]["prnu"] == FpnConfig().prnu
     # the dataset job records the same: only the synthesis knobs and the displays differ
     from udc_render.dataset import DatasetJob, _shared, job_params
     from udc_render.dataset.plan import image_list
@@ -148,7 +150,7 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
         params[name] = job_params(job, _shared(job, tmp_path / "ds"), source, images)
     assert _differing(params["paper"], params["physical"]) == {"synth", "displays"}
     assert _differing(params["paper"]["synth"], params["physical"]["synth"]) == {"form", "channel_kernels", "defects",
-                                                                                 "profile", "sensor"}
+                                                                                 "fpn", "profile", "sensor"}
     assert _differing(params["paper"]["synth"]["sensor"], params["physical"]["synth"]["sensor"]) == {
         "noise", "lambda_source"}
     assert params["paper"]["synth"]["channel_kernels"] == "paper"

@@ -184,10 +184,10 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
                          several=True, default="toled")
     p.add_argument("--profile", choices=tuple(PROFILES), default=DEFAULT_PROFILE,
                    help=f"paper: the paper's synthesis (form per_channel with its channel kernels, d = 0, "
-                        f"heteroscedastic Gaussian noise, no defect pixels); physical: form "
-                        f"spectral, d = {PHYSICAL_DISTANCE_MM:g} mm for the preset displays, dead and hot pixels "
-                        f"(udc_render/profiles.py); --form, --channel-kernels and --distance-mm override it "
-                        f"[{DEFAULT_PROFILE}]")
+                        f"heteroscedastic Gaussian noise, no defect pixels or FPN); physical: form "
+                        f"spectral, d = {PHYSICAL_DISTANCE_MM:g} mm for the preset displays, dead and hot pixels, "
+                        f"fixed-pattern noise (udc_render/profiles.py); --form, --channel-kernels and --distance-mm "
+                        f"override it [{DEFAULT_PROFILE}]")
     p.add_argument("--distance-mm", type=non_negative("--distance-mm"),
                    help="display-to-lens distance d for every display [the profile's for the presets, a display "
                         "file's own]")

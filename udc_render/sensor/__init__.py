@@ -12,24 +12,28 @@ Conventions
   the white level).
 
     radiance L_k ──► electrons e(p) = Σ_k π L_k / (4 N²) [cos⁴θ] · A · t · Δλ_k · q_ck   (radiometry.py)
-    electrons ──► DN: Poisson + read noise (or heteroscedastic Gaussian), full well, quantise,
+    electrons ──► DN: fixed-pattern noise (PRNU gain map, dark current, DSNU and row/column
+                  offsets; optional, the same maps in every capture)                     (fpn.py)
+                  Poisson + read noise (or heteroscedastic Gaussian), full well, quantise,
                   black and white levels                                               (noise.py)
     DN ──► DN: dead and hot pixels, the same map in every capture (optional)         (defects.py)
 
 Modules: config (SensorConfig), bayer (the RGGB convention, packing, bilinear demosaic), radiometry
-(radiance ──► electrons), noise (electrons ──► DN), defects (DefectConfig: dead and hot pixels),
-capture (the whole chain).
+(radiance ──► electrons), noise (electrons ──► DN), fpn (FpnConfig: fixed-pattern noise), defects
+(DefectConfig: dead and hot pixels), capture (the whole chain).
 """
 from udc_render.sensor.bayer import (CHANNELS, SITE_COLOUR, SITES, demosaic_bilinear, mosaic_of, pack_rggb, rgb_to_rggb,
                                      site_colour, unpack_rggb)
 from udc_render.sensor.capture import Capture, capture, capture_electrons
 from udc_render.sensor.config import SensorConfig, SensorError
 from udc_render.sensor.defects import DefectConfig, DefectError, apply_defects, defect_map
+from udc_render.sensor.fpn import FpnConfig, FpnError, FpnMaps, fpn_maps
 from udc_render.sensor.noise import expose, noise_lambdas, sample_brooks, sensor_lambdas
 from udc_render.sensor.radiometry import (band_electron_weights, cos4_map, electrons_per_channel, electrons_rgb,
                                           electrons_spectral, photon_weights)
 
-__all__ = ["CHANNELS", "SITES", "SITE_COLOUR", "Capture", "DefectConfig", "DefectError", "SensorConfig", "SensorError",
-           "apply_defects", "band_electron_weights", "capture", "capture_electrons", "cos4_map", "defect_map", "demosaic_bilinear",
-           "electrons_per_channel", "electrons_rgb", "electrons_spectral", "expose", "mosaic_of", "noise_lambdas",
-           "pack_rggb", "photon_weights", "rgb_to_rggb", "sample_brooks", "sensor_lambdas", "site_colour", "unpack_rggb"]
+__all__ = ["CHANNELS", "SITES", "SITE_COLOUR", "Capture", "DefectConfig", "DefectError", "FpnConfig", "FpnError",
+           "FpnMaps", "SensorConfig", "SensorError", "apply_defects", "band_electron_weights", "capture",
+           "capture_electrons", "cos4_map", "defect_map", "demosaic_bilinear", "electrons_per_channel", "electrons_rgb",
+           "electrons_spectral", "expose", "fpn_maps", "mosaic_of", "noise_lambdas", "pack_rggb", "photon_weights",
+           "rgb_to_rggb", "sample_brooks", "sensor_lambdas", "site_colour", "unpack_rggb"]

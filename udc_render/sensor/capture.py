@@ -1,4 +1,5 @@
-"""One RAW capture: radiance (or the paper's per-channel RGB) ──► electrons ──► RGGB DN ──► defect pixels."""
+"""One RAW capture: radiance (or the paper's per-channel RGB) ──► electrons ──► fixed-pattern noise, noise,
+RGGB DN ──► defect pixels."""
 from __future__ import annotations
 
 import dataclasses
@@ -9,6 +10,7 @@ import numpy as np
 from udc_render.sensor.bayer import pack_rggb
 from udc_render.sensor.config import SensorConfig, SensorError
 from udc_render.sensor.defects import DefectConfig, apply_defects
+from udc_render.sensor.fpn import FpnConfig
 from udc_render.sensor.noise import expose
 from udc_render.sensor.radiometry import electrons_per_channel, electrons_spectral, photon_weights
 
@@ -16,8 +18,8 @@ from udc_render.sensor.radiometry import electrons_per_channel, electrons_spectr
 @dataclass(frozen=True)
 class Capture:
     """One synthetic capture. mosaic_dn [H, W] uint16 (RGGB, with the sensor's defect pixels when
-    there are any), clean_dn [H, W] float32 (noise-free, defect-free, unquantised, saturated like the
-    sensor), packed_dn [4, H/2, W/2] uint16 (R, Gr, Gb, B; packed from mosaic_dn),
+    there are any), clean_dn [H, W] float32 (noise-free, defect-free, free of fixed-pattern noise,
+    unquantised, saturated like the sensor), packed_dn [4, H/2, W/2] uint16 (R, Gr, Gb, B; packed from mosaic_dn),
     electrons [H, W] float64 (mean collected e⁻ before the full well), params: every setting, the
     derived constants and the sampled noise parameters (JSON-serialisable)."""
     mosaic_dn: np.ndarray
@@ -30,7 +32,8 @@ class Capture:
 
 
 def capture(image: np.ndarray, edges_nm, sensor: SensorConfig, rng: np.random.Generator,
-            input_pitch_um: float | None = None, defects: DefectConfig | None = None) -> Capture:
+            input_pitch_um: float | None = None, defects: DefectConfig | None = None,
+            fpn: FpnConfig | None = None) -> Capture:
     """Synthesise one RAW capture.
 
     image: [K, H, W] band-mean radiance (W·sr⁻¹·m⁻²·nm⁻¹) with edges_nm [K + 1] when
@@ -39,7 +42,8 @@ def capture(image: np.ndarray, edges_nm, sensor: SensorConfig, rng: np.random.Ge
     (block-mean binning; spectral form); None: already at the sensor pitch. H, W even.
     rng: the generator for the noise (its state before the draws is recorded in params).
     defects: dead and hot pixels applied to the quantised mosaic before packing (sensor.defects;
-    None: none); they draw nothing from rng.
+    None: none); they draw nothing from rng. fpn: fixed-pattern noise in the electron stage
+    (sensor.fpn; None: none), its maps drawn from its own seed, not from rng.
     """
     _check_rng(rng)
     img = np.asarray(image)
@@ -51,7 +55,7 @@ def capture(image: np.ndarray, edges_nm, sensor: SensorConfig, rng: np.random.Ge
     return capture_electrons(e, sensor, rng, defects, {
         "input_shape": list(img.shape), "input_pitch_um": input_pitch_um,
         "edges_nm": None if edges_nm is None or sensor.form != "spectral" else np.asarray(edges_nm, float).tolist(),
-        "negative_values_clamped": clamped})
+        "negative_values_clamped": clamped}, fpn)
 
 
 def _check_rng(rng) -> None:
@@ -60,14 +64,15 @@ def _check_rng(rng) -> None:
 
 
 def capture_electrons(electrons: np.ndarray, sensor: SensorConfig, rng: np.random.Generator,
-                      defects: DefectConfig | None = None, input_info: dict | None = None) -> Capture:
+                      defects: DefectConfig | None = None, input_info: dict | None = None,
+                      fpn: FpnConfig | None = None) -> Capture:
     """The capture of a mosaic of mean collected electrons [H, W] (RGGB sites, cos⁴ included):
-    noise, quantisation, defect pixels, packing (capture's tail; the pipeline's fused optics give
-    the electrons directly). input_info: how the electrons were made, recorded in params."""
+    fixed-pattern noise, noise, quantisation, defect pixels, packing (capture's tail; the pipeline's fused
+    optics give the electrons directly). input_info: how the electrons were made, recorded in params."""
     _check_rng(rng)
     state = rng.bit_generator.state
     e = np.asarray(electrons, dtype=np.float64)
-    mosaic, clean, info = expose(e, sensor, rng)
+    mosaic, clean, info = expose(e, sensor, rng, fpn)
     defect_info = None
     if defects is not None:
         mosaic, defect_info = apply_defects(mosaic, sensor, defects)

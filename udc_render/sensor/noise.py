@@ -1,5 +1,10 @@
 """Noise, full well and quantisation: mean electrons ──► DN (defect pixels: sensor.defects).
 
+With fixed-pattern noise (sensor.fpn, FpnConfig) the mean electrons e become the mean charge
+q = e · (1 + PRNU map) + dark current × exposure before the noise below, and the offset map o (DSNU,
+rows, columns; e⁻) is added to the read-out charge before the full-well cap: Poisson(q) + N + o,
+w + noise + g·o/R, or q + o. Without it (fpn None) every line below runs exactly as written.
+
 
     noise = "poisson":  DN = black + g · min(Poisson(e) + N(0, σ_read²), FW)
     noise = "gaussian": w = g · e / R,   DN = black + R · min(w + N(0, λ_read + λ_shot · w), g FW / R)
@@ -21,6 +26,7 @@ import numpy as np
 
 from udc_render.sensor.bayer import SITES, check_even
 from udc_render.sensor.config import SensorConfig
+from udc_render.sensor.fpn import FpnConfig, fpn_maps, fpn_record, mean_charge_e
 
 BROOKS_LOG_SHOT_RANGE = (math.log(1e-4), math.log(1.2e-2))
 BROOKS_READ_SLOPE, BROOKS_READ_INTERCEPT, BROOKS_READ_SIGMA = 2.18, 1.20, 0.26
@@ -61,8 +67,10 @@ def _to_dn(signal_dn: np.ndarray, sensor: SensorConfig) -> np.ndarray:
     return signal_dn.astype(np.uint16)
 
 
-def expose(electrons: np.ndarray, sensor: SensorConfig, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Mean electrons [H, W] ──► (mosaic uint16, clean float32, sampled-noise params). See module doc."""
+def expose(electrons: np.ndarray, sensor: SensorConfig, rng: np.random.Generator,
+           fpn: FpnConfig | None = None) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Mean electrons [H, W] ──► (mosaic uint16, clean float32 (FPN-free), sampled-noise params). See
+    module doc; fpn: the sensor's fixed-pattern noise (None: none), its maps drawn from fpn.seed, not rng."""
     e = np.asarray(electrons, dtype=np.float64)
     if not np.all(np.isfinite(e)):  # overflow of huge but finite radiance: saturate, never NaN
         e = np.nan_to_num(e, nan=0.0, posinf=np.finfo(np.float64).max)
@@ -71,7 +79,12 @@ def expose(electrons: np.ndarray, sensor: SensorConfig, rng: np.random.Generator
     fw = sensor.full_well_e
     charge = np.minimum(e, fw)
     clean = np.clip(black + g * charge, 0, sensor.white_level_dn).astype(np.float32)
-    info: dict = {"noise": sensor.noise}
+    info: dict = {"noise": sensor.noise, "fpn": None}
+    off = None
+    if fpn is not None:
+        maps = fpn_maps(*e.shape, fpn)
+        e, off = mean_charge_e(e, maps, fpn, sensor.exposure_s), maps.offset_e
+        info["fpn"] = fpn_record(fpn, maps, sensor)
     if sensor.noise == "poisson":
         # Poisson(λ) + read noise ≥ FW for λ ≥ cap with probability 1 − e^(−hundreds): the cap only
         # avoids numpy's limit on λ (and overflow); the clipped result is the same.
@@ -79,6 +92,8 @@ def expose(electrons: np.ndarray, sensor: SensorConfig, rng: np.random.Generator
         n = rng.poisson(np.minimum(e, cap)).astype(np.float64)
         if sensor.read_noise_e > 0:
             n += rng.normal(0.0, sensor.read_noise_e, size=n.shape)
+        if off is not None:
+            n += off
         np.minimum(n, fw, out=n)
         sig = black + g * n
         info.update(read_noise_e=sensor.read_noise_e, full_well_e=fw)
@@ -93,10 +108,12 @@ def expose(electrons: np.ndarray, sensor: SensorConfig, rng: np.random.Generator
         for c, (i, j) in enumerate(SITES):
             var[i::2, j::2] = lam_read[c] + lam_shot[c] * w[i::2, j::2]
         y = w + rng.standard_normal(w.shape) * np.sqrt(var)
+        if off is not None:
+            y += (g / rng_dn) * off
         sig = black + rng_dn * np.minimum(y, g * fw / rng_dn, out=y)
         info.update(lambda_source=sensor.lambda_source, lambda_read=list(lam_read), lambda_shot=list(lam_shot))
     else:
-        sig = black + g * charge
+        sig = black + g * (charge if off is None else np.minimum(e + off, fw))
     return _to_dn(sig, sensor), clean, info
 
 

@@ -10,6 +10,8 @@ import importlib.util
 from dataclasses import dataclass, replace
 from typing import Callable
 
+from udc_render.sensor.fpn import FpnConfig
+
 
 @dataclass(frozen=True)
 class Effect:
@@ -38,12 +40,18 @@ def _defects(setup, on: bool):
     return _cfg(setup, defects=DefectConfig() if on else None)
 
 
+def _fpn(setup, on: bool):
+    return _cfg(setup, fpn=FpnConfig() if on else None)
+
+
 EFFECTS: tuple[Effect, ...] = (
     Effect("display-to-lens distance 2 mm (bands)",
            "the paper's real data shows bands of low to moderate visibility (l.498); d from `study realism`", True,
            _distance),
     Effect("dead and hot pixels", "impulse noise 'widely exists' in the real data (l.412); densities: "
            "Chapman et al. 2011–2022 (sensor.defects)", True, _defects, compare="packed"),
+    Effect("fixed-pattern noise (PRNU, DSNU, rows/columns, dark current)", "EMVA 1288 nonuniformities; PRNU 0.7 % "
+           "from ISETCam's Sony IMX363 model, the rest stated choices (sensor.fpn)", True, _fpn, compare="packed"),
 )
 
 
