@@ -25,6 +25,11 @@ pixels in every capture, glass included, and never in the ground truth), nor its
 (SynthConfig.fpn, udc_render.sensor.fpn: PRNU, DSNU, row/column offsets and dark current, the same maps
 in every capture).
 
+Stray light (SynthConfig.stray_light, optics.stray, spectral form): room light on the monitor's screen,
+the display's haze, a driven display's own light, the ghost between display and lens and the lens's veiling
+glare, added to each view's electrons before the mosaic; the ground truth gets what glass and the same
+lens would give it (the room light, the glass's ghost, the glare).
+
 Exposure: 'auto' puts the monitor's full white at EXPOSURE_FILL of the full well in the brightest
 channel through glass at gain 1 (a fixed setting for every image, like the paper's rig; behind the
 displays the paper's gains 6 and 25 bring the levels back); for 3D scenes the EXPOSURE_PERCENTILE
@@ -62,6 +67,7 @@ from tqdm import tqdm
 from udc_render.optics.layers import DefocusGeometry, DepthLayers, LayerError, choose_layers, one_layer
 from udc_render.optics import gamma
 from udc_render.optics.displays import PAPER_GAMMA, Display
+from udc_render.optics.stray import synthesis_stray_light
 from udc_render.render import BandImage, render_scene, resolve_xml_camera
 from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens
@@ -200,6 +206,8 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     electrons = layered_electrons(band_image, layers,
                                   lambda l: capture_views(per_layer[l], spectral_views, band_image.edges_nm),
                                   base_sensor, cfg, bright)
+    electrons, stray = synthesis_stray_light(cfg.stray_light, electrons, band_image, base_sensor, cfg.form,
+                                             {d.name for d in displays if d.is_glass})
     glass_e, gt_optics = electrons["gt"]
     gt = (glass_e / base_sensor.full_well_e).astype(np.float32)
     bar.update()
@@ -225,6 +233,7 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
             "depth_layers": layers.describe(), "bright_pixels": 0 if bright is None else int(bright.mask.sum()),
             "defects": None if cfg.defects is None else asdict(cfg.defects), "profile": cfg.profile,
             "fpn": None if cfg.fpn is None else asdict(cfg.fpn),
+            "stray_light": stray,
             "kernel_size_px": kernels.grid.kernel_size_px, "kernel_pixel_um": float(band_image.pitch_um),
             "kernel_precision": cfg.kernel_precision, "lens": psf_lens(scene).describe(),
             "render": {k: v for k, v in band_image.meta.items() if k != "seconds"}}

@@ -16,6 +16,10 @@ physical   ``spectral``: band kernels, T(λ), the          PHYSICAL_DISTANCE_MM 
                                                                                        (sensor.fpn defaults)
 =========  ============================================  ===========================  ======================
 
+Stray light (SynthConfig.stray_light, udc_render.optics.stray): the physical profile keeps the evidence-backed
+defaults (the P-OLED's haze; room light, ghost, lens glare and the display's own light off for want of a
+magnitude for the paper's rig), the paper profile has none (its synthesis has none).
+
 The per-channel form's kernels (SynthConfig.channel_kernels): ``paper``, the paper's recipe as printed
 (l.258–263: one wavelength per channel, its printed r, cubic down-sampling; psf.paper, the very kernels
 of `udc-render psf --method paper`), or ``camera``, the camera's sensitivities × D65 over the visible
@@ -51,6 +55,7 @@ from dataclasses import asdict, dataclass, replace
 
 from udc_render.errors import UdcError
 from udc_render.optics.displays import Display
+from udc_render.optics.stray import StrayLight
 from udc_render.pipeline import SynthConfig
 from udc_render.sensor.defects import DefectConfig
 from udc_render.sensor.fpn import FpnConfig
@@ -76,18 +81,19 @@ class Profile:
     noise: dict | None  # SensorConfig noise keys (None: the sensor config's)
     summary: str
     fpn: FpnConfig | None = None  # fixed-pattern noise: PRNU, DSNU, row/column offsets, dark current (None: none)
+    stray_light: StrayLight = StrayLight()  # optics.stray: the evidence-backed defaults (the paper: all off)
 
     def sets(self) -> dict:
         """What the profile sets, as plain JSON values."""
         return {"form": self.form, "channel_kernels": self.channel_kernels, "distance_mm": self.distance_mm,
                 "defects": None if self.defects is None else asdict(self.defects), "noise": self.noise,
-                "fpn": None if self.fpn is None else asdict(self.fpn)}
+                "fpn": None if self.fpn is None else asdict(self.fpn), "stray_light": self.stray_light.describe()}
 
 
 PROFILES = {
     "paper": Profile("paper", "per_channel", "paper", 0.0, None, PAPER_NOISE,
                      "the paper's synthesis: y = γ x ⊗ k + n (its 3 channel kernels, its γ), display at the lens, "
-                     "no defect pixels, no fixed-pattern noise"),
+                     "no defect pixels, no fixed-pattern noise", stray_light=StrayLight.off()),
     "physical": Profile("physical", "spectral", "camera", PHYSICAL_DISTANCE_MM, DefectConfig(), None,
                         "band kernels and T(λ), the preset displays at the display-to-lens distance, "
                         "dead and hot pixels, fixed-pattern noise (PRNU, DSNU, row/column offsets, dark current)",
@@ -104,17 +110,20 @@ def get_profile(name: str) -> Profile:
 
 def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: str | None = None,
                     distance_mm: float | None = None, channel_kernels: str | None = None,
-                    noise_model: str | None = None, sensor_file: bool = False) -> tuple[SynthConfig, list[Display]]:
+                    noise_model: str | None = None, sensor_file: bool = False,
+                    stray_light: str | None = None) -> tuple[SynthConfig, list[Display]]:
     """(cfg with the profile's form, channel kernels, noise and defects and its record, the displays with
     their distance) under profile `name`; `form`, `distance_mm`, `channel_kernels` and `noise_model` are
     explicit options (None: not given), which win over the profile, as a sensor config file (`sensor_file`)
-    does over its noise (module doc). `displays` as loaded, without a distance override; cfg.sensor with
-    the options already applied."""
+    does over its noise (module doc), and `stray_light` ('default': optics.stray's defaults, 'off': none) over
+    its stray light. `displays` as loaded, without a distance override; cfg.sensor with the options already
+    applied."""
     p = get_profile(name)
     final_form = form if form is not None else p.form
     kernels = channel_kernels if channel_kernels is not None else p.channel_kernels
     options = {k: v for k, v in (("form", form), ("channel_kernels", channel_kernels), ("distance_mm", distance_mm),
-                                 ("noise", noise_model)) if v is not None}
+                                 ("noise", noise_model), ("stray_light", stray_light)) if v is not None}
+    stray = p.stray_light if stray_light is None else StrayLight.off() if stray_light == "off" else StrayLight()
     if sensor_file:
         options["sensor_config"] = "a file"
     distance, applies_to, displays, notes = _distance(p, final_form, distance_mm, displays)
@@ -122,11 +131,11 @@ def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: 
     record = {"name": p.name, "sets": p.sets(), "options": options,
               "applied": {"form": final_form, "channel_kernels": kernels, "distance_mm": distance,
                           "distance_applies_to": applies_to, "defects": p.sets()["defects"], "fpn": p.sets()["fpn"],
-                          "noise": {"noise": sensor.noise, "lambda_source": sensor.lambda_source}}}
+                          "stray_light": stray.describe(), "noise": {"noise": sensor.noise, "lambda_source": sensor.lambda_source}}}
     if notes:
         record["notes"] = notes
     return replace(cfg, form=final_form, channel_kernels=kernels, sensor=sensor, defects=p.defects, fpn=p.fpn,
-                   profile=record), displays
+                   stray_light=stray, profile=record), displays
 
 
 def _distance(p: Profile, form: str, distance_mm: float | None, displays: list[Display]) -> tuple:
@@ -157,9 +166,30 @@ def describe(record: dict | None) -> str:
     f = a.get("fpn")
     fpn = "none" if f is None else (f"PRNU {f['prnu']:g}, DSNU {f['dsnu_e']:g} e-, rows/columns {f['row_offset_e']:g}/"
                                     f"{f['column_offset_e']:g} e-, dark {f['dark_current_e_per_s']:g} e-/s, seed {f['seed']}")
-    mark = {k: " (option)" if k in o else "" for k in ("form", "channel_kernels", "distance_mm", "noise")}
+    mark = {k: " (option)" if k in o else "" for k in ("form", "channel_kernels", "distance_mm", "noise",
+                                                          "stray_light")}
     kernels = (f" (channel kernels {a['channel_kernels']}{mark['channel_kernels']})"
                if a["form"] == "per_channel" else "")
     return (f"profile {record['name']}: form {a['form']}{mark['form']}{kernels}, display-to-lens distance "
             f"{a['distance_mm']:g} mm{mark['distance_mm']} for {a['distance_applies_to']}, noise {a['noise']['noise']}"
-            f"{mark['noise']}, defect pixels: {defects}, fixed-pattern noise: {fpn}")
+            f"{mark['noise']}, defect pixels: {defects}, fixed-pattern noise: {fpn}, "
+            f"stray light: {stray_summary(a.get('stray_light'))}{mark['stray_light']}")
+
+
+def stray_summary(knobs: dict | None) -> str:
+    """The stray-light effects that are on (StrayLight.describe() knobs), in a few words."""
+    if not knobs:
+        return "none"
+    on = []
+    if knobs["room_illuminance_lux"]:
+        on.append(f"room {knobs['room_illuminance_lux']:g} lx on the screen (R {knobs['screen_reflectance']:g})")
+    if knobs["lens_reflectance"]:
+        on.append(f"ghost (lens R {knobs['lens_reflectance']:g})")
+    if knobs["lens_glare"]:
+        on.append(f"lens glare {knobs['lens_glare']:g}")
+    haze = {k: v for k, v in knobs["haze"].items() if v > 0}
+    if haze:
+        on.append("haze " + ", ".join(f"{k} {v:g}" for k, v in haze.items()))
+    if knobs["display_luminance_cd_m2"]:
+        on.append(f"display light {knobs['display_luminance_cd_m2']:g} cd/m²")
+    return ", ".join(on) or "none"

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field
 
 from udc_render.errors import UdcError
+from udc_render.optics.stray import StrayLight
 from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig
 
 FORMS = ("spectral", "per_channel")
@@ -47,6 +48,9 @@ class SynthConfig:
     kernel_cache: str | None = None  # kernel cache folder (None: psf.cache's default); how, not what: not recorded
     defects: DefectConfig | None = None  # dead and hot pixels of the sensor (None: none)
     fpn: FpnConfig | None = None  # fixed-pattern noise of the sensor: PRNU, DSNU, rows/columns, dark current (None: none)
+    # Stray light beyond the diffraction model (optics.stray: room light, ghost, lens glare, display haze,
+    # the display's own light; each off at 0 or None): the evidence-backed defaults, the paper profile all off
+    stray_light: StrayLight = field(default_factory=StrayLight)
     # Depth layers (optics.layers): largest blur-diameter error, render px; None: no defocus at all
     # (every pixel in focus, the kernels of the focus distance)
     defocus_tolerance_px: float | None = DEFAULT_DEFOCUS_TOLERANCE_PX
@@ -64,6 +68,8 @@ class SynthConfig:
             raise SynthError(f"defects = {self.defects!r}: expected a sensor.defects.DefectConfig or None")
         if self.fpn is not None and not isinstance(self.fpn, FpnConfig):
             raise SynthError(f"fpn = {self.fpn!r}: expected a sensor.fpn.FpnConfig or None")
+        if not isinstance(self.stray_light, StrayLight):
+            raise SynthError(f"stray_light = {self.stray_light!r}: expected an optics.stray.StrayLight")
         if self.exposure_s is not None and not (self.exposure_s > 0 and math.isfinite(self.exposure_s)):
             raise SynthError(f"exposure_s = {self.exposure_s!r}: expected a positive number of seconds or auto")
         tol = self.defocus_tolerance_px

@@ -13,6 +13,7 @@ from udc_render.cli import build_parser, main
 from udc_render.cli.args import capture_setup
 from udc_render.profiles import (DEFAULT_PROFILE, PHYSICAL_DISTANCE_MM, PROFILES, ProfileError, describe,
                                  resolve_profile)
+from udc_render.optics.stray import StrayLight
 from udc_render.sensor import DefectConfig, FpnConfig
 
 pytestmark = pytest.mark.usefixtures("render_cache")
@@ -126,7 +127,10 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
         assert main(["synth", str(scene), "--display", "toled", "--profile", name, "--quiet", "--out",
                      str(out[name])]) == 0
     synth = {n: json.loads((o / "synth.json").read_text()) for n, o in out.items()}
-    assert _differing(synth["paper"], synth["physical"]) == {"form", "channel_kernels", "defects", "fpn", "profile"}
+    assert _differing(synth["paper"], synth["physical"]) == {"form", "channel_kernels", "defects", "fpn", "profile",
+                                                             "stray_light"}
+    assert synth["physical"]["stray_light"]["settings"]["haze"] == {"poled": 0.015}  # optics.stray's default
+    assert synth["paper"]["stray_light"] == {"settings": StrayLight.off().describe(), "applied": False}
     assert synth["paper"]["channel_kernels"] == "paper" and synth["physical"]["channel_kernels"] is None  # spectral
     assert synth["physical"]["profile"]["name"] == "physical" and synth["paper"]["profile"]["name"] == "paper"
     assert synth["physical"]["defects"] == asdict(DefectConfig()) and synth["paper"]["defects"] is None
@@ -150,7 +154,8 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
         params[name] = job_params(job, _shared(job, tmp_path / "ds"), source, images)
     assert _differing(params["paper"], params["physical"]) == {"synth", "displays"}
     assert _differing(params["paper"]["synth"], params["physical"]["synth"]) == {"form", "channel_kernels", "defects",
-                                                                                 "fpn", "profile", "sensor"}
+                                                                                 "fpn", "profile", "sensor",
+                                                                                 "stray_light"}
     assert _differing(params["paper"]["synth"]["sensor"], params["physical"]["synth"]["sensor"]) == {
         "noise", "lambda_source"}
     assert params["paper"]["synth"]["channel_kernels"] == "paper"

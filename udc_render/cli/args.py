@@ -196,6 +196,9 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
                         "paper's y = γ x ⊗ k + n with 3 channel kernels [the profile's]")
     add_channel_kernels_argument(p)
     add_sensor_arguments(p)
+    p.add_argument("--stray-light", choices=("default", "off"),
+                   help="stray light beyond diffraction (udc_render/optics/stray/): default, the evidence-backed "
+                        "defaults (the P-OLED's haze), or off [the profile's: physical default, paper off]")
     p.add_argument("--exposure-s", type=positive("--exposure-s"),
                    help="exposure time [auto: the monitor's white at 0.8 of the full well through glass]")
     p.add_argument("--field-phases", type=positive("--field-phases", int), help="d > 0: phases per axis [4]")
@@ -263,4 +266,5 @@ def capture_setup(args, displays: str | None = None):
                            form=getattr(args, "form", None), distance_mm=getattr(args, "distance_mm", None),
                            channel_kernels=getattr(args, "channel_kernels", None),
                            noise_model=getattr(args, "noise_model", None),
+                           stray_light=getattr(args, "stray_light", None),
                            sensor_file=getattr(args, "sensor_config", None) is not None)
