@@ -1,5 +1,5 @@
-"""`udc-render study {psf,render,capture,realism,defocus,banding,gap} --out DIR [--quick]`: error-versus-run-time
-studies of the approximation knobs, and the defocus and banding studies users run."""
+"""`udc-render study {psf,render,capture,far_field,realism,defocus,banding,gap} --out DIR [--quick]`:
+error-versus-run-time studies of the approximation knobs, and the defocus and banding studies users run."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -7,6 +7,7 @@ from pathlib import Path
 import argparse
 
 from udc_render.cli.args import UserError, out_dir
+from udc_render.studies import gap
 
 STUDIES = {
     "psf": "the PSF engine's knobs (pupil samples, precision, wavelength step, field phases, kernel size)",
@@ -16,6 +17,7 @@ STUDIES = {
     "defocus": "through-focus PSFs, MTFs and depth of field of glass, T-OLED and P-OLED",
     "banding": "the bands a display a distance d in front of the lens prints on a flat field",
     "gap": "the size of each effect beyond the paper's model (each on and off), and what it does to DeP",
+    "far_field": "the far field's threshold and coarse factor (the light past the kernel window)",
 }
 
 
@@ -56,8 +58,7 @@ def run(args) -> int:
         raise UserError(f"--images {','.join(map(str, args.images))}: only `study gap` takes images")
     out = out_dir(args.out)
     if args.what == "gap":
-        from udc_render.studies.gap import run_study
-        run_study(out, quick=args.quick, images=args.images)
+        gap.run_study(out, quick=args.quick, images=args.images)
         print(f"wrote {out}/study_gap.csv, study_gap.md, study_gap.png")
         return 0
     if args.what == "realism":
@@ -68,6 +69,8 @@ def run(args) -> int:
         from udc_render.studies.banding import run_study
     elif args.what == "capture":
         from udc_render.studies.capture_knobs import run_study
+    elif args.what == "far_field":
+        from udc_render.studies.capture_far import run_study
     elif args.what == "render":
         from udc_render.studies.render_knobs import run_study
     else:

@@ -41,15 +41,21 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from restore.dep import dep_restore
+from restore.metrics import paper_metrics
 from udc_render.metrics import psnr_db
+from udc_render.optics.gamma import display_gamma
+from udc_render.scene.geometry import psf_lens
 from udc_render.scene.overrides import with_overrides
+from udc_render.sensor import pack_rggb, rgb_to_rggb
+from udc_render.studies.gap_effects import DEP_VARIANTS, EFFECTS
+from udc_render.studies.gap_report import PAPER_DEP_DB, write_report
 
 DEAD_LEAVES = ("pattern:dead_leaves_colour:101", "pattern:dead_leaves_colour:102", "pattern:dead_leaves_colour:103")
 PHOTOGRAPHS = ("builtin:astronaut", "builtin:coffee", "builtin:chelsea")
 FULL = {"sensor_px": (2048, 1024), "content": DEAD_LEAVES, "photographs": PHOTOGRAPHS}
 QUICK = {"sensor_px": (512, 256), "content": DEAD_LEAVES[:1], "photographs": PHOTOGRAPHS[:1]}
 DISPLAYS = ("toled", "poled")
-PAPER_DEP_DB = {"toled": 28.50, "poled": 16.97}  # l.380
 
 
 @dataclass(frozen=True)
@@ -72,7 +78,6 @@ class Shot:
 
 def packed_unit(capture, clean: bool = False) -> np.ndarray:
     """A capture's packed RAW (or its noise-free mosaic, packed) in [0, 1] of the white level."""
-    from udc_render.sensor import pack_rggb
     s = capture.params["sensor"]
     dn = pack_rggb(capture.clean_dn) if clean else capture.packed_dn
     return ((dn.astype(np.float32) - s["black_level_dn"]) / (s["white_level_dn"] - s["black_level_dn"])).astype(np.float32)
@@ -94,9 +99,7 @@ def render(scene):
 def shoot(setup: Setup, display, item: int) -> Shot:
     """Synthesise `display`'s capture of setup.scene (item seeds the noise) and the γ that made it."""
     from udc_render.optics.displays import PAPER_GAMMA
-    from udc_render.optics.gamma import display_gamma
     from udc_render.pipeline import plan_kernels, synthesize
-    from udc_render.sensor import rgb_to_rggb
     band_image = render(setup.scene)
     t0 = time.perf_counter()
     kernels = plan_kernels(setup.scene, [display], setup.cfg)
@@ -115,7 +118,6 @@ def dep_kernels(display, scene, cfg, source: str = "paper") -> np.ndarray:
     """DeP's RGGB kernels of `display` at the packed pitch (restore.known: 'paper' or 'exact')."""
     from restore.known import packed_channel_kernels, packed_paper_kernels, rggb_kernels
     from udc_render.pipeline import plan_kernels
-    from udc_render.scene.geometry import psf_lens
     size = (plan_kernels(scene, [display], cfg).grid.kernel_size_px // 2) | 1
     lens, pitch = psf_lens(scene), float(scene.sensor.pitch_um)
     if source == "paper":
@@ -125,8 +127,6 @@ def dep_kernels(display, scene, cfg, source: str = "paper") -> np.ndarray:
 
 def score(shot: Shot, kernels: np.ndarray, item: int, denoiser: str = "nlm", gamma_scale: float = 1.0) -> dict:
     """Level, input PSNR and DeP PSNR of one shot (module doc)."""
-    from restore.dep import dep_restore
-    from restore.metrics import paper_metrics
     t0 = time.perf_counter()
     dep = dep_restore(shot.packed, shot.gamma_rggb * gamma_scale, kernels, denoiser=denoiser,
                       rng=np.random.default_rng(item))
@@ -148,7 +148,6 @@ def base_setups(sensor_px: tuple[int, int]) -> dict[str, Setup]:
     from udc_render.optics.displays import load_displays
     from udc_render.pipeline import SynthConfig
     from udc_render.profiles import resolve_profile
-    from udc_render.studies.gap_effects import EFFECTS
     from udc_render.studies.realism_paper import default_scene
     scene = default_scene(sensor_px)
     out = {}
@@ -169,7 +168,6 @@ def with_image(setup: Setup, image: str) -> Setup:
 
 def rows_for_image(image: str, content: str, item: int, setups: dict, progress_bar=None, rank: int = 0) -> list[dict]:
     """Every row (module doc) for one image, both displays; `rank`: the image's place in its content group."""
-    from udc_render.studies.gap_effects import DEP_VARIANTS, EFFECTS
     rows = []
     for di, name in enumerate(DISPLAYS):
         def at(setup):
@@ -204,8 +202,6 @@ def rows_for_image(image: str, content: str, item: int, setups: dict, progress_b
 
 def run_study(out_dir, quick: bool = False, images: tuple[str, ...] = (), progress: bool = True) -> list[dict]:
     """Write study_gap.csv, .md and .png into out_dir (gap_report); returns the rows."""
-    from udc_render.studies.gap_effects import EFFECTS
-    from udc_render.studies.gap_report import write_report
     c = QUICK if quick else FULL
     setups = base_setups(c["sensor_px"])
     content = ([(i, "dead leaves") for i in c["content"]] + [(i, "--images") for i in images]

@@ -10,6 +10,8 @@ import importlib.util
 from dataclasses import dataclass, replace
 from typing import Callable
 
+from udc_render.optics.stray.settings import ON_VALUES
+from udc_render.sensor.defects import DefectConfig
 from udc_render.sensor.fpn import FpnConfig
 
 
@@ -36,12 +38,26 @@ def _distance(setup, on: bool):
 
 
 def _defects(setup, on: bool):
-    from udc_render.sensor.defects import DefectConfig
     return _cfg(setup, defects=DefectConfig() if on else None)
 
 
 def _fpn(setup, on: bool):
     return _cfg(setup, fpn=FpnConfig() if on else None)
+
+
+def _stray(knob: str):
+    """Switch one stray-light knob (optics.stray): its ON_VALUES value, or off (None for a mapping or a
+    level, 0 for a fraction)."""
+    def switch(setup, on: bool):
+        off = None if knob in ("room_illuminance_lux", "haze", "display_luminance_cd_m2") else 0.0
+        return _cfg(setup, stray_light=replace(setup.cfg.stray_light, **{knob: ON_VALUES[knob] if on else off}))
+    return switch
+
+
+def _read_noise(setup, on: bool):
+    from udc_render.sensor import SensorConfig
+    e = 2 * SensorConfig().read_noise_e if on else SensorConfig().read_noise_e
+    return _cfg(setup, sensor=replace(setup.cfg.sensor, read_noise_e=e))
 
 
 EFFECTS: tuple[Effect, ...] = (
@@ -52,6 +68,19 @@ EFFECTS: tuple[Effect, ...] = (
            "Chapman et al. 2011–2022 (sensor.defects)", True, _defects, compare="packed"),
     Effect("fixed-pattern noise (PRNU, DSNU, rows/columns, dark current)", "EMVA 1288 nonuniformities; PRNU 0.7 % "
            "from ISETCam's Sony IMX363 model, the rest stated choices (sensor.fpn)", True, _fpn, compare="packed"),
+    Effect("haze of the display stack (P-OLED 1.5 %)", "median ASTM D1003 haze of six polyimide films, 0.6–2.8 % "
+           "(Polymers 15, 3408, 2023); 'hazy' (l.122); optics.stray", True, _stray("haze")),
+    Effect("room light on the monitor (500 lx)", "environment light (l.412): EN 12464-1 office 500 lx × screen "
+           "reflectance 4.4 % (DisplayMate 2014) / π; the rig's room unknown: off by default", False,
+           _stray("room_illuminance_lux")),
+    Effect("ghost between display and lens (0.5 %)", "reflections (l.429): a multilayer AR coating 0.4–0.5 % × the "
+           "underside's reflectance; off by default", False, _stray("lens_reflectance")),
+    Effect("lens veiling glare (2 %)", "lens flare (l.429): ISO 9358 veiling glare index, a typical figure; the "
+           "paper's lens unmeasured: off by default", False, _stray("lens_glare")),
+    Effect("the display's own light (1 cd/m²)", "an active display (l.429); the paper's panels were not driven "
+           "(l.200–235): off by default", False, _stray("display_luminance_cd_m2")),
+    Effect("read noise 2× (9.7 e⁻)", "the noise at gain 25: a sensitivity, not evidence (the default 4.87 e⁻ is a "
+           "peer's; 1.55 µm Sony sensors read 1.5–5 e⁻, sensor.fpn's sources)", False, _read_noise),
 )
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from udc_render.studies.gap_effects import DEP_VARIANTS, EFFECTS
 from udc_render.studies.report import duration, machine_text, md_table, pct, pyplot, save_plot, write_tables
 
 COLUMNS = ["row", "display", "content", "images", "level", "input_db", "dep_db", "dep_change_db", "capture_vs_base_db",
@@ -15,13 +16,13 @@ HEADERS = {"row": "row", "display": "display", "content": "content", "images": "
            "level": "level (GT mean / white)", "input_db": "input PSNR (dB)", "dep_db": "DeP PSNR (dB)",
            "dep_change_db": "DeP − base (dB)", "capture_vs_base_db": "capture vs base (dB)",
            "light_moved": "light moved", "paper_dep_db": "paper's DeP, real panel (dB)"}
+PAPER_DEP_DB = {"toled": 28.50, "poled": 16.97}  # the paper's DeP on its real panels, PSNR (l.380)
 SHORTFALL_DB = (6.0, 10.0)  # how much worse the paper's real P-OLED is for DeP than ours (issue 29)
 
 
 def summarise(rows: list[dict]) -> list[dict]:
     """Means over the images of each (row, display, content group), with DeP's change against the base row
     of the same display and image (a DeP candidate run on fewer images is compared on those)."""
-    from udc_render.studies.gap import PAPER_DEP_DB
     base = {(r["display"], r["image"]): r["dep_db"] for r in rows if r["kind"] == "base"}
     keys = list(dict.fromkeys((r["row"], r["display"], r["content"]) for r in rows))
     out = []
@@ -82,7 +83,6 @@ def plot(summary: list[dict], path: Path) -> None:
 
 
 def effects_table() -> list[str]:
-    from udc_render.studies.gap_effects import DEP_VARIANTS, EFFECTS
     rows = ([{"name": e.name, "on": "yes" if e.default_on else "no", "evidence": e.evidence} for e in EFFECTS]
             + [{"name": f"DeP: {v.name}", "on": "", "evidence": v.evidence + ("" if v.available() else " (not installed: "
                                                                                 "not run)")} for v in DEP_VARIANTS])
