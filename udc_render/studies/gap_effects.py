@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 from typing import Callable
 
 from udc_render.optics.stray.settings import ON_VALUES
+from udc_render.sensor import SensorConfig
 from udc_render.sensor.defects import DefectConfig
 from udc_render.sensor.fpn import FpnConfig
 
@@ -55,7 +56,6 @@ def _stray(knob: str):
 
 
 def _read_noise(setup, on: bool):
-    from udc_render.sensor import SensorConfig
     e = 2 * SensorConfig().read_noise_e if on else SensorConfig().read_noise_e
     return _cfg(setup, sensor=replace(setup.cfg.sensor, read_noise_e=e))
 
