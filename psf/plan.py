@@ -64,10 +64,13 @@ def validate_request(wavelengths_nm, pixel_um, size_px, distance_mm, field_phase
 
 
 def auto_pupil_samples(lens: Lens, wavelength_min_nm: float, pixel_um: float, size_px: int) -> int:
-    """Samples across the aperture: DEFAULT_PUPIL_SAMPLES, raised until λ_min z / δ ≥ 1.05 × window."""
+    """Samples across the aperture: DEFAULT_PUPIL_SAMPLES, raised until λ_min z / δ ≥ 1.05 × window and,
+    with aberrations, until the pupil phase steps less than π per sample (δ ≤ λ_min / (2 max|∇OPD|), times
+    1.05: the light the aberration throws stays inside the alias-free field)."""
     window = size_px * pixel_um
     need = ALIAS_GUARD * lens.aperture_um * window / (wavelength_min_nm * 1e-3 * lens.image_distance_um)
-    return max(DEFAULT_PUPIL_SAMPLES, int(math.ceil(need)))
+    phase = ALIAS_GUARD * 2 * lens.aperture_um * lens.max_phase_slope() / (wavelength_min_nm * 1e-3)
+    return max(DEFAULT_PUPIL_SAMPLES, int(math.ceil(need)), int(math.ceil(phase)))
 
 
 PAPER_SENSOR_UM = (2048 * 1.55, 1024 * 1.55)
@@ -166,8 +169,15 @@ def check_alias(plan: Plan) -> None:
     """Warn when the kernel window reaches past the alias-free field λz/δ of the pupil raster."""
     lens, wl, pg = plan.lens, plan.wl, plan.pgrid
     window = plan.size_px * plan.pixel_um
+    slope = lens.max_phase_slope()
     for axis, step in (("x", pg.dx_um), ("y", pg.dy_um)):
         free = float(wl.min()) * 1e-3 * lens.image_distance_um / step
+        if slope * step > float(wl.min()) * 1e-3 / 2:
+            need = auto_pupil_samples(lens, float(wl.min()), plan.pixel_um, plan.size_px)
+            warnings.warn(f"the lens's aberrations step the pupil phase by more than π per sample along {axis} at "
+                          f"{wl.min():g} nm (pupil_samples={plan.n_pupil}); need pupil_samples ≥ {need}",
+                          AliasingWarning, stacklevel=3)
+            break
         if window > free and plan.method != "paper":
             need = auto_pupil_samples(lens, float(wl.min()), plan.pixel_um, plan.size_px)
             warnings.warn(f"kernel window {window:.0f} µm exceeds the alias-free field λz/δ{axis} = {free:.0f} µm "
@@ -223,13 +233,17 @@ def _field_raster(display, grid, mask: np.ndarray) -> np.ndarray:
 def _mirror_symmetries(plan: Plan) -> list[tuple[bool, bool]]:
     """The flips (flip_y, flip_x) that leave both the mask raster over the window and the aperture crop
     unchanged (to SYMMETRY_TOL): reflections x → −x, y → −y about the optical axis (the window and,
-    when the crop is centred in it, the crop are symmetric about the axis)."""
+    when the crop is centred in it, the crop are symmetric about the axis), and the lens's wavefront error
+    too when it has one (coma along x, say, is not symmetric under x → −x)."""
     centred = (plan.sy.start + plan.sy.stop == plan.grid.ny, plan.sx.start + plan.sx.stop == plan.grid.nx)
+    arrays = (plan.mask, plan.aperture)
+    if plan.lens.zernike_waves:
+        arrays += (plan.lens.wavefront_um(plan.pgrid.x_um, plan.pgrid.y_um) * plan.aperture,)
     out = []
     for flips in ((False, False), (False, True), (True, False), (True, True)):
         axes = tuple(a for a, f in enumerate(flips) if f)
         if all(centred[a] for a in axes) and all(
-                np.abs(a - np.flip(a, axes)).max() <= SYMMETRY_TOL * np.abs(a).max() for a in (plan.mask, plan.aperture)):
+                np.abs(a - np.flip(a, axes)).max() <= SYMMETRY_TOL * np.abs(a).max() for a in arrays):
             out.append(flips)
     return out
 

@@ -6,12 +6,13 @@ field-dependent, which DeP does not model), sampled at the packed plane's pitch 
 the R kernel for R, the G kernel for Gr and Gb, B for B, cached on disk like every kernel (psf.cache):
 - 'paper' (the default, the row 'dep'): the paper's computed PSF, "the pre-computed PSF" its DeP used
   (l.277): its recipe as printed at 640 / 520 / 450 nm (psf.paper; `udc-render psf --method paper`),
-  the kernels of the paper profile's synthesis. On `physical` captures it is the misfit the paper's DeP
-  "suffers from" (l.410);
+  the kernels of the paper profile's synthesis, for the diffraction-limited lens (its model has no lens
+  aberrations, l.145–171: a lens's zernike_waves in synth.json are dropped). On `physical` captures it is
+  the misfit the paper's DeP "suffers from" (l.410);
 - 'exact' (the row 'dep_exact', "DeP (exact kernel)"): the channel-effective PSFs of the camera's
   sensitivities under D65 (psf.spectral.channel_kernels): the kernels of the per-channel synthesis with
-  camera kernels, and the closest channel kernels to the spectral form's band kernels at d = 0; the
-  upper bound a good PSF gives.
+  camera kernels, and the closest channel kernels to the spectral form's band kernels at d = 0, with the
+  lens's aberrations; the upper bound a good PSF gives.
 
 γ: the γ that made the capture, by the one definition (udc_render.optics.gamma, what the paper's
 calibration measures): for the spectral form, band-wise from the display's and the bare lens's band
@@ -25,6 +26,7 @@ from __future__ import annotations
 
 import functools
 import json
+from dataclasses import replace
 
 import numpy as np
 
@@ -61,8 +63,8 @@ def _channel_kernels(pair: Pair, size_px: int | None, use_cache: bool, source: s
     if size % 2 == 0:
         raise DataError(f"kernel_px = {size}: expected an odd number of pixels (a centred kernel)")
     layout, lens, pitch_um = capture_display(pair).layout, Lens(**synth["lens"]), float(sensor["pitch_um"])
-    if source == "paper":
-        return packed_paper_kernels(layout, lens, pitch_um, size, use_cache)
+    if source == "paper":  # the paper's diffraction model: no lens aberrations (module doc)
+        return packed_paper_kernels(layout, replace(lens, zernike_waves=()), pitch_um, size, use_cache)
     return packed_channel_kernels(layout, lens, sensor["camera"], pitch_um, size, use_cache)
 
 

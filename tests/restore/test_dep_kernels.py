@@ -53,6 +53,21 @@ def test_the_two_sources_differ_and_the_default_is_the_papers(data):
         known_kernels_rggb(pair, KERNEL_PX, source="camera")
 
 
+def test_the_papers_kernels_are_for_the_diffraction_limited_lens(data, tmp_path):
+    """A lens with aberrations (synth.json's zernike_waves) changes the exact kernels, not the paper's: its
+    diffraction model has none (l.145–171)."""
+    import shutil
+    shutil.copytree(data, tmp_path / "data")
+    pair, base = _pair(tmp_path / "data"), _pair(data)
+    synth = json.loads((pair.folder / "synth.json").read_text())
+    synth["lens"]["zernike_waves"] = [[4, 0, 1.0]]
+    (pair.folder / "synth.json").write_text(json.dumps(synth))
+    np.testing.assert_array_equal(known_kernels_rggb(pair, KERNEL_PX, source="paper"),
+                                  known_kernels_rggb(base, KERNEL_PX, source="paper"))
+    moved = np.abs(known_kernels_rggb(pair, KERNEL_PX, source="exact") - known_kernels_rggb(base, KERNEL_PX, source="exact"))
+    assert moved.sum(axis=(1, 2)).min() > 1e-3
+
+
 def test_dep_and_dep_exact_are_rows_of_their_own(data, tmp_path):
     """Both score, each row records its kernels, and they land in one table, DeP before DeP (exact kernel)."""
     settings = EvalSettings(previews=0, kernel_px=KERNEL_PX)

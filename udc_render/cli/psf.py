@@ -29,6 +29,19 @@ def _bands(text):
     return bands
 
 
+def _zernike_term(text):
+    """--zernike N,M,WAVES: one Zernike term of the lens (psf.zernike; checked with the others by psf.Lens)."""
+    parts = text.split(",")
+    try:
+        n, m, a = int(parts[0]), int(parts[1]), float(parts[2])
+        if len(parts) != 3 or not math.isfinite(a):
+            raise ValueError
+    except (ValueError, IndexError):
+        raise argparse.ArgumentTypeError(f"--zernike must look like N,M,WAVES (e.g. 4,0,0.05: 0.05 waves RMS of "
+                                         f"spherical aberration), got '{text}'") from None
+    return n, m, a
+
+
 def register(sub) -> None:
     p = sub.add_parser("psf", help="wave-optics PSF kernels of a display in front of a lens")
     p.set_defaults(run=run)
@@ -63,6 +76,11 @@ def register(sub) -> None:
     p.add_argument("--object-distance-mm", type=positive("--object-distance-mm"), default=math.inf,
                    help="distance of the object; away from the focus distance the kernels are defocused "
                         "(paraxial pupil phase) [inf]")
+    p.add_argument("--zernike", type=_zernike_term, action="append", metavar="N,M,WAVES",
+                   help="a wavefront aberration of the lens: the OSA/ANSI Zernike term Z(N, M) with WAVES RMS at "
+                        "550 nm, e.g. 4,0,0.05 (spherical), 3,1,0.05 (coma along x), 2,2,0.05 (astigmatism); repeat "
+                        "for several; the same optical path at every wavelength (psf/zernike.py) [none: "
+                        "diffraction-limited]")
     p.add_argument("--method", choices=METHODS, default="mft",
                    help="Fraunhofer transform to the pixels: mft: matrix Fourier transform of the pupil's "
                         "autocorrelation, exact pixel integration at any pitch (default); czt: the same sum by "
@@ -132,7 +150,8 @@ def run(args) -> int:
     from psf import Lens
     out = out_dir(args.out)
     display, args.distance_mm = layout_and_distance(args)
-    lens = Lens(args.focal_length_um, args.aperture_um, args.focus_distance_mm, args.object_distance_mm)
+    lens = Lens(args.focal_length_um, args.aperture_um, args.focus_distance_mm, args.object_distance_mm,
+                tuple(args.zernike or ()))
     with warnings.catch_warnings(record=True) as caught, tqdm(desc="psf kernels", unit="kernel", disable=None) as bar:
         warnings.simplefilter("always", AliasingWarning)
         warnings.simplefilter("always", UnderSamplingWarning)

@@ -24,8 +24,8 @@ def kernel_arrays(ks) -> dict:
                   params_json=np.array(json.dumps(ks.params)))
     for key in ("size_px", "distance_mm", "method", "pupil_samples", "precision", "field_phases"):
         arrays[key] = np.array(ks.params[key])
-    for key, value in ks.params["lens"].items():
-        arrays[key] = np.float64(value)
+    for key, value in ks.params["lens"].items():  # zernike_waves: [terms, 3] (n, m, waves), when there are any
+        arrays[key] = np.asarray(value, dtype=np.float64)
     return arrays
 
 

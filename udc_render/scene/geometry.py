@@ -121,11 +121,11 @@ def render_grid(scene: Scene) -> RenderGrid:
 
 def psf_lens(scene: Scene, object_distance_m: float | None = None):
     """The psf.Lens of the scene's camera (µm), focused at the scene's focus distance, with the object
-    at `object_distance_m` (None: at the focus distance, in focus)."""
+    at `object_distance_m` (None: at the focus distance, in focus), with the lens's aberrations (zernike_waves)."""
     from psf import Lens
     geom = camera_geometry(scene)
     focus_mm = geom.focus_distance_m * 1000.0
     obj_mm = focus_mm if object_distance_m is None else object_distance_m * 1000.0
     f_um = scene.lens.focal_length_mm * 1000.0
     return Lens(focal_length_um=f_um, aperture_um=f_um / scene.lens.f_number, focus_distance_mm=focus_mm,
-                object_distance_mm=obj_mm)
+                object_distance_mm=obj_mm, zernike_waves=scene.lens.zernike_waves)

@@ -38,6 +38,17 @@ class Lens:
     f_number: float = 1.8
     focus_distance_m: float | None = None  # None: the monitor's distance (monitor) or the target's
     model: str = "pinhole"  # pinhole: all in focus, defocus left to the wave optics (depth output)
+    # Wavefront aberrations of the lens for the wave optics: (n, m, waves RMS at 550 nm) per Zernike term
+    # (psf.zernike, psf.lens.Lens.zernike_waves); () the diffraction-limited lens (default: no magnitude published)
+    zernike_waves: tuple = ()
+
+    def __post_init__(self):
+        if self.zernike_waves:  # checked and sorted by the psf lens (a [lens] table is checked in parse)
+            from psf import Lens as PsfLens, LensError, zernike
+            try:
+                object.__setattr__(self, "zernike_waves", PsfLens(zernike_waves=self.zernike_waves).zernike_waves)
+            except LensError:
+                raise SceneError(f"lens.zernike_waves = {self.zernike_waves!r}: expected {zernike.ALLOWED}") from None
 
     @property
     def aperture_mm(self) -> float:

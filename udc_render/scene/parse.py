@@ -127,6 +127,17 @@ def _content(data, source: str):
     return MitsubaXML(file=t.string("file", ""), use_xml_camera=t.boolean("use_xml_camera", True))
 
 
+def _zernike(t: _Table, default: tuple) -> tuple:
+    """[lens] zernike_waves = [[n, m, waves], …]: the lens's Zernike terms (psf.zernike), checked."""
+    if "zernike_waves" not in t.data:
+        return default
+    from psf import Lens as PsfLens, LensError, zernike
+    try:
+        return PsfLens(zernike_waves=t.data["zernike_waves"]).zernike_waves
+    except LensError:
+        t.fail("zernike_waves", t.data["zernike_waves"], zernike.ALLOWED)
+
+
 def parse_scene(data: dict, source: str) -> Scene:
     """Validate a parsed TOML document into a :class:`Scene`."""
     top = _Table(source, "", data, ("camera", "lens", "sensor", "bands", "render", "content"))
@@ -141,12 +152,13 @@ def parse_scene(data: dict, source: str) -> Scene:
     if camera.origin_m is not None and camera.origin_m == camera.target_m:
         t.fail("target_m", list(camera.target_m), "a point different from camera.origin_m")
 
-    t = _Table(source, "lens", data.get("lens", {}), ("focal_length_mm", "f_number", "focus_distance_m", "model"))
+    t = _Table(source, "lens", data.get("lens", {}),
+               ("focal_length_mm", "f_number", "focus_distance_m", "model", "zernike_waves"))
     d = Lens()
     lens = Lens(focal_length_mm=t.number("focal_length_mm", d.focal_length_mm, 0, 1e4, lo_open=True),
                 f_number=t.number("f_number", d.f_number, 0.5, 128),
                 focus_distance_m=t.number("focus_distance_m", d.focus_distance_m, 0, 1e9, lo_open=True, optional=True),
-                model=t.string("model", d.model, LENS_MODELS))
+                model=t.string("model", d.model, LENS_MODELS), zernike_waves=_zernike(t, d.zernike_waves))
     if lens.focus_distance_m is not None and lens.focus_distance_m * 1e3 <= lens.focal_length_mm:
         t.fail("focus_distance_m", lens.focus_distance_m, f"a distance beyond the focal length ({lens.focal_length_mm} mm)")
 
