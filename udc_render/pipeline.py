@@ -25,6 +25,16 @@ pixels in every capture, glass included, and never in the ground truth), nor its
 (SynthConfig.fpn, udc_render.sensor.fpn: PRNU, DSNU, row/column offsets and dark current, the same maps
 in every capture).
 
+Averaged ground truth (SynthConfig.gt_frames = N; the profiles set 16): the paper's ground truth is the
+mean of 16 glass captures at gain 1 (l.235), so its temporal noise is the single frame's σ/√16 = σ/4.
+With N, 'gt' is the mean of N captures of the glass electrons (sensor.frames.mean_of_frames: the glass
+capture's noise model at gain 1, quantised to the bit depth, saturating at the white level, hence
+clipped), each camera channel at every pixel with its own noise, from its own noise stream
+(gt_noise_seed). Averaging removes temporal noise, not what is the same in every frame: the defect
+pixels and the fixed-pattern noise stay out of the ground truth as above (they are sites of a mosaic the
+ground truth does not have; the paper's RGB went through an in-camera pipeline, l.236, whose defect
+correction is unknown), and so does the in-camera demosaic (docs/concepts/physics.md).
+
 Stray light (SynthConfig.stray_light, optics.stray, spectral form): room light on the monitor's screen,
 the display's haze, a driven display's own light, the ghost between display and lens and the lens's veiling
 glare, added to each view's electrons before the mosaic; the ground truth gets what glass and the same
@@ -73,6 +83,7 @@ from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens
 from udc_render.sensor import (Capture, SensorConfig, band_electron_weights, capture, capture_electrons,
                                electrons_rgb, mosaic_of, rgb_to_rggb)
+from udc_render.sensor.frames import burst_sensor, mean_of_frames
 from udc_render.synth_config import (CHANNEL_KERNELS, DEFAULT_DEFOCUS_TOLERANCE_PX, EXPOSURE_FILL,
                                      EXPOSURE_PERCENTILE, FORMS, SynthConfig, SynthError)
 from udc_render.synth_kernels import (Kernels, band_kernel_set, compact_kernels, display_channel_kernels,
@@ -83,8 +94,15 @@ from udc_render.views import View, bin_pixels, bright_pixels, layered_electrons,
 __all__ = ["CHANNEL_KERNELS", "DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "EXPOSURE_PERCENTILE", "FORMS", "Kernels", "SynthConfig",
            "SynthError", "SynthResult", "auto_exposure_s", "band_kernel_set", "capture_scene", "capture_views",
            "check_grid", "compact_kernels", "depth_layers", "display_channel_kernels", "display_gamma",
-           "display_kernels", "layer_kernels", "noise_seed", "plan_kernels", "scene_object_distance_m",
+           "display_kernels", "gt_noise_seed", "layer_kernels", "noise_seed", "plan_kernels", "scene_object_distance_m",
            "sensor_for_scene", "synthesize"]
+
+
+GT_RECORD = {False: "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, "
+                    "no FPN, / full well (1.0 = white level at gain 1), not clipped",
+             True: "linear camera RGB through glass (bare-lens kernels), the mean of gt_frames captures at gain 1 "
+                   "(temporal noise σ/√N, quantised, clipped at the white level), no mosaic, no defect pixels, "
+                   "no FPN, (DN − black) / (g · full well) (1.0 = white level at gain 1)"}
 
 
 @dataclass(frozen=True)
@@ -127,6 +145,32 @@ def noise_seed(seed: int, item: int, display_name: str) -> np.random.SeedSequenc
     """Noise stream of one capture: SeedSequence([seed, item, crc32(display name)]) (adding a display
     to a job does not change the others' noise)."""
     return np.random.SeedSequence([int(seed), int(item), zlib.crc32(display_name.encode())])
+
+
+GT_NOISE_STREAM = "gt frames"  # the averaged ground truth's stream name: no display's (their names have no spaces)
+
+
+def gt_noise_seed(seed: int, item: int) -> np.random.SeedSequence:
+    """Noise stream of the averaged ground truth's frames: noise_seed(seed, item, 'gt frames'), apart from
+    every display's."""
+    return noise_seed(seed, item, GT_NOISE_STREAM)
+
+
+def averaged_gt(glass_e: np.ndarray, sensor: SensorConfig, frames: int, seed: int,
+                item: int) -> tuple[np.ndarray, dict]:
+    """The ground truth as the paper took it (module doc): the mean DN of `frames` glass captures at gain 1 of
+    the electrons [3, H, W], each channel with the noise of its RGGB site (G: Gr's), as (DN − black) / (g · FW)
+    (the noise-free ground truth's units), and its record."""
+    s = replace(sensor, gain=1.0)
+    rng = np.random.default_rng(gt_noise_seed(seed, item))
+    s = burst_sensor(s, rng)
+    planes, drawn = zip(*(mean_of_frames(glass_e[c], s, frames, rng, site) for c, site in enumerate((0, 1, 3))))
+    gt = ((np.stack(planes) - s.black_level_dn) / (s.dn_per_electron * s.full_well_e)).astype(np.float32)
+    record = {"frames": frames, "noise": s.noise, "gain": 1.0, "noise_seed": f"SeedSequence([{seed}, {item}, "
+              f"crc32('{GT_NOISE_STREAM}')])", "pixels_drawn_frame_by_frame": int(sum(drawn))}
+    if s.noise == "gaussian":
+        record.update(lambda_read=list(s.lambda_read), lambda_shot=list(s.lambda_shot))
+    return gt, record
 
 
 def check_grid(band_image: BandImage, grid: RenderGrid) -> None:
@@ -209,7 +253,9 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     electrons, stray = synthesis_stray_light(cfg.stray_light, electrons, band_image, base_sensor, cfg.form,
                                              {d.name for d in displays if d.is_glass})
     glass_e, gt_optics = electrons["gt"]
-    gt = (glass_e / base_sensor.full_well_e).astype(np.float32)
+    gt, gt_noise = (glass_e / base_sensor.full_well_e).astype(np.float32), None
+    if cfg.gt_frames is not None:
+        gt, gt_noise = averaged_gt(glass_e, base_sensor, cfg.gt_frames, cfg.seed, item)
     bar.update()
     captures, display_meta, rgb = {}, {}, None
     for d in displays:
@@ -228,8 +274,8 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     bar.close()
     meta = {"form": cfg.form, "channel_kernels": cfg.channel_kernels if cfg.form == "per_channel" else None,
             "exposure_s": exposure, "exposure_rule": how, "seed": cfg.seed, "item": item,
-            "gt": "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, no FPN, "
-                  "/ full well (1.0 = white level at gain 1), not clipped", "gt_optics": gt_optics,
+            "gt": GT_RECORD[cfg.gt_frames is not None], "gt_frames": cfg.gt_frames, "gt_noise": gt_noise,
+            "gt_optics": gt_optics,
             "depth_layers": layers.describe(), "bright_pixels": 0 if bright is None else int(bright.mask.sum()),
             "defects": None if cfg.defects is None else asdict(cfg.defects), "profile": cfg.profile,
             "fpn": None if cfg.fpn is None else asdict(cfg.fpn),

@@ -16,6 +16,14 @@ physical   ``spectral``: band kernels, T(λ), the          PHYSICAL_DISTANCE_MM 
                                                                                        (sensor.fpn defaults)
 =========  ============================================  ===========================  ======================
 
+Both profiles take the ground truth as the paper did, the mean of PAPER_GT_FRAMES = 16 glass captures at
+gain 1 (l.235; SynthConfig.gt_frames, pipeline module doc): its synthetic pairs degraded those same averaged
+captures and kept them as targets (l.258–260), so their residual noise (σ/4 of a glass frame) is in the
+paper's real and synthetic targets alike. The paper's synthetic inputs also carry it, blurred and scaled by
+γ, under the added noise n: per pixel its variance is γ²/16 of a gain-1 frame's against n's gain × γ of
+it (T-OLED: 1 % of the input's noise variance, P-OLED 0.1 %), which the profile leaves out (its input is
+the noise-free render). ``gt_frames = 'ideal'`` (``--gt-frames ideal``) keeps the noise-free ground truth.
+
 Stray light (SynthConfig.stray_light, udc_render.optics.stray): the physical profile keeps the evidence-backed
 defaults (the P-OLED's haze; room light, ghost, lens glare and the display's own light off for want of a
 magnitude for the paper's rig), the paper profile has none (its synthesis has none).
@@ -64,6 +72,9 @@ PHYSICAL_DISTANCE_MM = 2.0
 # The paper's noise (l.176–178): heteroscedastic Gaussian, variance λ_read + λ_shot·w, its λ measured on its
 # camera (not printed): here the λ of the simulated sensor (sensor.noise.sensor_lambdas), at each display's gain.
 PAPER_NOISE = {"noise": "gaussian", "lambda_source": "sensor"}
+# The paper's ground truth: "we average the 16 repeated captured frames" through glass at gain 1 (l.235, Table 1);
+# its synthetic pairs degrade those same captures and keep them as targets (l.258–260), so both profiles average.
+PAPER_GT_FRAMES = 16
 
 
 class ProfileError(UdcError):
@@ -81,23 +92,26 @@ class Profile:
     noise: dict | None  # SensorConfig noise keys (None: the sensor config's)
     summary: str
     fpn: FpnConfig | None = None  # fixed-pattern noise: PRNU, DSNU, row/column offsets, dark current (None: none)
+    gt_frames: int | None = None  # the ground truth: the mean of N glass frames (None: noise-free)
     stray_light: StrayLight = StrayLight()  # optics.stray: the evidence-backed defaults (the paper: all off)
 
     def sets(self) -> dict:
         """What the profile sets, as plain JSON values."""
         return {"form": self.form, "channel_kernels": self.channel_kernels, "distance_mm": self.distance_mm,
                 "defects": None if self.defects is None else asdict(self.defects), "noise": self.noise,
-                "fpn": None if self.fpn is None else asdict(self.fpn), "stray_light": self.stray_light.describe()}
+                "fpn": None if self.fpn is None else asdict(self.fpn), "gt_frames": self.gt_frames,
+                "stray_light": self.stray_light.describe()}
 
 
 PROFILES = {
     "paper": Profile("paper", "per_channel", "paper", 0.0, None, PAPER_NOISE,
                      "the paper's synthesis: y = γ x ⊗ k + n (its 3 channel kernels, its γ), display at the lens, "
-                     "no defect pixels, no fixed-pattern noise", stray_light=StrayLight.off()),
+                     "no defect pixels, no fixed-pattern noise, its 16-frame ground truth",
+                     gt_frames=PAPER_GT_FRAMES, stray_light=StrayLight.off()),
     "physical": Profile("physical", "spectral", "camera", PHYSICAL_DISTANCE_MM, DefectConfig(), None,
                         "band kernels and T(λ), the preset displays at the display-to-lens distance, "
-                        "dead and hot pixels, fixed-pattern noise (PRNU, DSNU, row/column offsets, dark current)",
-                        fpn=FpnConfig()),
+                        "dead and hot pixels, fixed-pattern noise (PRNU, DSNU, row/column offsets, dark current), "
+                        "the 16-frame ground truth", fpn=FpnConfig(), gt_frames=PAPER_GT_FRAMES),
 }
 DEFAULT_PROFILE = "physical"
 
@@ -111,19 +125,22 @@ def get_profile(name: str) -> Profile:
 def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: str | None = None,
                     distance_mm: float | None = None, channel_kernels: str | None = None,
                     noise_model: str | None = None, sensor_file: bool = False,
+                    gt_frames: int | str | None = None,
                     stray_light: str | None = None) -> tuple[SynthConfig, list[Display]]:
     """(cfg with the profile's form, channel kernels, noise and defects and its record, the displays with
     their distance) under profile `name`; `form`, `distance_mm`, `channel_kernels` and `noise_model` are
     explicit options (None: not given), which win over the profile, as a sensor config file (`sensor_file`)
-    does over its noise (module doc), and `stray_light` ('default': optics.stray's defaults, 'off': none) over
-    its stray light. `displays` as loaded, without a distance override; cfg.sensor with the options already
-    applied."""
+    does over its noise (module doc), and `gt_frames` (N, or 'ideal': the noise-free ground truth) over its
+    ground truth, and `stray_light` ('default': optics.stray's defaults, 'off': none) over its stray light.
+    `displays` as loaded, without a distance override; cfg.sensor with the options already applied."""
     p = get_profile(name)
     final_form = form if form is not None else p.form
     kernels = channel_kernels if channel_kernels is not None else p.channel_kernels
     options = {k: v for k, v in (("form", form), ("channel_kernels", channel_kernels), ("distance_mm", distance_mm),
-                                 ("noise", noise_model), ("stray_light", stray_light)) if v is not None}
+                                 ("noise", noise_model), ("gt_frames", gt_frames), ("stray_light", stray_light))
+               if v is not None}
     stray = p.stray_light if stray_light is None else StrayLight.off() if stray_light == "off" else StrayLight()
+    frames = p.gt_frames if gt_frames is None else None if gt_frames == "ideal" else gt_frames
     if sensor_file:
         options["sensor_config"] = "a file"
     distance, applies_to, displays, notes = _distance(p, final_form, distance_mm, displays)
@@ -131,11 +148,11 @@ def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: 
     record = {"name": p.name, "sets": p.sets(), "options": options,
               "applied": {"form": final_form, "channel_kernels": kernels, "distance_mm": distance,
                           "distance_applies_to": applies_to, "defects": p.sets()["defects"], "fpn": p.sets()["fpn"],
-                          "stray_light": stray.describe(), "noise": {"noise": sensor.noise, "lambda_source": sensor.lambda_source}}}
+                          "gt_frames": frames, "stray_light": stray.describe(), "noise": {"noise": sensor.noise, "lambda_source": sensor.lambda_source}}}
     if notes:
         record["notes"] = notes
     return replace(cfg, form=final_form, channel_kernels=kernels, sensor=sensor, defects=p.defects, fpn=p.fpn,
-                   stray_light=stray, profile=record), displays
+                   gt_frames=frames, stray_light=stray, profile=record), displays
 
 
 def _distance(p: Profile, form: str, distance_mm: float | None, displays: list[Display]) -> tuple:
@@ -166,14 +183,18 @@ def describe(record: dict | None) -> str:
     f = a.get("fpn")
     fpn = "none" if f is None else (f"PRNU {f['prnu']:g}, DSNU {f['dsnu_e']:g} e-, rows/columns {f['row_offset_e']:g}/"
                                     f"{f['column_offset_e']:g} e-, dark {f['dark_current_e_per_s']:g} e-/s, seed {f['seed']}")
-    mark = {k: " (option)" if k in o else "" for k in ("form", "channel_kernels", "distance_mm", "noise",
+    mark = {k: " (option)" if k in o else "" for k in ("form", "channel_kernels", "distance_mm", "noise", "gt_frames",
                                                           "stray_light")}
+    n = a.get("gt_frames")
+    gt = "noise-free" if n is None else f"the mean of {n} glass frame{'s' if n > 1 else ''}"
+    stray = stray_summary(a.get("stray_light"))
     kernels = (f" (channel kernels {a['channel_kernels']}{mark['channel_kernels']})"
                if a["form"] == "per_channel" else "")
     return (f"profile {record['name']}: form {a['form']}{mark['form']}{kernels}, display-to-lens distance "
             f"{a['distance_mm']:g} mm{mark['distance_mm']} for {a['distance_applies_to']}, noise {a['noise']['noise']}"
             f"{mark['noise']}, defect pixels: {defects}, fixed-pattern noise: {fpn}, "
-            f"stray light: {stray_summary(a.get('stray_light'))}{mark['stray_light']}")
+            f"ground truth: {gt}{mark['gt_frames']}, "
+            f"stray light: {stray}{mark['stray_light']}")
 
 
 def stray_summary(knobs: dict | None) -> str:

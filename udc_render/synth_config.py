@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from udc_render.errors import UdcError
 from udc_render.optics.stray import StrayLight
 from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig
+from udc_render.sensor.frames import MAX_FRAMES as MAX_GT_FRAMES
 
 FORMS = ("spectral", "per_channel")
 # The per-channel form's 3 kernels (synth_kernels.display_channel_kernels), each with its record in capture.json
@@ -55,6 +56,9 @@ class SynthConfig:
     # (every pixel in focus, the kernels of the focus distance)
     defocus_tolerance_px: float | None = DEFAULT_DEFOCUS_TOLERANCE_PX
     bright_split: bool = True  # very bright pixels convolved apart in float64 (bright_pixels)
+    # The ground truth as the paper took it (l.235): the mean of N glass captures at gain 1 (sensor.frames:
+    # temporal noise σ/√N, quantised, saturating); None: the ideal noise-free ground truth (pipeline module doc)
+    gt_frames: int | None = None
     # The profile that chose form, distance and defects (udc_render.profiles.resolve_profile): a JSON
     # record {name, sets, options, applied}, kept in synth.json; None when no profile was used.
     profile: dict | None = field(default=None, hash=False)
@@ -72,6 +76,10 @@ class SynthConfig:
             raise SynthError(f"stray_light = {self.stray_light!r}: expected an optics.stray.StrayLight")
         if self.exposure_s is not None and not (self.exposure_s > 0 and math.isfinite(self.exposure_s)):
             raise SynthError(f"exposure_s = {self.exposure_s!r}: expected a positive number of seconds or auto")
+        g = self.gt_frames
+        if g is not None and (isinstance(g, bool) or not isinstance(g, int) or not 1 <= g <= MAX_GT_FRAMES):
+            raise SynthError(f"gt_frames = {g!r}: expected a whole number of frames from 1 to {MAX_GT_FRAMES}, or None "
+                             "(the noise-free ground truth)")
         tol = self.defocus_tolerance_px
         if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
                                 or not tol >= 0.05):

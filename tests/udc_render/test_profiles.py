@@ -128,7 +128,10 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
                      str(out[name])]) == 0
     synth = {n: json.loads((o / "synth.json").read_text()) for n, o in out.items()}
     assert _differing(synth["paper"], synth["physical"]) == {"form", "channel_kernels", "defects", "fpn", "profile",
-                                                             "stray_light"}
+                                                             "stray_light", "gt_noise"}
+    # both average the paper's 16 ground-truth frames, each with its own noise model (gaussian / poisson)
+    assert synth["paper"]["gt_frames"] == synth["physical"]["gt_frames"] == 16
+    assert {n: s["gt_noise"]["noise"] for n, s in synth.items()} == {"paper": "gaussian", "physical": "poisson"}
     assert synth["physical"]["stray_light"]["settings"]["haze"] == {"poled": 0.015}  # optics.stray's default
     assert synth["paper"]["stray_light"] == {"settings": StrayLight.off().describe(), "applied": False}
     assert synth["paper"]["channel_kernels"] == "paper" and synth["physical"]["channel_kernels"] is None  # spectral

@@ -12,6 +12,7 @@ from udc_render.errors import UdcError
 from udc_render.scene import RENDER_PATHS, SAMPLERS, load_scene
 from udc_render.scene.overrides import with_overrides
 from udc_render.sensor import SensorConfig
+from udc_render.synth_config import MAX_GT_FRAMES
 
 
 class UserError(UdcError):
@@ -68,6 +69,16 @@ def defocus_tolerance(text):
     if not (value >= 0.05 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"--defocus-tolerance-px = {text!r}: expected a number of pixels ≥ 0.05 or 'off'")
     return value
+
+
+def gt_frames(text):
+    """--gt-frames: a whole number of glass frames averaged into the ground truth, or 'ideal' (noise-free)."""
+    if text == "ideal":
+        return text
+    if not (text.isdigit() and 1 <= int(text) <= MAX_GT_FRAMES):
+        raise argparse.ArgumentTypeError(f"--gt-frames = {text!r}: expected a whole number of frames from 1 to "
+                                         f"{MAX_GT_FRAMES}, or 'ideal'")
+    return int(text)
 
 
 def float_list(text):
@@ -196,6 +207,9 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
                         "paper's y = γ x ⊗ k + n with 3 channel kernels [the profile's]")
     add_channel_kernels_argument(p)
     add_sensor_arguments(p)
+    p.add_argument("--gt-frames", type=gt_frames,
+                   help="the ground truth: the mean of N glass captures at gain 1 (their noise σ/√N, as the paper "
+                        "averaged 16), or 'ideal': noise-free [the profile's: 16]")
     p.add_argument("--stray-light", choices=("default", "off"),
                    help="stray light beyond diffraction (udc_render/optics/stray/): default, the evidence-backed "
                         "defaults (the P-OLED's haze), or off [the profile's: physical default, paper off]")
@@ -256,8 +270,8 @@ def synth_config(args):
 
 def capture_setup(args, displays: str | None = None):
     """(SynthConfig, displays) of a capture command: the capture options under --profile (the default
-    profile when the command has none); --form, --channel-kernels, --distance-mm, --noise-model and
-    --sensor-config win over the profile
+    profile when the command has none); --form, --channel-kernels, --distance-mm, --noise-model,
+    --gt-frames and --sensor-config win over the profile
     (udc_render.profiles). `displays`: the comma-separated displays [args.display]."""
     from udc_render.optics.displays import load_displays
     from udc_render.profiles import DEFAULT_PROFILE, resolve_profile
@@ -266,5 +280,6 @@ def capture_setup(args, displays: str | None = None):
                            form=getattr(args, "form", None), distance_mm=getattr(args, "distance_mm", None),
                            channel_kernels=getattr(args, "channel_kernels", None),
                            noise_model=getattr(args, "noise_model", None),
+                           gt_frames=getattr(args, "gt_frames", None),
                            stray_light=getattr(args, "stray_light", None),
                            sensor_file=getattr(args, "sensor_config", None) is not None)

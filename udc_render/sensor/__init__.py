@@ -20,7 +20,8 @@ Conventions
 
 Modules: config (SensorConfig), bayer (the RGGB convention, packing, bilinear demosaic), radiometry
 (radiance ──► electrons), noise (electrons ──► DN), fpn (FpnConfig: fixed-pattern noise), defects
-(DefectConfig: dead and hot pixels), capture (the whole chain).
+(DefectConfig: dead and hot pixels), capture (the whole chain), frames (the mean of N frames: the
+averaged ground truth).
 """
 from udc_render.sensor.bayer import (CHANNELS, SITE_COLOUR, SITES, demosaic_bilinear, mosaic_of, pack_rggb, rgb_to_rggb,
                                      site_colour, unpack_rggb)

@@ -1,0 +1,144 @@
+"""The averaged ground truth (SynthConfig.gt_frames, sensor.frames): the mean of N glass frames at gain 1."""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from udc_render.optics import displays as D
+from udc_render.pipeline import SynthConfig, SynthError, synthesize
+from udc_render.profiles import PAPER_GT_FRAMES, resolve_profile
+from udc_render.render import render_scene
+from udc_render.sensor import SensorConfig, SensorError, mosaic_of
+from udc_render.sensor.frames import _frame_by_frame, burst_sensor, mean_of_frames
+
+FLAT_PX = (256, 256)  # 65 536 pixels: a σ estimate within 0.3 % (1/√(2M)); tolerances 2 % (≈ 7 of those)
+
+
+def _frame_sigma_dn(s: SensorConfig, e: float) -> float:
+    """One poisson frame's σ in DN with the rounding: √(g² (e + σ_read²) + 1/12)."""
+    g = s.dn_per_electron
+    return math.sqrt(g * g * (e + s.read_noise_e ** 2) + 1 / 12)
+
+
+@pytest.mark.parametrize("e0", [300.0, 5000.0, 12000.0])
+def test_flat_field_noise_falls_as_one_over_root_n(e0):
+    """On a flat field the mean of 16 frames has the single frame's σ / 4 (within sampling error), both equal
+    to the model's σ (shot, read, rounding), and the mean level is unbiased."""
+    s = SensorConfig()
+    rng = np.random.default_rng(3)
+    e = np.full(FLAT_PX, e0)
+    one, _ = mean_of_frames(e, s, 1, rng)
+    sixteen, drawn = mean_of_frames(e, s, PAPER_GT_FRAMES, rng)
+    sigma = _frame_sigma_dn(s, e0)
+    assert drawn == 0  # no frame clips: the one-draw sum
+    assert one.std() == pytest.approx(sigma, rel=0.02)
+    assert sixteen.std() == pytest.approx(sigma / 4, rel=0.02)
+    assert one.std() / sixteen.std() == pytest.approx(4.0, rel=0.03)
+    assert abs(sixteen.mean() - s.dn_per_electron * e0) < 5 * sigma / 4 / math.sqrt(e.size)
+
+
+def test_the_one_draw_sum_matches_frames_drawn_one_by_one():
+    """The exact-sum path (Poisson(N e) + N(0, N σ²) + rounding) and N frames of expose agree in mean and σ."""
+    s = SensorConfig()
+    rng = np.random.default_rng(4)
+    e = np.full(FLAT_PX, 2000.0)
+    fast, _ = mean_of_frames(e, s, 16, rng)
+    slow = _frame_by_frame(e.ravel(), s, 16, rng)
+    assert fast.std() == pytest.approx(slow.std(), rel=0.03)
+    assert abs(fast.mean() - slow.mean()) < 5 * slow.std() / math.sqrt(e.size)
+
+
+def test_dark_pixels_clip_at_black_frame_by_frame():
+    """At black level 0 a dark pixel's frames are clipped at 0 DN one by one: the mean of e = 0 is
+    E[max(g·N(0, σ_read²), 0)] = g σ_read / √(2π), not 0, and never negative."""
+    s = SensorConfig()
+    out, drawn = mean_of_frames(np.zeros(FLAT_PX), s, 16, np.random.default_rng(5))
+    expected = s.dn_per_electron * s.read_noise_e / math.sqrt(2 * math.pi)
+    assert drawn == out.size and out.min() >= 0
+    assert out.mean() == pytest.approx(expected, rel=0.01)
+
+
+def test_saturation_and_the_gaussian_model():
+    """Above the full well every frame reads the white level; the Gaussian model's mean of 16 has its
+    σ √((λ_read + λ_shot w)/16) (in units of the range)."""
+    s = SensorConfig()
+    sat, _ = mean_of_frames(np.full((4, 4), 3 * s.full_well_e), s, 16, np.random.default_rng(6))
+    assert np.all(sat == s.white_level_dn)
+    g = burst_sensor(replace(s, noise="gaussian", lambda_source="sensor"), np.random.default_rng(7))
+    w = 0.4
+    out, _ = mean_of_frames(np.full(FLAT_PX, w * s.full_well_e), g, 16, np.random.default_rng(8))
+    sigma = math.sqrt((g.lambda_read[0] + g.lambda_shot[0] * w) / 16) * g.range_dn
+    assert out.std() == pytest.approx(math.sqrt(sigma ** 2 + 1 / (12 * 16)), rel=0.02)
+
+
+def test_bad_frames_and_brooks_without_a_burst_are_refused():
+    with pytest.raises(SensorError, match="frames = 0"):
+        mean_of_frames(np.zeros((2, 2)), SensorConfig(), 0, np.random.default_rng(0))
+    with pytest.raises(SensorError, match="brooks"):
+        mean_of_frames(np.zeros((2, 2)), SensorConfig(noise="gaussian", lambda_source="brooks"), 4,
+                       np.random.default_rng(0))
+    for bad in (0, -1, 2.5, True, 5000):
+        with pytest.raises(SynthError, match="gt_frames"):
+            SynthConfig(gt_frames=bad)
+
+
+# ---------------------------------------------------------------- the pipeline
+
+
+@pytest.fixture(scope="module")
+def grey(udc, tmp_path_factory, render_cache):
+    """A tiny monitor filling the frame with a mid-grey and a black half (both the sum and the per-frame path)."""
+    doc = udc.monitor_doc(image="pattern:white", bands={"range_nm": [400, 700], "step_nm": 100}, framing="fit")
+    scene = udc.write_scene(tmp_path_factory.mktemp("grey") / "grey.toml", doc)
+    return scene, render_scene(scene, progress=False)
+
+
+def test_none_is_the_noise_free_ground_truth(grey):
+    """gt_frames None: the gt is the glass electrons / full well, bit for bit (the glass capture's mean
+    electrons, mosaicked, are those electrons)."""
+    scene, band_image = grey
+    r = synthesize(band_image, scene, [D.preset("glass")], SynthConfig())
+    fw = SynthConfig().sensor.full_well_e
+    glass_e = r.captures["glass"].electrons
+    np.testing.assert_array_equal(mosaic_of(r.gt), (glass_e / fw).astype(np.float32))
+    assert r.meta["gt_frames"] is None and r.meta["gt_noise"] is None
+
+
+def test_averaged_ground_truth_in_the_pipeline(grey):
+    """gt_frames 16: the gt departs from the noise-free one by the 16-frame σ of each pixel (its normalised
+    residual has unit variance), is deterministic, its own noise stream (a second display changes nothing),
+    and recorded in synth.json's record."""
+    scene, band_image = grey
+    base = SynthConfig()
+    ideal = synthesize(band_image, scene, [D.preset("glass")], base).gt
+    cfg = replace(base, gt_frames=16)
+    a = synthesize(band_image, scene, [D.preset("glass")], cfg)
+    b = synthesize(band_image, scene, [D.preset("glass"), D.preset("toled")], cfg)
+    np.testing.assert_array_equal(a.gt, b.gt)
+    assert not np.array_equal(a.gt, synthesize(band_image, scene, [D.preset("glass")], cfg, item=1).gt)
+    s = SensorConfig()
+    g = s.dn_per_electron
+    e = ideal.astype(np.float64) * s.full_well_e
+    lit = e > 100
+    sigma = np.sqrt((g * g * (e + s.read_noise_e ** 2) + 1 / 12) / 16) / (g * s.full_well_e)
+    z = (a.gt.astype(np.float64) - ideal)[lit] / sigma[lit]
+    assert lit.sum() > 3000 and np.var(z) == pytest.approx(1.0, rel=0.1) and abs(z.mean()) < 0.1
+    rec = a.meta["gt_noise"]
+    assert a.meta["gt_frames"] == 16 and rec["frames"] == 16 and rec["gain"] == 1.0
+    assert "crc32('gt frames')" in rec["noise_seed"] and "mean of gt_frames" in a.meta["gt"]
+    json.dumps(a.meta)
+
+
+def test_profiles_average_sixteen_frames():
+    """Both profiles take the paper's 16-frame ground truth (l.235, l.258–260); 'ideal' and N override it."""
+    for name in ("paper", "physical"):
+        cfg, _ = resolve_profile(name, SynthConfig(), [D.preset("glass")])
+        assert cfg.gt_frames == PAPER_GT_FRAMES and cfg.profile["applied"]["gt_frames"] == 16
+        cfg, _ = resolve_profile(name, SynthConfig(), [D.preset("glass")], gt_frames="ideal")
+        assert cfg.gt_frames is None and cfg.profile["options"]["gt_frames"] == "ideal"
+        cfg, _ = resolve_profile(name, SynthConfig(), [D.preset("glass")], gt_frames=4)
+        assert cfg.gt_frames == 4
