@@ -87,13 +87,15 @@ _RENDERS: dict = {}
 
 
 def render(scene):
-    """The scene's render, once per process (every row of one image shares it)."""
+    """The scene's render, once per process (every row of one image shares it; the lens's aberrations act
+    on the kernels, not on the pinhole render, so they do not key it)."""
     from udc_render.render import render_scene
-    if scene not in _RENDERS:
+    key = replace(scene, lens=replace(scene.lens, zernike_waves=()))
+    if key not in _RENDERS:
         if len(_RENDERS) > 2:
             _RENDERS.clear()
-        _RENDERS[scene] = render_scene(scene)
-    return _RENDERS[scene]
+        _RENDERS[key] = render_scene(key)
+    return _RENDERS[key]
 
 
 def shoot(setup: Setup, display, item: int) -> Shot:

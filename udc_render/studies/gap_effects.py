@@ -55,6 +55,19 @@ def _stray(knob: str):
     return switch
 
 
+def _gt_frames(setup, on: bool):
+    from udc_render.profiles import PAPER_GT_FRAMES
+    return _cfg(setup, gt_frames=PAPER_GT_FRAMES if on else None)
+
+
+ABERRATION = ((4, 0, 0.07),)  # spherical, waves RMS at 550 nm: Maréchal's diffraction limit (Strehl 0.82)
+
+
+def _aberration(setup, on: bool):
+    scene = setup.scene
+    return replace(setup, scene=replace(scene, lens=replace(scene.lens, zernike_waves=ABERRATION if on else ())))
+
+
 def _read_noise(setup, on: bool):
     e = 2 * SensorConfig().read_noise_e if on else SensorConfig().read_noise_e
     return _cfg(setup, sensor=replace(setup.cfg.sensor, read_noise_e=e))
@@ -79,6 +92,10 @@ EFFECTS: tuple[Effect, ...] = (
            "paper's lens unmeasured: off by default", False, _stray("lens_glare")),
     Effect("the display's own light (1 cd/m²)", "an active display (l.429); the paper's panels were not driven "
            "(l.200–235): off by default", False, _stray("display_luminance_cd_m2")),
+    Effect("ground truth of 16 averaged frames", "the paper averaged 16 glass frames at gain 1 (l.235); its residual "
+           "noise σ/4 (sensor.frames)", True, _gt_frames, compare="gt"),
+    Effect("lens aberration (spherical 0.07 wave RMS)", "Maréchal's diffraction limit, Strehl 0.82; phone lenses "
+           "0.07–0.12 wave (MTF 0.2–0.25 at Nyquist); the paper's lens unmeasured: off by default", False, _aberration),
     Effect("read noise 2× (9.7 e⁻)", "the noise at gain 25: a sensitivity, not evidence (the default 4.87 e⁻ is a "
            "peer's; 1.55 µm Sony sensors read 1.5–5 e⁻, sensor.fpn's sources)", False, _read_noise),
 )
