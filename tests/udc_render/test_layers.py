@@ -21,7 +21,7 @@ LAYERS = [
      "udc_render.pipeline", "udc_render.dataset",
      "udc_render.profiles"),
     ("restore",),
-    ("udc_render.studies", "udc_render.calibration", "restore.studies"),
+    ("udc_render.studies", "udc_render.calibration", "udc_render.fit", "restore.studies"),
     ("udc_render.cli",),
 ]
 

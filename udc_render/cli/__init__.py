@@ -6,6 +6,7 @@ one library or experiment function.
     udc-render synth SCENE --display toled[,poled,FILE] --out DIR;   udc-render demo [--out DIR]
     udc-render dataset --builtin | --images DIR --count N --out DIR [--workers N | --scheduler ADDR]
     udc-render calibrate --display toled --out DIR
+    udc-render fit --psf IMAGE [IMAGE ...] [--flat IMAGE] [--white GLASS DISPLAY] [--noise-frames DIR] --out DIR
     udc-render study {psf,render,capture,realism,defocus,banding} --out DIR [--quick]
     udc-render train / evaluate / results   (restore/)
     udc-render --version
@@ -27,11 +28,11 @@ from psf.engine import PSFError
 from psf.layouts import LayoutError
 from psf.lens import LensError
 from udc_render import __version__
-from udc_render.cli import calibrate, dataset, evaluate, psf, render, results, study, synth, train
+from udc_render.cli import calibrate, dataset, evaluate, fit, psf, render, results, study, synth, train
 from udc_render.cli.args import Parser
 from udc_render.errors import UdcError
 
-COMMANDS = (psf, render, synth, dataset, calibrate, study, train, evaluate, results)
+COMMANDS = (psf, render, synth, dataset, calibrate, fit, study, train, evaluate, results)
 USER_ERRORS = (UdcError, PSFError, LayoutError, LensError)
 
 

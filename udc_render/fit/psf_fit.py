@@ -1,0 +1,185 @@
+"""The PSF fit: the exposures merged (hdr), the orders' lattice (lattice), their powers (photometry), each
+family's opening (refine), the lattice's centroid bias removed with the fitted model, the family chosen.
+
+The centroid bias: the light of an order's neighbours and the pixels pull each centroid a little (on the
+T-OLED's weak y orders beside the zeroth, 6e-4 of the pitch: 8 σ of a good measurement). The fitted model
+is rendered where the measurement's lattice is (synthetic.psf_image: the engine's kernel at the fitted
+pitch, shape, origin and rotation) and centroided at the same pixels; its centroids minus its known orders'
+positions are each peak's bias, taken off before the lattice is solved again (lattice.centroid_bias).
+
+Auto: every family whose visible lattice matches the peaks' (lattice.cell_basis) is fitted; the lowest
+χ²/dof wins. A family is refused when its residual is far above the noise: χ²/dof > CHI2_MAX and the
+noise-weighted RMS of the log residuals > LOG_RMS_MAX (orders' powers off by more than 20 % on average).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from udc_render.fit import lattice as lat_mod
+from udc_render.fit.families import Family, family
+from udc_render.fit.hdr import Plane
+from udc_render.fit.inputs import FitError
+from udc_render.fit.photometry import Optics, Orders, aperture_px, lattice_orders, measure, measure_exposures
+from udc_render.fit.refine import FamilyFit, fit_family
+from udc_render.fit.synthetic import psf_image
+
+CHI2_MAX, LOG_RMS_MAX = 9.0, 0.2
+MIN_ORDERS_ACROSS = 3  # the window must hold ± this many spacings (and an aperture) around the spot
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One family's lattice and fit."""
+    family: Family
+    lattice: lat_mod.Lattice
+    orders: Orders
+    fit: FamilyFit
+    pitch_um: tuple  # ((p_x, σ), (p_y, σ))
+    rotation_deg: tuple  # (φ, σ)
+    skew_deg: float
+    radius_px: float
+    raw_pitch_um: tuple  # before the centroid bias was removed
+
+
+@dataclass(frozen=True)
+class PsfFit:
+    """The plane, window, peaks, every candidate (and why the others were not fitted), the chosen one."""
+    plane: Plane
+    window: lat_mod.Window
+    peaks: lat_mod.Peaks
+    candidates: list
+    skipped: dict
+    chosen: Candidate
+
+
+def pitch_of(lattice: lat_mod.Lattice, optics: Optics) -> tuple:
+    """((p_x, σ), (p_y, σ)) µm: p = λ z_i / (|e| pixel), σ_p = p σ_|e| / |e|."""
+    out = []
+    for k in (0, 1):
+        n, s = lattice.length(k)
+        p = optics.lz_px / n
+        out.append((p, p * s / n))
+    return tuple(out)
+
+
+def _model_image(fam: Family, params, pitch, lattice: lat_mod.Lattice, optics: Optics, size: int) -> tuple:
+    """(noise-free model [S, S] with its orders where the lattice is, its lattice vectors [2, 2])."""
+    phi = math.radians(lattice.angle_deg(0)[0])
+    half = size // 2
+    img = psf_image(fam.layout(pitch[0][0], pitch[1][0], params), optics.lens, optics.wavelength_nm, optics.pixel_um,
+                    (size, size), (half + lattice.origin[0], half + lattice.origin[1]), math.degrees(phi), size)
+    rot = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])
+    return img, rot @ np.diag([optics.lz_px / pitch[0][0], optics.lz_px / pitch[1][0]])
+
+
+def _candidate(fam: Family, plane: Plane, window, peaks, visible, optics: Optics):
+    """The family's lattice, powers and fit; None (and why) when its lattice does not match the peaks'."""
+    m = fam.index_basis()
+    e0 = lat_mod.cell_basis(visible, m)
+    if e0 is None:
+        return None, "its lattice of orders does not match the peaks' (spacing, angle or centring)"
+    lattice, _ = lat_mod.fit_lattice(peaks, e0, m)
+    radius = aperture_px(lattice.spacing_px)
+    longest = max(np.hypot(*lattice.e1), np.hypot(*lattice.e2))
+    need = 2 * int(math.ceil(MIN_ORDERS_ACROSS * longest + radius)) + 1
+    if window.size < need:
+        raise FitError(f"the spot is clipped by the frame: its centre at pixel ({window.x0}, {window.y0}) leaves a "
+                       f"{window.size}-px window; at least {need} px (± {MIN_ORDERS_ACROSS} orders) are needed")
+    raw = pitch_of(lattice, optics)
+    index = lattice_orders(lattice, m, window.half, radius)
+    orders = measure_exposures(plane.exposures, window, lattice.points(index), index, radius, optics)
+    fit = fit_family(fam, orders, plane.factors, (raw[0][0], raw[1][0]), optics, window.size, radius)
+    model, e_model = _model_image(fam, fit.params, raw, lattice, optics, window.size)
+    bias = lat_mod.centroid_bias(model, lattice, e_model, lattice.origin)
+    lattice = lat_mod.solve_lattice(lattice.xy - bias, lattice.sigma, lattice.index, m)
+    pitch = pitch_of(lattice, optics)
+    rot = lattice.angle_deg(0)
+    skew = lattice.angle_deg(1)[0] - rot[0]
+    return Candidate(fam, lattice, orders, fit, pitch, rot, skew, radius, raw), ""
+
+
+def fit_psf(plane: Plane, optics: Optics, family_name: str, micrograph=None, window_px: int = 511,
+            progress=None) -> PsfFit:
+    """The PSF fit of the module doc; progress(text) is told each stage."""
+    say = progress or (lambda text: None)
+    window = lat_mod.spot_window(plane.value, plane.clipped, window_px)
+    if window.size < 33:
+        raise FitError(f"the spot is clipped by the frame: its centre at pixel ({window.x0}, {window.y0}) is "
+                       f"{window.half} px from the edge; at least 16 px are needed")
+    say("orders' lattice")
+    peaks = lat_mod.find_peaks(plane.value, plane.var, plane.usable, plane.clipped, window)
+    visible = lat_mod.visible_basis(peaks)
+    names = ("toled", "poled") + (("micrograph",) if micrograph else ()) if family_name == "auto" else (family_name,)
+    candidates, skipped = [], {}
+    for name in names:
+        for fam in family(name, micrograph):
+            say(f"family {name}{' (' + fam.orientation + ')' if fam.orientation else ''}")
+            cand, why = _candidate(fam, plane, window, peaks, visible, optics)
+            if cand is None:
+                skipped[f"{name} {fam.orientation}".strip()] = why
+            else:
+                candidates.append(cand)
+    if not candidates:
+        raise FitError(f"--family {family_name}: no family's lattice matches the orders found "
+                       f"({'; '.join(f'{k}: {v}' for k, v in skipped.items())})")
+    chosen = min(candidates, key=lambda c: c.fit.chi2_red)
+    if chosen.fit.chi2_red > CHI2_MAX and chosen.fit.rms_log > LOG_RMS_MAX:
+        raise FitError(f"--family {family_name}: the best family ({chosen.family.name}) leaves a residual far above the "
+                       f"noise (χ²/dof {chosen.fit.chi2_red:.3g}, orders' powers off by {chosen.fit.rms_log:.0%} RMS): "
+                       "the layout is not one of the families; try --family micrograph with the panel's micrograph")
+    return PsfFit(plane, window, peaks, candidates, skipped, chosen)
+
+
+def orders_table(c: Candidate) -> dict:
+    """Per order (m, n): the row with the best SNR in the reference exposure's units (÷ its fitted factor):
+    power, σ, model, whether any of its rows was fitted, its window position."""
+    o, fit = c.orders, c.fit
+    scale = np.exp(-fit.exposure_log_factor(o.exposure))
+    snr = np.where(np.isfinite(scale) & o.measured, o.snr(), -np.inf)
+    uniq, inv = np.unique(o.index, axis=0, return_inverse=True)
+    inv = inv.ravel()
+    best = np.full(len(uniq), -1)
+    for row in np.argsort(snr):
+        best[inv[row]] = row
+    best = best[snr[best] > -np.inf]
+    used = np.zeros(len(uniq), bool)
+    np.logical_or.at(used, inv, fit.used)
+    return {"m": o.index[best, 0], "n": o.index[best, 1], "x_px": o.xy[best, 0], "y_px": o.xy[best, 1],
+            "power": o.power[best] * scale[best], "sigma": o.sigma[best] * scale[best],
+            "model": fit.model_power[best] * scale[best], "used": used[inv[best]]}
+
+
+def synthesis_check(psf: PsfFit, layout, optics: Optics) -> tuple[dict, np.ndarray]:
+    """The display file's layout rendered where the measured spot is (origin, rotation) against the
+    measurement: (measures, the rendered window scaled to the measurement). Orders: each row's model is
+    exp(ln s + ln f + g·X) × the render's photometry at that order; image: the least-squares scale of the
+    render to the HDR window over the usable pixels. Each relative L2 beside the noise's alone."""
+    c, w = psf.chosen, psf.window
+    lattice, fit, o = c.lattice, c.fit, c.orders
+    phi = math.radians(c.rotation_deg[0])
+    half = w.half
+    render = psf_image(layout, optics.lens, optics.wavelength_nm, optics.pixel_um, (w.size, w.size),
+                       (half + lattice.origin[0], half + lattice.origin[1]), c.rotation_deg[0], w.size)
+    p = layout.period_um
+    rot = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])
+    e = rot @ np.diag([optics.lz_px / p[0], optics.lz_px / p[1]])
+    uniq, inv = np.unique(o.index, axis=0, return_inverse=True)
+    q = measure(render, np.ones_like(render), np.ones(render.shape, bool), lattice.origin + uniq @ e.T, uniq,
+                c.radius_px, optics.lens, optics.wavelength_nm, optics.pixel_um)
+    k = len(fit.family.names)
+    lin = fit.x[k:k + 3]
+    model = np.exp(lin[0] + o.xy @ lin[1:] / half + fit.exposure_log_factor(o.exposure)) * q.power[inv.ravel()]
+    u = fit.used & (model > 0)
+    pw, sg = o.power[u], o.sigma[u]
+    v, var, ok = w.crop(psf.plane.value), w.crop(psf.plane.var), w.crop(psf.plane.usable)
+    a = float(np.sum(v[ok] * render[ok]) / np.sum(render[ok] ** 2))
+    norm = float(np.sqrt(np.sum(v[ok] ** 2)))
+    return {"orders_relative_l2": float(np.linalg.norm(pw - model[u]) / np.linalg.norm(pw)),
+            "orders_noise_l2": float(np.linalg.norm(sg) / np.linalg.norm(pw)),
+            "orders_median_abs_log": float(np.median(np.abs(np.log(pw / model[u])))),
+            "orders": int(u.sum()),
+            "image_relative_l2": float(np.sqrt(np.sum((v[ok] - a * render[ok]) ** 2)) / norm),
+            "image_noise_l2": float(np.sqrt(np.sum(var[ok])) / norm)}, a * render

@@ -1,0 +1,173 @@
+"""Least squares of the opening on the orders' powers: log domain, weighted by the noise, the project's
+PSF engine as the forward model.
+
+Data: one row per order k and exposure i where the order is measured (photometry), y = ln P_ki with
+σ = σ(P_ki) / P_ki; the rows used are those the model predicts at SNR ≥ MIN_SNR (the first pass: measured at
+≥ START_SNR), so that the selection does not follow the noise.
+Model: ln M_ki = ln s + ln f_i + g_x X_k + g_y Y_k + ln Q_k(θ); f_i: exposure i's factor against the
+reference (the brightest exposure with rows; the exposures' HDR factors are fitted here with the orders,
+so that their error is in the covariance); X, Y: the order's position over the window's half side (a
+log-linear vignetting across the spot); Q_k(θ) = κ |c_k(θ)|² + δ_k.
+δ is what the engine's kernel (psf.compute_kernels at θ̂, the fitted pitch, the window's size) holds at each
+order beyond κ |c|²: the neighbours' light, the orders' interference, the window; the same photometry run
+on it gives Q^eng, κ = Σ Q^eng |c|² / Σ |c|⁴ and δ_k = Q^eng_k − κ |c_k(θ̂)|². The fit is repeated with δ
+until θ moves by less than 0.05 σ (at most ENGINE_PASSES kernels).
+Start: the grid's best point (the linear parameters solved at each), then scipy.optimize.least_squares
+(trf, within the family's bounds); covariance (JᵀJ)⁻¹ · max(1, χ²/dof): a residual beyond the noise widens it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from psf import compute_kernels
+from udc_render.fit.families import Family
+from udc_render.fit.inputs import border
+from udc_render.fit.photometry import Optics, Orders, measure
+
+MIN_SNR, START_SNR = 3.0, 5.0
+ENGINE_PASSES = 3
+TINY = 1e-300
+
+
+@dataclass(frozen=True)
+class FamilyFit:
+    """A family's fit: x = (shape parameters, ln s, g_x, g_y, ln f of the other exposures), its covariance,
+    χ² and dof, the noise-weighted RMS of the log residuals √(χ² / Σ σ⁻²), the rows used, the model's power
+    of every row (its exposure's units), the engine kernels run, the exposures with rows (the reference first)."""
+    family: Family
+    x: np.ndarray
+    cov: np.ndarray
+    chi2: float
+    dof: int
+    rms_log: float
+    used: np.ndarray
+    model_power: np.ndarray
+    passes: int
+    exposures: tuple
+
+    def exposure_log_factor(self, exposure: np.ndarray) -> np.ndarray:
+        """ln f of each row's exposure against the reference (0 for it)."""
+        k = len(self.family.names) + 3
+        table = dict(zip(self.exposures, np.concatenate([[0.0], self.x[k:]])))
+        return np.array([table.get(int(e), np.nan) for e in exposure])
+
+    @property
+    def params(self) -> np.ndarray:
+        return self.x[:len(self.family.names)]
+
+    @property
+    def sigma(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov))[:len(self.family.names)]
+
+    @property
+    def chi2_red(self) -> float:
+        return self.chi2 / max(self.dof, 1)
+
+
+def engine_powers(fam: Family, params, pitch_um, optics: Optics, size: int, index: np.ndarray,
+                  radius_px: float) -> Orders:
+    """The photometry of the engine's kernel (float64, pixel-integrated, d = 0) of the family's layout at
+    `params` and pitch (x, y): the same matched filter at the model's lattice (no rotation, centred)."""
+    ks = compute_kernels(fam.layout(pitch_um[0], pitch_um[1], params), optics.lens, [optics.wavelength_nm],
+                         pixel_um=optics.pixel_um, size_px=size, precision="float64")
+    k = ks.kernels[0].astype(np.float64)
+    k = k - np.median(k[border(k.shape)])
+    xy = index * np.array([optics.lz_px / pitch_um[0], optics.lz_px / pitch_um[1]])
+    return measure(k, np.ones_like(k), np.ones(k.shape, bool), xy, index, radius_px, optics.lens,
+                   optics.wavelength_nm, optics.pixel_um)
+
+
+def _design(orders: Orders, half: int, exposures: list[int]) -> np.ndarray:
+    """Columns 1, X, Y and one per exposure other than the reference (exposures[0])."""
+    cols = [np.ones(len(orders.xy)), orders.xy[:, 0] / half, orders.xy[:, 1] / half]
+    cols += [(orders.exposure == e).astype(float) for e in exposures[1:]]
+    return np.column_stack(cols)
+
+
+def _linear(y, sig, q, a):
+    """(linear coefficients; χ²) of y − q on the design a, weighted by 1/σ²."""
+    w = 1.0 / sig
+    coef = np.linalg.lstsq(a * w[:, None], (y - q) * w, rcond=None)[0]
+    r = (y - q - a @ coef) * w
+    return coef, float(r @ r)
+
+
+def _log_q(fam, params, index, kappa, delta):
+    return np.log(np.maximum(kappa * fam.power(params, index) + delta, TINY))
+
+
+def _start(fam: Family, index, y, sig, a, kappa, delta) -> np.ndarray:
+    """The grid point (and its linear parameters) with the smallest χ²."""
+    best, key = None, math.inf
+    grid = np.stack(np.meshgrid(*fam.grid, indexing="ij"), -1).reshape(-1, len(fam.grid)) if fam.grid else [()]
+    for point in grid:
+        coef, chi2 = _linear(y, sig, _log_q(fam, point, index, kappa, delta), a)
+        if chi2 < key:
+            best, key = np.concatenate([np.asarray(point, float), coef]), chi2
+    return best
+
+
+def _solve(fam: Family, index, y, sig, a, kappa, delta, x0):
+    """scipy.optimize.least_squares from x0: (x, covariance, χ², normalised residuals)."""
+    from scipy.optimize import least_squares
+    k = len(fam.names)
+    if k == 0:  # a micrograph: the model is linear in what is left
+        coef, chi2 = _linear(y, sig, _log_q(fam, (), index, kappa, delta), a)
+        r = (y - _log_q(fam, (), index, kappa, delta) - a @ coef) / sig
+        cov = np.linalg.pinv((a / sig[:, None]).T @ (a / sig[:, None])) * max(1.0, chi2 / max(len(y) - a.shape[1], 1))
+        return coef, cov, chi2, r
+
+    def resid(x):
+        return (y - _log_q(fam, x[:k], index, kappa, delta) - a @ x[k:]) / sig
+    lo = np.concatenate([fam.lower, [-np.inf] * a.shape[1]])
+    hi = np.concatenate([fam.upper, [np.inf] * a.shape[1]])
+    span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
+    res = least_squares(resid, np.clip(x0, lo + 1e-9 * span, hi - 1e-9 * span), bounds=(lo, hi), method="trf",
+                        x_scale="jac", xtol=1e-10, ftol=1e-10)
+    chi2 = float(res.fun @ res.fun)
+    cov = np.linalg.pinv(res.jac.T @ res.jac) * max(1.0, chi2 / max(len(y) - len(x0), 1))
+    return res.x, cov, chi2, res.fun
+
+
+def _reference(orders: Orders, rows: np.ndarray, factors) -> list[int]:
+    """The exposures with rows, the reference (the largest factor) first."""
+    have = sorted({int(e) for e in orders.exposure[rows]}, key=lambda e: -factors[e])
+    return have
+
+
+def fit_family(fam: Family, orders: Orders, factors, pitch_um, optics: Optics, size: int,
+               radius_px: float) -> FamilyFit:
+    """The family's shape fitted to the measured orders' powers (module doc)."""
+    half, k = size // 2, len(fam.names)
+    uniq, row_order = np.unique(orders.index, axis=0, return_inverse=True)
+    row_order = row_order.ravel()
+    snr = orders.snr()
+    used = orders.measured & (snr >= START_SNR)
+    exposures = _reference(orders, used, factors)
+    a = _design(orders, half, exposures)
+    kappa, delta = 1.0, np.zeros(len(uniq))
+    x = None
+    for passes in range(ENGINE_PASSES + 1):
+        y, sig = np.log(orders.power[used]), orders.sigma[used] / orders.power[used]
+        if x is None:
+            x = _start(fam, orders.index[used], y, sig, a[used], kappa, delta[row_order][used])
+        x_new, cov, chi2, r = _solve(fam, orders.index[used], y, sig, a[used], kappa, delta[row_order][used], x)
+        moved = np.max(np.abs(x_new - x)[:k] / np.maximum(np.sqrt(np.diag(cov))[:k], 1e-12), initial=0.0)
+        x = x_new
+        if passes == ENGINE_PASSES or (passes > 0 and moved < 0.05) or k == 0 and passes > 0:
+            break
+        eng = engine_powers(fam, x[:k], pitch_um, optics, size, uniq, radius_px)
+        c2 = fam.power(x[:k], uniq)
+        ok = eng.measured & (c2 > 0)
+        kappa = float(np.sum(eng.power[ok] * c2[ok]) / np.sum(c2[ok] ** 2))
+        delta = np.where(eng.measured, eng.power - kappa * c2, 0.0)
+        model = np.exp(a @ x[k:] + _log_q(fam, x[:k], uniq, kappa, delta)[row_order])
+        used = orders.measured & eng.measured[row_order] & (orders.power > 0) & (model >= MIN_SNR * orders.sigma) \
+            & np.isin(orders.exposure, exposures)
+    model = np.exp(a @ x[k:] + _log_q(fam, x[:k], uniq, kappa, delta)[row_order])
+    dof = max(int(used.sum()) - len(x), 1)
+    rms = float(np.sqrt(chi2 / np.sum(sig ** -2.0)))  # the noise-weighted RMS of the log residuals
+    return FamilyFit(fam, x, cov, chi2, dof, rms, used, model, passes, tuple(exposures))

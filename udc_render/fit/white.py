@@ -1,0 +1,150 @@
+"""γ per RGGB channel from the paper's white-square pair, and the display's transmission T(λ) fitted to it
+(--white GLASS DISPLAY).
+
+The paper calibrates γ with a white square on the monitor, captured through a glass panel and through
+the display (l.210): γ_c = (display level) / (glass level) per channel, the display capture at its own
+gain. Here: the square is where the glass capture exceeds half its 99.5th percentile; its central half
+(each side) is the region; per channel (a CFA's sites named by the pattern, Gr the green on the red rows; a
+colour image's R, G, G, B; a grey image's one value four times) γ_c = mean(display) / mean(glass) above
+black, σ_γ = std(display − γ glass) / (√n mean(glass)).
+T(λ) (optics.gamma): γ_c = G Σ_k W_ck T_k τ_k (1 − o_k) / Σ_k W_ck τ⁰_k (1 − o⁰_k), W the camera's electrons per
+band from the monitor's white, τ (1 − o) the kernels' share inside the window (the fitted layout's and the
+bare lens's, psf.compute_kernels at the band centres, KERNEL_PX px), G the display capture's gain over
+the glass capture's (--white-gain). Flat T: weighted least squares over R, G, B; when the channels
+disagree with it (χ²/dof > 4 and a channel more than 2 % off), the polyimide T(λ) of the P-OLED preset
+(scale, absorption edge, cathode) is fitted instead (optics.displays.fit_poled_transmission), σ by its
+Jacobian.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from psf import Lens, compute_kernels
+from psf.cache import cached
+from udc_render.fit.inputs import FitError, Frame, saturated
+from udc_render.optics.displays import Display, Transmission, fit_poled_transmission, poled_transmission
+from udc_render.optics.gamma import channel_gamma, kernel_gain, white_weights
+
+CHANNEL_NAMES = ("R", "Gr", "Gb", "B")
+KERNEL_PX = 511
+SENSOR_UM = (2048 * 1.55, 1024 * 1.55)
+
+
+@dataclass(frozen=True)
+class WhiteFit:
+    """γ (R, Gr, Gb, B) ± σ, the pixels per channel, the fitted transmission, its parameters ± σ, the γ it
+    gives, the gain."""
+    gamma: np.ndarray
+    gamma_sigma: np.ndarray
+    pixels: int
+    transmission: Transmission
+    params: dict
+    gamma_model: np.ndarray
+    gain: float
+
+
+def channels(frame: Frame) -> list[np.ndarray]:
+    """[4] (R, Gr, Gb, B) masks [H, W] of a frame's pixels (module doc)."""
+    h, w = frame.shape
+    if frame.kind != "cfa":
+        full = np.ones((h, w), bool)
+        return [full] * 4
+    out = [np.zeros((h, w), bool) for _ in range(4)]
+    rows, cols = np.mgrid[0:h, 0:w]
+    for i in (0, 1):
+        for j in (0, 1):
+            c = int(frame.sites[i, j])
+            name = {0: 0, 2: 3}.get(c, 1 if frame.sites[i, 1 - j] == 0 else 2)
+            out[name] |= (rows % 2 == i) & (cols % 2 == j)
+    return out
+
+
+def _planes(frame: Frame) -> list[np.ndarray]:
+    """The frame's value above black per channel (R, Gr, Gb, B) and the saturated pixels."""
+    if frame.kind == "rgb":
+        return [frame.dn[..., c] - frame.black_dn for c in (0, 1, 1, 2)]
+    return [frame.dn - frame.black_dn] * 4
+
+
+def measure_gamma(glass: Frame, display: Frame) -> tuple[np.ndarray, np.ndarray, int]:
+    """(γ [4], σ [4], pixels per channel) of the module doc."""
+    if glass.shape != display.shape:
+        raise FitError(f"--white: {glass.path} and {display.path} differ in size: expected one camera and framing")
+    gp, dp = _planes(glass), _planes(display)
+    level = np.mean(gp, axis=0)
+    square = level > 0.5 * np.percentile(level, 99.5)
+    rows, cols = np.nonzero(square)
+    if rows.size < 64:
+        raise FitError(f"--white {glass.path}: no white square found (fewer than 64 pixels above half the brightest)")
+    r0, r1, c0, c1 = rows.min(), rows.max(), cols.min(), cols.max()
+    region = np.zeros(glass.shape, bool)
+    region[r0 + (r1 - r0) // 4:r1 - (r1 - r0) // 4 + 1, c0 + (c1 - c0) // 4:c1 - (c1 - c0) // 4 + 1] = True
+    gamma, sigma, n = np.zeros(4), np.zeros(4), []
+    raw = lambda f, c: f.dn[..., (0, 1, 1, 2)[c]] if f.kind == "rgb" else f.dn  # noqa: E731
+    for c, mask in enumerate(channels(glass)):
+        sel = region & mask
+        for f in (glass, display):
+            if saturated(f, raw(f, c))[sel].any():
+                raise FitError(f"--white {f.path}: the white square is saturated in channel {CHANNEL_NAMES[c]}: "
+                               "expected captures below the white level (a shorter exposure)")
+        g, d = gp[c][sel], dp[c][sel]
+        gamma[c] = d.mean() / g.mean()
+        sigma[c] = np.std(d - gamma[c] * g) / (math.sqrt(g.size) * g.mean())
+        n.append(g.size)
+    return gamma, sigma, min(n)
+
+
+def band_gains(layout, lens: Lens, edges_nm, pixel_um: float) -> tuple[np.ndarray, np.ndarray]:
+    """(display, glass) τ_k (1 − o_k) at the band centres (module doc)."""
+    centres = 0.5 * (edges_nm[1:] + edges_nm[:-1])
+    out = []
+    for lay in (layout, None):
+        ks, _ = cached(compute_kernels, "mono", lay, lens, True, wavelengths_nm=centres, pixel_um=pixel_um,
+                       size_px=KERNEL_PX, sensor_um=SENSOR_UM)
+        out.append(kernel_gain(ks))
+    return out[0], out[1]
+
+
+def _rgb(gamma_rggb: np.ndarray) -> np.ndarray:
+    return np.array([gamma_rggb[0], 0.5 * (gamma_rggb[1] + gamma_rggb[2]), gamma_rggb[3]])
+
+
+def fit_transmission(gamma, sigma, layout, lens: Lens, edges_nm, pixel_um: float, camera: str, gain: float):
+    """(Transmission, {parameter: (value, σ)}, γ (R, Gr, Gb, B) it gives) of the module doc."""
+    d_gain, g_gain = band_gains(layout, lens, edges_nm, pixel_um)
+    w = white_weights(edges_nm, camera)
+    unit = channel_gamma(w, Display("t", layout, Transmission("flat", 1.0), gain), d_gain, g_gain, edges_nm)
+    a = np.array([unit[0], unit[1], unit[1], unit[2]])
+    inv = 1.0 / sigma ** 2
+    t = float(np.sum(inv * gamma * a) / np.sum(inv * a * a))
+    chi2 = float(np.sum(inv * (gamma - t * a) ** 2)) / 3
+    st = math.sqrt(max(1.0, chi2) / np.sum(inv * a * a))
+    if chi2 <= 4 or np.max(np.abs(gamma / (t * a) - 1)) <= 0.02:
+        if not 0 < t <= 1:
+            raise FitError(f"--white: the flat transmission fitted to γ is {t:.3g}: expected 0 < T ≤ 1 (is --white-gain "
+                           "the display capture's gain over the glass capture's?)")
+        return Transmission("flat", t), {"value": (t, st)}, t * a
+    p = fit_poled_transmission(d_gain, g_gain, edges_nm, camera, target=tuple(_rgb(gamma)), gain=gain, layout=layout)
+
+    def model(q):
+        return channel_gamma(w, Display("t", layout, poled_transmission(*q), gain), d_gain, g_gain, edges_nm)
+    jac = np.stack([(model(np.add(p, np.eye(3)[i] * h)) - model(np.subtract(p, np.eye(3)[i] * h))) / (2 * h)
+                    for i, h in enumerate((1e-4, 0.05, 0.05))], axis=1)
+    s_rgb = np.array([sigma[0], 0.5 * math.hypot(sigma[1], sigma[2]), sigma[3]])
+    cov = np.linalg.pinv(jac) @ np.diag(s_rgb ** 2) @ np.linalg.pinv(jac).T
+    g = model(p)
+    names = ("scale", "edge_nm", "cathode_nm")
+    return poled_transmission(*p), {n: (float(v), float(math.sqrt(cov[i, i]))) for i, (n, v) in enumerate(zip(names, p))}, \
+        np.array([g[0], g[1], g[1], g[2]])
+
+
+def fit_white(glass: Frame, display: Frame, layout, lens: Lens, edges_nm, pixel_um: float, camera: str,
+              gain: float) -> WhiteFit:
+    """γ and T(λ) of the module doc."""
+    gamma, sigma, n = measure_gamma(glass, display)
+    trans, params, model = fit_transmission(gamma, sigma, layout, lens, np.asarray(edges_nm, float), pixel_um,
+                                            camera, gain)
+    return WhiteFit(gamma, sigma, n, trans, params, model, gain)
