@@ -13,16 +13,19 @@ Per exposure i (d: DN above the black level):
   least-squares slopes d_dim ≈ f d_bright between each exposure and the next brighter one, over the pixels
   the brighter one sees unmasked below NEAR_CLIP of its range (its noise is not cut by the clip there) and
   above OVERLAP_SNR σ (selected on the brighter one alone, so the dimmer one's noise does not bias the
-  slope), weights 1 / var(f d_bright). The power fit (refine) fits the factors again, with the orders.
+  slope), weights 1 / var(f d_bright), pixels beyond OUTLIER_SIGMAS left out; a pixel two exposures disagree
+  on by more (a hot pixel the same in every exposure, a cosmic ray) is masked in both. The power fit
+  (refine) fits the factors again, with the orders.
 
 κ: from --noise-frames; else from the scatter of each exposure against the next brighter one,
-var(d_i / f − d_j) = σ_i² / f² + σ_j² + κ s (1/f + 1) / G at the brighter one's signal s, binned in s and
-regressed; else (one exposure) κ = saturation / ASSUMED_FULL_WELL_E (noted). The merged pixel is the
+var(d_i / f − d_j) = σ_i² / f² + σ_j² + κ s (1/f + 1) / G at the brighter one's signal s, solved for κ by the
+median of the normalised differences (on the sites of the laser's colour); else (one exposure) κ = saturation / ASSUMED_FULL_WELL_E (noted). The merged pixel is the
 inverse-variance mean of d_i / f_i over the exposures where it is unmasked: w_i = f_i² / var_i,
 var = 1 / Σ w_i.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +36,7 @@ from udc_render.sensor import photon_weights
 ASSUMED_FULL_WELL_E = 10000.0  # one exposure and no --noise-frames: κ = saturation / this (order of a phone pixel)
 OVERLAP_SNR = 5.0
 NEAR_CLIP = 0.9
+OUTLIER_SIGMAS = 8.0
 
 
 @dataclass(frozen=True)
@@ -103,16 +107,26 @@ def _overlap(dim: dict, bright: dict) -> np.ndarray:
         (bright["d"] > OVERLAP_SNR * bright["sigma"])
 
 
+def _pair_residual(dim: dict, bright: dict, f: float, kappa: float) -> np.ndarray:
+    """(d_dim − f d_bright) / σ at every pixel (the prediction's noise: both exposures')."""
+    pred = f * bright["d"]
+    var = dim["sigma"] ** 2 + kappa * np.clip(pred, 0.0, None) / dim["gain"] + \
+        f * f * (bright["sigma"] ** 2 + kappa * np.clip(bright["d"], 0.0, None) / bright["gain"])
+    return (dim["d"] - pred) / np.sqrt(var)
+
+
 def _factor(dim: dict, bright: dict, kappa: float) -> float:
-    """The weighted slope d_dim ≈ f d_bright of the module doc."""
+    """The weighted slope d_dim ≈ f d_bright of the module doc; pixels beyond OUTLIER_SIGMAS of it (a hot
+    pixel the same in both, a cosmic ray) are left out."""
     sel = _overlap(dim, bright)
     if sel.sum() < 5:
         raise FitError(f"--psf {dim['path']}: shares fewer than 5 unsaturated pixels above the noise with the next "
                        "brighter exposure: expected exposures of one spot at most ~30× apart")
-    a, b = dim["d"][sel], bright["d"][sel]
-    f = float(np.sum(a) / np.sum(b))
-    for _ in range(3):  # weights from the prediction f b, not from a (whose noise would bias the slope)
-        w = 1.0 / (dim["sigma"][sel] ** 2 + kappa * f * b / dim["gain"][sel])
+    f = float(np.median(dim["d"][sel] / bright["d"][sel]))
+    for _ in range(4):  # weights from the prediction f d_bright, not from d_dim (whose noise would bias the slope)
+        keep = sel & (np.abs(_pair_residual(dim, bright, f, kappa)) < OUTLIER_SIGMAS)
+        a, b = dim["d"][keep], bright["d"][keep]
+        w = 1.0 / (dim["sigma"][keep] ** 2 + kappa * f * b / dim["gain"][keep])
         f = float(np.sum(w * a * b) / np.sum(w * b * b))
     return f
 
@@ -129,23 +143,31 @@ def _chain(parts: list[dict], kappa: float) -> tuple[list[float], list[tuple[int
 
 
 def _shot_gain(parts: list[dict], factors: list[float], pairs) -> float | None:
-    """κ from the pairs' scaled differences (module doc); None when no pair has enough pixels."""
-    num = den = 0.0
+    """κ from the pairs' scaled differences (module doc): the κ with median |Δ| / √(base + κ u) = 0.6745 (the
+    Gaussian's, robust to outliers and to the spread of u), by bisection in ln κ; None when no pair has 100
+    pixels of the laser's colour or the read noise alone explains the scatter."""
+    delta, base, u = [], [], []
     for dim, bright in pairs:
         p, r = parts[dim], parts[bright]
         f = factors[dim] / factors[bright]
-        sel = _overlap(p, r)
+        sel = _overlap(p, r) & (r["gain"] >= 0.5)  # the laser's colour: the others' noise is the read noise × 1/G
         if sel.sum() < 100:
             continue
         s = r["d"][sel]
-        delta = p["d"][sel] / f - s
-        u = s / r["gain"][sel] * (1.0 / f + 1.0)
-        base = (p["sigma"][sel] / f) ** 2 + r["sigma"][sel] ** 2
-        for chunk in np.array_split(np.argsort(u), min(20, sel.sum() // 50)):
-            v = robust_sigma(delta[chunk]) ** 2 - float(np.mean(base[chunk]))
-            uu = float(np.mean(u[chunk]))
-            num, den = num + v * uu, den + uu * uu
-    return num / den if den > 0 and num > 0 else None
+        delta.append(p["d"][sel] / f - s)
+        base.append((p["sigma"][sel] / f) ** 2 + r["sigma"][sel] ** 2)
+        u.append(s / r["gain"][sel] * (1.0 / f + 1.0))
+    if not delta:
+        return None
+    delta, base, u = np.abs(np.concatenate(delta)), np.concatenate(base), np.concatenate(u)
+    score = lambda k: float(np.median(delta / np.sqrt(base + k * u))) - 0.6745  # noqa: E731
+    lo, hi = -12.0, 12.0
+    if score(math.exp(lo)) <= 0:
+        return None
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if score(math.exp(mid)) > 0 else (lo, mid)
+    return math.exp(0.5 * (lo + hi))
 
 
 def _merge(exposures: list[Exposure], factors: list[float]):
@@ -183,6 +205,12 @@ def merge_psf(frames: list[Frame], wavelength_nm: float, camera: str, dn_per_e: 
         else:
             kappa = measured
             factors, pairs, _ = _chain(parts, kappa)
+    for dim, bright in pairs:  # a pixel two exposures disagree on (hot, a cosmic ray) is masked in both
+        f = factors[dim] / factors[bright]
+        bad = parts[dim]["usable"] & parts[bright]["usable"] & \
+            (np.abs(_pair_residual(parts[dim], parts[bright], f, kappa)) > OUTLIER_SIGMAS)
+        parts[dim]["usable"] &= ~bad
+        parts[bright]["usable"] &= ~bad
     exposures = [Exposure(p["path"], p["d"], p["sigma"] ** 2 + kappa * np.clip(p["d"], 0.0, None) / p["gain"],
                           p["usable"], p["sat"], p["gain"], p["sigma"], int((~p["sat"] & ~p["usable"]).sum()))
                  for p in parts]

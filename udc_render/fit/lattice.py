@@ -83,6 +83,7 @@ def _centroids(v, var, bad, ys, xs, radius):
     for _ in range(4):
         a = np.clip(radius + 0.5 - np.hypot(gx[None] - cx[:, None, None], gy[None] - cy[:, None, None]), 0, 1)
         s = np.sum(a * pv, axis=(1, 2))
+        s = np.where(s != 0, s, np.nan)  # a centroid of nothing (a model that is 0 there): NaN, dropped
         cx = np.clip(np.sum(a * pv * gx, axis=(1, 2)) / s, -1.0, 1.0)
         cy = np.clip(np.sum(a * pv * gy, axis=(1, 2)) / s, -1.0, 1.0)
     d2 = (gx[None] - cx[:, None, None]) ** 2 + (gy[None] - cy[:, None, None]) ** 2
@@ -261,10 +262,24 @@ def solve_lattice(xy: np.ndarray, sigma: np.ndarray, index: np.ndarray, index_ba
                    index[use], xy[use], sigma[use], math.sqrt(f2), float(np.sqrt(np.mean(2 * r2[use]))), index_basis)
 
 
-def fit_lattice(peaks: Peaks, e0: np.ndarray, index_basis: np.ndarray) -> tuple[Lattice, np.ndarray]:
+def light_centre(value: np.ndarray, usable: np.ndarray, window: Window) -> np.ndarray:
+    """The window's centroid of light (window px): the zeroth order's place, since the PSF of a real mask at
+    d = 0 is centrosymmetric (the brightest peak can be a first order: the T-OLED's are 0.8–0.95 of it)."""
+    v = np.where(window.crop(usable), window.crop(value), 0.0)
+    g = np.arange(window.size) - window.half
+    total = v.sum()
+    return np.array([np.sum(v.sum(axis=0) * g), np.sum(v.sum(axis=1) * g)]) / total
+
+
+def fit_lattice(peaks: Peaks, e0: np.ndarray, index_basis: np.ndarray,
+                centre: np.ndarray | None = None) -> tuple[Lattice, np.ndarray]:
     """(the lattice, the peaks' numbers used): solve_lattice three times, the orders assigned again with the
-    previous pass's lattice (the far orders need the near ones' spacing)."""
+    previous pass's lattice (the far orders need the near ones' spacing); the zeroth order is the visible
+    order nearest `centre` (light_centre; None: the brightest peak)."""
     origin, e = peaks.xy[0].copy(), e0
+    if centre is not None:
+        shift = index_basis @ np.round(np.linalg.solve(e0 @ index_basis, centre - origin))
+        origin = origin + e0 @ shift
     for _ in range(3):
         keep, q = assign(peaks, origin, e, index_basis)
         if keep.size < 4:

@@ -4,7 +4,7 @@ family's opening (refine), the lattice's centroid bias removed with the fitted m
 The centroid bias: the light of an order's neighbours and the pixels pull each centroid a little (on the
 T-OLED's weak y orders beside the zeroth, 6e-4 of the pitch: 8 σ of a good measurement). The fitted model
 is rendered where the measurement's lattice is (synthetic.psf_image: the engine's kernel at the fitted
-pitch, shape, origin and rotation) and centroided at the same pixels; its centroids minus its known orders'
+pitch, shape, origin and rotation, times the fitted vignetting) and centroided at the same pixels; its centroids minus its known orders'
 positions are each peak's bias, taken off before the lattice is solved again (lattice.centroid_bias).
 
 Auto: every family whose visible lattice matches the peaks' (lattice.cell_basis) is fitted; the lowest
@@ -23,8 +23,8 @@ from udc_render.fit.families import Family, family
 from udc_render.fit.hdr import Plane
 from udc_render.fit.inputs import FitError
 from udc_render.fit.photometry import Optics, Orders, aperture_px, lattice_orders, measure, measure_exposures
-from udc_render.fit.refine import FamilyFit, fit_family
-from udc_render.fit.synthetic import psf_image
+from udc_render.fit.refine import FamilyFit, Geometry, fit_family
+from udc_render.fit.synthetic import render_window
 
 CHI2_MAX, LOG_RMS_MAX = 9.0, 0.2
 MIN_ORDERS_ACROSS = 3  # the window must hold ± this many spacings (and an aperture) around the spot
@@ -65,14 +65,16 @@ def pitch_of(lattice: lat_mod.Lattice, optics: Optics) -> tuple:
     return tuple(out)
 
 
-def _model_image(fam: Family, params, pitch, lattice: lat_mod.Lattice, optics: Optics, size: int) -> tuple:
-    """(noise-free model [S, S] with its orders where the lattice is, its lattice vectors [2, 2])."""
-    phi = math.radians(lattice.angle_deg(0)[0])
-    half = size // 2
-    img = psf_image(fam.layout(pitch[0][0], pitch[1][0], params), optics.lens, optics.wavelength_nm, optics.pixel_um,
-                    (size, size), (half + lattice.origin[0], half + lattice.origin[1]), math.degrees(phi), size)
-    rot = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])
-    return img, rot @ np.diag([optics.lz_px / pitch[0][0], optics.lz_px / pitch[1][0]])
+def render(layout, optics: Optics, size: int, origin: np.ndarray, rotation_deg: float) -> np.ndarray:
+    """The layout's noise-free PSF on the window, centred at `origin`, turned by rotation_deg."""
+    return render_window(layout, optics.lens, optics.wavelength_nm, optics.pixel_um, size, origin, rotation_deg)
+
+
+def field_map(fit: FamilyFit, size: int) -> np.ndarray:
+    """exp(g_x X + g_y Y + q (X² + Y²)) on the window [S, S]: the fitted vignetting (without the scale)."""
+    g = np.arange(size) - size // 2
+    xy = np.stack(np.broadcast_arrays(g[None, :], g[:, None]), -1).reshape(-1, 2)
+    return np.exp(fit.log_field(xy, size // 2) - fit.log_field(np.zeros((1, 2)), size // 2)).reshape(size, size)
 
 
 def _candidate(fam: Family, plane: Plane, window, peaks, visible, optics: Optics):
@@ -81,7 +83,7 @@ def _candidate(fam: Family, plane: Plane, window, peaks, visible, optics: Optics
     e0 = lat_mod.cell_basis(visible, m)
     if e0 is None:
         return None, "its lattice of orders does not match the peaks' (spacing, angle or centring)"
-    lattice, _ = lat_mod.fit_lattice(peaks, e0, m)
+    lattice, _ = lat_mod.fit_lattice(peaks, e0, m, lat_mod.light_centre(plane.value, plane.usable, window))
     radius = aperture_px(lattice.spacing_px)
     longest = max(np.hypot(*lattice.e1), np.hypot(*lattice.e2))
     need = 2 * int(math.ceil(MIN_ORDERS_ACROSS * longest + radius)) + 1
@@ -91,10 +93,17 @@ def _candidate(fam: Family, plane: Plane, window, peaks, visible, optics: Optics
     raw = pitch_of(lattice, optics)
     index = lattice_orders(lattice, m, window.half, radius)
     orders = measure_exposures(plane.exposures, window, lattice.points(index), index, radius, optics)
-    fit = fit_family(fam, orders, plane.factors, (raw[0][0], raw[1][0]), optics, window.size, radius)
-    model, e_model = _model_image(fam, fit.params, raw, lattice, optics, window.size)
+    geometry = Geometry(window.size, lattice.origin, lattice.angle_deg(0)[0])
+    fit = fit_family(fam, orders, plane.factors, (raw[0][0], raw[1][0]), optics, geometry, radius)
+    model = fit.image if fit.image is not None else render(fam.layout(raw[0][0], raw[1][0], fit.params), optics,
+                                                            window.size, lattice.origin, geometry.rotation_deg)
+    phi = math.radians(geometry.rotation_deg)
+    e_model = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]]) @ \
+        np.diag([optics.lz_px / raw[0][0], optics.lz_px / raw[1][0]])
+    model = model * field_map(fit, window.size)  # the fitted vignetting too
     bias = lat_mod.centroid_bias(model, lattice, e_model, lattice.origin)
-    lattice = lat_mod.solve_lattice(lattice.xy - bias, lattice.sigma, lattice.index, m)
+    ok = np.all(np.isfinite(bias), axis=1)
+    lattice = lat_mod.solve_lattice(lattice.xy[ok] - bias[ok], lattice.sigma[ok], lattice.index[ok], m)
     pitch = pitch_of(lattice, optics)
     rot = lattice.angle_deg(0)
     skew = lattice.angle_deg(1)[0] - rot[0]
@@ -155,31 +164,30 @@ def orders_table(c: Candidate) -> dict:
 def synthesis_check(psf: PsfFit, layout, optics: Optics) -> tuple[dict, np.ndarray]:
     """The display file's layout rendered where the measured spot is (origin, rotation) against the
     measurement: (measures, the rendered window scaled to the measurement). Orders: each row's model is
-    exp(ln s + ln f + g·X) × the render's photometry at that order; image: the least-squares scale of the
-    render to the HDR window over the usable pixels. Each relative L2 beside the noise's alone."""
+    exp(ln s + ln f + the field's terms) × the render's photometry at that order; image: the least-squares scale of the
+    render (times the fitted vignetting) to the HDR window over the usable pixels. Each relative L2 beside
+    the noise's alone."""
     c, w = psf.chosen, psf.window
     lattice, fit, o = c.lattice, c.fit, c.orders
     phi = math.radians(c.rotation_deg[0])
     half = w.half
-    render = psf_image(layout, optics.lens, optics.wavelength_nm, optics.pixel_um, (w.size, w.size),
-                       (half + lattice.origin[0], half + lattice.origin[1]), c.rotation_deg[0], w.size)
+    synth = render(layout, optics, w.size, lattice.origin, c.rotation_deg[0])
     p = layout.period_um
     rot = np.array([[math.cos(phi), -math.sin(phi)], [math.sin(phi), math.cos(phi)]])
     e = rot @ np.diag([optics.lz_px / p[0], optics.lz_px / p[1]])
     uniq, inv = np.unique(o.index, axis=0, return_inverse=True)
-    q = measure(render, np.ones_like(render), np.ones(render.shape, bool), lattice.origin + uniq @ e.T, uniq,
+    q = measure(synth, np.ones_like(synth), np.ones(synth.shape, bool), lattice.origin + uniq @ e.T, uniq,
                 c.radius_px, optics.lens, optics.wavelength_nm, optics.pixel_um)
-    k = len(fit.family.names)
-    lin = fit.x[k:k + 3]
-    model = np.exp(lin[0] + o.xy @ lin[1:] / half + fit.exposure_log_factor(o.exposure)) * q.power[inv.ravel()]
+    synth = synth * field_map(fit, w.size)
+    model = np.exp(fit.log_field(o.xy, half) + fit.exposure_log_factor(o.exposure)) * q.power[inv.ravel()]
     u = fit.used & (model > 0)
     pw, sg = o.power[u], o.sigma[u]
     v, var, ok = w.crop(psf.plane.value), w.crop(psf.plane.var), w.crop(psf.plane.usable)
-    a = float(np.sum(v[ok] * render[ok]) / np.sum(render[ok] ** 2))
+    a = float(np.sum(v[ok] * synth[ok]) / np.sum(synth[ok] ** 2))
     norm = float(np.sqrt(np.sum(v[ok] ** 2)))
     return {"orders_relative_l2": float(np.linalg.norm(pw - model[u]) / np.linalg.norm(pw)),
             "orders_noise_l2": float(np.linalg.norm(sg) / np.linalg.norm(pw)),
             "orders_median_abs_log": float(np.median(np.abs(np.log(pw / model[u])))),
             "orders": int(u.sum()),
-            "image_relative_l2": float(np.sqrt(np.sum((v[ok] - a * render[ok]) ** 2)) / norm),
-            "image_noise_l2": float(np.sqrt(np.sum(var[ok])) / norm)}, a * render
+            "image_relative_l2": float(np.sqrt(np.sum((v[ok] - a * synth[ok]) ** 2)) / norm),
+            "image_noise_l2": float(np.sqrt(np.sum(var[ok])) / norm)}, a * synth

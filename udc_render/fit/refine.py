@@ -4,16 +4,22 @@ PSF engine as the forward model.
 Data: one row per order k and exposure i where the order is measured (photometry), y = ln P_ki with
 σ = σ(P_ki) / P_ki; the rows used are those the model predicts at SNR ≥ MIN_SNR (the first pass: measured at
 ≥ START_SNR), so that the selection does not follow the noise.
-Model: ln M_ki = ln s + ln f_i + g_x X_k + g_y Y_k + ln Q_k(θ); f_i: exposure i's factor against the
-reference (the brightest exposure with rows; the exposures' HDR factors are fitted here with the orders,
-so that their error is in the covariance); X, Y: the order's position over the window's half side (a
-log-linear vignetting across the spot); Q_k(θ) = κ |c_k(θ)|² + δ_k.
-δ is what the engine's kernel (psf.compute_kernels at θ̂, the fitted pitch, the window's size) holds at each
-order beyond κ |c|²: the neighbours' light, the orders' interference, the window; the same photometry run
-on it gives Q^eng, κ = Σ Q^eng |c|² / Σ |c|⁴ and δ_k = Q^eng_k − κ |c_k(θ̂)|². The fit is repeated with δ
-until θ moves by less than 0.05 σ (at most ENGINE_PASSES kernels).
-Start: the grid's best point (the linear parameters solved at each), then scipy.optimize.least_squares
-(trf, within the family's bounds); covariance (JᵀJ)⁻¹ · max(1, χ²/dof): a residual beyond the noise widens it.
+Model: ln M_ki = ln s + ln f_i + g_x X_k + g_y Y_k + q (X_k² + Y_k²) + ln Q_k(θ); f_i: exposure i's factor
+against the reference (the brightest exposure with rows; the exposures' HDR factors are fitted here with
+the orders, so that their error is in the covariance); X, Y: the order's position over the window's half
+side (the vignetting across the spot: a gradient where the spot is off the axis, a radial fall-off where it
+is on it); Q_k(θ) = κ |c_k(θ)|² + δ_k.
+δ is what the engine's PSF holds at each order beyond κ |c|²: the neighbours' light, the orders' interference,
+the pixels' phases; it is the layout at θ̂ and the fitted pitch rendered where the measurement's spot is
+(synthetic.render_window: psf.compute_kernels at a third of the pixel, turned by the lattice's rotation,
+centred on its origin, summed back to pixels), the same photometry run on it at its own orders: Q^eng,
+κ = Σ Q^eng |c|² / Σ |c|⁴ and δ_k = Q^eng_k − κ |c_k(θ̂)|². The fit is repeated with δ until θ moves by less
+than 0.05 σ (at most ENGINE_PASSES renders).
+Start: the grid's best point (the linear parameters solved at each) on the orders with |m|, |n| ≤
+START_ORDERS, polished there (the χ² of many orders has a minimum between every two zeros of |c|², ~1 /
+(2 n_max) apart: the low orders' landscape is smooth enough for the grid); then scipy.optimize.least_squares
+(trf, within the family's bounds) on all; covariance (JᵀJ)⁻¹ · max(1, χ²/dof): a residual beyond the
+noise widens it.
 """
 from __future__ import annotations
 
@@ -22,21 +28,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from psf import compute_kernels
 from udc_render.fit.families import Family
 from udc_render.fit.inputs import border
 from udc_render.fit.photometry import Optics, Orders, measure
+from udc_render.fit.synthetic import render_window
 
 MIN_SNR, START_SNR = 3.0, 5.0
+START_ORDERS = 6
+ROBUST_SCALE = 5.0  # the start's score: Σ ln(1 + (r / 5)²), so that an order near a zero of |c|² (its log
+# residual steep in θ) cannot hide the right basin from a grid point a step away
+FIELD_TERMS = 4  # ln s, g_x, g_y, q
 ENGINE_PASSES = 3
 TINY = 1e-300
 
 
 @dataclass(frozen=True)
 class FamilyFit:
-    """A family's fit: x = (shape parameters, ln s, g_x, g_y, ln f of the other exposures), its covariance,
+    """A family's fit: x = (shape parameters, ln s, g_x, g_y, q, ln f of the other exposures), its covariance,
     χ² and dof, the noise-weighted RMS of the log residuals √(χ² / Σ σ⁻²), the rows used, the model's power
-    of every row (its exposure's units), the engine kernels run, the exposures with rows (the reference first)."""
+    of every row (its exposure's units), the renders made, the exposures with rows (the reference first), the
+    last render."""
     family: Family
     x: np.ndarray
     cov: np.ndarray
@@ -47,12 +58,18 @@ class FamilyFit:
     model_power: np.ndarray
     passes: int
     exposures: tuple
+    image: np.ndarray | None = None  # the last render of the model (at θ within 0.05 σ of the result)
 
     def exposure_log_factor(self, exposure: np.ndarray) -> np.ndarray:
         """ln f of each row's exposure against the reference (0 for it)."""
-        k = len(self.family.names) + 3
+        k = len(self.family.names) + FIELD_TERMS
         table = dict(zip(self.exposures, np.concatenate([[0.0], self.x[k:]])))
         return np.array([table.get(int(e), np.nan) for e in exposure])
+
+    def log_field(self, xy: np.ndarray, half: int) -> np.ndarray:
+        """ln s + g_x X + g_y Y + q (X² + Y²) at window positions xy [N, 2]."""
+        k = len(self.family.names)
+        return _field(xy / half) @ self.x[k:k + FIELD_TERMS]
 
     @property
     def params(self) -> np.ndarray:
@@ -67,32 +84,52 @@ class FamilyFit:
         return self.chi2 / max(self.dof, 1)
 
 
-def engine_powers(fam: Family, params, pitch_um, optics: Optics, size: int, index: np.ndarray,
-                  radius_px: float) -> Orders:
-    """The photometry of the engine's kernel (float64, pixel-integrated, d = 0) of the family's layout at
-    `params` and pitch (x, y): the same matched filter at the model's lattice (no rotation, centred)."""
-    ks = compute_kernels(fam.layout(pitch_um[0], pitch_um[1], params), optics.lens, [optics.wavelength_nm],
-                         pixel_um=optics.pixel_um, size_px=size, precision="float64")
-    k = ks.kernels[0].astype(np.float64)
-    k = k - np.median(k[border(k.shape)])
-    xy = index * np.array([optics.lz_px / pitch_um[0], optics.lz_px / pitch_um[1]])
-    return measure(k, np.ones_like(k), np.ones(k.shape, bool), xy, index, radius_px, optics.lens,
-                   optics.wavelength_nm, optics.pixel_um)
+@dataclass(frozen=True)
+class Geometry:
+    """Where the measurement's spot is: the window's size, the zeroth order's place (window px) and the
+    display's rotation (degrees, x towards +y)."""
+    size: int
+    origin: np.ndarray
+    rotation_deg: float
+
+    def orders_xy(self, index: np.ndarray, pitch_um, optics: Optics) -> np.ndarray:
+        """Window positions of cell orders [N, 2] of a display of that pitch (x, y), turned and placed."""
+        a = math.radians(self.rotation_deg)
+        rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
+        e = rot @ np.diag([optics.lz_px / pitch_um[0], optics.lz_px / pitch_um[1]])
+        return self.origin[None, :] + index @ e.T
+
+
+def engine_powers(fam: Family, params, pitch_um, optics: Optics, geometry: Geometry, index: np.ndarray,
+                  radius_px: float) -> tuple[Orders, np.ndarray]:
+    """(the photometry, the image [S, S]) of the family's layout at `params` and pitch (x, y) rendered where the
+    spot is (module doc)."""
+    img = render_window(fam.layout(pitch_um[0], pitch_um[1], params), optics.lens, optics.wavelength_nm,
+                        optics.pixel_um, geometry.size, geometry.origin, geometry.rotation_deg)
+    k = img - np.median(img[border(img.shape)])
+    orders = measure(k, np.ones_like(k), np.ones(k.shape, bool), geometry.orders_xy(index, pitch_um, optics), index,
+                     radius_px, optics.lens, optics.wavelength_nm, optics.pixel_um)
+    return orders, img
+
+
+def _field(u: np.ndarray) -> np.ndarray:
+    """Columns 1, X, Y, X² + Y² of positions u [N, 2] over the window's half side."""
+    return np.column_stack([np.ones(len(u)), u, np.sum(u * u, axis=1)])
 
 
 def _design(orders: Orders, half: int, exposures: list[int]) -> np.ndarray:
-    """Columns 1, X, Y and one per exposure other than the reference (exposures[0])."""
-    cols = [np.ones(len(orders.xy)), orders.xy[:, 0] / half, orders.xy[:, 1] / half]
-    cols += [(orders.exposure == e).astype(float) for e in exposures[1:]]
-    return np.column_stack(cols)
+    """The field's columns and one per exposure other than the reference (exposures[0])."""
+    cols = [(orders.exposure == e).astype(float) for e in exposures[1:]]
+    return np.column_stack([_field(orders.xy / half)] + cols)
 
 
-def _linear(y, sig, q, a):
-    """(linear coefficients; χ²) of y − q on the design a, weighted by 1/σ²."""
+def _linear(y, sig, q, a, robust: bool = False):
+    """(linear coefficients; χ², or with `robust` Σ ln(1 + (r/ROBUST_SCALE)²)) of y − q on the design a,
+    weighted by 1/σ²."""
     w = 1.0 / sig
     coef = np.linalg.lstsq(a * w[:, None], (y - q) * w, rcond=None)[0]
     r = (y - q - a @ coef) * w
-    return coef, float(r @ r)
+    return coef, float(np.sum(np.log1p((r / ROBUST_SCALE) ** 2))) if robust else float(r @ r)
 
 
 def _log_q(fam, params, index, kappa, delta):
@@ -104,14 +141,15 @@ def _start(fam: Family, index, y, sig, a, kappa, delta) -> np.ndarray:
     best, key = None, math.inf
     grid = np.stack(np.meshgrid(*fam.grid, indexing="ij"), -1).reshape(-1, len(fam.grid)) if fam.grid else [()]
     for point in grid:
-        coef, chi2 = _linear(y, sig, _log_q(fam, point, index, kappa, delta), a)
+        coef, chi2 = _linear(y, sig, _log_q(fam, point, index, kappa, delta), a, robust=True)
         if chi2 < key:
             best, key = np.concatenate([np.asarray(point, float), coef]), chi2
     return best
 
 
-def _solve(fam: Family, index, y, sig, a, kappa, delta, x0):
-    """scipy.optimize.least_squares from x0: (x, covariance, χ², normalised residuals)."""
+def _solve(fam: Family, index, y, sig, a, kappa, delta, x0, loss: str = "linear"):
+    """scipy.optimize.least_squares from x0: (x, covariance, χ², normalised residuals); loss 'cauchy' for the
+    start's polish (scale ROBUST_SCALE)."""
     from scipy.optimize import least_squares
     k = len(fam.names)
     if k == 0:  # a micrograph: the model is linear in what is left
@@ -126,7 +164,7 @@ def _solve(fam: Family, index, y, sig, a, kappa, delta, x0):
     hi = np.concatenate([fam.upper, [np.inf] * a.shape[1]])
     span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
     res = least_squares(resid, np.clip(x0, lo + 1e-9 * span, hi - 1e-9 * span), bounds=(lo, hi), method="trf",
-                        x_scale="jac", xtol=1e-10, ftol=1e-10)
+                        x_scale="jac", xtol=1e-10, ftol=1e-10, loss=loss, f_scale=ROBUST_SCALE)
     chi2 = float(res.fun @ res.fun)
     cov = np.linalg.pinv(res.jac.T @ res.jac) * max(1.0, chi2 / max(len(y) - len(x0), 1))
     return res.x, cov, chi2, res.fun
@@ -138,10 +176,10 @@ def _reference(orders: Orders, rows: np.ndarray, factors) -> list[int]:
     return have
 
 
-def fit_family(fam: Family, orders: Orders, factors, pitch_um, optics: Optics, size: int,
+def fit_family(fam: Family, orders: Orders, factors, pitch_um, optics: Optics, geometry: Geometry,
                radius_px: float) -> FamilyFit:
     """The family's shape fitted to the measured orders' powers (module doc)."""
-    half, k = size // 2, len(fam.names)
+    half, k = geometry.size // 2, len(fam.names)
     uniq, row_order = np.unique(orders.index, axis=0, return_inverse=True)
     row_order = row_order.ravel()
     snr = orders.snr()
@@ -149,17 +187,20 @@ def fit_family(fam: Family, orders: Orders, factors, pitch_um, optics: Optics, s
     exposures = _reference(orders, used, factors)
     a = _design(orders, half, exposures)
     kappa, delta = 1.0, np.zeros(len(uniq))
-    x = None
+    x = image = None
     for passes in range(ENGINE_PASSES + 1):
         y, sig = np.log(orders.power[used]), orders.sigma[used] / orders.power[used]
         if x is None:
-            x = _start(fam, orders.index[used], y, sig, a[used], kappa, delta[row_order][used])
+            low = np.all(np.abs(orders.index[used]) <= START_ORDERS, axis=1)
+            low = low if low.sum() >= a.shape[1] + k + 5 else np.ones_like(low)
+            args = (fam, orders.index[used][low], y[low], sig[low], a[used][low], kappa, delta[row_order][used][low])
+            x = _solve(*args, _start(*args), loss="cauchy")[0]
         x_new, cov, chi2, r = _solve(fam, orders.index[used], y, sig, a[used], kappa, delta[row_order][used], x)
         moved = np.max(np.abs(x_new - x)[:k] / np.maximum(np.sqrt(np.diag(cov))[:k], 1e-12), initial=0.0)
         x = x_new
         if passes == ENGINE_PASSES or (passes > 0 and moved < 0.05) or k == 0 and passes > 0:
             break
-        eng = engine_powers(fam, x[:k], pitch_um, optics, size, uniq, radius_px)
+        eng, image = engine_powers(fam, x[:k], pitch_um, optics, geometry, uniq, radius_px)
         c2 = fam.power(x[:k], uniq)
         ok = eng.measured & (c2 > 0)
         kappa = float(np.sum(eng.power[ok] * c2[ok]) / np.sum(c2[ok] ** 2))
@@ -170,4 +211,4 @@ def fit_family(fam: Family, orders: Orders, factors, pitch_um, optics: Optics, s
     model = np.exp(a @ x[k:] + _log_q(fam, x[:k], uniq, kappa, delta)[row_order])
     dof = max(int(used.sum()) - len(x), 1)
     rms = float(np.sqrt(chi2 / np.sum(sig ** -2.0)))  # the noise-weighted RMS of the log residuals
-    return FamilyFit(fam, x, cov, chi2, dof, rms, used, model, passes, tuple(exposures))
+    return FamilyFit(fam, x, cov, chi2, dof, rms, used, model, passes, tuple(exposures), image)

@@ -64,6 +64,15 @@ def psf_image(layout, lens: Lens, wavelength_nm: float, pixel_um: float, shape_h
     return np.clip(vals, 0.0, None).reshape(h, oversample, w, oversample).sum(axis=(1, 3))
 
 
+def render_window(layout, lens: Lens, wavelength_nm: float, pixel_um: float, size: int, origin, rotation_deg: float):
+    """psf_image on a square window [S, S] (its centre pixel at (0, 0)) with the PSF's centre at `origin`
+    (window px), from a kernel large enough to cover the whole window."""
+    half = size // 2
+    cover = 2 * (half + int(math.ceil(np.max(np.abs(origin)))) + 4) + 1
+    return psf_image(layout, lens, wavelength_nm, pixel_um, (size, size), (half + origin[0], half + origin[1]),
+                     rotation_deg, cover)
+
+
 def vignetting_map(shape_hw, corner_loss: float) -> np.ndarray:
     """1 − corner_loss · r² / r_corner²: a radial fall-off about the frame's centre (the optical axis)."""
     h, w = shape_hw
