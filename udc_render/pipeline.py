@@ -213,19 +213,21 @@ def layer_kernels(layers: DepthLayers, kernels: Kernels, scene: Scene, displays:
         if z == kernels.object_distance_m:
             out.append(kernels)
             continue
-        k = plan_kernels(scene, displays, cfg, progress, object_distance_m=z)
+        k = plan_kernels(scene, displays, cfg, progress, object_distance_m=z, far=False)  # the focus's far fields
         out.append(compact_kernels(k, scene, cfg) if kernels.field_bases else k)
     return out
 
 
-def capture_views(kernels: Kernels, displays: list[Display], edges_nm) -> list[View]:
+def capture_views(kernels: Kernels, displays: list[Display], edges_nm, far: dict | None = None) -> list[View]:
     """The ground truth ('gt': glass, T = 1) and every display but a glass with T = 1 (that one is the ground
-    truth's optics exactly)."""
-    out = [View("gt", kernels.band["glass"], None)]
+    truth's optics exactly), each with its far field from `far` (None: kernels.far; a depth layer's views
+    share the focus kernels' far fields)."""
+    far = kernels.far if far is None else far
+    out = [View("gt", kernels.band["glass"], None, far_field=far.get("glass"))]
     for d in displays:
         t = d.transmission.band_means(edges_nm)
         if not (d.is_glass and np.all(t == 1)):
-            out.append(View(d.name, kernels.band[d.name], t, kernels.field_bases.get(d.name)))
+            out.append(View(d.name, kernels.band[d.name], t, kernels.field_bases.get(d.name), far.get(d.name)))
     return out
 
 
@@ -248,7 +250,7 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     bar = tqdm(total=len(displays) + 1, desc="captures", unit="view", disable=not progress, leave=False)
     spectral_views = displays if cfg.form == "spectral" else []
     electrons = layered_electrons(band_image, layers,
-                                  lambda l: capture_views(per_layer[l], spectral_views, band_image.edges_nm),
+                                  lambda l: capture_views(per_layer[l], spectral_views, band_image.edges_nm, kernels.far),
                                   base_sensor, cfg, bright)
     electrons, stray = synthesis_stray_light(cfg.stray_light, electrons, band_image, base_sensor, cfg.form,
                                              {d.name for d in displays if d.is_glass})
@@ -282,9 +284,18 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
             "stray_light": stray,
             "kernel_size_px": kernels.grid.kernel_size_px, "kernel_pixel_um": float(band_image.pitch_um),
             "kernel_precision": cfg.kernel_precision, "lens": psf_lens(scene).describe(),
+            "far_field": _far_field_record(kernels, cfg),
             "render": {k: v for k, v in band_image.meta.items() if k != "seconds"}}
     timing = {"render_s": band_image.meta.get("seconds"), "synth_s": round(time.perf_counter() - t0, 3)}
     return SynthResult(gt, captures, meta, display_meta, timing)
+
+
+def _far_field_record(kernels: Kernels, cfg: SynthConfig) -> dict:
+    """synth.json's far field: the settings and, per view, the share of the transmitted power added per band."""
+    return {"threshold": cfg.far_field_threshold, "coarse_factor": cfg.far_field_coarse,
+            "form": "spectral only (the per-channel form is the paper's y = γ x ⊗ k)",
+            "far_share": {name: f.added.tolist() for name, f in kernels.far.items()},
+            "lost_share": {name: ks.energy_outside.tolist() for name, ks in kernels.band.items()}}
 
 
 def capture_scene(scene: Scene, displays: list[Display], cfg: SynthConfig = SynthConfig(), item: int = 0,

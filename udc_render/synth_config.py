@@ -22,6 +22,11 @@ EXPOSURE_PERCENTILE = 99.5
 # 1.6 % at 4 px with 3). 1 px keeps the built-in room at 2048 × 1024 within 3× its one-layer optics
 # (benchmarks/bench_layers.py: 0.5 px gives it 3 layers and 3.7×).
 DEFAULT_DEFOCUS_TOLERANCE_PX = 1.0
+# Light past the kernel window (optics.far_field): the far field is added to a view's band whose lost share (its
+# kernels' energy outside the core window) exceeds the threshold; its coarse pixel is an odd number of render
+# pixels. Chosen by `study capture` (far_field rows; docs/concepts/defaults.md).
+DEFAULT_FAR_FIELD_THRESHOLD = 0.005
+DEFAULT_FAR_FIELD_COARSE = 15
 
 
 
@@ -56,6 +61,10 @@ class SynthConfig:
     # (every pixel in focus, the kernels of the focus distance)
     defocus_tolerance_px: float | None = DEFAULT_DEFOCUS_TOLERANCE_PX
     bright_split: bool = True  # very bright pixels convolved apart in float64 (bright_pixels)
+    # Light past the kernel window (optics.far_field, spectral form): the far field is added to a band whose lost
+    # share exceeds the threshold (None: never, the light is lost); coarse: render pixels per coarse pixel (odd)
+    far_field_threshold: float | None = DEFAULT_FAR_FIELD_THRESHOLD
+    far_field_coarse: int = DEFAULT_FAR_FIELD_COARSE
     # The ground truth as the paper took it (l.235): the mean of N glass captures at gain 1 (sensor.frames:
     # temporal noise σ/√N, quantised, saturating); None: the ideal noise-free ground truth (pipeline module doc)
     gt_frames: int | None = None
@@ -80,6 +89,12 @@ class SynthConfig:
         if g is not None and (isinstance(g, bool) or not isinstance(g, int) or not 1 <= g <= MAX_GT_FRAMES):
             raise SynthError(f"gt_frames = {g!r}: expected a whole number of frames from 1 to {MAX_GT_FRAMES}, or None "
                              "(the noise-free ground truth)")
+        ft = self.far_field_threshold
+        if ft is not None and (isinstance(ft, bool) or not isinstance(ft, (int, float)) or not 0 <= ft < 1):
+            raise SynthError(f"far_field_threshold = {ft!r}: expected a lost share from 0 to 1 (exclusive), or None (off)")
+        fc = self.far_field_coarse
+        if isinstance(fc, bool) or not isinstance(fc, int) or fc < 1 or fc % 2 == 0:
+            raise SynthError(f"far_field_coarse = {fc!r}: expected an odd whole number of render pixels ≥ 1")
         tol = self.defocus_tolerance_px
         if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
                                 or not tol >= 0.05):

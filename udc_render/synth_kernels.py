@@ -12,9 +12,11 @@ from tqdm import tqdm
 from psf import KernelSet, compute_kernels
 from psf.cache import cached
 from psf.engine import DEFAULT_FIELD_PHASES
+from psf.far import CACHE_NAME as FAR_CACHE_NAME, ORDER_PIXEL_FACTOR, order_kernels
 from psf.spectral import channel_kernels
 from udc_render.optics import FieldBasis, field_basis, field_weights, live_phases
 from udc_render.optics.displays import Display
+from udc_render.optics.far_field import FarField, acceptance_um, far_window_px, make_far_field
 from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens, render_grid
 from udc_render.synth_config import SynthConfig, SynthError
@@ -32,6 +34,7 @@ class Kernels:
     channel: dict[str, KernelSet] = field(default_factory=dict)
     field_bases: dict[str, FieldBasis] = field(default_factory=dict)  # compact_kernels: rank-r phase bases
     object_distance_m: float = math.nan  # the distance the kernels are focused for (scene_object_distance_m)
+    far: dict[str, FarField] = field(default_factory=dict)  # spectral form: the light past the window (far_field)
 
 
 def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um: tuple[float, float],
@@ -49,6 +52,32 @@ def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um
                        field_phases=cfg.field_phases, precision=cfg.kernel_precision, sensor_um=frame_um,
                        progress=bar.update)
     return ks
+
+
+def far_field(layout, lens, grid: RenderGrid, core: KernelSet, frame_um: tuple[float, float],
+              cfg: SynthConfig) -> FarField | None:
+    """The far field of the band kernels `core` (optics.far_field): the same PSF computed at cfg.far_field_coarse
+    × the render pitch over the acceptance (through the kernel cache), less the core window's part: a periodic
+    display's and the bare lens's from the diffraction orders (psf.far.order_kernels), an aperiodic tile's (or
+    at a coarse pitch too fine for orders as points) by the engine at d = 0. None when it is off
+    (far_field_threshold None), when no band loses more than the threshold, or when the core window already
+    reaches every frame pixel from every render pixel."""
+    threshold = cfg.far_field_threshold
+    if threshold is None or not (core.energy_outside > threshold).any():
+        return None
+    coarse = cfg.far_field_coarse
+    size, half_um = far_window_px(frame_um, grid.margin_px * grid.pitch_um, coarse * grid.pitch_um)
+    if half_um <= (core.size_px // 2 + coarse) * grid.pitch_um:
+        return None
+    common = dict(cache_dir=cfg.kernel_cache, wavelengths_nm=grid.centres_nm, pixel_um=coarse * grid.pitch_um,
+                  size_px=size, precision=cfg.kernel_precision)
+    orders = layout is None or (getattr(layout, "periodic", True) and hasattr(layout, "fourier_coefficients"))
+    airy_um = grid.edges_nm[-1] * 1e-3 * lens.image_distance_um / lens.aperture_um  # λ z / D at the longest λ
+    if orders and coarse * grid.pitch_um >= ORDER_PIXEL_FACTOR * airy_um:
+        far, _ = cached(order_kernels, FAR_CACHE_NAME, layout, lens, cfg.use_cache, **common)
+    else:
+        far, _ = cached(compute_kernels, "mono", layout, lens, cfg.use_cache, distance_mm=0.0, **common)
+    return make_far_field(core, far, coarse, acceptance_um(frame_um), threshold)
 
 
 def scene_object_distance_m(scene: Scene) -> float:
@@ -102,10 +131,11 @@ def camera_channel_kernels(layout, lens, camera: str, pixel_um: float, size_px: 
 
 
 def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progress: bool = False,
-                 object_distance_m: float | None = None) -> Kernels:
+                 object_distance_m: float | None = None, far: bool = True) -> Kernels:
     """Every kernel set the synthesis of `scene` through `displays` needs, from the scene alone, for
     objects at `object_distance_m` (None: scene_object_distance_m; the focus distance when
-    cfg.defocus_tolerance_px is None)."""
+    cfg.defocus_tolerance_px is None); with `far` (spectral form), the far fields of the band kernels
+    (far_field; every depth layer shares those of the focus)."""
     grid = render_grid(scene)
     z = object_distance_m
     if z is None:
@@ -118,7 +148,15 @@ def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progre
             band[d.name] = display_kernels(d, scene, grid, cfg, progress, z)
         if cfg.form == "per_channel":
             channel[d.name] = display_channel_kernels(d, scene, grid, cfg, z)
-    return Kernels(grid, band, channel, object_distance_m=float(z))
+    far_fields = {}
+    if far and cfg.form == "spectral":
+        frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
+        layouts = {"glass": None, **{d.name: d.layout for d in displays}}
+        for name, ks in band.items():
+            f = far_field(layouts[name], psf_lens(scene, z), grid, ks, frame_um, cfg)
+            if f is not None:
+                far_fields[name] = f
+    return Kernels(grid, band, channel, object_distance_m=float(z), far=far_fields)
 
 
 def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels:

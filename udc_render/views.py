@@ -9,6 +9,8 @@ nearer layers (optics.layers.Compositor: Hasinoff & Kutulakos' occlusion, Ikoma 
 the silhouettes α_l and their normalisers blurred with k̄, the layer's kernels weighted per camera channel
 by the view's band weights and the image's mean spectrum (one kernel per channel, not per band, and the
 mean kernel over the field phases at d > 0: the occlusion's approximations beyond the model's own).
+The far field (optics.far_field: the light past the kernel window, a veil over the frame) is added once per
+view, from the whole render, after the layers are composited (its occlusion by nearer layers is not modelled).
 """
 from __future__ import annotations
 
@@ -17,6 +19,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from udc_render.optics import BrightPixels, FieldBasis, apply_kernels, band_spectra, convolve_bands
+from udc_render.optics.apply import far_field_images
+from udc_render.optics.far_field import FarField
 from udc_render.optics.layers import Compositor, DepthLayers, occluder_kernels
 from udc_render.render import BandImage
 from udc_render.sensor import SensorConfig, band_electron_weights, cos4_map
@@ -34,11 +38,12 @@ ROUNDOFF_TARGET = 0.1
 @dataclass(frozen=True)
 class View:
     """One view's optics in one layer: its name ('gt' for the ground truth), band kernels, T(λ_k) (None:
-    1) and rank-r field basis (d > 0, compacted kernels)."""
+    1), rank-r field basis (d > 0, compacted kernels) and far field (None: the light past the window is lost)."""
     name: str
     kernel_set: object
     transmission: np.ndarray | None
     field_basis: FieldBasis | None = None
+    far_field: FarField | None = None
 
     @property
     def plain(self) -> bool:
@@ -78,7 +83,8 @@ def bright_pixels(band_image: BandImage, sensor: SensorConfig) -> BrightPixels |
 def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectra, bright) -> tuple[np.ndarray, dict]:
     """One optics pass: electrons [3, h, w] (float64, render pitch, before binning) and its record."""
     w = band_electron_weights(band_image.edges_nm, sensor)
-    kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=view.field_basis, bright=bright)
+    kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=view.field_basis, bright=bright,
+              far_field=view.far_field)
     if cfg.blend == "source":
         optics = apply_kernels(band_image, view.kernel_set, view.transmission, cfg.precision, channel_weights=w,
                                spectra=spectra, **kw)
@@ -135,7 +141,7 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
         return {v.name: channel_electrons(band_image, v, sensor, cfg, spectra, bright) for v in views}
     w = band_electron_weights(band_image.edges_nm, sensor)
     mean_bands = band_image.frame(band_image.bands).mean(axis=(1, 2), dtype=np.float64)
-    comp, records = {}, {}
+    comp, records, far = {}, {}, {}
     behind = np.ones(band_image.bands.shape[1:], np.float32)  # this layer and every farther one
     for l in reversed(range(layers.count)):  # near to far
         alpha = layers.alpha(l)
@@ -144,14 +150,28 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
         views = views_of_layer(l)
         spectra = shared_spectra(layer, views, cfg, layer_bright)
         for v in views:
-            y, records[v.name] = _optics(layer, v, sensor, cfg, spectra if v.plain else None, layer_bright)
+            far[v.name] = v
+            y, records[v.name] = _optics(layer, replace(v, far_field=None), sensor, cfg, spectra if v.plain else None,
+                                         layer_bright)
             g = np.asarray(records[v.name]["gains"])
             kbar = occluder_kernels(v.kernel_set.kernels, w * g[None] * mean_bands[None]).astype(np.float32)
             cover, cover_behind = silhouette_covers(np.stack([alpha, behind]), kbar, band_image.margin_px, cfg.precision)
             comp.setdefault(v.name, Compositor()).add(y, cover if l > 0 else None, cover_behind)
         behind -= alpha
         del layer, spectra
-    return {name: _finish(c.result(), band_image, sensor, records[name]) for name, c in comp.items()}
+    return {name: _finish(c.result() + _far_electrons(band_image, far[name], w, records[name]), band_image, sensor,
+                          records[name]) for name, c in comp.items()}
+
+
+def _far_electrons(band_image: BandImage, view: View, w: np.ndarray, record: dict):
+    """The far field's electrons [3, h, w] of the whole render through one view (0 without one; module doc),
+    noted in its record."""
+    if view.far_field is None:
+        return 0.0
+    t = np.ones(len(w[0])) if view.transmission is None else np.asarray(view.transmission, float)
+    record["far_field"] = {**view.far_field.describe(), "layers": "added once, after compositing, from the whole render"}
+    return far_field_images(band_image.bands, view.far_field, band_image.margin_px,
+                            t * np.asarray(view.kernel_set.transmittance, float), w)
 
 
 def per_channel_blur(rgb: np.ndarray, layers: DepthLayers, kernels_of_layer, margin_px: int, precision: str,

@@ -8,6 +8,7 @@ import pytest
 
 from udc_render.optics import apply_kernels
 from udc_render.optics.displays import preset
+from udc_render.optics.stray import StrayLight
 from udc_render.pipeline import SynthConfig, auto_exposure_s, bin_pixels, plan_kernels, sensor_for_scene, synthesize
 from udc_render.render import render_scene
 from udc_render.scene import Bands, Sensor, load_scene
@@ -26,18 +27,21 @@ def small():
 def test_fused_synthesis_equals_the_per_band_reference(small, distance_mm):
     scene, band_image = small
     displays = [preset("glass")] + [replace(preset(n), distance_mm=distance_mm) for n in ("toled", "poled")]
-    cfg = SynthConfig(field_phases=2 if distance_mm else None, use_cache=False)
+    # the stray light (optics.stray) acts after the optics, on the electrons: off, to compare the optics alone
+    cfg = SynthConfig(field_phases=2 if distance_mm else None, use_cache=False, stray_light=StrayLight.off())
     kernels = plan_kernels(scene, displays, cfg)
     result = synthesize(band_image, scene, displays, cfg, kernels=kernels)
     sensor = sensor_for_scene(cfg.sensor, scene)
     sensor = replace(sensor, exposure_s=auto_exposure_s(band_image, sensor)[0])
-    glass = apply_kernels(band_image, kernels.band["glass"], None, cfg.precision).images
+    glass = apply_kernels(band_image, kernels.band["glass"], None, cfg.precision,
+                          far_field=kernels.far.get("glass")).images
     gt = bin_pixels(electrons_rgb(glass, band_image.edges_nm, sensor), band_image.pitch_um, sensor.pitch_um)
     gt /= sensor.full_well_e
     np.testing.assert_allclose(result.gt, gt, rtol=0, atol=TOL * gt.max())
     for d in displays:
         t = d.transmission.band_means(band_image.edges_nm)
-        optics = apply_kernels(band_image, kernels.band[d.name], t, cfg.precision, field_rank=cfg.field_rank)
+        optics = apply_kernels(band_image, kernels.band[d.name], t, cfg.precision, field_rank=cfg.field_rank,
+                               far_field=kernels.far.get(d.name))  # the far field per band (optics.far_field)
         want = electrons_spectral(optics.images, band_image.edges_nm, sensor)
         got = result.captures[d.name].electrons
         np.testing.assert_allclose(got, want, rtol=0, atol=TOL * want.max(), err_msg=d.name)

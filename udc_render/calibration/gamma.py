@@ -4,8 +4,9 @@ the display against the mean through glass, slope of a least-squares line.
 The rgb_matrix render is linear in the drive levels, so one render of the square at full drive is
 scaled by the decoded level (exact); every level gets its own noisy capture. Honest measurement: the
 square is as tall as the panel and the region's side is at most square − (kernel size − 1), so every
-region pixel collects the whole kernel window (light the PSF sends beyond its window is lost, as in
-the truth). Truth: optics.gamma.display_gamma, the project's one γ.
+region pixel collects the whole kernel window. Truth: optics.gamma's γ (the project's one γ), its kernel
+gains τ (1 − o) raised by τ a, a the share of the far field (optics.far_field: the light past the window)
+that the region collects from the square, evaluated from the far kernels (far_square_share).
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ import numpy as np
 
 from udc_render.calibration.rig import CHANNELS, Rig, check
 from udc_render.content.monitor_image import decode
-from udc_render.optics.gamma import display_gamma
+from udc_render.optics.gamma import channel_gamma, kernel_gain, white_weights
 from udc_render.pipeline import SynthError
 from udc_render.sensor import pack_rggb, rgb_to_rggb
 
@@ -21,10 +22,31 @@ GAMMA_LEVELS = tuple(range(0, 256, 10))
 GAMMA_TOL = 0.02
 
 
-def true_gamma(rig: Rig, band_image) -> np.ndarray:
-    """The truth: γ (R, Gr, Gb, B) of the display for the rendered monitor white (optics.gamma)."""
-    g = display_gamma(rig.display, rig.kernels[rig.display.name], rig.kernels[rig.glass.name], band_image.edges_nm,
-                      rig.sensors[rig.glass.name].camera, band_image.white_bands())
+def far_square_share(far, side_x_px: float, side_y_px: float, region_px: int) -> np.ndarray:
+    """[K] the share of the transmitted power that the far field f (optics.far_field.FarField) brings to the
+    region's pixels, on average, from a uniform square side_x × side_y render pixels centred on them:
+    Σ_J f[J] A_x(J) A_y(J), A(J) the mean over the region's pixels p of the share of coarse pixel J's render
+    offsets u whose source p − u lies in the square (|p − u| ≤ side / 2; side inf: a square that reaches the
+    render grid's edges, continued past them as the far field continues the render)."""
+    c, h = far.coarse, far.kernels.shape[-1] // 2
+    offsets = (np.arange(-h, h + 1) * c)[:, None] + np.arange(c)[None, :] - (c - 1) // 2  # [J, c] render px
+    p = np.arange(region_px) - (region_px - 1) / 2
+
+    def share(side):
+        return (np.abs(p[None, None, :] - offsets[:, :, None]) <= side / 2).mean(axis=(1, 2))
+    return np.einsum("kij,i,j->k", far.kernels, share(side_y_px), share(side_x_px))
+
+
+def true_gamma(rig: Rig, band_image, square_px: tuple[float, float] = (0.0, 0.0), region_px: int = 0) -> np.ndarray:
+    """The truth: γ (R, Gr, Gb, B) of the display for the rendered monitor white (optics.gamma), with the far
+    field's share from a white square (x, y render px; far_square_share) around the region."""
+    gains = {}
+    for d in (rig.display, rig.glass):
+        ks, far = rig.kernels[d.name], rig.far.get(d.name)
+        extra = 0.0 if far is None else np.asarray(ks.transmittance) * far_square_share(far, *square_px, region_px)
+        gains[d.name] = kernel_gain(ks) + extra
+    w = white_weights(band_image.edges_nm, rig.sensors[rig.glass.name].camera, band_image.white_bands())
+    g = channel_gamma(w, rig.display, gains[rig.display.name], gains[rig.glass.name], band_image.edges_nm)
     return np.array(rgb_to_rggb(g))
 
 
@@ -61,7 +83,8 @@ def calibrate_gamma(rig: Rig) -> dict:
     x, y = np.array(means[rig.glass.name]), np.array(means[rig.display.name])  # [levels, 4]
     used = ~clipped
     slope = np.array([np.polyfit(x[used[:, c], c], y[used[:, c], c], 1)[0] for c in range(4)])
-    truth = true_gamma(rig, b)
+    grid_rows = H + 2 * b.margin_px  # a square reaching the render grid's edges is continued past them (far_field)
+    truth = true_gamma(rig, b, (side, side if side < grid_rows else np.inf), region)
     return {"levels": list(GAMMA_LEVELS), "region_px": region, "square_px": side,
             "kernel_px": 2 * rig.half_kernel() + 1, "glass_mean_w": x, "display_mean_w": y, "used": used,
             "gamma": slope, "truth": truth,

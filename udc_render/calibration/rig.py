@@ -63,7 +63,8 @@ class Rig:
                              bands=parse_bands(self.spec.bands_nm)).with_render(margin_um=self.spec.margin_um,
                                                                                 spp=self.spec.spp, noise=None)
         t0 = time.perf_counter()
-        self.kernels = plan_kernels(self.scene, [self.glass, self.display], self.cfg).band
+        planned = plan_kernels(self.scene, [self.glass, self.display], self.cfg)
+        self.kernels, self.far = planned.band, planned.far  # far: the light past the window (SynthConfig)
         self.seconds = {"kernels": time.perf_counter() - t0}
         self.sensors = None
 
@@ -87,7 +88,8 @@ class Rig:
         """Irradiance bands [K, H, W] on the sensor frame behind `d`."""
         t0 = time.perf_counter()
         t = d.transmission.band_means(band_image.edges_nm)
-        img = apply_kernels(band_image, self.kernels[d.name], t, self.cfg.precision).images
+        img = apply_kernels(band_image, self.kernels[d.name], t, self.cfg.precision,
+                            far_field=self.far.get(d.name)).images
         self.seconds["optics"] = self.seconds.get("optics", 0.0) + time.perf_counter() - t0
         return img
 

@@ -13,6 +13,7 @@ from udc_render.scene import RENDER_PATHS, SAMPLERS, load_scene
 from udc_render.scene.overrides import with_overrides
 from udc_render.sensor import SensorConfig
 from udc_render.synth_config import MAX_GT_FRAMES
+from udc_render.synth_config import DEFAULT_FAR_FIELD_COARSE, DEFAULT_FAR_FIELD_THRESHOLD
 
 
 class UserError(UdcError):
@@ -79,6 +80,37 @@ def gt_frames(text):
         raise argparse.ArgumentTypeError(f"--gt-frames = {text!r}: expected a whole number of frames from 1 to "
                                          f"{MAX_GT_FRAMES}, or 'ideal'")
     return int(text)
+
+
+def far_field_threshold(text):
+    """--far-field-threshold: a lost share from 0 to 1 (exclusive), or 'off' (the light past the window is lost: None)."""
+    if text == "off":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 <= value < 1:
+        raise argparse.ArgumentTypeError(f"--far-field-threshold = {text!r}: expected a share from 0 to 1 (exclusive) "
+                                         "or 'off'")
+    return value
+
+
+def far_field_coarse(text):
+    """--far-field-coarse: an odd whole number of render pixels per coarse pixel."""
+    if not (text.isdigit() and int(text) >= 1 and int(text) % 2 == 1):
+        raise argparse.ArgumentTypeError(f"--far-field-coarse = {text!r}: expected an odd whole number ≥ 1")
+    return int(text)
+
+
+def add_far_field_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--far-field-threshold", type=far_field_threshold, default=argparse.SUPPRESS,
+                   help="spectral form: lay the light a band's kernels send past their window on the sensor (a "
+                        "far field at a coarse pitch, within the lens's acceptance; udc_render/optics/far_field.py) "
+                        "when that lost share exceeds this, or 'off' (the light is lost) "
+                        f"[{DEFAULT_FAR_FIELD_THRESHOLD:g}]")
+    p.add_argument("--far-field-coarse", type=far_field_coarse, default=argparse.SUPPRESS,
+                   help=f"render pixels per coarse pixel of the far field, odd [{DEFAULT_FAR_FIELD_COARSE}]")
 
 
 def float_list(text):
@@ -226,6 +258,7 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
                    help="depth layers: the largest error in a pixel's blur-circle diameter, render pixels (fewer "
                         f"layers when larger; udc_render/optics/layers.py), or 'off' (every pixel in focus) "
                         f"[{DEFAULT_DEFOCUS_TOLERANCE_PX:g}]")
+    add_far_field_arguments(p)
 
 
 def add_channel_kernels_argument(p: argparse.ArgumentParser) -> None:
@@ -264,6 +297,8 @@ def synth_config(args):
                        field_phases=getattr(args, "field_phases", None),
                        field_rank=getattr(args, "field_rank", SynthConfig.field_rank),
                        defocus_tolerance_px=getattr(args, "defocus_tolerance_px", SynthConfig.defocus_tolerance_px),
+                       far_field_threshold=getattr(args, "far_field_threshold", SynthConfig.far_field_threshold),
+                       far_field_coarse=getattr(args, "far_field_coarse", SynthConfig.far_field_coarse),
                        seed=getattr(args, "noise_seed", 0),
                        use_cache=not getattr(args, "no_cache", False), kernel_cache=None if cache is None else str(cache))
 

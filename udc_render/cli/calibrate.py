@@ -5,7 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from udc_render.cli.args import UserError, add_display_argument, add_sensor_arguments, out_dir, synth_config
+from udc_render.cli.args import (UserError, add_display_argument, add_far_field_arguments, add_sensor_arguments, out_dir,
+                                synth_config)
 from udc_render.io.files import save_json
 
 
@@ -16,6 +17,7 @@ def register(sub) -> None:
     c.add_argument("--out", type=Path, default=Path("out/calibrate"), help="output folder [out/calibrate]")
     c.add_argument("--quick", action="store_true", help="reduced rig (512×128 px, 161-px kernels, 15 bands): smoke run")
     add_sensor_arguments(c)
+    add_far_field_arguments(c)
     c.set_defaults(run=run)
 
 

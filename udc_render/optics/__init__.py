@@ -5,6 +5,7 @@
     field.py        the field-dependent blur (d > 0): phase weights, rank-r phase bases, convolve_field
     field_power.py  the exact transmitted power at every pixel's mask shift (PowerMap, field_power_map)
     bright.py       very bright pixels, convolved apart in float64 (BrightPixels)
+    far_field.py    the light past the kernel window: the far field of the two-scale kernel (FarField)
     displays.py     Display, Transmission, the presets (glass, T-OLED, P-OLED), display TOML files,
                     the analytic γ of a display and the transmission fits
 """

@@ -1,8 +1,10 @@
 """Optics stage: apply PSF kernels to rendered band images (docs/PHYSICS.md §1, §3, §4). Per band k:
 
-    y_k = g_k · (x_k ⊗ k_k),    g_k = T_display(λ_k) · transmittance_k · (1 − energy_outside_k)
+    y_k = g_k · (x_k ⊗ k_k)  [+ T(λ_k) · transmittance_k · (x̄_k ⊗ f_k)],
+    g_k = T(λ_k) · transmittance_k · (1 − energy_outside_k)
 
-- Light that the PSF sends outside the kernel window is lost (energy_outside), not renormalised.
+- Light that the PSF sends outside the kernel window (energy_outside) is not renormalised: it is lost, or,
+  given a far field (optics.far_field), laid on the sensor at a coarse pitch within the lens's acceptance.
 - Glass (no display): pass the bare-lens KernelSet (transmittance 1) and transmission None (T = 1).
 - d = 0 (or no field kernels): one kernel per band (optics.convolution); d > 0: field phases blended
   (optics.field) with the exact transmitted power at every pixel (optics.field_power); very bright pixels convolved apart in float64 (optics.bright).
@@ -15,6 +17,7 @@ import numpy as np
 
 from udc_render.optics.bright import BrightPixels
 from udc_render.optics.convolution import OpticsError, _check_margin, _precision, convolve_bands, fft_shape
+from udc_render.optics.far_field import FarField, far_light
 from udc_render.optics.field import FieldBasis, convolve_field, field_weights
 from udc_render.optics.field_power import field_power_map
 
@@ -60,11 +63,20 @@ def _transmission(transmission, K: int) -> np.ndarray:
 
 
 
+def far_field_images(bands: np.ndarray, far_field: FarField, margin_px: int, far_gains: np.ndarray,
+                     channel_weights=None) -> np.ndarray:
+    """The far field's light on the frame (optics.far_field.far_light) with gains T τ [K]: per band [K, h, w],
+    or the channel sums [C, h, w] with channel_weights [C, K]."""
+    w = np.diag(far_gains) if channel_weights is None else np.asarray(channel_weights, float) * far_gains[None, :]
+    return far_light(bands, far_field, margin_px, w)
+
+
 def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "float32", workers: int | None = None,
                   blend: str = "source", field: bool = True, distance_mm: float | None = None,
                   image_distance_um: float | None = None, period_um=None,
                   field_rank: int | None = None, channel_weights=None, spectra: np.ndarray | None = None,
-                  field_basis: FieldBasis | None = None, bright: BrightPixels | None = None) -> OpticsResult:
+                  field_basis: FieldBasis | None = None, bright: BrightPixels | None = None,
+                  far_field: FarField | None = None) -> OpticsResult:
     """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
 
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (optics.convolution).
@@ -76,6 +88,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     channel; blend 'source'); spectra: band_spectra of the band image, shared between calls (d = 0 path).
     field_basis: the kernel set's rank-`field_rank` bases for this grid, made once (field_basis).
     bright: very bright pixels, convolved apart in float64 (optics.bright; pipeline.bright_pixels).
+    far_field: the light past the kernel window, added at a coarse pitch (optics.far_field; None: lost).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -127,4 +140,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         if field_rank is not None:
             applied.update(field_rank=int(field_rank), field_rank_kernel_residual=residual)
         applied.update(model="field-dependent", blend=blend, **geometry)
+    if far_field is not None:
+        images = images + far_field_images(bands, far_field, m, t * np.asarray(kernel_set.transmittance, float),
+                                           channel_weights).astype(images.dtype)
+        applied["far_field"] = far_field.describe()
     return OpticsResult(np.ascontiguousarray(images, dtype=np.float32), pitch, wl.copy(), gains, t, applied)
