@@ -68,6 +68,11 @@ def _aberration(setup, on: bool):
     return replace(setup, scene=replace(scene, lens=replace(scene.lens, zernike_waves=ABERRATION if on else ())))
 
 
+def _far_field(setup, on: bool):
+    from udc_render.synth_config import DEFAULT_FAR_FIELD_THRESHOLD
+    return _cfg(setup, far_field_threshold=DEFAULT_FAR_FIELD_THRESHOLD if on else None)
+
+
 def _read_noise(setup, on: bool):
     e = 2 * SensorConfig().read_noise_e if on else SensorConfig().read_noise_e
     return _cfg(setup, sensor=replace(setup.cfg.sensor, read_noise_e=e))
@@ -77,6 +82,9 @@ EFFECTS: tuple[Effect, ...] = (
     Effect("display-to-lens distance 2 mm (bands)",
            "the paper's real data shows bands of low to moderate visibility (l.498); d from `study realism`", True,
            _distance),
+    Effect("far field (light past the kernel window)", "diffraction: the display's orders past the 513-px window "
+           "(P-OLED 6–10 %, T-OLED 1.1–1.6 %) within the lens's acceptance; psf.far, optics.far_field", True,
+           _far_field),
     Effect("dead and hot pixels", "impulse noise 'widely exists' in the real data (l.412); densities: "
            "Chapman et al. 2011–2022 (sensor.defects)", True, _defects, compare="packed"),
     Effect("fixed-pattern noise (PRNU, DSNU, rows/columns, dark current)", "EMVA 1288 nonuniformities; PRNU 0.7 % "
