@@ -51,8 +51,8 @@ from udc_render.sensor import pack_rggb, rgb_to_rggb
 from udc_render.studies.gap_effects import DEP_VARIANTS, EFFECTS
 from udc_render.studies.gap_report import PAPER_DEP_DB, write_report
 
-DEAD_LEAVES = ("pattern:dead_leaves_colour:101", "pattern:dead_leaves_colour:102", "pattern:dead_leaves_colour:103")
-PHOTOGRAPHS = ("builtin:astronaut", "builtin:coffee", "builtin:chelsea")
+DEAD_LEAVES = ("pattern:dead_leaves_colour:101", "pattern:dead_leaves_colour:102")
+PHOTOGRAPHS = ("builtin:astronaut",)
 FULL = {"sensor_px": (2048, 1024), "content": DEAD_LEAVES, "photographs": PHOTOGRAPHS}
 QUICK = {"sensor_px": (512, 256), "content": DEAD_LEAVES[:1], "photographs": PHOTOGRAPHS[:1]}
 DISPLAYS = ("toled", "poled")
@@ -193,7 +193,8 @@ def rows_for_image(image: str, content: str, item: int, setups: dict, progress_b
         rows.append({**common, "row": "physical (every default)", "kind": "profile", **score(shots["physical"], kern, item),
                      **versus(shots["physical"], shots["bare"])})
         for v in DEP_VARIANTS:
-            if not v.available() or (v.images is not None and rank >= v.images):
+            if (not v.available() or (v.images is not None and rank >= v.images)
+                    or (v.content is not None and v.content != content)):
                 continue
             k = kern if v.kernels == "paper" else dep_kernels(setups["physical"].displays[di], setups["physical"].scene,
                                                                setups["physical"].cfg, v.kernels)

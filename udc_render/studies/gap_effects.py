@@ -118,6 +118,7 @@ class DepVariant:
     denoiser: str = "nlm"
     gamma_scale: float = 1.0
     images: int | None = None  # run on the first `images` of each content group (None: all)
+    content: str | None = None  # run on this content group only (None: every group)
 
     def available(self) -> bool:
         return self.denoiser != "bm3d" or importlib.util.find_spec("bm3d") is not None
@@ -129,5 +130,6 @@ DEP_VARIANTS: tuple[DepVariant, ...] = (
                "0.34, ±2.5 % on 0.20) from a 256-px white square; 5 % stands for that and a field-dependent T",
                gamma_scale=1.05),
     DepVariant("BM3D denoiser", "the paper's DeP denoised with BM3D (l.277); needs the optional bm3d package; "
-               "first image of each group (BM3D takes minutes per frame)", denoiser="bm3d", images=1),
+               "the first dead-leaves image (BM3D takes minutes per frame)", denoiser="bm3d", images=1,
+               content="dead leaves"),
 )
