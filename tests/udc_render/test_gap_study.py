@@ -53,3 +53,11 @@ def test_quick_study_writes_its_tables(tmp_path):
     assert {p.name for p in tmp_path.iterdir()} >= {"study_gap.csv", "study_gap.md", "study_gap.png"}
     assert sum(r["kind"] == "effect" for r in rows) == 2 * 2 * len(EFFECTS)  # 2 images × 2 displays
     assert all(np.isfinite(r["dep_db"]) and np.isfinite(r["input_db"]) for r in rows)
+
+
+def test_rows_log_resumes_and_ignores_a_torn_line(tmp_path):
+    from udc_render.studies.gap import read_rows
+    log = tmp_path / "rows_full.jsonl"
+    log.write_text('{"image": "a", "rows": [{"row": "x"}]}\n{"image": "b", "rows": [{"ro')
+    assert read_rows(log) == {"a": [{"row": "x"}]}
+    assert read_rows(tmp_path / "none.jsonl") == {}

@@ -30,10 +30,13 @@ Content at the paper's level of detail: its DIV2K test photographs were 2K image
 at about one image pixel per sensor pixel (l.231). Rows are scored on colour dead leaves
 (pattern:dead_leaves_colour, the test content of `udc-render results`) and on `--images` (for users with
 DIV2K); the built-in photographs (300–640 px, enlarged 4–7× on the monitor: far smoother) are reported
-apart. ``quick``: one dead-leaves image and one photograph at 512 × 256 px, the shipped effects only.
+apart. ``quick``: one dead-leaves image and one photograph at 512 × 256 px. The study resumes: each finished
+image's rows go to rows_full.jsonl (rows_quick.jsonl) in the output folder, and a new run skips those images
+(delete the file after changing an effect).
 """
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -203,6 +206,20 @@ def rows_for_image(image: str, content: str, item: int, setups: dict, progress_b
     return rows
 
 
+def read_rows(log: Path) -> dict[str, list[dict]]:
+    """{image: its rows} from an earlier run's log (one JSON line per finished image; a torn last line is
+    ignored): the study resumes image by image."""
+    done = {}
+    if log.is_file():
+        for line in log.read_text().splitlines():
+            try:
+                entry = json.loads(line)
+            except json.JSONDecodeError:
+                continue
+            done[entry["image"]] = entry["rows"]
+    return done
+
+
 def run_study(out_dir, quick: bool = False, images: tuple[str, ...] = (), progress: bool = True) -> list[dict]:
     """Write study_gap.csv, .md and .png into out_dir (gap_report); returns the rows."""
     c = QUICK if quick else FULL
@@ -211,10 +228,19 @@ def run_study(out_dir, quick: bool = False, images: tuple[str, ...] = (), progre
                + [(i, "built-in photographs (enlarged)") for i in c["photographs"]])
     t0 = time.perf_counter()
     bar = tqdm(total=len(content) * len(DISPLAYS) * len(EFFECTS), desc="study gap", unit="row", disable=not progress)
+    log = Path(out_dir) / f"rows_{'quick' if quick else 'full'}.jsonl"
+    done = read_rows(log)
     rows = []
     for item, (image, kind) in enumerate(content):
+        if image in done:  # scored by an earlier, interrupted run of the same grid
+            rows += done[image]
+            bar.update(len(DISPLAYS) * len(EFFECTS))
+            continue
         rank = sum(1 for _, k in content[:item] if k == kind)
-        rows += rows_for_image(image, kind, item, setups, bar, rank)
+        new = rows_for_image(image, kind, item, setups, bar, rank)
+        with open(log, "a") as f:
+            f.write(json.dumps({"image": image, "rows": new}) + "\n")
+        rows += new
     bar.close()
     write_report(Path(out_dir), rows, setups, c, time.perf_counter() - t0, quick)
     return rows
