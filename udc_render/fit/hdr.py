@@ -17,9 +17,10 @@ Per exposure i (d: DN above the black level):
   on by more (a hot pixel the same in every exposure, a cosmic ray) is masked in both. The power fit
   (refine) fits the factors again, with the orders.
 
-κ: from --noise-frames; else from the scatter of each exposure against the next brighter one,
+κ: from the scatter of each exposure against the next brighter one,
 var(d_i / f − d_j) = σ_i² / f² + σ_j² + κ s (1/f + 1) / G at the brighter one's signal s, solved for κ by the
-median of the normalised differences (on the sites of the laser's colour); else (one exposure) κ = saturation / ASSUMED_FULL_WELL_E (noted). The merged pixel is the
+median of the normalised differences (on the sites of the laser's colour); else (one exposure) from
+--noise-frames (λ_shot (white − black), assuming the frames were taken at the PSF's gain); else κ = saturation / ASSUMED_FULL_WELL_E (noted). The merged pixel is the
 inverse-variance mean of d_i / f_i over the exposures where it is unmasked: w_i = f_i² / var_i,
 var = 1 / Σ w_i.
 """
@@ -184,7 +185,7 @@ def _merge(exposures: list[Exposure], factors: list[float]):
 
 def merge_psf(frames: list[Frame], wavelength_nm: float, camera: str, dn_per_e: float | None = None) -> Plane:
     """The exposures and their HDR merge (module doc). dn_per_e: κ (DN per electron, the same in every
-    exposure: they differ by their time) when known (--noise-frames)."""
+    exposure: they differ by their time) from --noise-frames, used when the exposures cannot measure it."""
     notes = [n for f in frames for n in f.notes]
     channel = _channel(frames) if frames[0].kind == "rgb" else 0
     if frames[0].kind == "rgb":
@@ -194,17 +195,19 @@ def merge_psf(frames: list[Frame], wavelength_nm: float, camera: str, dn_per_e: 
         notes.append(f"CFA sites balanced by {camera}'s response at {wavelength_nm:g} nm: R/G/B "
                      f"{gains[0]:.3f}/{gains[1]:.3f}/{gains[2]:.3f}")
     parts = [_prepare(f, channel, gains) for f in frames]
-    kappa = dn_per_e if dn_per_e is not None else frames[0].saturation_dn / ASSUMED_FULL_WELL_E
-    factors, pairs, _ = _chain(parts, kappa)
-    if dn_per_e is None:
-        measured = _shot_gain(parts, factors, pairs)
-        if measured is None:
-            notes.append(f"shot noise not measured (one exposure, no --noise-frames): {kappa:.3g} DN per electron "
-                         f"assumed (a {ASSUMED_FULL_WELL_E:g} e- full well); the uncertainties are scaled by the fit's "
-                         "residual")
-        else:
-            kappa = measured
-            factors, pairs, _ = _chain(parts, kappa)
+    assumed = frames[0].saturation_dn / ASSUMED_FULL_WELL_E
+    factors, pairs, _ = _chain(parts, dn_per_e or assumed)
+    kappa = _shot_gain(parts, factors, pairs)
+    if kappa is not None:
+        factors, pairs, _ = _chain(parts, kappa)
+    elif dn_per_e is not None:
+        kappa = dn_per_e
+        notes.append(f"shot noise from --noise-frames: {kappa:.3g} DN per electron (taken at the PSF's gain)")
+    else:
+        kappa = assumed
+        notes.append(f"shot noise not measured (one exposure, no --noise-frames): {kappa:.3g} DN per electron "
+                     f"assumed (a {ASSUMED_FULL_WELL_E:g} e- full well); the uncertainties are scaled by the fit's "
+                     "residual")
     for dim, bright in pairs:  # a pixel two exposures disagree on (hot, a cosmic ray) is masked in both
         f = factors[dim] / factors[bright]
         bad = parts[dim]["usable"] & parts[bright]["usable"] & \

@@ -26,7 +26,7 @@ import numpy as np
 
 from udc_render.fit.inputs import FitError
 
-PEAK_SNR = 10.0
+PEAK_SNR = 6.0
 MAX_PEAKS = 600
 CENTROID_RADIUS_PX = 2.0
 MIN_SPACING_PX = 3.0
@@ -257,7 +257,7 @@ def solve_lattice(xy: np.ndarray, sigma: np.ndarray, index: np.ndarray, index_ba
         r2 = ((xy[:, 0] - a @ cx) ** 2 + (xy[:, 1] - a @ cy) ** 2) / 2
         f2 = _floor(r2[use], s2[use], int(use.sum()) - 3)
         use = r2 < 25 * (s2 + f2)
-    cov = np.linalg.inv(a[use].T @ (a[use] / (s2[use, None] + f2)))
+    cov = np.linalg.pinv(a[use].T @ (a[use] / (s2[use, None] + f2)))
     return Lattice(np.array([cx[0], cy[0]]), np.array([cx[1], cy[1]]), np.array([cx[2], cy[2]]), cov, cov,
                    index[use], xy[use], sigma[use], math.sqrt(f2), float(np.sqrt(np.mean(2 * r2[use]))), index_basis)
 

@@ -15,10 +15,11 @@ the pixels' phases; it is the layout at θ̂ and the fitted pitch rendered where
 centred on its origin, summed back to pixels), the same photometry run on it at its own orders: Q^eng,
 κ = Σ Q^eng |c|² / Σ |c|⁴ and δ_k = Q^eng_k − κ |c_k(θ̂)|². The fit is repeated with δ until θ moves by less
 than 0.05 σ (at most ENGINE_PASSES renders).
-Start: the grid's best point (the linear parameters solved at each) on the orders with |m|, |n| ≤
-START_ORDERS, polished there (the χ² of many orders has a minimum between every two zeros of |c|², ~1 /
-(2 n_max) apart: the low orders' landscape is smooth enough for the grid); then scipy.optimize.least_squares
-(trf, within the family's bounds) on all; covariance (JᵀJ)⁻¹ · max(1, χ²/dof): a residual beyond the
+Start: the χ² of many orders has a minimum between every two zeros of |c|² (~1 / (2 n_max) apart in a
+shape parameter), so the start continues from the low orders to all: the grid's best point (the linear
+parameters solved at each, a robust score) on the orders with |m|, |n| ≤ START_ORDERS[0], polished there by
+least squares with a Cauchy loss, then on |m|, |n| ≤ each next bound in turn; then
+scipy.optimize.least_squares (trf, within the family's bounds) on all; covariance (JᵀJ)⁻¹ · max(1, χ²/dof): a residual beyond the
 noise widens it.
 """
 from __future__ import annotations
@@ -34,7 +35,7 @@ from udc_render.fit.photometry import Optics, Orders, measure
 from udc_render.fit.synthetic import render_window
 
 MIN_SNR, START_SNR = 3.0, 5.0
-START_ORDERS = 6
+START_ORDERS = (3, 6, 12, 24)
 ROBUST_SCALE = 5.0  # the start's score: Σ ln(1 + (r / 5)²), so that an order near a zero of |c|² (its log
 # residual steep in θ) cannot hide the right basin from a grid point a step away
 FIELD_TERMS = 4  # ln s, g_x, g_y, q
@@ -170,6 +171,18 @@ def _solve(fam: Family, index, y, sig, a, kappa, delta, x0, loss: str = "linear"
     return res.x, cov, chi2, res.fun
 
 
+def _continue(fam: Family, index, y, sig, a, kappa, delta) -> np.ndarray:
+    """The start of the module doc: the grid on the lowest orders, then Cauchy-loss polishes on ever more."""
+    x = None
+    for bound in START_ORDERS:
+        low = np.all(np.abs(index) <= bound, axis=1)
+        if low.sum() < a.shape[1] + len(fam.names) + 5:
+            continue
+        args = (fam, index[low], y[low], sig[low], a[low], kappa, delta[low])
+        x = _solve(*args, _start(*args) if x is None else x, loss="cauchy")[0]
+    return x if x is not None else _start(fam, index, y, sig, a, kappa, delta)
+
+
 def _reference(orders: Orders, rows: np.ndarray, factors) -> list[int]:
     """The exposures with rows, the reference (the largest factor) first."""
     have = sorted({int(e) for e in orders.exposure[rows]}, key=lambda e: -factors[e])
@@ -191,10 +204,7 @@ def fit_family(fam: Family, orders: Orders, factors, pitch_um, optics: Optics, g
     for passes in range(ENGINE_PASSES + 1):
         y, sig = np.log(orders.power[used]), orders.sigma[used] / orders.power[used]
         if x is None:
-            low = np.all(np.abs(orders.index[used]) <= START_ORDERS, axis=1)
-            low = low if low.sum() >= a.shape[1] + k + 5 else np.ones_like(low)
-            args = (fam, orders.index[used][low], y[low], sig[low], a[used][low], kappa, delta[row_order][used][low])
-            x = _solve(*args, _start(*args), loss="cauchy")[0]
+            x = _continue(fam, orders.index[used], y, sig, a[used], kappa, delta[row_order][used])
         x_new, cov, chi2, r = _solve(fam, orders.index[used], y, sig, a[used], kappa, delta[row_order][used], x)
         moved = np.max(np.abs(x_new - x)[:k] / np.maximum(np.sqrt(np.diag(cov))[:k], 1e-12), initial=0.0)
         x = x_new

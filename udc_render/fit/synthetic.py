@@ -45,12 +45,14 @@ class Camera:
 
 
 def psf_image(layout, lens: Lens, wavelength_nm: float, pixel_um: float, shape_hw, centre_px,
-              rotation_deg: float = 0.0, window_px: int = 511, oversample: int = OVERSAMPLE) -> np.ndarray:
+              rotation_deg: float = 0.0, window_px: int = 511, oversample: int = OVERSAMPLE,
+              use_cache: bool = True) -> np.ndarray:
     """The noise-free PSF [H, W] (energy per pixel, the kernel window's total 1) with its centre at
     centre_px = (x, y) (pixel units, pixel (0, 0)'s centre at 0) and the display's x axis turned by
-    rotation_deg from the image's x axis towards +y (module doc)."""
+    rotation_deg from the image's x axis towards +y (module doc). use_cache: through the kernel cache (a
+    measurement's display; not a fit's passing trial layouts)."""
     from scipy.ndimage import map_coordinates
-    fine, _ = cached(compute_kernels, "mono", layout, lens, True, wavelengths_nm=[wavelength_nm],
+    fine, _ = cached(compute_kernels, "mono", layout, lens, use_cache, wavelengths_nm=[wavelength_nm],
                      pixel_um=pixel_um / oversample, size_px=window_px * oversample, precision="float64")
     k = fine.kernels[0]
     c = k.shape[-1] // 2
@@ -66,11 +68,11 @@ def psf_image(layout, lens: Lens, wavelength_nm: float, pixel_um: float, shape_h
 
 def render_window(layout, lens: Lens, wavelength_nm: float, pixel_um: float, size: int, origin, rotation_deg: float):
     """psf_image on a square window [S, S] (its centre pixel at (0, 0)) with the PSF's centre at `origin`
-    (window px), from a kernel large enough to cover the whole window."""
+    (window px), from a kernel large enough to cover the whole window; the kernel cache is not used."""
     half = size // 2
     cover = 2 * (half + int(math.ceil(np.max(np.abs(origin)))) + 4) + 1
     return psf_image(layout, lens, wavelength_nm, pixel_um, (size, size), (half + origin[0], half + origin[1]),
-                     rotation_deg, cover)
+                     rotation_deg, cover, use_cache=False)
 
 
 def vignetting_map(shape_hw, corner_loss: float) -> np.ndarray:

@@ -98,11 +98,12 @@ def measure_gamma(glass: Frame, display: Frame) -> tuple[np.ndarray, np.ndarray,
 
 
 def band_gains(layout, lens: Lens, edges_nm, pixel_um: float) -> tuple[np.ndarray, np.ndarray]:
-    """(display, glass) τ_k (1 − o_k) at the band centres (module doc)."""
+    """(display, glass) τ_k (1 − o_k) at the band centres (module doc); the bare lens's through the kernel
+    cache (the same every run), the fitted layout's not."""
     centres = 0.5 * (edges_nm[1:] + edges_nm[:-1])
     out = []
     for lay in (layout, None):
-        ks, _ = cached(compute_kernels, "mono", lay, lens, True, wavelengths_nm=centres, pixel_um=pixel_um,
+        ks, _ = cached(compute_kernels, "mono", lay, lens, lay is None, wavelengths_nm=centres, pixel_um=pixel_um,
                        size_px=KERNEL_PX, sensor_um=SENSOR_UM)
         out.append(kernel_gain(ks))
     return out[0], out[1]
