@@ -99,8 +99,9 @@ def test_items_are_views_from_jittered_poses_with_one_focus(reference):
         # the focus (hence the lens-to-sensor distance and the kernels) is the base pose's for every item
         assert camera["focus_distance_m"] == pytest.approx(FOCUS_M)
         assert synth["depth_layers"]["depths_m"] == [camera["focus_distance_m"]]
-    # one kernel file per display (glass, toled) for both items: the items share the in-focus kernels
-    assert len(kernel_files) == 2
+    # two kernel files per display (glass, toled): the core kernels and the far field's orders (psf.far,
+    # optics.far_field), for both items: the items share the in-focus kernels
+    assert len(kernel_files) == 4
     gt = [(out / f / "gt.exr").read_bytes() for f in FOLDERS]
     assert gt[0] != gt[1]
 

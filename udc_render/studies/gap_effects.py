@@ -14,6 +14,7 @@ from udc_render.optics.stray.settings import ON_VALUES
 from udc_render.sensor import SensorConfig
 from udc_render.sensor.defects import DefectConfig
 from udc_render.sensor.fpn import FpnConfig
+from udc_render.synth_config import DEFAULT_FAR_FIELD_THRESHOLD
 
 
 @dataclass(frozen=True)
@@ -69,7 +70,6 @@ def _aberration(setup, on: bool):
 
 
 def _far_field(setup, on: bool):
-    from udc_render.synth_config import DEFAULT_FAR_FIELD_THRESHOLD
     return _cfg(setup, far_field_threshold=DEFAULT_FAR_FIELD_THRESHOLD if on else None)
 
 
