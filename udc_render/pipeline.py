@@ -87,7 +87,7 @@ from udc_render.sensor.frames import burst_sensor, mean_of_frames
 from udc_render.synth_config import (CHANNEL_KERNELS, DEFAULT_DEFOCUS_TOLERANCE_PX, EXPOSURE_FILL,
                                      EXPOSURE_PERCENTILE, FORMS, SynthConfig, SynthError)
 from udc_render.synth_kernels import (Kernels, band_kernel_set, compact_kernels, display_channel_kernels,
-                                      display_kernels, plan_kernels, scene_object_distance_m)
+                                      display_kernels, plan_kernels, scene_object_distance_m, store_power_maps)
 from udc_render.views import View, bin_pixels, bright_pixels, layered_electrons, per_channel_blur
 
 # The settings (synth_config) and the kernels (synth_kernels) are part of the pipeline's public names.
@@ -95,7 +95,7 @@ __all__ = ["CHANNEL_KERNELS", "DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "
            "SynthError", "SynthResult", "auto_exposure_s", "band_kernel_set", "capture_scene", "capture_views",
            "check_grid", "compact_kernels", "depth_layers", "display_channel_kernels", "display_gamma",
            "display_kernels", "gt_noise_seed", "layer_kernels", "noise_seed", "plan_kernels", "scene_object_distance_m",
-           "sensor_for_scene", "synthesize"]
+           "sensor_for_scene", "store_power_maps", "synthesize"]
 
 
 GT_RECORD = {False: "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, "
@@ -227,7 +227,8 @@ def capture_views(kernels: Kernels, displays: list[Display], edges_nm, far: dict
     for d in displays:
         t = d.transmission.band_means(edges_nm)
         if not (d.is_glass and np.all(t == 1)):
-            out.append(View(d.name, kernels.band[d.name], t, kernels.field_bases.get(d.name), far.get(d.name)))
+            out.append(View(d.name, kernels.band[d.name], t, kernels.field_bases.get(d.name), far.get(d.name),
+                            kernels.power_maps.get(d.name)))
     return out
 
 

@@ -14,7 +14,7 @@ from psf.cache import cached
 from psf.engine import DEFAULT_FIELD_PHASES
 from psf.far import CACHE_NAME as FAR_CACHE_NAME, ORDER_PIXEL_FACTOR, order_kernels
 from psf.spectral import channel_kernels
-from udc_render.optics import FieldBasis, field_basis, field_weights, live_phases
+from udc_render.optics import FieldBasis, PowerMap, field_basis, field_power_map, field_weights, live_phases
 from udc_render.optics.displays import Display
 from udc_render.optics.far_field import FarField, acceptance_um, far_window_px, make_far_field
 from udc_render.scene import Monitor, Scene
@@ -33,6 +33,7 @@ class Kernels:
     band: dict[str, KernelSet]
     channel: dict[str, KernelSet] = field(default_factory=dict)
     field_bases: dict[str, FieldBasis] = field(default_factory=dict)  # compact_kernels: rank-r phase bases
+    power_maps: dict[str, PowerMap] = field(default_factory=dict)  # store_power_maps: exact power, made once
     object_distance_m: float = math.nan  # the distance the kernels are focused for (scene_object_distance_m)
     far: dict[str, FarField] = field(default_factory=dict)  # spectral form: the light past the window (far_field)
 
@@ -174,3 +175,19 @@ def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels
             bases[name] = field_basis(ks.field_kernels, live_phases(wy, wx), cfg.field_rank)
             band[name] = replace(ks, field_kernels=None)
     return replace(kernels, band=band, field_bases=bases)
+
+
+def store_power_maps(kernels: Kernels, scene: Scene) -> Kernels:
+    """The kernels with each d > 0 set's exact-power map on the scene's render grid made now and kept
+    (optics.field_power: the numbers apply_kernels would make per capture, two chirp z-transforms per band,
+    5–7 s for 30 bands at 2558 × 1534 px; kept in float32, K · H · W · 4 bytes per display: 0.47 GB there):
+    a dataset worker makes them once, not once per item (benchmarks/bench_banding_rank.py --full-frame)."""
+    cam = camera_geometry(scene)
+    shape, pitch = (cam.height_px, cam.width_px), kernels.grid.pitch_um
+    maps = {}
+    for name, ks in kernels.band.items():
+        if ks.field_series is not None and ks.distance_mm > 0:
+            _, _, g = field_weights(ks, shape, pitch, ks.distance_mm)
+            maps[name] = field_power_map(ks, shape, pitch, ks.distance_mm, g["image_distance_um"],
+                                         g["period_um"]).stored()
+    return replace(kernels, power_maps=maps)

@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from udc_render.optics import BrightPixels, FieldBasis, apply_kernels, band_spectra, convolve_bands
+from udc_render.optics import BrightPixels, FieldBasis, PowerMap, apply_kernels, band_spectra, convolve_bands
 from udc_render.optics.apply import far_field_images
 from udc_render.optics.far_field import FarField
 from udc_render.optics.layers import Compositor, DepthLayers, occluder_kernels
@@ -44,6 +44,7 @@ class View:
     transmission: np.ndarray | None
     field_basis: FieldBasis | None = None
     far_field: FarField | None = None
+    power_map: PowerMap | None = None  # d > 0: the exact-power map made once (synth_kernels.store_power_maps)
 
     @property
     def plain(self) -> bool:
@@ -84,7 +85,7 @@ def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectr
     """One optics pass: electrons [3, h, w] (float64, render pitch, before binning) and its record."""
     w = band_electron_weights(band_image.edges_nm, sensor)
     kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=view.field_basis, bright=bright,
-              far_field=view.far_field)
+              far_field=view.far_field, power_map=view.power_map)
     if cfg.blend == "source":
         optics = apply_kernels(band_image, view.kernel_set, view.transmission, cfg.precision, channel_weights=w,
                                spectra=spectra, **kw)

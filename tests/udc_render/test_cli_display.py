@@ -94,6 +94,20 @@ def test_dataset_names_of_files_presets_and_words(cell):
         "toled", "glass", "cell", "cell", "blur"]
 
 
+def test_dataset_names_read_no_image_and_name_a_missing_file(cell, tmp_path, monkeypatch):
+    """display_name takes a micrograph's stem and a display file's [display] name without reading an image
+    (MicrographLayout.load is not called, also for a file whose layout is a micrograph); the names equal
+    load_display's; a missing file is refused in one line naming it."""
+    png, _ = cell
+    micro_toml = tmp_path / "micro.toml"
+    micro_toml.write_text(f'[display]\nname = "m1"\n[display.layout]\ntype = "micrograph"\nfile = "{png.name}"\n')
+    want = [D.load_display(str(p)).name for p in (png, micro_toml)]
+    monkeypatch.setattr(D.MicrographLayout, "load", lambda *a, **k: pytest.fail("an image was read"))
+    assert [D.display_name(str(p)) for p in (png, micro_toml)] == want == ["cell", "m1"]
+    with pytest.raises(D.DisplayError, match="gone.png.*no such file"):
+        D.display_name(str(tmp_path / "gone.png"))
+
+
 def _psf(tmp_path, name, *argv):
     out = tmp_path / name
     assert main(["psf", *argv, "--wavelengths-nm", "520", "--size", "31", "--field-phases", "2",

@@ -64,3 +64,36 @@ def test_compact_kernels_give_the_same_bytes(small):
     for name in ("glass", "toled"):
         assert a.captures[name].mosaic_dn.tobytes() == b.captures[name].mosaic_dn.tobytes()
     assert compact_kernels(full, scene, replace(cfg, field_rank=None)) is full  # exact: every phase kernel
+
+
+def test_stored_power_maps_are_made_once_and_give_the_same_bytes(small, monkeypatch, tmp_path):
+    """A dataset worker makes each d > 0 display's exact-power map once (store_power_maps, in worker_kernels):
+    two captures with it call psf.banding.power_lattice no more (a capture without it calls it once per band)
+    and give the bytes of the map made per call; a map of another grid is refused."""
+    from udc_render.dataset.executors import Shared, worker_kernels
+    from udc_render.optics import OpticsError, field_power
+    from udc_render.pipeline import compact_kernels, store_power_maps
+    scene, band_image = small
+    displays = [preset("glass"), replace(preset("toled"), distance_mm=2.0)]
+    cfg = SynthConfig(field_phases=2, use_cache=False)
+    compact = compact_kernels(plan_kernels(scene, displays, cfg), scene, cfg)
+    calls = []
+    lattice = field_power.power_lattice
+    monkeypatch.setattr(field_power, "power_lattice", lambda *a: calls.append(1) or lattice(*a))
+    fresh = synthesize(band_image, scene, displays, cfg, kernels=compact)
+    K = band_image.bands.shape[0]
+    assert len(calls) == K
+    stored = store_power_maps(compact, scene)
+    assert set(stored.power_maps) == {"toled"} and stored.power_maps["toled"].maps.shape == (K,) + band_image.bands.shape[1:]
+    assert len(calls) == 2 * K
+    for _ in range(2):
+        again = synthesize(band_image, scene, displays, cfg, kernels=stored)
+        assert again.captures["toled"].mosaic_dn.tobytes() == fresh.captures["toled"].mosaic_dn.tobytes()
+    assert len(calls) == 2 * K
+    shared = Shared(scene, displays, cfg, tmp_path, side_by_side=False, previews=False)
+    first = worker_kernels(shared)
+    assert first.power_maps["toled"].maps is not None and worker_kernels(shared) is first
+    small_grid = replace(band_image, bands=band_image.bands[:, 2:, 2:])
+    with pytest.raises(OpticsError, match="power_map"):
+        apply_kernels(small_grid, stored.band["toled"], None, field_rank=cfg.field_rank,
+                      field_basis=stored.field_bases["toled"], power_map=stored.power_maps["toled"])

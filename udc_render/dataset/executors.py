@@ -48,13 +48,14 @@ _WORKER_KERNELS: dict[str, Kernels] = {}  # per process: the job's kernels, load
 
 def worker_kernels(shared: Shared) -> Kernels:
     """The job's kernels, loaded from the cache on a worker's first item and kept for the next ones, the
-    d > 0 phase kernels reduced to their rank-r bases (pipeline.compact_kernels: same numbers, 1/8 the memory)."""
-    from udc_render.pipeline import compact_kernels, plan_kernels
+    d > 0 phase kernels reduced to their rank-r bases (pipeline.compact_kernels: same numbers, 1/8 the memory)
+    and their exact-power maps made once (pipeline.store_power_maps: same numbers, not remade per item)."""
+    from udc_render.pipeline import compact_kernels, plan_kernels, store_power_maps
     key = str(shared.out)
     if key not in _WORKER_KERNELS:
         _WORKER_KERNELS.clear()
-        _WORKER_KERNELS[key] = compact_kernels(plan_kernels(shared.scene, shared.displays, shared.cfg), shared.scene,
-                                               shared.cfg)
+        kernels = compact_kernels(plan_kernels(shared.scene, shared.displays, shared.cfg), shared.scene, shared.cfg)
+        _WORKER_KERNELS[key] = store_power_maps(kernels, shared.scene)
     return _WORKER_KERNELS[key]
 
 

@@ -19,7 +19,7 @@ from udc_render.optics.bright import BrightPixels
 from udc_render.optics.convolution import OpticsError, _check_margin, _precision, convolve_bands, fft_shape
 from udc_render.optics.far_field import FarField, far_light
 from udc_render.optics.field import FieldBasis, convolve_field, field_weights
-from udc_render.optics.field_power import field_power_map
+from udc_render.optics.field_power import PowerMap, field_power_map, stored_or_fresh
 
 PITCH_RTOL = 1e-6
 
@@ -76,7 +76,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
                   image_distance_um: float | None = None, period_um=None,
                   field_rank: int | None = None, channel_weights=None, spectra: np.ndarray | None = None,
                   field_basis: FieldBasis | None = None, bright: BrightPixels | None = None,
-                  far_field: FarField | None = None) -> OpticsResult:
+                  far_field: FarField | None = None, power_map: PowerMap | None = None) -> OpticsResult:
     """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
 
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (optics.convolution).
@@ -89,6 +89,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     field_basis: the kernel set's rank-`field_rank` bases for this grid, made once (field_basis).
     bright: very bright pixels, convolved apart in float64 (optics.bright; pipeline.bright_pixels).
     far_field: the light past the kernel window, added at a coarse pitch (optics.far_field; None: lost).
+    power_map: the exact-power map of this kernel set on this grid, made once (PowerMap.stored; None: made here).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -130,8 +131,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra, bright)
     else:
         wy, wx, geometry = field_weights(kernel_set, (H, W), pitch, d_mm, image_distance_um, period_um)
-        power_map = field_power_map(kernel_set, (H, W), pitch, d_mm, geometry["image_distance_um"],
-                                    geometry["period_um"])
+        power_map = stored_or_fresh(power_map, field_power_map(kernel_set, (H, W), pitch, d_mm,
+                                                               geometry["image_distance_um"], geometry["period_um"]))
         images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
                                           gains, blend, precision, workers, field_rank, channel_weights, field_basis,
                                           bright, power_map)

@@ -176,11 +176,28 @@ def load_display(spec: str, **micrograph) -> Display:
 
 
 def display_name(spec: str) -> str:
-    """The name a --display has in a dataset (train, evaluate): a preset's, a display file's or a
-    micrograph's (load_display); any other word is taken as a dataset's display name as it is."""
-    if spec == "none" or Path(spec).suffix.lower() in (".toml", *MICROGRAPH_SUFFIXES):
-        return load_display(spec).name
-    return spec
+    """The name a --display has in a dataset (train, evaluate): a preset's, a display file's [display] name
+    or a micrograph's file stem (load_display's names, without building the layout or reading an image);
+    any other word is taken as a dataset's display name as it is."""
+    if spec == "none":
+        return "glass"
+    path = Path(spec)
+    suffix = path.suffix.lower()
+    if suffix not in (".toml", *MICROGRAPH_SUFFIXES):
+        return spec
+    if not path.is_file():
+        raise DisplayError(f"--display = {spec!r}: no such file; expected {ALLOWED}")
+    if suffix == ".toml":
+        return _document_name(read_toml(path, DisplayError, "display file"), path)
+    return micrograph_name(path)
+
+
+def micrograph_name(path: Path) -> str:
+    """A micrograph display's name: its file's stem (one without spaces)."""
+    if " " in path.stem:
+        raise DisplayError(f"--display = {str(path)!r}: a micrograph display is named by its file's stem: expected "
+                           "a file name without spaces")
+    return path.stem
 
 
 def micrograph_display(path: Path, pixel_um: float = 1.0, values: str = "amplitude", random_rotation: bool = False,
@@ -188,11 +205,9 @@ def micrograph_display(path: Path, pixel_um: float = 1.0, values: str = "amplitu
     """A transmission micrograph as a display, named by the file's stem: what a display file with only
     ``[display.layout] type = "micrograph"`` gives (T = 1, gain 1, d = 0), with the tile's pixel size,
     values and random tile rotation of ``psf.MicrographLayout.load``."""
-    if " " in path.stem:
-        raise DisplayError(f"--display = {str(path)!r}: a micrograph display is named by its file's stem: expected "
-                           "a file name without spaces")
+    name = micrograph_name(path)
     layout = MicrographLayout.load(path, pixel_um, values, random_rotation, seed)
-    return Display(path.stem, layout, Transmission("flat", 1.0), 1.0, 0.0, source=str(path))
+    return Display(name, layout, Transmission("flat", 1.0), 1.0, 0.0, source=str(path))
 
 
 def load_displays(specs: str, distance_mm: float | None = None) -> list[Display]:
@@ -239,8 +254,8 @@ def _check_keys(path, table, allowed, prefix):
             _fail(path, prefix + k, table[k], f"a known key ({', '.join(allowed)})")
 
 
-def parse_display(data: dict, path: Path) -> Display:
-    """Validate a display document: [display] name, layout {type, …}, distance_mm, gain, transmission."""
+def _document_name(data: dict, path: Path) -> str:
+    """A display document's [display] name (default: the file's stem), its top-level keys checked."""
     _check_keys(path, data, ("display",), "")
     d = data.get("display")
     if d is None:
@@ -249,6 +264,13 @@ def parse_display(data: dict, path: Path) -> Display:
     name = d.get("name", path.stem)
     if not isinstance(name, str) or not name or any(c in name for c in "/\\ "):
         _fail(path, "display.name", name, "a non-empty name without spaces or slashes")
+    return name
+
+
+def parse_display(data: dict, path: Path) -> Display:
+    """Validate a display document: [display] name, layout {type, …}, distance_mm, gain, transmission."""
+    name = _document_name(data, path)
+    d = data["display"]
     lay = d.get("layout")
     kind = lay.get("type") if isinstance(lay, dict) else None
     if kind not in _LAYOUT_KEYS:

@@ -22,17 +22,19 @@ for a display with sharp edges); more phases cost P² kernels each.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from psf.banding import power_lattice
+from udc_render.optics.convolution import OpticsError
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class PowerMap:
     """m_k on the render grid [H, W]: the series [K, 2n+1, m+1] (KernelSet.field_series) on the lattice of
-    mask shifts x0 + i·dx (columns), y0 + j·dy (rows), µm."""
+    mask shifts x0 + i·dx (columns), y0 + j·dy (rows), µm; maps [K, H, W] float32: every band's m_k made
+    once (stored(); a dataset worker keeps them, pipeline.compact_kernels), None: made per call."""
     series: np.ndarray
     period_um: tuple[float, float]
     x0_um: float
@@ -41,11 +43,26 @@ class PowerMap:
     y0_um: float
     dy_um: float
     height_px: int
+    maps: np.ndarray | None = None
 
     def band(self, k: int, dtype=np.float32) -> np.ndarray:
-        """m_k(s(x)) [H, W] of band k, in dtype."""
+        """m_k(s(x)) [H, W] of band k, in dtype (the stored map when there is one)."""
+        if self.maps is not None:
+            return self.maps[k].astype(dtype, copy=False)
         return power_lattice(self.series[k], self.period_um, self.x0_um, self.dx_um, self.width_px, self.y0_um,
                              self.dy_um, self.height_px).astype(dtype)
+
+    def stored(self) -> "PowerMap":
+        """This map with every band's m_k computed now and kept (float32: K · H · W · 4 bytes)."""
+        if self.maps is not None:
+            return self
+        return replace(self, maps=np.stack([self.band(k) for k in range(self.series.shape[0])]))
+
+    def same_lattice(self, other: "PowerMap") -> bool:
+        """True when both maps are of the same series on the same lattice of shifts (so either may serve)."""
+        geometry = ("period_um", "x0_um", "dx_um", "width_px", "y0_um", "dy_um", "height_px")
+        return (all(getattr(self, a) == getattr(other, a) for a in geometry)
+                and np.array_equal(self.series, other.series))
 
 
 def field_power_map(kernel_set, shape_hw, pitch_um: float, distance_mm: float, image_distance_um: float,
@@ -59,3 +76,14 @@ def field_power_map(kernel_set, shape_hw, pitch_um: float, distance_mm: float, i
     step_um = pitch_um * distance_mm * 1000.0 / image_distance_um
     return PowerMap(np.asarray(kernel_set.field_series), tuple(period_um), -(W - 1) / 2 * step_um, step_um, int(W),
                     -(H - 1) / 2 * step_um, step_um, int(H))
+
+
+def stored_or_fresh(stored: PowerMap | None, fresh: PowerMap | None) -> PowerMap | None:
+    """The stored map (PowerMap.stored, made once for this grid) in place of the fresh one, which it must equal
+    (same series, same lattice); the fresh one when none is stored."""
+    if stored is None:
+        return fresh
+    if fresh is None or not stored.same_lattice(fresh):
+        raise OpticsError("power_map: the stored exact-power map is not this kernel set's on this grid "
+                          f"({stored.height_px} × {stored.width_px} px): make it for this grid (field_power_map)")
+    return stored
