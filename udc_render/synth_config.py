@@ -45,10 +45,12 @@ class SynthConfig:
     kernel_precision: str = "float32"
     field_phases: int | None = None  # d > 0: phases per axis (None: the engine's default, 4)
     blend: str = "source"
-    # d > 0: rank of each band's phase-kernel basis (None: every phase, exact). 2, from `study capture`
-    # (field_rank) and the full-frame check in README: 4.8× faster than every phase at 4e-4 relative RMS
-    # (T-OLED, d = 2 mm; P-OLED 1e-4), a hundredth of the sensor noise, 3 % of the bands' amplitude.
-    field_rank: int | None = 2
+    # d > 0: rank of each band's phase-kernel basis (None: every phase). 4, the lowest rank that keeps the T-OLED
+    # flat field's first harmonic within 5 % of the exact series P(s) at d = 2–16 mm (`study banding`, issue 29):
+    # 0.974 / 0.976 / 1.020 / 0.988 at 2 / 4 / 8 / 16 mm (rank 2: 0.96 / 0.93 / 0.86 / 0.72, rank 3: 0.96 / 0.93 /
+    # 0.91 / 0.96; a basis that drops the kernels' phase-dependent shape smooths the bands by the PSF's MTF).
+    # Cost: a 2048 × 1024 synthesis 1.35–1.5× rank 2's (benchmarks/bench_banding_rank.py; docs/concepts/defaults).
+    field_rank: int | None = 4
     seed: int = 0
     use_cache: bool = True
     kernel_cache: str | None = None  # kernel cache folder (None: psf.cache's default); how, not what: not recorded

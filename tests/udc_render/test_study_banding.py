@@ -9,7 +9,9 @@ import pytest
 
 from psf.banding import PowerSeries
 from udc_render.cli import main
+from psf.engine import DEFAULT_FIELD_PHASES
 from udc_render.optics import displays as D
+from udc_render.pipeline import SynthConfig
 from udc_render.scene.geometry import psf_lens
 from udc_render.studies import banding as B
 from udc_render.studies import banding_fit as F
@@ -17,7 +19,7 @@ from udc_render.studies import banding_fit as F
 
 @pytest.fixture(scope="module")
 def quick(tmp_path_factory):
-    """The quick study through the CLI (one run for the module: ~40 s on 2 cores), its rows from the CSV."""
+    """The quick study through the CLI (one run for the module: 1.5–3 min on 2 loaded cores), its rows from the CSV."""
     out = tmp_path_factory.mktemp("banding")
     assert main(["study", "banding", "--out", str(out), "--quick"]) == 0
     with open(out / "study_banding.csv", newline="") as f:
@@ -62,8 +64,10 @@ def test_flat_field_period_is_zi_p_over_d(quick):
         assert order == int(r["analytic_order"]) == {"x": 1, "y": 2}[r["axis"]]
         assert abs(float(r["period_fit_um"]) * order / expected - 1) < 0.01
         checked.add((r["axis"], r["field_phases"], r["field_power"], r["field_rank"]))
-    assert checked == {("x", "4", "series", "2"), ("x", "4", "series", "all"), ("x", "2", "series", "2"),
-                       ("x", "2", "interpolated", "2"), ("x", "4", "interpolated", "2"), ("y", "4", "series", "2")}
+    r0 = str(SynthConfig().field_rank)
+    assert checked == {("x", "4", "series", r0), ("x", "4", "series", "2"), ("x", "4", "series", "all"),
+                       ("x", "2", "series", r0), ("x", "2", "interpolated", r0), ("x", "4", "interpolated", r0),
+                       ("y", "4", "series", r0)}
 
 
 def test_toled_along_y_the_frame_sees_the_second_harmonic():
@@ -92,28 +96,69 @@ def test_toled_along_y_the_frame_sees_the_second_harmonic():
 
 
 def test_first_harmonic_against_the_exact_series(quick):
-    """T-OLED, the blend's power from the exact series (optics.field_power): with every phase kernel (rank
-    'all') the measured harmonic of the fit's order is within 5 % of the exact series P(s) (measured 1.00),
-    nearer it than the phase-averaged kernel's smoothing (series × OTF, 'expected'). With the default rank-2
-    basis it sits nearer that smoothing than the series (x: 0.93 of the series, 0.98 of expected; y: 0.95,
-    1.01): the basis drops the shape that varies with the phase, not the power. The interpolated powers (the
-    blend before the series, same kernels) give below 0.8 of the series (0.69 at P = 4, 0.71 at P = 2) and
-    follow P(s) interpolated alone instead."""
+    """T-OLED, the blend's power from the exact series (optics.field_power), quick rig: along x with 4 phases,
+    at the default field rank and with every phase kernel (rank 'all'), the measured harmonic is within 5 % of
+    the exact series P(s) (6 mm: rank 4 0.98, all 0.97), nearer it than the phase-averaged kernel's smoothing
+    (series × OTF, 'expected'; MTF 0.87). Where the kernels' phase-dependent shape is lost, the harmonic sits
+    nearer that smoothing than the series: a rank-2 basis drops it (0.87 of the series, 1.00 of expected),
+    2 phases keep sinc²(1/2) = 0.41 of it (0.88, 1.01), and along y the second harmonic is the Nyquist
+    frequency of 4 phases (0.88, 0.95). The interpolated powers (the blend before the series, same kernels)
+    give below 0.8 of the series (0.76 at P = 4, 0.68 at P = 2) and follow P(s) interpolated alone instead."""
     _, rows = quick
+    ranks = set()
     for r in _toled_rows(rows):
         to_series, to_expected = float(r["ratio_measured_analytic"]), float(r["ratio_measured_expected"])
         to_interp = float(r["ratio_measured_interpolated"])
-        assert 0.9 < float(r["psf_mtf"]) < 1.0
+        assert 0.8 < float(r["psf_mtf"]) < 1.0
         if r["field_power"] == "interpolated":
             assert to_series < 0.8
             assert abs(to_interp - 1) < abs(to_series - 1)
-        elif r["field_rank"] == "all":
-            assert abs(to_series - 1) <= 0.05
-            assert abs(to_series - 1) < abs(to_expected - 1)
+        elif r["field_rank"] == "2" or r["field_phases"] == "2" or r["axis"] == "y":
+            assert abs(to_expected - 1) < abs(to_series - 1), (r["axis"], r["field_phases"], r["field_rank"])
+            assert abs(to_expected - 1) <= 0.05 or r["axis"] == "y"
         else:
-            assert abs(to_expected - 1) < abs(to_series - 1) and abs(to_expected - 1) <= 0.05
+            assert abs(to_series - 1) <= 0.05, (r["field_rank"], to_series)
+            assert abs(to_series - 1) < abs(to_expected - 1)
+        ranks.add(r["field_rank"])
         assert float(r["a1_dn"]) > 0 and float(r["sigma_dn"]) > 0
         assert (r["visible_pixel"] == "True") == (float(r["a1_dn"]) >= float(r["sigma_dn"]))
+    assert ranks == {"2", str(SynthConfig().field_rank), "all"}
+
+
+@pytest.fixture(scope="module")
+def default_rig():
+    """The quick study's rig (512 × 64 px, 3 bands, the default margin), bands along x, the default
+    SynthConfig (kernels with the cache off; the study's own base turns the stray light off)."""
+    return B.Rig(B.QUICK, "x", SynthConfig(use_cache=False))
+
+
+def _default_ratio(rig, distance_mm: float) -> float:
+    """study banding's measure of the T-OLED at distance_mm with the default SynthConfig: first harmonic / P(s)."""
+    row, _, _ = B.measure(rig, "toled", distance_mm, None)
+    assert (row["field_phases"], row["field_rank"]) == (DEFAULT_FIELD_PHASES, SynthConfig().field_rank)
+    assert row["harmonic_order"] == 1
+    return row["ratio_measured_analytic"]
+
+
+def test_default_settings_band_within_5_percent_of_the_exact_series(default_rig):
+    """The DEFAULT SynthConfig (no knob set: 4 field phases, its field rank, blend 'source', the power from the
+    exact series) on a small T-OLED flat field (the quick rig), d = 16 mm, where the rank
+    matters most: the first harmonic along x within 5 % of the exact series P(s) (rank 4: 0.97; a rank-2 basis
+    gives 0.65, test_default_settings_band_at_4_and_8_mm). About 30 s."""
+    ratio = _default_ratio(default_rig, 16.0)
+    assert abs(ratio - 1) < 0.05, ratio
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("distance_mm", [4.0, 8.0])
+def test_default_settings_band_at_4_and_8_mm(default_rig, distance_mm):
+    """The same at 4 and 8 mm (rank 4: 1.00 at 8 mm), and the check can fail: a rank-2 basis on the same
+    kernels gives 0.84 at 8 mm. About 40 s each: `pytest -m slow tests/udc_render/test_study_banding.py`."""
+    ratio = _default_ratio(default_rig, distance_mm)
+    assert abs(ratio - 1) < 0.05, ratio
+    if distance_mm == 8.0:
+        rank2, _, _ = B.measure(default_rig, "toled", distance_mm, None, rank=2)
+        assert rank2["ratio_measured_analytic"] < 0.9
 
 
 def test_kernel_otf_of_a_gaussian():

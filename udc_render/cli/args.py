@@ -250,7 +250,7 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--field-phases", type=positive("--field-phases", int), help="d > 0: phases per axis [4]")
     p.add_argument("--field-rank", type=field_rank, default=argparse.SUPPRESS,
                    help="d > 0: convolve with a rank-R basis of each band's phase kernels (R FFT pairs per band "
-                        "instead of one per phase; the kernel residual is recorded), or 'exact' [2]")
+                        "instead of one per phase; the kernel residual is recorded), or 'exact' [4]")
     p.add_argument("--precision", choices=("float32", "float64"), default="float32",
                    help="the optics' FFT convolutions: float32: single precision (default); float64: double "
                         "precision [float32]")

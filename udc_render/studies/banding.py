@@ -6,8 +6,11 @@ Rig: the monitor scene (scenes/monitor.toml) showing ``pattern:white`` with fram
 reduced sensor (FULL: 1024 × 128 px of 1.55 µm). The rendered panel's centre spectrum is extended over
 the whole render grid (the margin included), so the frame's edges see no panel edge: a flat field.
 Each display (T-OLED, P-OLED presets, gains 6 and 25) is synthesised at every distance d with the
-default SynthConfig (spectral form, blend 'source', 4 field phases per axis, field rank 2, Poisson and
-read noise, the rig's auto exposure: monitor white at 0.8 of the full well through glass).
+default SynthConfig (spectral form, blend 'source', 4 field phases per axis, its field rank, Poisson and
+read noise, the rig's auto exposure: monitor white at 0.8 of the full well through glass), stray light off
+(STUDY_BASE: the P-OLED's default haze, a θ⁻² veil of the finite flat field, would shade the frame more than
+its bands, and the fit would lock onto it; the T-OLED has none by default); the phase display's
+distance runs again at cfg['ranks'] and with every phase kernel (rank 'all'), on the same kernels.
 
 Measured (green Gr sites of the RGGB mosaic, sample every 2 px along x):
 
@@ -31,7 +34,8 @@ takes its power from the exact series at every pixel's shift (optics.field_power
 should be 1 whatever the phase count; the phases run measures it against P, with the exact series and
 with the phases' powers interpolated (power 'interpolated': the same kernels without their field_series,
 the blend before the series), which keeps sinc²(h/P) of harmonic h (0.81 for h = 1, P = 4) and aliases
-harmonics mP ± h onto it. synthesis_cost times the two at the default phases.
+harmonics mP ± h onto it. synthesis_cost times the two at the default phases, and the series at the field
+ranks of cfg['ranks'] and 'all'.
 
 Visibility: bands are visible per pixel when A1 · mean ≥ σ (first-harmonic amplitude at least the
 per-pixel noise at that level); averaged along the bands over the N Gr rows of the frame the criterion
@@ -41,7 +45,8 @@ one below 4 px (the Nyquist limit of a colour channel sampled every 2 px) is not
 Outputs: study_banding.csv (one row per display, distance, field-phase count and power),
 study_banding.md (set-up, table, visible ranges, cost) and study_banding.png (period and amplitude
 against d with the analytic curves; measured / expected against P; a flat-field example). ``quick``:
-512 × 64 px, 3 bands of 100 nm, 60 µm render margin, one distance per display and P = 2 (CI smoke run),
+512 × 64 px, 3 bands of 100 nm, the default render margin (396 µm: a smaller kernel window would put a
+large share of the light into the unbanded far field), one distance per display and P = 2 (CI smoke run),
 the cost from 3 syntheses each (5 in the full run). Kernels are computed with the cache off (a d > 0
 set of the full run is 250 MB; nothing is written to disk).
 """
@@ -57,6 +62,7 @@ from tqdm import tqdm
 
 from psf.engine import DEFAULT_FIELD_PHASES
 from udc_render.optics import displays as D
+from udc_render.optics.stray import StrayLight
 from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
 from udc_render.render import render_scene
 from udc_render.scene import Bands, load_scene
@@ -72,11 +78,12 @@ FULL = {"sensor": (1024, 128), "step_nm": 20.0, "margin_um": None,
         "distances_mm": {"toled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0), "poled": (0.5, 1.0, 2.0, 4.0, 8.0, 16.0)},
         "phases": (2, 3, 6), "phase_display": "toled", "phase_distance_mm": 4.0,
         "curve_mm": (0.25, 20.0, 21), "curve_step_nm": 50.0,
-        "y_distances_mm": {"toled": (2.0, 4.0, 8.0), "poled": (1.0, 4.0)}, "cost_repeats": 5}
-QUICK = {"sensor": (512, 64), "step_nm": 100.0, "margin_um": 60.0,
+        "y_distances_mm": {"toled": (2.0, 4.0, 8.0), "poled": (1.0, 4.0)}, "cost_repeats": 5, "ranks": (2, 3)}
+QUICK = {"sensor": (512, 64), "step_nm": 100.0, "margin_um": None,
          "distances_mm": {"toled": (6.0,), "poled": (3.0,)},
          "phases": (2,), "phase_display": "toled", "phase_distance_mm": 6.0,
-         "curve_mm": (1.0, 16.0, 5), "curve_step_nm": 100.0, "y_distances_mm": {"toled": (6.0,)}, "cost_repeats": 3}
+         "curve_mm": (1.0, 16.0, 5), "curve_step_nm": 100.0, "y_distances_mm": {"toled": (6.0,)}, "cost_repeats": 3,
+         "ranks": (2,)}
 
 
 # ----------------------------------------------------------------------------------------------
@@ -104,21 +111,22 @@ def flat_band_image(band_image):
 # The runs
 
 
-class Rig:
-    """The scene, its flat field and the glass capture shared by every run (kernels: cache off); bands
-    measured along `axis` (y: the sensor turned to portrait, cfg's height × width)."""
+# The study's synthesis: the default but for the stray light (module doc), kernels with the cache off
+STUDY_BASE = SynthConfig(use_cache=False, stray_light=StrayLight.off())
 
-    def __init__(self, cfg: dict, axis: str = "x"):
+
+class Rig:
+    """The scene, its flat field and the glass capture shared by every run; bands measured along `axis` (y:
+    the sensor turned to portrait, cfg's height × width); base: the synthesis (None: STUDY_BASE)."""
+
+    def __init__(self, cfg: dict, axis: str = "x", base: SynthConfig | None = None):
         self.cfg, self.axis, self.a = cfg, axis, AXES.index(axis)
         self.scene = flat_field_scene(cfg if axis == "x" else {**cfg, "sensor": cfg["sensor"][::-1]})
         self.band_image = flat_band_image(render_scene(self.scene, progress=False))
         self.lens = psf_lens(self.scene)
         self.z_i_um = float(self.lens.image_distance_um)  # z_i: the lens focused on the panel (the kernels' own)
         self.pitch_um = float(self.scene.sensor.pitch_um)
-        # the far field (optics.far_field) is left off: it adds the light past the kernel window as a veil
-        # without bands of its own, so it dilutes the bands by the window's lost share (the quick rig's 60 µm
-        # window loses ~15 %; the default 513-px window 1.1-1.6 % for the T-OLED), which the series does not
-        self.base = SynthConfig(use_cache=False, far_field_threshold=None)
+        self.base = STUDY_BASE if base is None else base
         self._last = (None, None, 0.0)  # (key, kernels, seconds): Rig.kernels' last set
         glass = D.preset("glass")
         res = synthesize(self.band_image, self.scene, [glass], self.base,
@@ -237,12 +245,12 @@ def measure(rig: Rig, name: str, distance_mm: float, phases: int | None, power: 
 
 def jobs(cfg: dict) -> list[tuple[str, str, float, int | None, str, str]]:
     """(axis, display, distance mm, field phases, power, field rank) in run order: every distance at the
-    default phases (the phase display also with every phase kernel, rank 'all', on the same kernels), the
-    phase-count runs (the exact series and the interpolated powers, on the same kernels), then the bands
-    along y."""
+    default phases (the phase display also at the field ranks cfg['ranks'] and with every phase kernel, rank
+    'all', on the same kernels), the phase-count runs (the exact series and the interpolated powers, on the
+    same kernels), then the bands along y."""
     name, d = cfg["phase_display"], cfg["phase_distance_mm"]
     out = [("x", n, dd, None, "series", rank) for n in DISPLAYS for dd in cfg["distances_mm"][n]
-           for rank in (("default", "all") if n == name else ("default",))]
+           for rank in (("default", *cfg["ranks"], "all") if n == name else ("default",))]
     out += [("x", name, d, p, power, "default") for p in (*cfg["phases"], DEFAULT_FIELD_PHASES)
             for power in ("series", "interpolated") if (p, power) != (DEFAULT_FIELD_PHASES, "series")]
     return out + [("y", n, dd, None, "series", "default") for n in DISPLAYS for dd in cfg["y_distances_mm"].get(n, ())]
@@ -290,15 +298,18 @@ def is_default(row: dict) -> bool:
 
 def synthesis_cost(rig: Rig, cfg: dict) -> dict:
     """Median seconds of cfg['cost_repeats'] syntheses (kernels made beforehand) of the phase display at the
-    phase distance, default phases, with the exact series and with the interpolated powers (alternating)."""
+    phase distance, default phases, in turn: the default (exact series, default rank), the interpolated powers,
+    and the exact series at each field rank of cfg['ranks'] and 'all' ({'rank_s': {rank: s}})."""
     display = D.preset(cfg["phase_display"]).with_distance(cfg["phase_distance_mm"])
-    seconds = {"series": [], "interpolated": []}
+    runs = [("series", "default"), ("interpolated", "default")] + [("series", r) for r in (*cfg["ranks"], "all")]
+    seconds = {run: [] for run in runs}
     for _ in range(cfg["cost_repeats"]):
-        for power, runs in seconds.items():
-            runs.append(rig.synthesis(display, DEFAULT_FIELD_PHASES, power)[2])
-    med = {power: float(np.median(runs)) for power, runs in seconds.items()}
-    return {"series_s": med["series"], "interpolated_s": med["interpolated"],
-            "ratio": med["series"] / med["interpolated"], "repeats": cfg["cost_repeats"]}
+        for (power, rank), times in seconds.items():
+            times.append(rig.synthesis(display, DEFAULT_FIELD_PHASES, power, rank)[2])
+    med = {run: float(np.median(times)) for run, times in seconds.items()}
+    series, interp = med[("series", "default")], med[("interpolated", "default")]
+    return {"series_s": series, "interpolated_s": interp, "ratio": series / interp, "repeats": cfg["cost_repeats"],
+            "rank_s": {rank: med[("series", rank)] for _, rank in runs[2:]}}
 
 
 def run_study(out: Path, quick: bool = False, progress: bool = True) -> list[dict]:

@@ -30,7 +30,7 @@ def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, cost: dict, e
     lines = ["# Banding of a flat field against the display-to-lens distance", "",
              f"Monitor rig showing `pattern:white` (framing fill, the panel's spectrum extended over the render "
              f"margin), {w} × {h} px of {rig.pitch_um:g} µm, {k} bands of {cfg['step_nm']:g} nm, default synthesis "
-             f"(blend 'source', field rank 2, Poisson + read noise), auto exposure {rig.exposure_s * 1e3:.3g} ms. "
+             f"(blend 'source', field rank {DEFAULT_RANK}, Poisson + read noise; stray light off), auto exposure {rig.exposure_s * 1e3:.3g} ms. "
              f"z_i = {rig.z_i_um:.1f} µm (bands along y: the sensor turned to {h} × {w} px, framed anew). "
              "Measured on the green (Gr) sites: the mean across the bands (column mean for x) of clean_dn / glass, "
              f"least-squares fit of a sinusoid + {HARMONICS - 1} harmonics with the period free (FFT start, bounded "
@@ -48,10 +48,11 @@ def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, cost: dict, e
              "'ratio to analytic' is the synthesis' error against the exact series. rank: the field rank "
              "('all': every phase kernel, no basis). A1 expected: the analytic harmonic times each band's "
              "phase-averaged kernel OTF at the band frequency (MTF = expected / analytic), what a kernel shape "
-             "independent of the phase would print; the rank-2 basis comes near it, every phase kernel "
-             "near the exact series. order: the harmonic the fit found (period T/order), compared with the "
+             "independent of the phase would print; a rank-2 basis comes near it (it drops the shape's "
+             "variation with the phase), the default rank and every phase kernel near the exact series. "
+             "order: the harmonic the fit found (period T/order), compared with the "
              "analytic harmonic of that order; order analytic: the strongest analytic harmonic. A1 interp.: the "
-             "analytic P(s) sampled at the kernels' P × P field shifts and blended bilinearly (no PSF, no rank-2 "
+             "analytic P(s) sampled at the kernels' P × P field shifts and blended bilinearly (no PSF, no "
              "basis), what the 'interpolated' power gives.", ""]
     lines += md_table(rows, [("axis", "bands along"), ("display", "display"), ("distance_mm", "d mm"),
                              ("field_phases", "P"), ("field_power", "power"), ("field_rank", "rank"),
@@ -76,7 +77,10 @@ def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, cost: dict, e
     lines += ["", f"Cost of the exact series: a synthesis of the {cfg['phase_display']} at "
               f"d = {cfg['phase_distance_mm']:g} mm, {DEFAULT_FIELD_PHASES} field phases, kernels made beforehand, "
               f"median of {cost['repeats']}: {cost['series_s']:.3g} s with the exact series, "
-              f"{cost['interpolated_s']:.3g} s with the phases' powers interpolated ({cost['ratio']:.3g}×)."]
+              f"{cost['interpolated_s']:.3g} s with the phases' powers interpolated ({cost['ratio']:.3g}×); "
+              f"with the exact series at field rank {DEFAULT_RANK} (the default) {cost['series_s']:.3g} s, "
+              + ", ".join(f"rank {r} {t:.3g} s ({t / cost['series_s']:.2f}×)" for r, t in cost["rank_s"].items())
+              + "."]
     return "\n".join(lines + ["", machine_text(elapsed_s) + "."]) + "\n"
 
 
