@@ -192,3 +192,18 @@ def test_table_refits_and_gives_the_papers_gamma_between_its_rows():
             "poled", {"transmission_scale": 1.0, "urbach_width_nm": float(w)}), D.PAPER_GAIN["poled"])
         g = G.channel_gamma(white, d, gains["poled"], gains["glass"], edges)
         assert np.abs(g / np.array(D.PAPER_GAMMA["poled"]) - 1).max() < 3e-3, (w, g)
+
+
+def test_capture_config_sets_the_sensor_and_the_panels_haze(dists):
+    from udc_render.pipeline import SynthConfig
+    from udc_render.optics.stray import StrayLight
+    panel = next(p for p in R.draw_panels(dists, 8, 0) if p.family == "poled")
+    cap = R.draw_capture(dists, 8, 0, 5)
+    cfg = R.capture_config(SynthConfig(), cap, panel)
+    assert cfg.sensor.read_noise_e == cap.read_noise_e and cfg.defects == cap.defects and cfg.fpn == cap.fpn
+    assert cfg.stray_light.haze_of(R.PANEL_NAME) == panel.haze and 0.006 <= panel.haze <= 0.028
+    assert cfg.stray_light.haze_of("poled") == 0.015  # the preset's stays
+    off = R.capture_config(SynthConfig(stray_light=StrayLight.off()), cap, panel)
+    assert off.stray_light.haze_of(R.PANEL_NAME) == 0.0  # --stray-light off wins
+    assert R.capture_display(panel, cap).gain == 25.0 * cap.gain_scale
+    assert R.capture_panel(8, 0, 5) == cap.panel

@@ -5,11 +5,11 @@ shipped default.toml: the documented ranges), N panels drawn once per job and ea
 from udc_render.dataset.randomize.distributions import (DEFAULT, SCHEMA, Dist, Distributions, RandomizeError,
                                                         default_distributions, load_distributions, parse)
 from udc_render.dataset.randomize.draws import (CaptureDraw, LensDraw, PanelDraw, as_record, capture_config,
-                                                capture_display, draw_capture, draw_panel, draw_panels, panel_scene,
-                                                scaled_exposure_s)
+                                                capture_display, capture_panel, draw_capture, draw_panel, draw_panels,
+                                                panel_scene, scaled_exposure_s)
 from udc_render.dataset.randomize.panels import PANEL_NAME, POLED_T_TABLE, poled_fit
 
 __all__ = ["DEFAULT", "SCHEMA", "Dist", "Distributions", "RandomizeError", "default_distributions",
            "load_distributions", "parse", "CaptureDraw", "LensDraw", "PanelDraw", "as_record", "capture_config",
-           "capture_display", "draw_capture", "draw_panel", "draw_panels", "panel_scene", "scaled_exposure_s",
-           "PANEL_NAME", "POLED_T_TABLE", "poled_fit"]
+           "capture_display", "capture_panel", "draw_capture", "draw_panel", "draw_panels", "panel_scene",
+           "scaled_exposure_s", "PANEL_NAME", "POLED_T_TABLE", "poled_fit"]

@@ -70,6 +70,7 @@ _FAMILY = {  # per display family, under [display.<family>]
     "pitch_um": _num(1.0, 1e4, "µm (the square cell's side)"),
     "open_fraction": _num(0.0, 0.75, "(open area / cell)", lo_open=True),
     "transmission_scale": _num(0.0, 10.0, "(× the preset's T(λ); T stays ≤ 1)", lo_open=True),
+    "haze": _num(0.0, 0.5, "(share of the light scattered past 2.5°; optics.stray)"),
     "disorder_cells": _num(1, 8, "(supercell side, cells)", integer=True),
     "disorder_position_um": _num(0.0, 20.0, "µm (σ of each opening's shift)"),
     "disorder_size_sd": _num(0.0, 0.5, "(σ of each opening's relative size)"),

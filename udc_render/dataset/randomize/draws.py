@@ -45,13 +45,14 @@ class LensDraw:
 
 @dataclass(frozen=True)
 class PanelDraw:
-    """Panel i of a job: its display (panels.panel_display, named 'random'), its lens, and every drawn
-    value by key (display.*, lens.*)."""
+    """Panel i of a job: its display (panels.panel_display, named 'random'), its lens, its stack's haze
+    (optics.stray: the share scattered past 2.5°), and every drawn value by key (display.*, lens.*)."""
     index: int
     seed: int
     family: str
     display: Display
     lens: LensDraw
+    haze: float
     values: dict = field(hash=False)
 
 
@@ -90,7 +91,7 @@ def draw_panel(dists: Distributions, index: int, seed: int) -> PanelDraw:
     display = panel_display(family, own, values["display.distance_mm"], disorder_seed,
                             f"randomize: panel {index} of seed {seed} ({dists.source})")
     return PanelDraw(index, int(seed), family, display,
-                     LensDraw(values["lens.focus_error_per_m"], values["lens.f_number"]), values)
+                     LensDraw(values["lens.focus_error_per_m"], values["lens.f_number"]), own["haze"], values)
 
 
 def draw_panels(dists: Distributions, n: int, seed: int) -> list[PanelDraw]:
@@ -100,13 +101,18 @@ def draw_panels(dists: Distributions, n: int, seed: int) -> list[PanelDraw]:
     return [draw_panel(dists, i, seed) for i in range(n)]
 
 
+def capture_panel(panels: int, seed: int, item: int) -> int:
+    """Which of the `panels` panels capture `item` sees (uniform; its own stream): draw_capture's panel."""
+    return int(stream(seed, "capture", item, "panel").integers(panels))
+
+
 def draw_capture(dists: Distributions, panels: int, seed: int, item: int) -> CaptureDraw:
     """Capture `item`'s panel (uniform over 0 … panels−1), sensor and exposure (module doc: its streams)."""
     def draw(key):
         return dists[key].sample(stream(seed, "capture", item, key))
     s = {k: draw(f"sensor.{k}") for k in SENSOR_KEYS}
     e = {k: draw(f"exposure.{k}") for k in EXPOSURE_KEYS}
-    panel = int(stream(seed, "capture", item, "panel").integers(panels))
+    panel = capture_panel(panels, seed, item)
     defects = DefectConfig(s["dead_fraction"], s["hot_fraction"], s["hot_dark_e_per_s"],
                            _seed_of(stream(seed, "capture", item, "defect map")))
     fpn = FpnConfig(s["prnu"], s["dsnu_e"], s["row_offset_e"], s["column_offset_e"], s["dark_current_e_per_s"],
@@ -144,10 +150,15 @@ def capture_display(panel: PanelDraw, cap: CaptureDraw) -> Display:
     return replace(panel.display, gain=panel.display.gain * cap.gain_scale)
 
 
-def capture_config(cfg: SynthConfig, cap: CaptureDraw) -> SynthConfig:
-    """The synthesis settings with the capture's sensor: read noise, defect pixels, fixed-pattern noise."""
-    return replace(cfg, sensor=replace(cfg.sensor, read_noise_e=float(cap.read_noise_e)), defects=cap.defects,
-                   fpn=cap.fpn)
+def capture_config(cfg: SynthConfig, cap: CaptureDraw, panel: PanelDraw | None = None) -> SynthConfig:
+    """The synthesis settings with the capture's sensor (read noise, defect pixels, fixed-pattern noise) and,
+    with `panel`, its haze (unless the job's stray light has no haze: --stray-light off)."""
+    cfg = replace(cfg, sensor=replace(cfg.sensor, read_noise_e=float(cap.read_noise_e)), defects=cap.defects,
+                  fpn=cap.fpn)
+    stray = cfg.stray_light
+    if panel is None or not stray.haze:
+        return cfg
+    return replace(cfg, stray_light=replace(stray, haze={**dict(stray.haze), panel.display.name: panel.haze}))
 
 
 def scaled_exposure_s(auto_or_set_s: float, cap: CaptureDraw) -> float:
