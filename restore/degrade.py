@@ -1,0 +1,181 @@
+"""Degradation on the fly, in torch: the per-channel capture of udc_render's numpy synthesis, on any device.
+
+For a clean linear image x [3, h + 2m, w + 2m] (camera RGB in units of the white level at gain 1, as gt.exr;
+m = the kernel's half-width of scene around the crop), a panel of a kernel bank (udc_render.dataset.bank)
+and the crop's place in its frame (the optical axis at the frame's centre):
+
+    blur        y_c = (x_c ⊗ k_c)[m:−m, m:−m]                              d = 0 (optics.convolution)
+                y_c = Σ_r B_cr ⊗ (W_cr x_c),  W_cr = Σ_q c_qr w_q(x) m_c(s(x))  d > 0 (optics.field, field_power)
+    electrons   e = γ_c / gain · y_c / (g / (gain R)) [· cos⁴]           per RGGB site (sensor.radiometry)
+    sensor      FPN, Poisson–Gaussian noise, full well, quantisation, levels, defect pixels (restore.degrade_sensor)
+
+The convolution is linear with the numpy path's boundary handling: the FFT size per axis is fft_shape's
+next_fast_len(max(n, n − m + S//2, S)) with the kernel wrapped around index 0, so wrap-around reaches only
+the margin, which is cropped. For the same kernels, inputs and noise draw (restore.degrade_sensor.NoiseDraw)
+the result equals `synth --form per_channel` (tests/restore/test_degrade.py: float64 to 1e-9 relative in the
+electrons and to the DN after quantisation; float32 within the tolerances stated there). Everything runs in
+torch on the input's device, but for the set-up computed with numpy: the 1-D phase weights of a crop (its rows
+and columns), and once per panel and frame size the sensor's maps (FPN, defects) and the exact power map.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+import torch
+
+from restore.degrade_sensor import FrameMaps, NoiseDraw, expose_packed, packed_sites
+from udc_render.dataset.bank import Panel
+from psf.banding import power_lattice
+from udc_render.optics import fft_shape, phase_weights
+
+__all__ = ["Degrader", "NoiseDraw", "TorchPanel", "blur", "normalised"]
+
+# The d > 0 panels' power maps a Degrader keeps (float32 at 2048 × 1024 with 256-px margins: 47 MB per panel).
+POWER_BUDGET_BYTES = 1.0e9
+
+
+class TorchPanel:
+    """A bank's panel on a device, in a precision: its kernels (or field bases) and their spectra per FFT shape
+    (made once per shape: a training run's crops share one), the coefficient matrices of its field."""
+
+    def __init__(self, panel: Panel, device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32):
+        self.panel, self.device, self.dtype = panel, torch.device(device), dtype
+        f = panel.field
+        bases = panel.kernels[:, None] if f is None else f.bases  # [3, R, S, S]
+        self.bases = torch.as_tensor(np.asarray(bases), device=self.device).to(dtype)
+        self.size_px = int(bases.shape[-1])
+        self.margin_px = self.size_px // 2
+        self._spectra: dict = {}
+        if f is not None:
+            power = np.ones(f.field_power.shape) if f.series is not None else f.field_power  # exact map: m replaces P
+            c = np.zeros((3, f.rank, f.shifts_y_um.size, f.shifts_x_um.size))
+            for q, (j, i) in enumerate(f.live):
+                c[:, :, j, i] = f.coeffs[:, q, :] * power[:, j, i][:, None]
+            self.coeff_maps = torch.as_tensor(c, device=self.device).to(dtype)  # [3, R, Py, Px]
+
+    def spectra(self, shape: tuple[int, int]) -> torch.Tensor:
+        """rfft2 of the bases [3, R, S, S] wrapped around index 0 (centre S//2 → 0), padded to `shape`."""
+        if shape not in self._spectra:
+            S, half = self.size_px, self.margin_px
+            buf = torch.zeros(self.bases.shape[:2] + tuple(shape), dtype=self.dtype, device=self.device)
+            buf[..., :S, :S] = self.bases
+            self._spectra[shape] = torch.fft.rfft2(torch.roll(buf, (-half, -half), dims=(-2, -1)))
+        return self._spectra[shape]
+
+    def positions_um(self, n: int, start_px: int, frame_px: int) -> np.ndarray:
+        """Sensor positions of n pixels from frame index start_px on (pixel centres from the frame's centre)."""
+        return (np.arange(n) + start_px - (frame_px - 1) / 2) * self.panel.pitch_um
+
+    def weight_maps(self, rows: int, cols: int, frame_hw: tuple[int, int], origin_yx: tuple[int, int],
+                    power: torch.Tensor | None) -> torch.Tensor:
+        """W_cr [3, R, rows, cols] of the crop's input (module doc) whose first pixel is frame pixel origin − margin:
+        bilinear phase weights (optics.field.phase_weights) times the exact power `power` [3, rows, cols] (None: a
+        panel without a series, whose phase powers are in the coefficients)."""
+        f, m = self.panel.field, self.margin_px
+        py = self.positions_um(rows, origin_yx[0] - m, frame_hw[0])
+        px = self.positions_um(cols, origin_yx[1] - m, frame_hw[1])
+        d_um, z = f.distance_mm * 1000, f.image_distance_um
+        wy = phase_weights(py, f.shifts_y_um, d_um, z, f.period_um[1], f.periodic[0])
+        wx = phase_weights(px, f.shifts_x_um, d_um, z, f.period_um[0], f.periodic[1])
+        wy, wx = (torch.as_tensor(w, device=self.device).to(self.dtype) for w in (wy, wx))
+        maps = wy.T @ (self.coeff_maps @ wx)  # [3, R, rows, cols]
+        return maps if power is None else maps * power[:, None]
+
+    def power_frame(self, frame_hw: tuple[int, int]) -> torch.Tensor | None:
+        """m_c(s(x)) [3, H + 2m, W + 2m] of the whole frame with its margins, the lattice of optics.field_power's
+        field_power_map (psf.banding.power_lattice: two chirp z-transforms per channel); None without a series."""
+        f = self.panel.field
+        if f is None or f.series is None:
+            return None
+        rows, cols = frame_hw[0] + 2 * self.margin_px, frame_hw[1] + 2 * self.margin_px
+        step = self.panel.pitch_um * f.distance_mm * 1000.0 / f.image_distance_um
+        maps = np.stack([power_lattice(f.series[c], f.period_um, -(cols - 1) / 2 * step, step, cols,
+                                       -(rows - 1) / 2 * step, step, rows) for c in range(3)])
+        return torch.as_tensor(maps, device=self.device).to(self.dtype)
+
+
+def blur(x: torch.Tensor, panel: TorchPanel, frame_hw: tuple[int, int], origin_yx: tuple[int, int],
+         power_frame: torch.Tensor | None = None) -> torch.Tensor:
+    """The panel's blur of one crop x [3, h + 2m, w + 2m] (its output pixel (0, 0) at frame pixel origin_yx):
+    [3, h, w] (module doc). power_frame: the panel's power_frame(frame_hw), made once (None: made here)."""
+    m, S = panel.margin_px, panel.size_px
+    rows, cols = x.shape[-2:]
+    shape = fft_shape((rows, cols), S, m)
+    spec = panel.spectra(shape)
+    if panel.panel.field is None:
+        y = torch.fft.rfft2(x, s=shape) * spec[:, 0]
+    else:
+        power = panel.power_frame(frame_hw) if power_frame is None else power_frame
+        if power is not None:
+            power = power[:, origin_yx[0]:origin_yx[0] + rows, origin_yx[1]:origin_yx[1] + cols]
+        weighted = panel.weight_maps(rows, cols, frame_hw, origin_yx, power) * x[:, None]
+        y = (torch.fft.rfft2(weighted, s=shape) * spec).sum(dim=1)
+    return torch.fft.irfft2(y, s=shape)[:, m:rows - m, m:cols - m]
+
+
+def normalised(dn: torch.Tensor, panel: Panel) -> torch.Tensor:
+    """The restorers' input: (DN − black) / (white − black) (udc_render.io.capture.load_packed)."""
+    s = panel.sensor
+    return (dn - s.black_level_dn) / float(s.white_level_dn - s.black_level_dn)
+
+
+class Degrader:
+    """The bank's panels on one device and precision, with the sensor's frame maps (FPN, defects) and the d > 0
+    panels' power maps made once per frame size (the power maps of the panels used last, within
+    power_budget_bytes): degrade(x, i, ...) is the capture of crop x through panel i as packed DN [4, h/2, w/2]."""
+
+    def __init__(self, panels: list[Panel], device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32,
+                 power_budget_bytes: float = POWER_BUDGET_BYTES):
+        self.panels = [TorchPanel(p, device, dtype) for p in panels]
+        self.device, self.dtype = torch.device(device), dtype
+        self.maps = FrameMaps(self.device, dtype)
+        self.power_budget_bytes = power_budget_bytes
+        self._power: OrderedDict = OrderedDict()
+
+    @property
+    def margin_px(self) -> int:
+        return max(p.margin_px for p in self.panels)
+
+    def power_frame(self, index: int, frame_hw: tuple[int, int]) -> torch.Tensor | None:
+        """Panel `index`'s power_frame(frame_hw), kept (least recently used dropped beyond the budget)."""
+        key = (index, tuple(frame_hw))
+        if key in self._power:
+            self._power.move_to_end(key)
+            return self._power[key]
+        power = self.panels[index].power_frame(frame_hw)
+        if power is not None:
+            self._power[key] = power
+            while len(self._power) > 1 and sum(t.numel() * t.element_size() for t in self._power.values()) > \
+                    self.power_budget_bytes:
+                self._power.popitem(last=False)
+        return power
+
+    def degrade(self, x: torch.Tensor, index: int, frame_hw: tuple[int, int], origin_yx: tuple[int, int],
+                generator: torch.Generator | None = None, draw: NoiseDraw | None = None) -> torch.Tensor:
+        """Packed DN [4, h/2, w/2] (R, Gr, Gb, B; whole numbers) of crop x [3, h + 2m, w + 2m] whose output starts
+        at frame pixel origin_yx (even: an R site) of a frame_hw sensor, through panel `index`; the noise from
+        `generator` (on this device), or the explicit `draw`."""
+        tp = self.panels[index]
+        m = tp.margin_px
+        h, w = x.shape[-2] - 2 * m, x.shape[-1] - 2 * m
+        y0, x0 = origin_yx
+        if x.shape[0] != 3 or h < 2 or w < 2 or h % 2 or w % 2 or y0 % 2 or x0 % 2:
+            raise ValueError(f"crop {tuple(x.shape)} at {origin_yx}: expected [3, h + {2 * m}, w + {2 * m}] with h, w "
+                             "and the origin even (whole RGGB cells)")
+        if y0 < 0 or x0 < 0 or y0 + h > frame_hw[0] or x0 + w > frame_hw[1]:
+            raise ValueError(f"crop of {h} × {w} px at {origin_yx} leaves the {frame_hw[0]} × {frame_hw[1]} px frame")
+        power = self.power_frame(index, frame_hw) if tp.panel.field is not None else None
+        y = blur(x.to(self.device, self.dtype), tp, frame_hw, origin_yx, power).clamp_min(0)
+        s = tp.panel.sensor
+        per_e = s.dn_per_electron / s.gain / s.range_dn  # normalised units per e⁻ at gain 1
+        e = torch.as_tensor(s.gamma_rggb, device=self.device, dtype=self.dtype)[:, None, None] * packed_sites(y) / per_e
+        if s.cos4_falloff:
+            e = e * packed_sites(self._cos4(h, w, frame_hw, origin_yx, s))
+        return expose_packed(e, tp.panel, self.maps, frame_hw, origin_yx, generator, draw)
+
+    def _cos4(self, h: int, w: int, frame_hw, origin_yx, s) -> torch.Tensor:
+        """cos⁴θ [h, w] of the crop's pixels, r from the frame's centre (sensor.radiometry.cos4_map)."""
+        yy = (torch.arange(h, device=self.device, dtype=torch.float64) + origin_yx[0] + 0.5 - frame_hw[0] / 2) * s.pitch_um
+        xx = (torch.arange(w, device=self.device, dtype=torch.float64) + origin_yx[1] + 0.5 - frame_hw[1] / 2) * s.pitch_um
+        return (1.0 / (1.0 + (yy[:, None] ** 2 + xx[None, :] ** 2) / s.focal_length_um ** 2) ** 2).to(self.dtype)

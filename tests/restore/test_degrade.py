@@ -1,0 +1,197 @@
+"""The online degradation in torch (restore.degrade) against the numpy synthesis it stands for.
+
+Oracles: `synth --form per_channel` (udc_render.pipeline.synthesize) on a tiny monitor scene, its noise replayed
+from its own seed (the same Poisson counts and normals, fed as a NoiseDraw); optics.field.convolve_field for the
+d > 0 blend; sensor.fpn.fpn_maps and sensor.defects.defect_map for the frame maps; the Poisson–Gaussian moments
+for the generator's own draws.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import torch
+
+from psf import compute_kernels, layouts
+from restore.degrade import Degrader, NoiseDraw, TorchPanel, blur, normalised
+from restore.degrade_sensor import FrameMaps
+from udc_render.dataset.bank import Panel
+from udc_render.dataset.bank_make import panel_field, sensor_grid
+from udc_render.optics import convolve_field, displays as D, field_basis, field_power_map, field_weights, live_phases
+from udc_render.pipeline import SynthConfig, noise_seed, plan_kernels, sensor_for_scene, synthesize
+from udc_render.render import render_scene
+from udc_render.scene.geometry import psf_lens
+from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig, electrons_rgb, pack_rggb
+from udc_render.sensor.defects import defect_map
+from udc_render.sensor.fpn import fpn_maps, mean_charge_e
+
+DISPLAYS = [D.preset("toled"), D.preset("poled")]
+DEFECTS = DefectConfig(dead_fraction=0.01, hot_fraction=0.01)  # many, so that both kinds fall in the tiny frame
+
+
+@pytest.fixture(scope="module")
+def tiny(udc, tmp_path_factory, render_cache):
+    """A 128 × 64 px monitor scene of the astronaut (24.8 µm pixels, 3 bands, 33-px kernels), rendered once."""
+    folder = tmp_path_factory.mktemp("degrade")
+    scene = udc.write_scene(folder / "s.toml", udc.monitor_doc(image="builtin:astronaut",
+                                                               bands={"range_nm": [400, 700], "step_nm": 100}))
+    return scene, render_scene(scene, progress=False), str(folder / "kernels")
+
+
+def _synth(tiny, noise: str):
+    """The numpy per-channel synthesis (float64 optics, defects and FPN) and the clean RGB it blurred."""
+    scene, bi, cache = tiny
+    sensor = SensorConfig(noise=noise, lambda_source="sensor" if noise == "gaussian" else "fixed")
+    cfg = SynthConfig(form="per_channel", channel_kernels="paper", precision="float64", defects=DEFECTS,
+                      fpn=FpnConfig(), sensor=sensor, kernel_cache=cache)
+    kernels = plan_kernels(scene, DISPLAYS, cfg)
+    res = synthesize(bi, scene, DISPLAYS, cfg, kernels=kernels)
+    base = replace(sensor_for_scene(cfg.sensor, scene), exposure_s=res.meta["exposure_s"])
+    rgb = (electrons_rgb(bi.bands, bi.edges_nm, base) / base.full_well_e).astype(np.float32)  # as the pipeline's
+    return cfg, kernels, res, rgb
+
+
+def _panel(name, kernels, pitch_um, gamma, sensor, cfg, field=None):
+    return Panel(name, np.asarray(kernels, np.float32), pitch_um, tuple(gamma), sensor, cfg.defects, cfg.fpn, field, {})
+
+
+def _replayed_draw(cap, cfg, sensor: SensorConfig, name: str) -> NoiseDraw:
+    """The numpy capture's own draws, from its noise seed: Poisson counts of the mean charge, then normals."""
+    rng = np.random.default_rng(noise_seed(cfg.seed, 0, name))
+    e = cap.electrons
+    if sensor.noise != "poisson":
+        return NoiseDraw(None, torch.from_numpy(pack_rggb(rng.standard_normal(e.shape))))
+    q = mean_charge_e(e, fpn_maps(*e.shape, cfg.fpn), cfg.fpn, sensor.exposure_s)
+    shot = rng.poisson(np.minimum(q, 2 * sensor.full_well_e + 100 + 40 * sensor.read_noise_e)).astype(float)
+    return NoiseDraw(torch.from_numpy(pack_rggb(shot)), torch.from_numpy(pack_rggb(rng.normal(0.0, 1.0, e.shape))))
+
+
+@pytest.mark.parametrize("noise", ["poisson", "gaussian", "none"])
+def test_equals_the_per_channel_synthesis(tiny, noise):
+    """Same kernels, clean input and noise draw: float64 gives the numpy capture's DN exactly (every pixel; dead,
+    hot, FPN included); float32 differs by at most 1 DN (a rounding tie) on at most 0.5 % of the pixels."""
+    cfg, kernels, res, rgb = _synth(tiny, noise)
+    scene, bi, _ = tiny
+    for d in DISPLAYS:
+        cap = res.captures[d.name]
+        sensor = SensorConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cap.params["sensor"].items()})
+        panel = _panel(d.name, kernels.channel[d.name].kernels, bi.pitch_um, res.display_meta[d.name]["gamma_rgb"],
+                       sensor, cfg)
+        draw = _replayed_draw(cap, cfg, sensor, d.name)
+        ref = pack_rggb(cap.mosaic_dn).astype(np.float64)
+        frame = cap.mosaic_dn.shape
+        dn64 = Degrader([panel], "cpu", torch.float64).degrade(torch.from_numpy(rgb), 0, frame, (0, 0), draw=draw)
+        np.testing.assert_array_equal(dn64.numpy(), ref)
+        assert (ref == sensor.black_level_dn).any() and ref.max() > 0  # dead pixels and signal are there
+        dn32 = Degrader([panel], "cpu", torch.float32).degrade(torch.from_numpy(rgb), 0, frame, (0, 0), draw=draw)
+        diff = np.abs(dn32.double().numpy() - ref)
+        assert diff.max() <= 1 and (diff > 0).mean() <= 0.005, (d.name, noise, diff.max(), (diff > 0).mean())
+
+
+def test_electrons_and_blur_equal_the_numpy_path(tiny):
+    """Without noise or quantisation: the blur of the clean RGB equals convolve_bands' (float64, 1e-12 relative)."""
+    from udc_render.optics import convolve_bands
+    cfg, kernels, res, rgb = _synth(tiny, "none")
+    scene, bi, _ = tiny
+    k = kernels.channel["toled"].kernels
+    ref = convolve_bands(rgb, k, bi.margin_px, None, "float64")
+    tp = TorchPanel(_panel("toled", k, bi.pitch_um, (1, 1, 1), SensorConfig(), cfg), "cpu", torch.float64)
+    y = blur(torch.from_numpy(rgb).double(), tp, ref.shape[1:], (0, 0)).numpy()
+    assert np.abs(y - ref).max() <= 1e-12 * np.abs(ref).max()
+
+
+@pytest.fixture(scope="module")
+def field_kernels(tiny):
+    """Kernels at 450 / 520 / 640 nm through the T-OLED at d = 2 mm, 4 × 4 field phases, 33 px (a stand-in for
+    the channels: the blend's algebra does not care how the three kernel sets were weighted)."""
+    scene, _, _ = tiny
+    frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
+    return compute_kernels(layouts.toled(), psf_lens(scene), (450.0, 520.0, 640.0), pixel_um=scene.sensor.pitch_um,
+                           size_px=33, distance_mm=2.0, sensor_um=frame_um)
+
+
+@pytest.mark.parametrize("rank", [4, None])
+def test_field_blend_equals_convolve_field(tiny, field_kernels, rank):
+    """d > 0: the panel's rank-r (or exact) blend with the exact power map equals optics.field.convolve_field on the
+    frame with its margins (float64 1e-12, float32 1e-5 of the peak), and a crop of the frame equals the crop of
+    the whole frame's result (the field follows the crop's place)."""
+    scene, _, _ = tiny
+    ks, grid = field_kernels, sensor_grid(scene, 33)
+    m, H, W = grid.margin_px, scene.sensor.height_px, scene.sensor.width_px
+    shape = (H + 2 * m, W + 2 * m)
+    x = np.random.default_rng(0).random((3,) + shape)
+    wy, wx, g = field_weights(ks, shape, grid.pitch_um, 2.0)
+    pm = field_power_map(ks, shape, grid.pitch_um, 2.0, g["image_distance_um"], g["period_um"])
+    basis = None if rank is None else field_basis(ks.field_kernels, live_phases(wy, wx), rank)
+    ref, _ = convolve_field(x, ks.field_kernels, ks.field_power, wy, wx, m, None, "source", "float64", rank=rank,
+                            basis=basis, power_map=pm)
+    field = panel_field(ks, scene, grid, rank)
+    assert field.rank == (rank or 16) and field.series is not None
+    panel = _panel("toled", ks.kernels, grid.pitch_um, (1, 1, 1), SensorConfig(), SynthConfig(), field)
+    for dtype, tol in ((torch.float64, 1e-12), (torch.float32, 1e-5)):
+        tp = TorchPanel(panel, "cpu", dtype)
+        y = blur(torch.from_numpy(x), tp, (H, W), (0, 0)).double().numpy()
+        assert np.abs(y - ref).max() <= tol * np.abs(ref).max(), dtype
+        y0, x0, h, w = 10, 36, 32, 48
+        crop = blur(torch.from_numpy(x[:, y0:y0 + h + 2 * m, x0:x0 + w + 2 * m]), tp, (H, W), (y0, x0)).double().numpy()
+        assert np.abs(crop - y[:, y0:y0 + h, x0:x0 + w]).max() <= tol * np.abs(ref).max(), dtype
+
+
+def test_frame_maps_are_the_sensors():
+    """The FPN and defect maps of a crop are the region of sensor.fpn.fpn_maps / sensor.defects.defect_map."""
+    fpn, defects, frame = FpnConfig(seed=7, prnu=0.2), DefectConfig(dead_fraction=0.05, hot_fraction=0.1, seed=3), (40, 60)
+    maps = FrameMaps(torch.device("cpu"), torch.float64)
+    gain, offset = maps.fpn(frame, (8, 14), (20, 30), fpn)
+    ref = fpn_maps(*frame, fpn)
+    np.testing.assert_array_equal(gain.numpy(), pack_rggb(ref.gain[8:28, 14:44]))
+    np.testing.assert_array_equal(offset.numpy(), pack_rggb(ref.offset_e[8:28, 14:44]))
+    u = maps.defect_uniform(frame, (8, 14), (20, 30), defects.seed).numpy()
+    kind = pack_rggb(defect_map(*frame, defects)[8:28, 14:44])
+    np.testing.assert_array_equal(u < defects.dead_fraction, kind == 1)
+    np.testing.assert_array_equal((u >= 0.05) & (u < 0.15), kind == 2)
+
+
+def test_generator_noise_has_the_poisson_gaussian_moments():
+    """A flat field through a delta kernel at gain 1: mean DN = g e, variance g² (e + σ²) + 1/12 (Poisson shot,
+    Gaussian read noise, rounding) within 5 %; the same seed gives the same DN, another seed other DN."""
+    k = np.zeros((3, 5, 5), np.float32)
+    k[:, 2, 2] = 1
+    sensor = SensorConfig(form="per_channel")
+    deg = Degrader([_panel("flat", k, 1.55, (1, 1, 1), sensor, SynthConfig())], "cpu", torch.float64)
+    x = torch.full((3, 132, 132), 0.3, dtype=torch.float64)
+    dn = [deg.degrade(x, 0, (128, 128), (0, 0), torch.Generator().manual_seed(s)) for s in (1, 1, 2)]
+    g, e = sensor.dn_per_electron, 0.3 * sensor.full_well_e
+    assert abs(dn[0].mean().item() / (g * e) - 1) < 0.005
+    assert abs(dn[0].var().item() / (g * g * (e + sensor.read_noise_e ** 2) + 1 / 12) - 1) < 0.05
+    assert torch.equal(dn[0], dn[1]) and not torch.equal(dn[0], dn[2])
+    assert abs(normalised(dn[0], deg.panels[0].panel).mean().item() - 0.3) < 0.0015
+
+
+def test_bad_crops_are_refused():
+    k = np.zeros((3, 5, 5), np.float32)
+    k[:, 2, 2] = 1
+    deg = Degrader([_panel("flat", k, 1.55, (1, 1, 1), SensorConfig(form="per_channel"), SynthConfig())])
+    with pytest.raises(ValueError, match="whole RGGB cells"):
+        deg.degrade(torch.zeros(3, 13, 14), 0, (64, 64), (0, 0))
+    with pytest.raises(ValueError, match="leaves the 64 × 64 px frame"):
+        deg.degrade(torch.zeros(3, 14, 14), 0, (64, 64), (60, 0))
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
+def test_cuda_equals_cpu(tiny, field_kernels):
+    """The one code path on a GPU (d > 0, FPN, defects): its blur within 1e-12 of the CPU's (float64), the same DN
+    for the same draw, and its own generator's draws on the device."""
+    scene, _, _ = tiny
+    grid = sensor_grid(scene, 33)
+    panel = _panel("toled", field_kernels.kernels, grid.pitch_um, (0.97, 0.97, 0.97), SensorConfig(form="per_channel"),
+                   SynthConfig(defects=DEFECTS, fpn=FpnConfig()), panel_field(field_kernels, scene, grid, 4))
+    x = torch.from_numpy(np.random.default_rng(1).random((3, 64 + 32, 128 + 32)))
+    draw = NoiseDraw(torch.full((4, 32, 64), 100.0, dtype=torch.float64), torch.randn(4, 32, 64, dtype=torch.float64))
+    cpu, gpu = Degrader([panel], "cpu", torch.float64), Degrader([panel], "cuda", torch.float64)
+    y_cpu = blur(x, cpu.panels[0], (64, 128), (0, 0))
+    y_gpu = blur(x.cuda(), gpu.panels[0], (64, 128), (0, 0)).cpu()
+    assert (y_gpu - y_cpu).abs().max() <= 1e-12 * y_cpu.abs().max()
+    assert torch.equal(cpu.degrade(x, 0, (64, 128), (0, 0), draw=draw), gpu.degrade(x, 0, (64, 128), (0, 0), draw=draw).cpu())
+    dn = gpu.degrade(x, 0, (64, 128), (0, 0), torch.Generator("cuda").manual_seed(0))
+    assert dn.is_cuda and torch.isfinite(dn).all() and dn.max() > 0

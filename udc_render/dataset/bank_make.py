@@ -1,0 +1,197 @@
+"""Making a kernel bank (udc_render.dataset.bank): one panel per display, its kernels through the kernel cache.
+
+Per display, on the scene's sensor (pitch, frame, lens focused on the monitor's plane, as pipeline.plan_kernels):
+- d = 0 (or glass): the per-channel form's 3 kernels, the very call of the numpy synthesis
+  (synth_kernels.display_channel_kernels on a grid at the sensor pitch with margin kernel_px // 2);
+- d > 0: the camera's channel kernels at d with their field phases (psf.spectral.channel_kernels through
+  psf.cache, as display_channel_kernels' 'camera' with distance_mm = d), sampled at the scene's band step (the
+  spectral synthesis's sampling of λ; d = 0's λ/S would take 16 phases × ~400 wavelengths at 513 px, 16 times
+  the kernels of the d = 0 set) and each channel's phase kernels reduced
+  to the rank-r basis of optics.field.field_basis on the live phases of the frame (with its margins); the
+  exact blend (field_rank None) keeps every live phase kernel with coefficients I. The paper's recipe has
+  no d > 0 form: refused;
+- γ as pipeline.display_gamma: the paper's for a preset, else optics.gamma's from the band kernels of the
+  scene's render grid and the monitor's white;
+- the sensor: the synthesis's (sensor_for_scene) with the display's gain, γ / gain per site, the exposure.
+
+make_bank writes each panel's file and then bank.json (both atomic), so an interrupted run resumes: a re-run
+with the same settings makes only the panels not yet recorded; other settings on the same folder are refused.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from psf.cache import cached
+from psf.spectral import channel_kernels
+from udc_render.content import spectra
+from udc_render.dataset.bank import (BANK_FILE, BankError, Panel, PanelField, file_sha256, panel_arrays, panel_file,
+                                     panel_record, write_bank_json)
+from udc_render.io.files import save_npz
+from udc_render.optics import field_basis, field_weights, gamma, live_phases
+from udc_render.optics.displays import PAPER_GAMMA, Display
+from udc_render.pipeline import SynthConfig, auto_exposure_s, sensor_for_scene
+from udc_render.render import BandImage
+from udc_render.scene import Monitor, Scene
+from udc_render.scene.geometry import RenderGrid, psf_lens, render_grid
+from udc_render.sensor import rgb_to_rggb
+from udc_render.synth_kernels import display_channel_kernels, display_kernels, scene_object_distance_m
+
+
+def monitor_white_bands(scene: Scene) -> np.ndarray:
+    """[K] band-mean radiance of the scene's monitor at full white (what the render's primaries matrix sums to)."""
+    m = scene.content
+    primaries, _ = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, Path(scene.source).resolve().parent,
+                                             m.white_point)
+    return spectra.band_means(primaries, np.asarray(scene.bands.edges_nm)).sum(axis=0)
+
+
+def scene_exposure_s(scene: Scene, cfg: SynthConfig) -> tuple[float, str]:
+    """The synthesis's auto exposure of a monitor scene (pipeline.auto_exposure_s: its white at EXPOSURE_FILL of the
+    full well through glass), without a render; cfg.exposure_s when set."""
+    if cfg.exposure_s is not None:
+        return float(cfg.exposure_s), "set"
+    if not isinstance(scene.content, Monitor):
+        raise BankError(f"--scene {scene.source}: a {scene.content_type} scene has no monitor white to expose for: "
+                        "give --exposure-s")
+    edges = np.asarray(scene.bands.edges_nm, float)
+    white = monitor_white_bands(scene)
+    probe = BandImage(np.zeros((edges.size - 1, 2, 2), np.float32), edges, scene.sensor.pitch_um, 0, None,
+                      primaries_matrix=np.stack([white, 0 * white, 0 * white]))
+    return auto_exposure_s(probe, sensor_for_scene(cfg.sensor, scene))
+
+
+def sensor_grid(scene: Scene, kernel_px: int) -> RenderGrid:
+    """The grid of the bank's kernels: the sensor pitch, margin kernel_px // 2, the scene's bands."""
+    if kernel_px < 3 or kernel_px % 2 == 0:
+        raise BankError(f"--kernel-px = {kernel_px}: expected an odd number ≥ 3")
+    return RenderGrid(float(scene.sensor.pitch_um), kernel_px // 2, tuple(float(e) for e in scene.bands.edges_nm))
+
+
+def panel_gamma(display: Display, scene: Scene, cfg: SynthConfig) -> tuple[tuple, str]:
+    """γ (R, G, B) and its source, as pipeline.display_gamma for the scene's monitor white."""
+    if display.source == "preset":
+        return PAPER_GAMMA[display.name], "the paper's γ for this preset"
+    grid, z = render_grid(scene), scene_object_distance_m(scene)
+    white = monitor_white_bands(scene) if isinstance(scene.content, Monitor) else np.ones(len(grid.edges_nm) - 1)
+    g = gamma.display_gamma(display, display_kernels(display, scene, grid, cfg, object_distance_m=z),
+                            display_kernels(Display("glass", None), scene, grid, cfg, object_distance_m=z),
+                            np.asarray(grid.edges_nm, float), cfg.sensor.camera, white)
+    return tuple(float(x) for x in g), "γ of the display file (optics.gamma)"
+
+
+def panel_field(ks, scene: Scene, grid: RenderGrid, rank: int | None) -> PanelField:
+    """The d > 0 field of channel kernels `ks` on the frame with its margins (module doc)."""
+    shape = (scene.sensor.height_px + 2 * grid.margin_px, scene.sensor.width_px + 2 * grid.margin_px)
+    wy, wx, geometry = field_weights(ks, shape, grid.pitch_um, ks.distance_mm)
+    live = live_phases(wy, wx)
+    if rank is None:
+        bases = np.stack([[ks.field_kernels[c, j, i] for j, i in live] for c in range(3)])
+        coeffs = np.broadcast_to(np.eye(len(live)), (3, len(live), len(live))).copy()
+    else:
+        fb = field_basis(ks.field_kernels, live, rank)
+        r = max(b.shape[0] for b in fb.bases)  # a channel with fewer independent phases: zero bases
+        bases = np.zeros((3, r) + ks.field_kernels.shape[-2:], ks.field_kernels.dtype)
+        coeffs = np.zeros((3, len(live), r))
+        for c in range(3):
+            bases[c, :fb.bases[c].shape[0]], coeffs[c, :, :fb.coeffs[c].shape[1]] = fb.bases[c], fb.coeffs[c]
+    shifts = np.asarray(ks.field_shifts_um, float)
+    return PanelField(bases, coeffs, live, shifts[0, :, 0], shifts[:, 0, 1], tuple(geometry["periodic"]),
+                      tuple(geometry["period_um"]), float(ks.distance_mm), float(geometry["image_distance_um"]),
+                      np.asarray(ks.field_power, float), None if ks.field_series is None else np.asarray(ks.field_series))
+
+
+def channel_kernel_set(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig):
+    """The display's 3 channel kernels on `grid` (module doc), for the object at the scene's distance."""
+    z = scene_object_distance_m(scene)
+    d = 0.0 if display.is_glass else float(display.distance_mm)
+    if d == 0:
+        return display_channel_kernels(display, scene, grid, cfg, z)
+    if cfg.channel_kernels != "camera":
+        raise BankError(f"--display {display.name} at d = {d:g} mm with --channel-kernels {cfg.channel_kernels}: the "
+                        "paper's recipe has no field phases; use --channel-kernels camera or --distance-mm 0")
+    frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
+    ks, _ = cached(channel_kernels, "channel", display.layout, psf_lens(scene, z), cfg.use_cache,
+                   cache_dir=cfg.kernel_cache, camera=cfg.sensor.camera, illuminant="D65",
+                   step_nm=float(scene.bands.step_nm),
+                   pixel_um=grid.pitch_um, size_px=grid.kernel_size_px, distance_mm=d, field_phases=cfg.field_phases,
+                   precision=cfg.kernel_precision, sensor_um=frame_um)
+    return ks
+
+
+def make_panel(display: Display, scene: Scene, cfg: SynthConfig, kernel_px: int, exposure_s: float) -> Panel:
+    """One panel (module doc)."""
+    grid = sensor_grid(scene, kernel_px)
+    ks = channel_kernel_set(display, scene, grid, cfg)
+    g, why = panel_gamma(display, scene, cfg)
+    sensor = replace(sensor_for_scene(cfg.sensor, scene), exposure_s=float(exposure_s), gain=float(display.gain),
+                     form="per_channel", gamma_rggb=tuple(v / display.gain for v in rgb_to_rggb(g)))
+    field = None
+    if ks.field_kernels is not None and ks.distance_mm > 0:
+        field = panel_field(ks, scene, grid, cfg.field_rank)
+    record = {"display": display.describe(), "gamma_source": why, "transmission_rgb": [v / display.gain for v in g],
+              "kernel_notes": list(ks.notes), "kernel_params": ks.params}
+    return Panel(display.name, np.asarray(ks.kernels, np.float32), grid.pitch_um, g, sensor, cfg.defects, cfg.fpn,
+                 field, json.loads(json.dumps(record, default=str)))
+
+
+def bank_settings(scene: Scene, cfg: SynthConfig, kernel_px: int, exposure: tuple[float, str],
+                  displays: list[Display]) -> dict:
+    """What decides the bank's panels, as plain JSON values (a re-run with other settings is refused)."""
+    synth = {k: v for k, v in asdict(cfg).items() if k not in ("use_cache", "kernel_cache", "stray_light")}
+    doc = {"scene": scene.source, "frame_px": [scene.sensor.width_px, scene.sensor.height_px],
+           "pitch_um": scene.sensor.pitch_um, "kernel_px": kernel_px, "lens": psf_lens(scene).describe(),
+           "edges_nm": list(scene.bands.edges_nm), "exposure_s": exposure[0], "exposure_rule": exposure[1],
+           "form": "per_channel (the numpy synthesis's y = γ x ⊗ k + n; d > 0: the field blend of each channel)",
+           "synth": synth, "displays": [d.describe() for d in displays]}
+    return json.loads(json.dumps(doc, default=str))
+
+
+def make_bank(out: Path, displays: list[Display], scene: Scene, cfg: SynthConfig, kernel_px: int,
+              progress: bool = True) -> dict:
+    """Write (or finish) the bank of `displays` in `out` (module doc); returns its summary."""
+    out = Path(out)
+    names = [d.name for d in displays]
+    if not displays or len(set(names)) != len(names):
+        raise BankError(f"--display {','.join(names)}: expected distinct display names (they name the panels)")
+    exposure = scene_exposure_s(scene, cfg)
+    settings = bank_settings(scene, cfg, kernel_px, exposure, displays)
+    records = _resumable_records(out, settings)
+    made = 0
+    for i, d in enumerate(tqdm(displays, desc="bank", unit="panel", disable=not progress)):
+        if i < len(records):
+            continue
+        panel = make_panel(d, scene, cfg, kernel_px, exposure[0])
+        file = panel_file(i, d.name)
+        save_npz(out / file, **panel_arrays(panel))
+        records.append(panel_record(panel, file, file_sha256(out / file), panel.record))
+        write_bank_json(out, settings, records, len(displays))
+        made += 1
+    return {"out": str(out), "panels": len(records), "made": made, "exposure_s": exposure[0],
+            "names": names, "field_panels": [r["name"] for r in records if r["field"] is not None]}
+
+
+def _resumable_records(out: Path, settings: dict) -> list[dict]:
+    """The panels already made in `out` for these settings (none in a new folder); other settings: refused."""
+    path = out / BANK_FILE
+    if not path.is_file():
+        return []
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, ValueError):
+        raise BankError(f"{path}: unreadable; use another --out or delete the folder") from None
+    keys = sorted(k for k in settings.keys() | old.keys()
+                  if k not in ("format", "count", "complete", "panels") and old.get(k) != settings.get(k))
+    if keys:
+        raise BankError(f"--out {out} holds a different bank (differs in {', '.join(keys)}); use another --out or "
+                        "delete the folder")
+    done = []
+    for r in old.get("panels", []):  # the whole ones, up to the first missing or damaged file
+        if not ((out / r["file"]).is_file() and file_sha256(out / r["file"]) == r["sha256"]):
+            break
+        done.append(r)
+    return done
