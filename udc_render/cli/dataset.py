@@ -5,6 +5,7 @@
                        [--workers N | --scheduler ADDRESS] [--previews] [--side-by-side]
     udc-render dataset --scene room|hdr|FILE.toml --display toled --count N --out DIR
                        [--pose-jitter-m 0.15,0.1,0.15] [--target-jitter-m 0.3,0.2,0] [...]
+    udc-render dataset --builtin --randomize default|FILE.toml --panels N [--randomize-seed S] --count N ...
 
 A monitor scene (the default) needs --images or --builtin (item i shows image i); a 3D scene (room, hdr,
 a Mitsuba XML scene) takes neither: item i is a view of the scene from a jittered camera pose.
@@ -72,8 +73,17 @@ def register(sub) -> None:
                    help="also write each item's sRGB previews (gt_preview.png, <display>/preview.png) [off]")
     p.add_argument("--side-by-side", action="store_true",
                    help="also write each item's side_by_side.png (implies --previews)")
+    p.add_argument("--randomize", metavar="default|FILE.toml",
+                   help="randomized panels, sensors and exposures (docs/guides/randomize.md): 'default', the "
+                        "documented ranges, or a TOML file of distributions read over them; the items' display is "
+                        "then the drawn panel, in <item>/random/ (leave --display out)")
+    p.add_argument("--panels", type=positive("--panels", int),
+                   help="with --randomize: the number of panels drawn once per job (their kernels planned once); "
+                        "each item sees one of them [8]")
+    p.add_argument("--randomize-seed", type=int, default=0, help="with --randomize: the seed of every draw [0]")
     add_scene_arguments(p, scene_option=True)
     add_capture_arguments(p)
+    p.set_defaults(display=None)  # None: toled, or the drawn panel with --randomize
 
 
 def split_counts(count: int | None, split: tuple[int, int, int] | None) -> tuple[int, int, int]:
@@ -87,11 +97,33 @@ def split_counts(count: int | None, split: tuple[int, int, int] | None) -> tuple
     return split
 
 
+DEFAULT_PANELS = 8
+
+
+def randomization(args):
+    """The job's Randomization (None without --randomize): the distributions and the panels drawn once."""
+    from udc_render.dataset import Randomization
+    from udc_render.dataset.randomize import draw_panels, load_distributions
+    if args.randomize is None:
+        if args.panels is not None or args.randomize_seed != 0:
+            raise UserError(f"udc-render dataset: {'--panels' if args.panels is not None else '--randomize-seed'} "
+                            "is for a randomized dataset: add --randomize default|FILE.toml")
+        return None
+    for option, given in (("--display", args.display), ("--distance-mm", args.distance_mm)):
+        if given is not None:
+            raise UserError(f"udc-render dataset: {option} {given} with --randomize: the drawn panel is the items' "
+                            "display, its distance drawn (display.distance_mm in the TOML); leave it out")
+    dists = load_distributions(args.randomize)
+    panels = args.panels or DEFAULT_PANELS
+    return Randomization(dists, args.randomize_seed, tuple(draw_panels(dists, panels, args.randomize_seed)))
+
+
 def dataset_job(args):
     """The DatasetJob that the parsed `udc-render dataset` arguments describe (also benchmarks/bench_dataset.py)."""
     from udc_render.dataset import DatasetJob
     split = split_counts(args.count, args.split)
-    cfg, displays = capture_setup(args)
+    rand = randomization(args)
+    cfg, displays = capture_setup(args, "glass" if rand is not None else args.display or "toled")
     scene = scene_from_args(args)
     jitters = [o for o, v in (("--pose-jitter-m", args.pose_jitter_m), ("--target-jitter-m", args.target_jitter_m))
                if v is not None]
@@ -110,7 +142,7 @@ def dataset_job(args):
                       shard_size=args.shard_size, side_by_side=args.side_by_side,
                       previews=args.previews or args.side_by_side,
                       origin_jitter_m=args.pose_jitter_m or DEFAULT_ORIGIN_JITTER_M,
-                      target_jitter_m=args.target_jitter_m or DEFAULT_TARGET_JITTER_M)
+                      target_jitter_m=args.target_jitter_m or DEFAULT_TARGET_JITTER_M, randomize=rand)
 
 
 def run(args) -> int:
@@ -120,8 +152,15 @@ def run(args) -> int:
     cfg = job.cfg
     s = run_dataset(job, args.workers, args.scheduler, progress=not args.quiet)
     rate = f", {s['wall_s'] / s['made']:.2f} s/item wall" if s["made"] else ""
+    if s["panels_plan_s"]:
+        p = s["panels_plan_s"]
+        rate += f"; {len(p)} panels' kernels planned in {sum(p):.1f} s, {sum(p) / len(p):.2f} s per panel"
     stale = f", {s['stale_removed']} stale temporary folders removed" if s["stale_removed"] else ""
     print(describe(cfg.profile))
+    if job.randomize is not None:
+        r = job.randomize
+        print(f"randomized ({r.dists.source}, seed {r.seed}): {len(r.panels)} panel{'s' if len(r.panels) > 1 else ''} drawn once (job.json); each item's "
+              "panel, read noise, defect pixels, fixed-pattern noise and exposure drawn in its capture.json")
     print(f"{s['complete']}/{s['count']} items in {s['out']} ({s['made']} made now{rate}, "
           f"{s['count'] - s['made']} already there{stale}); manifest.jsonl, job.json, timing.jsonl")
     return 0

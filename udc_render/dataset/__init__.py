@@ -35,6 +35,10 @@ beside its final one and renamed into place when complete, so a folder named ite
 whole: a re-run removes stale temporary folders and makes only the missing items, with the same
 bytes as an uninterrupted run (every file is deterministic).
 
+A randomized job (randomized.py; --randomize, --panels N) draws N panels once and records them in
+job.json; item i sees panel capture_panel(N, seed, i) with its own sensor and exposure, its panel's
+capture in <item>/random/; the items are dispatched sorted by panel.
+
 Kernels are planned once in this process (pipeline.plan_kernels, into the kernel cache folder)
 before items are dispatched, and each worker loads them once: the monitor plane's, or a 3D scene's
 in-focus kernels; the synthesis plans the other depth layers' kernels of each item itself, through
@@ -46,6 +50,7 @@ the cluster's workers share.
     plan.py       Task, the image list, Views (a 3D scene's poses), render seeds, the split
     store.py      lock, job.json, stale folders, manifest
     executors.py  make_item; in-process, process pool or Dask
+    randomized.py a randomized job's panels, their kernels, each item's draws and their records
 """
 from __future__ import annotations
 
@@ -59,6 +64,8 @@ from pathlib import Path
 from tqdm import tqdm
 
 from udc_render.dataset.executors import Shared, executor
+from udc_render.dataset.randomize import PANEL_NAME, capture_panel
+from udc_render.dataset.randomized import Randomization, plan_panels
 from udc_render.dataset.plan import (BUILTIN_THEN, DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M, SPLITS,
                                      DatasetError, Task, Views, image_list, plan_tasks)
 from udc_render.dataset.store import check_job, clean_stale, locked, write_manifest
@@ -70,7 +77,7 @@ from udc_render.scene.geometry import camera_geometry
 
 JOB_VERSION = 2  # 2: raw.dng replaces raw.png and packed.tiff; previews optional
 
-__all__ = ["DatasetError", "DatasetJob", "Task", "Views", "run_dataset", "SPLITS", "DEFAULT_ORIGIN_JITTER_M",
+__all__ = ["DatasetError", "DatasetJob", "Randomization", "Task", "Views", "run_dataset", "SPLITS", "DEFAULT_ORIGIN_JITTER_M",
            "DEFAULT_TARGET_JITTER_M"]
 
 
@@ -81,7 +88,8 @@ class DatasetJob:
     built-in list; a 3D scene takes none), the camera jitters of a 3D scene (metres per world axis,
     plan.Views), the split (train, val, test item counts), the shard size, the output folder, whether to
     plot (side_by_side.png) and whether to write the sRGB previews (gt_preview.png, <display>/preview.png;
-    the plot draws them either way)."""
+    the plot draws them either way), and a randomization (randomized.py: the displays are then glass alone,
+    each item adds its panel; spectral form)."""
     scene: Scene
     displays: list[Display]
     cfg: SynthConfig
@@ -93,8 +101,17 @@ class DatasetJob:
     previews: bool = False
     origin_jitter_m: tuple[float, float, float] = DEFAULT_ORIGIN_JITTER_M
     target_jitter_m: tuple[float, float, float] = DEFAULT_TARGET_JITTER_M
+    randomize: Randomization | None = None
 
     def __post_init__(self):
+        if self.randomize is not None:
+            names = [d.name for d in self.displays]
+            if names != ["glass"]:
+                raise DatasetError(f"--randomize with --display {','.join(n for n in names if n != 'glass')}: the "
+                                   f"drawn panel ('{PANEL_NAME}') is the item's display; leave --display out")
+            if self.cfg.form != "spectral":
+                raise DatasetError(f"--randomize with form {self.cfg.form}: the drawn panels need the spectral form "
+                                   "(their distance, T(λ) and haze); use --profile physical or --form spectral")
         if not self.is_monitor and self.images_dir is not None:
             raise DatasetError(f"--scene {self.scene.source}: a {self.scene.content_type} scene's items are views of "
                                f"the scene (--pose-jitter-m, --target-jitter-m); --images and --builtin are for a "
@@ -125,6 +142,8 @@ def job_params(job: DatasetJob, shared: Shared, source: str | None, images, view
               "render_seed": job.scene.render.seed, "scene": dataclasses.asdict(shared.scene),
               "displays": [d.describe() for d in shared.displays], "synth": cfg, "side_by_side": shared.side_by_side,
               "previews": shared.previews}
+    if job.randomize is not None:
+        params["randomize"] = job.randomize.describe()
     return json.loads(json.dumps(params, default=str))
 
 
@@ -138,12 +157,12 @@ def _shared(job: DatasetJob, out: Path) -> Shared:
         cfg = replace(cfg, kernel_cache=str(cache_dir().resolve()))
     if job.is_monitor:
         scene = replace(job.scene, content=replace(job.scene.content, image="(per item)"))
-        return Shared(scene, job.displays, cfg, out, job.side_by_side, job.previews)
+        return Shared(scene, job.displays, cfg, out, job.side_by_side, job.previews, randomize=job.randomize)
     scene = resolve_xml_camera(job.scene)
     g = camera_geometry(scene)
     scene = replace(scene, camera=replace(scene.camera, origin_m=g.origin_m, target_m=g.target_m, up=g.up),
                     lens=replace(scene.lens, focus_distance_m=g.focus_distance_m))
-    return Shared(scene, job.displays, cfg, out, job.side_by_side, job.previews, parent_blas_threads())
+    return Shared(scene, job.displays, cfg, out, job.side_by_side, job.previews, parent_blas_threads(), job.randomize)
 
 
 def _views(job: DatasetJob, shared: Shared) -> Views | None:
@@ -166,15 +185,24 @@ def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None,
     views = _views(job, shared)
     tasks = plan_tasks(job.count, job.split, job.shard_size, images, job.images_dir is None, job.scene.render.seed,
                        views)
-    names = [d.name for d in job.displays]
+    rand = job.randomize
+    if rand is not None:
+        tasks = [replace(t, panel=capture_panel(len(rand.panels), rand.seed, t.item)) for t in tasks]
+    names = [d.name for d in job.displays] + ([PANEL_NAME] if rand is not None else [])
     with executor(workers, scheduler, shared) as run_all, locked(out):
         check_job(out, job_params(job, shared, source, images, views))
         stale = clean_stale(out)
         todo = [t for t in tasks if not (out / t.folder).is_dir() and (splits is None or t.split in splits)]
+        plan_s = []
         if todo and shared.cfg.use_cache:
             # once, into the cache, before dispatching (a 3D scene: the in-focus ones; the synthesis plans
-            # each item's other depth layers through the same cache)
-            plan_kernels(shared.scene, shared.displays, shared.cfg)
+            # each item's other depth layers through the same cache); a randomized job: every panel's
+            if rand is None:
+                plan_kernels(shared.scene, shared.displays, shared.cfg)
+            else:
+                plan_s = plan_panels(rand, shared.scene, shared.displays[0], shared.cfg)
+        if rand is not None:  # a worker keeps few panels' kernels: one panel's items after another
+            todo.sort(key=lambda t: (t.panel, t.item))
         t0 = time.perf_counter()
         wanted = sum(1 for t in tasks if splits is None or t.split in splits)
         bar = tqdm(total=wanted, initial=wanted - len(todo), desc="dataset", unit="item",
@@ -190,4 +218,4 @@ def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None,
             bar.close()
             complete = write_manifest(out, tasks, names, shared.cfg.seed)
     return {"out": str(out), "count": job.count, "complete": complete, "made": len(todo), "stale_removed": stale,
-            "wall_s": time.perf_counter() - t0}
+            "wall_s": time.perf_counter() - t0, "panels_plan_s": plan_s}

@@ -16,6 +16,7 @@ from itertools import islice
 from pathlib import Path
 
 from udc_render.dataset.plan import DatasetError, Task
+from udc_render.dataset.randomized import Randomization, exposed, item_setup, panel_setup, recorded
 from udc_render.dataset.store import TMP_PREFIX, item_record
 from udc_render.dataset.threads import blas_threads, blas_threads_env, set_worker_threads, threads_per_worker
 from udc_render.io.capture import write_synthesis
@@ -41,39 +42,48 @@ class Shared:
     side_by_side: bool
     previews: bool
     blas_threads: int | None = None  # the parent's BLAS threads: a 3D item's off-focus kernels are computed with them
+    randomize: Randomization | None = None  # --randomize: the panels drawn once (dataset.randomized)
 
 
-_WORKER_KERNELS: dict[str, Kernels] = {}  # per process: the job's kernels, loaded once per worker
+_WORKER_KERNELS: dict[tuple, Kernels] = {}  # per process: the job's kernels (a panel's), loaded once per worker
+KEEP_PANELS = 2  # a randomized job's panels whose kernels a worker keeps (the items come sorted by panel)
 
 
-def worker_kernels(shared: Shared) -> Kernels:
-    """The job's kernels, loaded from the cache on a worker's first item and kept for the next ones, the
+def worker_kernels(shared: Shared, panel: int | None = None) -> Kernels:
+    """The job's kernels (with --randomize, panel `panel`'s: randomized.panel_setup), loaded from the cache
+    on a worker's first item and kept for the next ones (KEEP_PANELS panels, the first loaded dropped first), the
     d > 0 phase kernels reduced to their rank-r bases (pipeline.compact_kernels: same numbers, 1/8 the memory)
     and their exact-power maps made once (pipeline.store_power_maps: same numbers, not remade per item)."""
     from udc_render.pipeline import compact_kernels, plan_kernels, store_power_maps
-    key = str(shared.out)
+    key = (str(shared.out), panel)
     if key not in _WORKER_KERNELS:
-        _WORKER_KERNELS.clear()
-        kernels = compact_kernels(plan_kernels(shared.scene, shared.displays, shared.cfg), shared.scene, shared.cfg)
-        _WORKER_KERNELS[key] = store_power_maps(kernels, shared.scene)
+        for old in [k for k in _WORKER_KERNELS if k[0] != key[0]]:  # another job's
+            del _WORKER_KERNELS[old]
+        while len(_WORKER_KERNELS) >= KEEP_PANELS:
+            del _WORKER_KERNELS[next(iter(_WORKER_KERNELS))]  # the first loaded
+        scene, displays = (shared.scene, shared.displays) if panel is None else \
+            panel_setup(shared.scene, shared.displays[0], shared.randomize.panels[panel])
+        kernels = compact_kernels(plan_kernels(scene, displays, shared.cfg), scene, shared.cfg)
+        _WORKER_KERNELS[key] = store_power_maps(kernels, scene)
     return _WORKER_KERNELS[key]
 
 
-def cache_layer_kernels(band_image, scene: Scene, shared: Shared, kernels: Kernels) -> None:
+def cache_layer_kernels(band_image, scene: Scene, shared: Shared, kernels: Kernels,
+                        displays: list[Display] | None = None) -> None:
     """Plan the kernels of the item's depth layers other than the job's (a 3D scene's depth away from
     the focus) into the kernel cache before the synthesis, which then loads them from there: computed
     here with the parent's BLAS thread count (Shared.blas_threads; a pool worker has it already, a Dask
     worker has its cluster's), since psf's kernels differ in the last bits with the BLAS thread count
     (threads.py), so an item's bytes do not depend on which process computed a layer's kernels. Costs
     one extra load per such layer; nothing without the cache (then the synthesis computes them with this
-    process's BLAS threads) or for a monitor (one layer, the job's)."""
+    process's BLAS threads) or for a monitor (one layer, the job's). `displays`: the item's [shared.displays]."""
     from udc_render.pipeline import depth_layers, plan_kernels
     if not shared.cfg.use_cache or isinstance(scene.content, Monitor):
         return
     with blas_threads(shared.blas_threads):  # the bits of the parent's kernels (threads.py)
         for z in depth_layers(band_image, scene, kernels.grid, shared.cfg).depths_m:
             if z != kernels.object_distance_m:
-                plan_kernels(scene, shared.displays, shared.cfg, object_distance_m=z)
+                plan_kernels(scene, displays or shared.displays, shared.cfg, object_distance_m=z)
 
 
 def make_item(shared: Shared, task: Task) -> dict:
@@ -88,11 +98,19 @@ def make_item(shared: Shared, task: Task) -> dict:
     else:  # a 3D item: its camera pose (the focus distance stays the job's, fixed in shared.scene.lens)
         origin, target, up = task.pose
         scene = replace(scene, camera=replace(scene.camera, origin_m=origin, target_m=target, up=up))
+    displays, cfg, setup = shared.displays, shared.cfg, None
+    if shared.randomize is not None:  # the item's panel, sensor and exposure (dataset.randomized)
+        setup = item_setup(shared.randomize, scene, shared.displays[0], shared.cfg, task.item)
+        scene, displays, cfg = setup.scene, setup.displays, setup.cfg
     band_image = render_scene(scene, progress=False)
+    if setup is not None:
+        band_image, cfg, exposure = exposed(setup, band_image)
     t1 = time.perf_counter()
-    kernels = worker_kernels(shared)
-    cache_layer_kernels(band_image, scene, shared, kernels)
-    result = synthesize(band_image, scene, shared.displays, shared.cfg, task.item, kernels=kernels)
+    kernels = worker_kernels(shared, None if setup is None else setup.panel.index)
+    cache_layer_kernels(band_image, scene, shared, kernels, displays)
+    result = synthesize(band_image, scene, displays, cfg, task.item, kernels=kernels)
+    if setup is not None:
+        result = recorded(result, setup, exposure)
     t2 = time.perf_counter()
     final = shared.out / task.folder
     final.parent.mkdir(parents=True, exist_ok=True)
@@ -100,7 +118,7 @@ def make_item(shared: Shared, task: Task) -> dict:
     try:
         write_synthesis(tmp, result, shared.cfg.sensor.camera, side_by_side=shared.side_by_side,
                         previews=shared.previews)
-        save_json(tmp / "item.json", item_record(task, [d.name for d in shared.displays], shared.cfg.seed))
+        save_json(tmp / "item.json", item_record(task, [d.name for d in displays], shared.cfg.seed))
         os.chmod(tmp, 0o777 & ~current_umask())  # mkdtemp makes 0700
         os.rename(tmp, final)
     except BaseException:

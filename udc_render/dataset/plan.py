@@ -33,7 +33,7 @@ Pose = tuple[tuple[float, float, float], tuple[float, float, float], tuple[float
 @dataclass(frozen=True)
 class Task:
     """One item: its id, split, folder (relative to OUT), image (spec and label; a monitor scene) or camera
-    pose (origin, target, up in metres; a 3D scene), and render seed."""
+    pose (origin, target, up in metres; a 3D scene), render seed, and its panel (a randomized job's)."""
     item: int
     split: str
     folder: str
@@ -41,6 +41,7 @@ class Task:
     label: str | None  # the image as recorded: a path relative to --images, or the spec
     render_seed: int
     pose: Pose | None = None  # a 3D scene's camera for this item (Views.pose); None: a monitor item
+    panel: int | None = None  # --randomize: the item's panel (randomize.capture_panel); None: not randomized
 
 
 @dataclass(frozen=True)

@@ -53,6 +53,8 @@ def clean_stale(out: Path) -> int:
 def item_record(task: Task, displays: list[str], noise_seed: int) -> dict:
     """item.json and the manifest's line (less the file list): nothing that depends on where OUT is."""
     what = {"image": task.label} if task.pose is None else {"pose": pose_record(task.pose)}
+    if task.panel is not None:
+        what["panel"] = task.panel
     return {"item": task.item, "split": task.split, "folder": task.folder, **what,
             "render_seed": task.render_seed, "noise_seed": f"SeedSequence([{noise_seed}, {task.item}, crc32(display)])",
             "displays": displays}
