@@ -131,10 +131,11 @@ def _psf_record(psf, spec: FitSpec) -> dict:
                         "peaks": int(len(lat.index)), "rms_px": lat.rms_px, "floor_px": lat.floor_px},
             "window_px": psf.window.size, "aperture_px": c.radius_px,
             "vignetting": {"log_gradient_x": pm(lin[1], sig[1]), "log_gradient_y": pm(lin[2], sig[2]),
-                           "log_radial": pm(lin[3], sig[3]), "unit": "per window half side"},
+                           "log_radial_r2": pm(lin[3], sig[3]), "log_radial_r4": pm(lin[4], sig[4]),
+                           "unit": "per window half side"},
             "exposure_factors": {"hdr_merge": list(psf.plane.factors),
                                  "fitted": {str(e): pm(math.exp(v), math.exp(v) * s) for e, v, s in
-                                            zip(c.fit.exposures[1:], lin[4:], sig[4:])}},
+                                            zip(c.fit.exposures[1:], lin[5:], sig[5:])}},
             "dn_per_electron": psf.plane.dn_per_e, "chi2_red": c.fit.chi2_red, "dof": c.fit.dof, "rms_log": c.fit.rms_log,
             "candidates": [_candidate_record(x) for x in psf.candidates], "skipped": psf.skipped,
             "orders": orders_table(c)}

@@ -81,8 +81,8 @@ class Family:
         return np.abs(c[iy, ix]) ** 2
 
     def default_params(self) -> tuple:
-        return tuple(float(np.median(g)) for g in self.grid) if self.name == "toled" else \
-            ((0.23, 0.7) if self.name == "poled" else ())
+        """The presets' shapes (psf.layouts.toled / poled defaults): what decides the visible orders."""
+        return {"toled": (0.21 / 0.9, 0.9), "poled": (0.23, 0.7)}.get(self.name, ())
 
     def index_basis(self, params=None) -> np.ndarray:
         """M [2, 2]: the visible orders' integer lattice (module doc), Lagrange–Gauss reduced in the cell's

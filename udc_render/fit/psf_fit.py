@@ -71,7 +71,7 @@ def render(layout, optics: Optics, size: int, origin: np.ndarray, rotation_deg: 
 
 
 def field_map(fit: FamilyFit, size: int) -> np.ndarray:
-    """exp(g_x X + g_y Y + q (X² + Y²)) on the window [S, S]: the fitted vignetting (without the scale)."""
+    """exp(g_x X + g_y Y + q R² + q₂ R⁴) on the window [S, S]: the fitted vignetting (without the scale)."""
     g = np.arange(size) - size // 2
     xy = np.stack(np.broadcast_arrays(g[None, :], g[:, None]), -1).reshape(-1, 2)
     return np.exp(fit.log_field(xy, size // 2) - fit.log_field(np.zeros((1, 2)), size // 2)).reshape(size, size)

@@ -2,19 +2,22 @@
 PSF engine as the forward model.
 
 Data: one row per order k and exposure i where the order is measured (photometry), y = ln P_ki with
-σ = σ(P_ki) / P_ki; the rows used are those the model predicts at SNR ≥ MIN_SNR (the first pass: measured at
-≥ START_SNR), so that the selection does not follow the noise.
-Model: ln M_ki = ln s + ln f_i + g_x X_k + g_y Y_k + q (X_k² + Y_k²) + ln Q_k(θ); f_i: exposure i's factor
+σ = σ(P_ki) / M_ki (the model's power: a weight from the measurement would favour the rows whose noise came
+out positive), the model's log shifted by −σ(P)² / (2 M²) (the log's bias, E ln P̂ = ln P − σ² / (2 P²)); the
+rows used are those the model predicts at SNR ≥ MIN_SNR (the first pass: measured at ≥ START_SNR), so that
+the selection does not follow the noise.
+Model: ln M_ki = ln s + ln f_i + g_x X_k + g_y Y_k + q R_k² + q₂ R_k⁴ + ln Q_k(θ) (R² = X² + Y²); f_i: exposure i's factor
 against the reference (the brightest exposure with rows; the exposures' HDR factors are fitted here with
 the orders, so that their error is in the covariance); X, Y: the order's position over the window's half
 side (the vignetting across the spot: a gradient where the spot is off the axis, a radial fall-off where it
-is on it); Q_k(θ) = κ |c_k(θ)|² + δ_k.
+is on it, whose log is not a pure square: ln cos⁴θ and ln(1 − a r²) have r⁴ terms); Q_k(θ) = κ |c_k(θ)|² + δ_k.
 δ is what the engine's PSF holds at each order beyond κ |c|²: the neighbours' light, the orders' interference,
 the pixels' phases; it is the layout at θ̂ and the fitted pitch rendered where the measurement's spot is
 (synthetic.render_window: psf.compute_kernels at a third of the pixel, turned by the lattice's rotation,
 centred on its origin, summed back to pixels), the same photometry run on it at its own orders: Q^eng,
 κ = Σ Q^eng |c|² / Σ |c|⁴ and δ_k = Q^eng_k − κ |c_k(θ̂)|². The fit is repeated with δ until θ moves by less
 than 0.05 σ (at most ENGINE_PASSES renders).
+Covariance: refine._covariance (the Jacobian's, widened by the residual and by White's sandwich).
 Start: the χ² of many orders has a minimum between every two zeros of |c|² (~1 / (2 n_max) apart in a
 shape parameter), so the start continues from the low orders to all: the grid's best point (the linear
 parameters solved at each, a robust score) on the orders with |m|, |n| ≤ START_ORDERS[0], polished there by
@@ -38,14 +41,14 @@ MIN_SNR, START_SNR = 3.0, 5.0
 START_ORDERS = (3, 6, 12, 24)
 ROBUST_SCALE = 5.0  # the start's score: Σ ln(1 + (r / 5)²), so that an order near a zero of |c|² (its log
 # residual steep in θ) cannot hide the right basin from a grid point a step away
-FIELD_TERMS = 4  # ln s, g_x, g_y, q
+FIELD_TERMS = 5  # ln s, g_x, g_y, q, q₂
 ENGINE_PASSES = 3
 TINY = 1e-300
 
 
 @dataclass(frozen=True)
 class FamilyFit:
-    """A family's fit: x = (shape parameters, ln s, g_x, g_y, q, ln f of the other exposures), its covariance,
+    """A family's fit: x = (shape parameters, ln s, g_x, g_y, q, q₂, ln f of the other exposures), its covariance,
     χ² and dof, the noise-weighted RMS of the log residuals √(χ² / Σ σ⁻²), the rows used, the model's power
     of every row (its exposure's units), the renders made, the exposures with rows (the reference first), the
     last render."""
@@ -68,7 +71,7 @@ class FamilyFit:
         return np.array([table.get(int(e), np.nan) for e in exposure])
 
     def log_field(self, xy: np.ndarray, half: int) -> np.ndarray:
-        """ln s + g_x X + g_y Y + q (X² + Y²) at window positions xy [N, 2]."""
+        """ln s + g_x X + g_y Y + q R² + q₂ R⁴ at window positions xy [N, 2]."""
         k = len(self.family.names)
         return _field(xy / half) @ self.x[k:k + FIELD_TERMS]
 
@@ -114,8 +117,9 @@ def engine_powers(fam: Family, params, pitch_um, optics: Optics, geometry: Geome
 
 
 def _field(u: np.ndarray) -> np.ndarray:
-    """Columns 1, X, Y, X² + Y² of positions u [N, 2] over the window's half side."""
-    return np.column_stack([np.ones(len(u)), u, np.sum(u * u, axis=1)])
+    """Columns 1, X, Y, R², R⁴ of positions u [N, 2] over the window's half side."""
+    r2 = np.sum(u * u, axis=1)
+    return np.column_stack([np.ones(len(u)), u, r2, r2 * r2])
 
 
 def _design(orders: Orders, half: int, exposures: list[int]) -> np.ndarray:
@@ -148,27 +152,43 @@ def _start(fam: Family, index, y, sig, a, kappa, delta) -> np.ndarray:
     return best
 
 
-def _solve(fam: Family, index, y, sig, a, kappa, delta, x0, loss: str = "linear"):
+def _solve(fam: Family, index, y, sig, a, kappa, delta, x0, loss: str = "linear", s_abs=None):
     """scipy.optimize.least_squares from x0: (x, covariance, χ², normalised residuals); loss 'cauchy' for the
-    start's polish (scale ROBUST_SCALE)."""
+    start's polish (scale ROBUST_SCALE). With s_abs (σ of each power) the log residual is taken against the
+    model, unbiased to second order: r = (ln P − ln M + s² / (2 M²)) M / s (E ln P̂ = ln P − σ² / (2 P²), and a
+    weight σ / P̂ from the measurement would favour the rows whose noise came out positive)."""
     from scipy.optimize import least_squares
     k = len(fam.names)
-    if k == 0:  # a micrograph: the model is linear in what is left
+    if k == 0 and s_abs is None:  # a micrograph's start: the model is linear in what is left
         coef, chi2 = _linear(y, sig, _log_q(fam, (), index, kappa, delta), a)
         r = (y - _log_q(fam, (), index, kappa, delta) - a @ coef) / sig
         cov = np.linalg.pinv((a / sig[:, None]).T @ (a / sig[:, None])) * max(1.0, chi2 / max(len(y) - a.shape[1], 1))
         return coef, cov, chi2, r
 
     def resid(x):
-        return (y - _log_q(fam, x[:k], index, kappa, delta) - a @ x[k:]) / sig
+        lm = _log_q(fam, x[:k], index, kappa, delta) + a @ x[k:]
+        if s_abs is None:
+            return (y - lm) / sig
+        m = np.exp(lm)
+        with np.errstate(divide="ignore", over="ignore"):  # an order predicted at 0: an infinite residual, a
+            return (y - lm + s_abs ** 2 / (2 * m * m)) * m / s_abs  # step the solver rejects
     lo = np.concatenate([fam.lower, [-np.inf] * a.shape[1]])
     hi = np.concatenate([fam.upper, [np.inf] * a.shape[1]])
     span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
     res = least_squares(resid, np.clip(x0, lo + 1e-9 * span, hi - 1e-9 * span), bounds=(lo, hi), method="trf",
                         x_scale="jac", xtol=1e-10, ftol=1e-10, loss=loss, f_scale=ROBUST_SCALE)
     chi2 = float(res.fun @ res.fun)
-    cov = np.linalg.pinv(res.jac.T @ res.jac) * max(1.0, chi2 / max(len(y) - len(x0), 1))
-    return res.x, cov, chi2, res.fun
+    return res.x, _covariance(res.jac, res.fun, len(y) - len(x0)), chi2, res.fun
+
+
+def _covariance(jac: np.ndarray, r: np.ndarray, dof: int) -> np.ndarray:
+    """(JᵀJ)⁻¹ max(1, χ²/dof), each parameter's variance raised where the sandwich (JᵀJ)⁻¹ Jᵀ diag(r²) J (JᵀJ)⁻¹
+    gives more (White's estimator: a residual beyond the noise where the parameter draws on it)."""
+    a_inv = np.linalg.pinv(jac.T @ jac)
+    cov = a_inv * max(1.0, float(r @ r) / max(dof, 1))
+    sandwich = a_inv @ (jac.T @ (jac * (r * r)[:, None])) @ a_inv * len(r) / max(dof, 1)
+    scale = np.sqrt(np.maximum(1.0, np.diag(sandwich) / np.maximum(np.diag(cov), 1e-300)))
+    return cov * np.outer(scale, scale)
 
 
 def _continue(fam: Family, index, y, sig, a, kappa, delta) -> np.ndarray:
@@ -179,6 +199,10 @@ def _continue(fam: Family, index, y, sig, a, kappa, delta) -> np.ndarray:
         if low.sum() < a.shape[1] + len(fam.names) + 5:
             continue
         args = (fam, index[low], y[low], sig[low], a[low], kappa, delta[low])
+        if x is not None:  # the shape so far, the linear parameters solved again on these rows (the field's
+            k = len(fam.names)  # R⁴ fitted on the low orders alone extrapolates wildly)
+            x = np.concatenate([x[:k], _linear(y[low], sig[low], _log_q(fam, x[:k], index[low], kappa, delta[low]),
+                                               a[low])[0]])
         x = _solve(*args, _start(*args) if x is None else x, loss="cauchy")[0]
     return x if x is not None else _start(fam, index, y, sig, a, kappa, delta)
 
@@ -205,7 +229,8 @@ def fit_family(fam: Family, orders: Orders, factors, pitch_um, optics: Optics, g
         y, sig = np.log(orders.power[used]), orders.sigma[used] / orders.power[used]
         if x is None:
             x = _continue(fam, orders.index[used], y, sig, a[used], kappa, delta[row_order][used])
-        x_new, cov, chi2, r = _solve(fam, orders.index[used], y, sig, a[used], kappa, delta[row_order][used], x)
+        x_new, cov, chi2, r = _solve(fam, orders.index[used], y, sig, a[used], kappa, delta[row_order][used], x,
+                                     s_abs=orders.sigma[used])
         moved = np.max(np.abs(x_new - x)[:k] / np.maximum(np.sqrt(np.diag(cov))[:k], 1e-12), initial=0.0)
         x = x_new
         if passes == ENGINE_PASSES or (passes > 0 and moved < 0.05) or k == 0 and passes > 0:
@@ -220,5 +245,6 @@ def fit_family(fam: Family, orders: Orders, factors, pitch_um, optics: Optics, g
             & np.isin(orders.exposure, exposures)
     model = np.exp(a @ x[k:] + _log_q(fam, x[:k], uniq, kappa, delta)[row_order])
     dof = max(int(used.sum()) - len(x), 1)
-    rms = float(np.sqrt(chi2 / np.sum(sig ** -2.0)))  # the noise-weighted RMS of the log residuals
+    weight = float(np.sum(sig ** -2.0))
+    rms = math.sqrt(chi2 / weight) if weight > 0 else math.inf  # the noise-weighted RMS of the log residuals
     return FamilyFit(fam, x, cov, chi2, dof, rms, used, model, passes, tuple(exposures), image)
