@@ -181,3 +181,22 @@ class PairDataset(torch.utils.data.Dataset):
         mode = int(rng.integers(0, 8)) if self.augment else 0
         x, y = augment_crop(packed, gt, mode, self.crop_px, rng)
         return torch.from_numpy(x), torch.from_numpy(y)
+
+
+class PairBatches:
+    """The training batches of a PairDataset: per epoch, its crops (set_epoch) in the order of a generator seeded
+    by seed · 1000003 + epoch, `batch` at a time (what restore.train iterates; restore.online.OnlineBatches is the
+    online degradation's)."""
+
+    def __init__(self, data: PairDataset, batch: int, seed: int):
+        self.data, self.batch, self.seed = data, batch, seed
+
+    @property
+    def count(self) -> int:
+        return len(self.data.pairs)
+
+    def epoch(self, epoch: int):
+        """(None: no draws to record, the epoch's batches (x, y))."""
+        self.data.set_epoch(epoch)
+        order = torch.Generator().manual_seed(self.seed * 1_000_003 + epoch)
+        return None, torch.utils.data.DataLoader(self.data, batch_size=self.batch, shuffle=True, generator=order)

@@ -35,7 +35,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from restore.data import PairDataset, largest_crop_px, list_pairs, load_pair, read_manifest
+from restore.data import PairBatches, PairDataset, largest_crop_px, list_pairs, load_pair, read_manifest
+from restore.online import DrawLog, online_data
 from restore.losses import loss_fn
 from restore.models import build_model, model_config
 from udc_render.errors import UdcError
@@ -79,6 +80,9 @@ class TrainSettings:
     # Adam stay float32), or all float32 (None). On this AVX512-BF16 CPU a UNet step takes half the time
     # (benchmarks/README.md, bench_train); validation and evaluation always run in float32.
     autocast: str | None = None
+    # The online degradation (restore.online; None: the dataset's captures): {"mode": "online", "bank_fingerprint",
+    # "panels": the bank's panels drawn from}.
+    degrade: dict | None = None
 
 
 AUTOCASTS = (None, "bf16")
@@ -212,16 +216,22 @@ def finished_summary(out: Path, settings: TrainSettings) -> dict | None:
     return summary if plateaued else None
 
 
-def _training_data(data_dir: Path, settings: TrainSettings) -> tuple[PairDataset, list]:
-    """(the training crops, the validation pairs as arrays): every pair read and checked (load_pair),
-    and --crop-px checked against the smallest frame."""
-    data = PairDataset(list_pairs(data_dir, "train", [settings.display]), settings.crop_px, augment=True,
-                       seed=settings.seed, crops_per_pair=settings.crops_per_pair)
-    h, w = min((gt.shape[1:] for _, gt in data.arrays), key=min)
-    if settings.crop_px > largest_crop_px(h, w):
-        raise TrainError(f"--crop-px = {settings.crop_px}: too large for the {w} × {h} px frames of {data_dir} "
-                         f"({settings.display}): at most {largest_crop_px(h, w)} (the smaller side less 2 px)")
-    val = [load_pair(p) for p in list_pairs(data_dir, "val", [settings.display])]
+def _training_data(data_dir: Path, settings: TrainSettings, dev, bank: Path | None = None) -> tuple[object, list]:
+    """(the training batches, the validation pairs as arrays): every pair read and checked (load_pair), and
+    --crop-px checked against the smallest frame; with settings.degrade, the clean images and the bank's
+    panels of the online degradation (restore.online)."""
+    if settings.degrade is not None:
+        data, val = online_data(data_dir, bank, settings, dev)
+        h, w = min((im.pixels.shape[1:] for im in data.images), key=min)
+    else:
+        pairs = PairDataset(list_pairs(data_dir, "train", [settings.display]), settings.crop_px, augment=True,
+                            seed=settings.seed, crops_per_pair=settings.crops_per_pair)
+        h, w = min((gt.shape[1:] for _, gt in pairs.arrays), key=min)
+        if settings.crop_px > largest_crop_px(h, w):
+            raise TrainError(f"--crop-px = {settings.crop_px}: too large for the {w} × {h} px frames of {data_dir} "
+                             f"({settings.display}): at most {largest_crop_px(h, w)} (the smaller side less 2 px)")
+        data = PairBatches(pairs, settings.batch, settings.seed)
+        val = [load_pair(p) for p in list_pairs(data_dir, "val", [settings.display])]
     if settings.val_crop_px is not None:
         c = settings.val_crop_px
         if c < 32 or c % 32 or c > min(h, w):
@@ -298,9 +308,10 @@ def plot_loss(log: list, path: Path) -> None:
 
 
 def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "auto", checkpoint_s: float = 60.0,
-          val_every: int = 10, progress: bool = True) -> dict:
+          val_every: int = 10, progress: bool = True, bank: Path | None = None) -> dict:
     """Train (or resume) in `out`; returns a summary (epochs, final loss, validation PSNR, seconds).
-    Nothing is written in `out` before the settings, the run folder and every pair have been checked."""
+    Nothing is written in `out` before the settings, the run folder and every pair have been checked.
+    settings.degrade: the online degradation through the kernel bank in `bank` (restore.online)."""
     data_dir, out = Path(data_dir), Path(out)
     if settings.epochs < 1 or settings.batch < 1:
         raise TrainError(f"epochs = {settings.epochs}, batch = {settings.batch}: expected integers ≥ 1")
@@ -311,12 +322,13 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     if (done := finished_summary(out, settings)) is not None:
         return done
     dev = pick_device(device)
-    data, val_pairs = _training_data(data_dir, settings)
+    data, val_pairs = _training_data(data_dir, settings, dev, bank)
     torch.manual_seed(settings.seed)
     model = build_model(settings.model).to(dev, memory_format=torch.channels_last)  # 1.07× (bench_train)
     opt = torch.optim.Adam(model.parameters(), lr=settings.lr, betas=(0.9, 0.999), eps=1e-8)
     save_json(out / "train.json", asdict(settings))  # everything above checked: the run folder is used now
     start_epoch, step, log = _resume(out / "checkpoint.pt", model, opt, dev)
+    draw_log = DrawLog(out, start_epoch) if settings.degrade is not None else None
     t_start, t_ckpt = time.perf_counter() - (log[-1]["seconds"] if log else 0.0), time.perf_counter()  # cumulative
     model.train()
     bar = tqdm(range(start_epoch, settings.epochs), initial=start_epoch, total=settings.epochs, unit="epoch",
@@ -327,17 +339,17 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
             break
         for group in opt.param_groups:
             group["lr"] = learning_rate(settings, epoch)
-        data.set_epoch(epoch)
-        order = torch.Generator().manual_seed(settings.seed * 1_000_003 + epoch)
-        loader = torch.utils.data.DataLoader(data, batch_size=settings.batch, shuffle=True, generator=order)
+        draws, batches = data.epoch(epoch)
         losses = []
-        for x, y in loader:
+        for x, y in batches:
             x = x.to(dev, memory_format=torch.channels_last)
             y = y.to(dev, memory_format=torch.channels_last)
             losses.append(train_step(model, opt, x, y, loss_of, settings))
             step += 1
         if not all(math.isfinite(v) for v in losses):
             raise TrainError(f"epoch {epoch + 1}: the loss is not finite ({losses[-1]}); lower the learning rate")
+        if draw_log is not None:
+            draw_log.add(epoch, draws)
         last = epoch + 1 == settings.epochs
         val = validation_psnr(model, val_pairs, dev) if (last or (epoch + 1) % val_every == 0) else None
         log.append({"epoch": epoch + 1, "step": step, "lr": learning_rate(settings, epoch),
@@ -348,6 +360,8 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
             plateau = plateau_step(log, settings.plateau_db)
         if last or plateau is not None or time.perf_counter() - t_ckpt >= checkpoint_s:
             _save_checkpoint(out, model, opt, epoch + 1, step, log, settings)
+            if draw_log is not None:
+                draw_log.save()
             t_ckpt = time.perf_counter()
     bar.close()
     epochs_done = log[-1]["epoch"] if log else 0
@@ -357,7 +371,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     summary = {"epochs": epochs_done, "epochs_planned": settings.epochs, "steps": step, "plateau_step": plateau,
                "plateaued": plateau is not None, "final_loss": log[-1]["loss"] if log else None,
                "val_psnr_db": next((r["val_psnr_db"] for r in reversed(log) if r["val_psnr_db"] is not None), None),
-               "train_pairs": len(data.pairs), "val_pairs": len(val_pairs), "device": str(dev),
+               "train_pairs": data.count, "val_pairs": len(val_pairs), "device": str(dev),
                "seconds": round(time.perf_counter() - t_start, 1)}
     save_json(out / "train_summary.json", summary)
     return summary

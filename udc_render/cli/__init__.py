@@ -5,6 +5,7 @@ one library or experiment function.
     udc-render render SCENE --out DIR [--spp N | --noise 0.01] [--bands-nm 400:700:10]
     udc-render synth SCENE --display toled[,poled,FILE] --out DIR;   udc-render demo [--out DIR]
     udc-render dataset --builtin | --images DIR --count N --out DIR [--workers N | --scheduler ADDR]
+    udc-render bank --display toled,poled --out DIR   (a kernel bank for train --degrade online)
     udc-render calibrate --display toled --out DIR
     udc-render fit --psf IMAGE [IMAGE ...] [--flat IMAGE] [--white GLASS DISPLAY] [--noise-frames DIR] --out DIR
     udc-render study {psf,render,capture,realism,defocus,banding} --out DIR [--quick]
@@ -28,11 +29,11 @@ from psf.engine import PSFError
 from psf.layouts import LayoutError
 from psf.lens import LensError
 from udc_render import __version__
-from udc_render.cli import calibrate, dataset, evaluate, fit, psf, render, results, study, synth, train
+from udc_render.cli import bank, calibrate, dataset, evaluate, fit, psf, render, results, study, synth, train
 from udc_render.cli.args import Parser
 from udc_render.errors import UdcError
 
-COMMANDS = (psf, render, synth, dataset, calibrate, fit, study, train, evaluate, results)
+COMMANDS = (psf, render, synth, dataset, bank, calibrate, fit, study, train, evaluate, results)
 USER_ERRORS = (UdcError, PSFError, LayoutError, LensError)
 
 

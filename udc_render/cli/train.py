@@ -1,11 +1,13 @@
-"""`udc-render train --data DIR --model {unet,resnet} --display D --out RUN`: train a restorer
-(torch is imported when the command runs, not when the command line is built)."""
+"""`udc-render train --data DIR --model {unet,resnet} --display D --out RUN`: train a restorer on a dataset's
+pairs; `--degrade online --bank DIR`: on crops of clean images degraded on the fly through a kernel bank's panels
+(restore/online.py). torch is imported when the command runs, not when the command line is built."""
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
 from udc_render.cli.args import UserError, add_display_argument, out_dir, positive
+from udc_render.dataset.bank import read_bank
 
 
 def _even(text: str) -> int:
@@ -23,13 +25,21 @@ def set_threads(n: int | None) -> None:
 
 def register(sub) -> None:
     p = sub.add_parser("train", help="train a restorer (UNet or ResNet) on one display's pairs of a dataset")
-    p.add_argument("--data", type=Path, required=True, help="a folder written by `udc-render dataset`")
+    p.add_argument("--data", type=Path, required=True,
+                   help="a folder written by `udc-render dataset`; with --degrade online its gt.exr images, or a "
+                        "folder of clean linear RGB .exr images (1.0 = white; all for training, no validation)")
+    p.add_argument("--degrade", choices=("dataset", "online"), default="dataset",
+                   help="dataset: the dataset's captures; online: a fresh degradation of every crop of the clean "
+                        "images, each through a panel drawn from --bank, on the training device [dataset]")
+    p.add_argument("--bank", type=Path, help="with --degrade online: a kernel bank written by `udc-render bank`")
     p.add_argument("--model", required=True, choices=("unet", "resnet"),
                    help="the model type (restore/models.py): unet: the paper's UNet with two sub-encoders; resnet: "
                         "the paper's ResNet baseline")
     p.add_argument("--config", type=Path, help="a model TOML file: type = ... and the model's arguments")
     add_display_argument(p, "the display whose captures to restore, by its name in the dataset (a file: the "
-                            "name it gives; any other word: a display name of the dataset)", required=True)
+                            "name it gives; any other word: a display name of the dataset); required with "
+                            "--degrade dataset. With --degrade online: the bank's panels to draw from, by name, "
+                            "comma-separated", unset="online: every panel of the bank")
     p.add_argument("--out", type=Path, required=True, help="run folder (re-run the same command to resume)")
     p.add_argument("--epochs", type=positive("--epochs", int), default=400, help="epochs [400, the paper's]")
     p.add_argument("--batch", type=positive("--batch", int), default=4, help="crops per step [4]")
@@ -55,23 +65,44 @@ def register(sub) -> None:
 def run(args) -> int:
     out_dir(args.out)
     from restore.models import RESNET_CONFIG, UNET_CONFIG, load_config
-    from restore.train import TrainSettings, data_fingerprint, train
-    from udc_render.optics.displays import display_name
+    from restore.train import TrainSettings, train
     set_threads(args.threads)
     cfg = dict({"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}[args.model])
     if args.config:
         cfg = load_config(args.config)
         if cfg.get("type") != args.model:
             raise UserError(f"{args.config}: type = {cfg.get('type')!r} but --model is {args.model!r}")
-    settings = TrainSettings(model=cfg, display=display_name(args.display), epochs=args.epochs, batch=args.batch,
+    display, fingerprint, degrade = _source(args)
+    settings = TrainSettings(model=cfg, display=display, epochs=args.epochs, batch=args.batch,
                              crop_px=args.crop_px, crops_per_pair=args.crops_per_pair, lr=args.lr,
-                             loss=args.loss, seed=args.seed, data_fingerprint=data_fingerprint(args.data),
-                             autocast=args.autocast)
-    s = train(args.data, args.out, settings, args.device, args.checkpoint_s, progress=not args.quiet)
-    print(f"trained {cfg['type']} on {s['train_pairs']} {settings.display} pairs, {s['epochs']} epochs ({s['steps']} "
+                             loss=args.loss, seed=args.seed, data_fingerprint=fingerprint,
+                             autocast=args.autocast, degrade=degrade)
+    s = train(args.data, args.out, settings, args.device, args.checkpoint_s, progress=not args.quiet, bank=args.bank)
+    what = (f"clean images degraded online through {settings.display}" if degrade
+            else f"{settings.display} pairs")
+    print(f"trained {cfg['type']} on {s['train_pairs']} {what}, {s['epochs']} epochs ({s['steps']} "
           f"steps) on {s['device']}: final loss {s['final_loss']:.4g}"
           + (f", validation PSNR {s['val_psnr_db']:.2f} dB" if s["val_psnr_db"] is not None else "")
           + f"; {args.out / 'model.pt'}")
     return 0
 
 
+
+
+def _source(args) -> tuple[str, str, dict | None]:
+    """(the display the run restores, the data's fingerprint, the online degradation's record or None)."""
+    if args.degrade == "online":
+        if args.bank is None:
+            raise UserError("--degrade online needs --bank DIR (a kernel bank written by `udc-render bank`)")
+        from restore.online import images_fingerprint
+        bank = read_bank(args.bank, [n.strip() for n in args.display.split(",")] if args.display else None)
+        names = [p.name for p in bank.panels]
+        return ",".join(names), images_fingerprint(args.data), {
+            "mode": "online", "bank_fingerprint": bank.fingerprint, "panels": names}
+    if args.bank is not None:
+        raise UserError("--bank goes with --degrade online (the dataset's own captures need none)")
+    if args.display is None:
+        raise UserError("--display is required with --degrade dataset: the display whose captures to restore")
+    from restore.train import data_fingerprint
+    from udc_render.optics.displays import display_name
+    return display_name(args.display), data_fingerprint(args.data), None

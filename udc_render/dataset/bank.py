@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from udc_render.dataset.plan import DatasetError
-from udc_render.io.files import save_json
+from udc_render.io.files import save_json, save_npz
 from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig
 
 BANK_FORMAT = "udc-render kernel bank 1"
@@ -194,6 +194,13 @@ def read_bank(folder: Path, names: list[str] | None = None) -> Bank:
         records = [r for r in records if r["name"] in names]
     settings = {k: v for k, v in doc.items() if k != "panels"}
     return Bank(folder, settings, [read_panel(folder, r) for r in records])
+
+
+def save_panel(folder: Path, index: int, panel: Panel) -> dict:
+    """Write panel `index`'s file (atomic) and return its bank.json record."""
+    file = panel_file(index, panel.name)
+    save_npz(Path(folder) / file, **panel_arrays(panel))
+    return panel_record(panel, file, file_sha256(Path(folder) / file), panel.record)
 
 
 def write_bank_json(folder: Path, settings: dict, records: list[dict], count: int) -> None:

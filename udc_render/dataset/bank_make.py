@@ -1,18 +1,23 @@
-"""Making a kernel bank (udc_render.dataset.bank): one panel per display, its kernels through the kernel cache.
+"""Making a kernel bank (udc_render.dataset.bank): one panel per display (preset_specs) or per drawn panel
+(random_specs), its kernels through the kernel cache.
 
-Per display, on the scene's sensor (pitch, frame, lens focused on the monitor's plane, as pipeline.plan_kernels):
+Per panel, on the scene's sensor (pitch, frame, lens focused on the monitor's plane, as pipeline.plan_kernels;
+a drawn panel's own lens, randomize.panel_scene):
 - d = 0 (or glass): the per-channel form's 3 kernels, the very call of the numpy synthesis
   (synth_kernels.display_channel_kernels on a grid at the sensor pitch with margin kernel_px // 2);
 - d > 0: the camera's channel kernels at d with their field phases (psf.spectral.channel_kernels through
   psf.cache, as display_channel_kernels' 'camera' with distance_mm = d), sampled at the scene's band step (the
   spectral synthesis's sampling of λ; d = 0's λ/S would take 16 phases × ~400 wavelengths at 513 px, 16 times
-  the kernels of the d = 0 set) and each channel's phase kernels reduced
-  to the rank-r basis of optics.field.field_basis on the live phases of the frame (with its margins); the
-  exact blend (field_rank None) keeps every live phase kernel with coefficients I. The paper's recipe has
-  no d > 0 form: refused;
+  the kernels of the d = 0 set), each channel's phase kernels reduced to the rank-r basis of
+  optics.field.field_basis on the live phases of the frame with its margins (the exact blend, field_rank None,
+  keeps every live phase kernel with coefficients I). The paper's recipe has no d > 0 form: refused;
 - γ as pipeline.display_gamma: the paper's for a preset, else optics.gamma's from the band kernels of the
-  scene's render grid and the monitor's white;
-- the sensor: the synthesis's (sensor_for_scene) with the display's gain, γ / gain per site, the exposure.
+  scene's render grid (at the display's d) and the monitor's white;
+- the sensor: the synthesis's (sensor_for_scene) with the display's gain, γ / gain per site, the exposure (the
+  scene's auto exposure, pipeline.auto_exposure_s, without a render; a drawn panel's × exposure.scale), the
+  defect pixels and FPN (a drawn panel's: capture draw i's, with their own seeds), the brightness (a drawn
+  panel's exposure.brightness: the trainer scales the clean image by it, as a randomized dataset scales the
+  render).
 
 make_bank writes each panel's file and then bank.json (both atomic), so an interrupted run resumes: a re-run
 with the same settings makes only the panels not yet recorded; other settings on the same folder are refused.
@@ -20,7 +25,7 @@ with the same settings makes only the panels not yet recorded; other settings on
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -29,9 +34,9 @@ from tqdm import tqdm
 from psf.cache import cached
 from psf.spectral import channel_kernels
 from udc_render.content import spectra
-from udc_render.dataset.bank import (BANK_FILE, BankError, Panel, PanelField, file_sha256, panel_arrays, panel_file,
-                                     panel_record, write_bank_json)
-from udc_render.io.files import save_npz
+from udc_render.dataset.bank import BANK_FILE, BankError, Panel, PanelField, file_sha256, save_panel, write_bank_json
+from udc_render.dataset.randomize import (PANEL_NAME, as_record, capture_config, capture_display, draw_capture,
+                                         draw_panels, panel_scene, scaled_exposure_s)
 from udc_render.optics import field_basis, field_weights, gamma, live_phases
 from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.pipeline import SynthConfig, auto_exposure_s, sensor_for_scene
@@ -123,56 +128,85 @@ def channel_kernel_set(display: Display, scene: Scene, grid: RenderGrid, cfg: Sy
     return ks
 
 
-def make_panel(display: Display, scene: Scene, cfg: SynthConfig, kernel_px: int, exposure_s: float) -> Panel:
+@dataclass(frozen=True)
+class PanelSpec:
+    """What makes one panel: the display (its name the panel's), the scene (the lens: a drawn panel's own), the
+    synthesis settings (sensor, defects, FPN, kernels), the exposure (s) and extra record values (a drawn panel's
+    draws, its brightness: the factor on the clean image's radiance, 1 for a preset)."""
+    display: Display
+    scene: Scene
+    cfg: SynthConfig
+    exposure_s: float
+    record: dict = field(default_factory=dict)
+
+
+def preset_specs(displays: list[Display], scene: Scene, cfg: SynthConfig) -> list[PanelSpec]:
+    """One panel per display, every one with the synthesis's sensor and the scene's exposure (scene_exposure_s)."""
+    exposure, rule = scene_exposure_s(scene, cfg)
+    return [PanelSpec(d, scene, cfg, exposure, {"brightness": 1.0, "exposure_rule": rule}) for d in displays]
+
+
+def random_specs(dists, n: int, seed: int, scene: Scene, cfg: SynthConfig) -> list[PanelSpec]:
+    """N drawn panels (udc_render.dataset.randomize.draw_panels), panel i named random_<i> with the sensor and
+    exposure of capture draw i (draw_capture(…, item = i): gain scale, read noise, defect pixels and FPN with
+    their seeds, exposure scale and brightness), its lens (panel_scene)."""
+    out = []
+    for draw in draw_panels(dists, n, seed):
+        cap = draw_capture(dists, n, seed, draw.index)
+        display = replace(capture_display(draw, cap), name=f"{PANEL_NAME}_{draw.index:03d}")
+        own = panel_scene(scene, draw.lens)
+        exposure, rule = scene_exposure_s(own, cfg)  # the panel's f-number's (randomized.py's rule)
+        out.append(PanelSpec(display, own, capture_config(cfg, cap), scaled_exposure_s(exposure, cap),
+                             {"brightness": float(cap.brightness), "exposure_rule": f"{rule} × exposure.scale",
+                              "panel_draw": as_record(draw), "capture_draw": as_record(cap)}))
+    return out
+
+
+def make_panel(spec: PanelSpec, kernel_px: int) -> Panel:
     """One panel (module doc)."""
+    display, scene, cfg = spec.display, spec.scene, spec.cfg
     grid = sensor_grid(scene, kernel_px)
     ks = channel_kernel_set(display, scene, grid, cfg)
     g, why = panel_gamma(display, scene, cfg)
-    sensor = replace(sensor_for_scene(cfg.sensor, scene), exposure_s=float(exposure_s), gain=float(display.gain),
+    sensor = replace(sensor_for_scene(cfg.sensor, scene), exposure_s=float(spec.exposure_s), gain=float(display.gain),
                      form="per_channel", gamma_rggb=tuple(v / display.gain for v in rgb_to_rggb(g)))
-    field = None
+    blend = None
     if ks.field_kernels is not None and ks.distance_mm > 0:
-        field = panel_field(ks, scene, grid, cfg.field_rank)
-    record = {"display": display.describe(), "gamma_source": why, "transmission_rgb": [v / display.gain for v in g],
-              "kernel_notes": list(ks.notes), "kernel_params": ks.params}
+        blend = panel_field(ks, scene, grid, cfg.field_rank)
+    record = {"display": display.describe(), "lens": psf_lens(scene).describe(), "gamma_source": why,
+              "transmission_rgb": [v / display.gain for v in g], "kernel_notes": list(ks.notes),
+              "kernel_params": ks.params, **spec.record}
     return Panel(display.name, np.asarray(ks.kernels, np.float32), grid.pitch_um, g, sensor, cfg.defects, cfg.fpn,
-                 field, json.loads(json.dumps(record, default=str)))
+                 blend, json.loads(json.dumps(record, default=str)))
 
 
-def bank_settings(scene: Scene, cfg: SynthConfig, kernel_px: int, exposure: tuple[float, str],
-                  displays: list[Display]) -> dict:
+def bank_settings(scene: Scene, cfg: SynthConfig, kernel_px: int, specs: list[PanelSpec], extra: dict) -> dict:
     """What decides the bank's panels, as plain JSON values (a re-run with other settings is refused)."""
     synth = {k: v for k, v in asdict(cfg).items() if k not in ("use_cache", "kernel_cache", "stray_light")}
     doc = {"scene": scene.source, "frame_px": [scene.sensor.width_px, scene.sensor.height_px],
            "pitch_um": scene.sensor.pitch_um, "kernel_px": kernel_px, "lens": psf_lens(scene).describe(),
-           "edges_nm": list(scene.bands.edges_nm), "exposure_s": exposure[0], "exposure_rule": exposure[1],
+           "edges_nm": list(scene.bands.edges_nm),
            "form": "per_channel (the numpy synthesis's y = γ x ⊗ k + n; d > 0: the field blend of each channel)",
-           "synth": synth, "displays": [d.describe() for d in displays]}
+           "synth": synth, "displays": [s.display.describe() for s in specs], **extra}
     return json.loads(json.dumps(doc, default=str))
 
 
-def make_bank(out: Path, displays: list[Display], scene: Scene, cfg: SynthConfig, kernel_px: int,
-              progress: bool = True) -> dict:
-    """Write (or finish) the bank of `displays` in `out` (module doc); returns its summary."""
+def make_bank(out: Path, specs: list[PanelSpec], settings: dict, kernel_px: int, progress: bool = True) -> dict:
+    """Write (or finish) the bank of `specs` in `out` (module doc); returns its summary."""
     out = Path(out)
-    names = [d.name for d in displays]
-    if not displays or len(set(names)) != len(names):
+    names = [s.display.name for s in specs]
+    if not specs or len(set(names)) != len(names):
         raise BankError(f"--display {','.join(names)}: expected distinct display names (they name the panels)")
-    exposure = scene_exposure_s(scene, cfg)
-    settings = bank_settings(scene, cfg, kernel_px, exposure, displays)
     records = _resumable_records(out, settings)
     made = 0
-    for i, d in enumerate(tqdm(displays, desc="bank", unit="panel", disable=not progress)):
+    for i, spec in enumerate(tqdm(specs, desc="bank", unit="panel", disable=not progress)):
         if i < len(records):
             continue
-        panel = make_panel(d, scene, cfg, kernel_px, exposure[0])
-        file = panel_file(i, d.name)
-        save_npz(out / file, **panel_arrays(panel))
-        records.append(panel_record(panel, file, file_sha256(out / file), panel.record))
-        write_bank_json(out, settings, records, len(displays))
+        records.append(save_panel(out, i, make_panel(spec, kernel_px)))
+        write_bank_json(out, settings, records, len(specs))
         made += 1
-    return {"out": str(out), "panels": len(records), "made": made, "exposure_s": exposure[0],
-            "names": names, "field_panels": [r["name"] for r in records if r["field"] is not None]}
+    return {"out": str(out), "panels": len(records), "made": made, "names": names,
+            "field_panels": [r["name"] for r in records if r["field"] is not None]}
 
 
 def _resumable_records(out: Path, settings: dict) -> list[dict]:

@@ -1,0 +1,204 @@
+"""Training on degradations made on the fly (`udc-render train --degrade online --bank DIR`): no capture dataset
+on disk; crops of clean linear images, each degraded through a panel drawn from a kernel bank at every step
+(restore.degrade, on the training device).
+
+Clean images (--data): a dataset folder's gt.exr files by split (the manifest's train and val items), or a
+folder of linear RGB .exr files (searched recursively, sorted; all train, no validation), in units of the white
+level at gain 1 (1.0 = full well), as gt.exr.
+
+Crop k of epoch e (k in the epoch's order: default_rng([seed, e]).permutation of images × crops_per_image), from
+default_rng([seed, e, k]): the image, the panel (uniform over the bank's), the Bayer-safe transform (one of the 8
+flips and transposes, applied to the clean crop: a scene seen as transformed by the same sensor), the crop's
+place (even rows and columns: it starts on an R site) and the noise seed of a torch generator on the device.
+The crop takes the panel's margin of scene around it; beyond the frame (gt.exr holds no more scene) the image is
+mirrored. Input: the degraded crop's (DN − black) / (white − black) [4, c/2, c/2]; target: the clean crop × the
+panel's brightness [3, c, c] (a drawn panel's exposure.brightness; 1 for a preset), the input made from the same
+scaled crop. A resumed run sees the same crops, panels and noise (they depend on (seed, epoch, k) alone); each
+epoch's draws are recorded in online.jsonl.
+
+Validation: each val image whole, through panel j mod N, the noise seeded by (seed, 'val', j), made once.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from restore.data import DataError, dihedral, load_gt, read_manifest
+from restore.degrade import Degrader, normalised
+from udc_render.dataset.bank import Bank, read_bank
+from udc_render.io.exr import read_exr
+from udc_render.io.files import save_text
+
+VAL_STREAM = zlib.crc32(b"val")
+
+
+@dataclass(frozen=True)
+class CleanImage:
+    """One clean image: where it came from and its pixels [3, H, W] float32 (H, W even)."""
+    name: str
+    pixels: np.ndarray
+
+
+def _read_rgb(path: Path) -> np.ndarray:
+    ch = read_exr(path)
+    missing = [c for c in "RGB" if c not in ch]
+    if missing:
+        raise DataError(f"{path}: no {missing[0]} channel: expected a linear RGB OpenEXR image")
+    return np.stack([ch[c] for c in "RGB"]).astype(np.float32)
+
+
+def _checked(name: str, rgb: np.ndarray) -> CleanImage:
+    bad = np.count_nonzero(~np.isfinite(rgb)) + np.count_nonzero(rgb < 0)
+    if bad:
+        raise DataError(f"{name}: {bad} negative, NaN or infinite values: expected finite linear RGB ≥ 0")
+    h, w = rgb.shape[1] // 2 * 2, rgb.shape[2] // 2 * 2  # whole RGGB cells
+    return CleanImage(name, np.ascontiguousarray(rgb[:, :h, :w]))
+
+
+def clean_images(data: Path, split: str) -> list[CleanImage]:
+    """The clean images of `split` (module doc): a dataset folder's gt.exr, or every .exr under a plain folder
+    (split 'train'; none for another split)."""
+    data = Path(data)
+    if (data / "manifest.jsonl").is_file():
+        rows = [r for r in read_manifest(data) if r["split"] == split]
+        return [_checked(str(data / r["folder"] / "gt.exr"), load_gt(data / r["folder"])) for r in rows]
+    if not data.is_dir():
+        raise DataError(f"--data {data}: no such folder: expected a dataset folder or a folder of .exr images")
+    if split != "train":
+        return []
+    paths = sorted(p for p in data.rglob("*") if p.suffix.lower() == ".exr")
+    if not paths:
+        raise DataError(f"--data {data}: no manifest.jsonl and no .exr image: expected a dataset folder "
+                        "(`udc-render dataset`) or a folder of linear RGB .exr images")
+    return [_checked(str(p), _read_rgb(p)) for p in paths]
+
+
+def images_fingerprint(data: Path) -> str:
+    """sha256 of what the clean images are: a dataset's manifest, or a plain folder's files' paths and bytes."""
+    data = Path(data)
+    h = hashlib.sha256()
+    if (data / "manifest.jsonl").is_file():
+        h.update((data / "manifest.jsonl").read_bytes())
+    else:
+        for p in sorted(p for p in data.rglob("*") if p.suffix.lower() == ".exr"):
+            h.update(str(p.relative_to(data)).encode())
+            h.update(hashlib.sha256(p.read_bytes()).digest())
+    return h.hexdigest()[:16]
+
+
+def region(img: np.ndarray, y0: int, x0: int, rows: int, cols: int) -> np.ndarray:
+    """img[:, y0:y0 + rows, x0:x0 + cols] with the image mirrored beyond its edges (edge pixels not repeated)."""
+    def idx(start, n, size):
+        i = np.abs(np.arange(start, start + n))
+        period = 2 * (size - 1)
+        i %= max(period, 1)
+        return np.where(i >= size, period - i, i)
+    return img[:, idx(y0, rows, img.shape[1])][:, :, idx(x0, cols, img.shape[2])]
+
+
+class OnlineBatches:
+    """The training batches of the online degradation (module doc) on a device."""
+
+    def __init__(self, images: list[CleanImage], bank: Bank, degrader: Degrader, crop_px: int, batch: int,
+                 seed: int, crops_per_image: int = 1):
+        if not images:
+            raise DataError("no clean images to train on: the split is empty")
+        small = min(images, key=lambda im: min(im.pixels.shape[1:]))
+        if crop_px > min(small.pixels.shape[1:]):
+            raise DataError(f"--crop-px = {crop_px}: larger than the {small.pixels.shape[2]} × "
+                            f"{small.pixels.shape[1]} px image {small.name}")
+        self.images, self.bank, self.degrader = images, bank, degrader
+        self.crop_px, self.batch, self.seed, self.crops_per_image = crop_px, batch, seed, crops_per_image
+        self.brightness = [float(p.record.get("brightness", 1.0)) for p in bank.panels]
+
+    @property
+    def count(self) -> int:
+        return len(self.images) * self.crops_per_image
+
+    def draw(self, epoch: int, k: int) -> dict:
+        """Crop k of the epoch (module doc): image, panel, transform, origin (even), noise seed."""
+        rng = np.random.default_rng([self.seed, epoch, k])
+        image = int(rng.integers(len(self.images)))
+        h, w = self.images[image].pixels.shape[1:]
+        c = self.crop_px
+        return {"image": image, "panel": int(rng.integers(len(self.bank.panels))), "mode": int(rng.integers(8)),
+                "y0": 2 * int(rng.integers((h - c) // 2 + 1)), "x0": 2 * int(rng.integers((w - c) // 2 + 1)),
+                "noise_seed": int(rng.integers(2 ** 63 - 1))}
+
+    def sample(self, d: dict) -> tuple[torch.Tensor, torch.Tensor]:
+        """(input [4, c/2, c/2], target [3, c, c]) of draw d, on the device."""
+        img, m, c = self.images[d["image"]].pixels, self.degrader.margin_px, self.crop_px
+        clean = dihedral(region(img, d["y0"] - m, d["x0"] - m, c + 2 * m, c + 2 * m), d["mode"])
+        x = torch.from_numpy(np.ascontiguousarray(clean)) * self.brightness[d["panel"]]
+        dev = self.degrader.device
+        gen = torch.Generator(dev).manual_seed(d["noise_seed"])
+        dn = self.degrader.degrade(x, d["panel"], img.shape[1:], (d["y0"], d["x0"]), gen)
+        target = x[:, m:m + c, m:m + c].to(dev, torch.float32)
+        return normalised(dn, self.bank.panels[d["panel"]]).float(), target
+
+    def epoch(self, epoch: int):
+        """(the epoch's draws in order, an iterator of batches (x [B, 4, c/2, c/2], y [B, 3, c, c]) on the device)."""
+        order = np.random.default_rng([self.seed, epoch]).permutation(self.count)
+        draws = [self.draw(epoch, int(k)) for k in order]
+
+        def batches():
+            for i in range(0, len(draws), self.batch):
+                xs, ys = zip(*(self.sample(d) for d in draws[i:i + self.batch]))
+                yield torch.stack(xs), torch.stack(ys)
+        return draws, batches()
+
+
+def validation_pairs(images: list[CleanImage], bank: Bank, degrader: Degrader, seed: int) -> list[tuple]:
+    """[(packed input [4, H/2, W/2], target [3, H, W]) numpy] of each whole val image, through panel j mod N with
+    the noise of (seed, 'val', j) (module doc)."""
+    out, m = [], degrader.margin_px
+    for j, im in enumerate(images):
+        p = j % len(bank.panels)
+        b = float(bank.panels[p].record.get("brightness", 1.0))
+        h, w = im.pixels.shape[1:]
+        x = torch.from_numpy(region(im.pixels, -m, -m, h + 2 * m, w + 2 * m)) * b
+        gen = torch.Generator(degrader.device).manual_seed(int(np.random.SeedSequence([seed, VAL_STREAM, j])
+                                                               .generate_state(1, np.uint64)[0] >> 1))
+        dn = degrader.degrade(x, p, (h, w), (0, 0), gen)
+        out.append((normalised(dn, bank.panels[p]).float().cpu().numpy(), (im.pixels * b).astype(np.float32)))
+    return out
+
+
+def online_data(data: Path, bank_dir: Path, settings, device) -> tuple[OnlineBatches, list]:
+    """(the training batches, the validation pairs) of the online degradation (module doc) for train settings
+    with degrade = {"bank_fingerprint", "panels"}: the bank's panels on the device (float32)."""
+    if bank_dir is None:
+        raise DataError("the online degradation needs a kernel bank (--bank DIR, written by `udc-render bank`)")
+    d = settings.degrade
+    bank = read_bank(bank_dir, d["panels"])
+    if bank.fingerprint != d["bank_fingerprint"]:
+        raise DataError(f"--bank {bank_dir}: its bank.json (sha {bank.fingerprint}) is not the run's "
+                        f"({d['bank_fingerprint']})")
+    degrader = Degrader(bank.panels, device, torch.float32)
+    batches = OnlineBatches(clean_images(data, "train"), bank, degrader, settings.crop_px, settings.batch,
+                            settings.seed, settings.crops_per_pair)
+    return batches, validation_pairs(clean_images(data, "val"), bank, degrader, settings.seed)
+
+
+class DrawLog:
+    """online.jsonl in a run folder: one line per epoch, its crops' [image, panel, transform, y0, x0, noise seed]
+    in the order trained (written with each checkpoint; a resumed run keeps the epochs its checkpoint holds)."""
+    FILE = "online.jsonl"
+
+    def __init__(self, out: Path, epochs_done: int):
+        self.path = Path(out) / self.FILE
+        lines = self.path.read_text().splitlines() if self.path.is_file() else []
+        self.lines = [l for l in lines if l.strip() and json.loads(l)["epoch"] <= epochs_done]
+
+    def add(self, epoch: int, draws: list[dict]) -> None:
+        keys = ("image", "panel", "mode", "y0", "x0", "noise_seed")
+        self.lines.append(json.dumps({"epoch": epoch + 1, "crops": [[d[k] for k in keys] for d in draws]}))
+
+    def save(self) -> None:
+        save_text(self.path, "\n".join(self.lines) + "\n")

@@ -1,0 +1,118 @@
+"""Kernel banks (udc_render.dataset.bank, `udc-render bank`): written, read back, resumed, refused in one line."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from restore.degrade import Degrader
+from udc_render.cli import main
+from udc_render.dataset.bank import BANK_FILE, read_bank
+from udc_render.dataset.randomize import draw_capture, draw_panels, load_distributions
+from udc_render.optics.displays import PAPER_GAIN, PAPER_GAMMA, preset
+from udc_render.scene import load_scene
+from udc_render.scene.geometry import psf_lens
+from udc_render.scene.overrides import with_overrides
+from udc_render.synth_kernels import paper_channel_kernels
+
+TINY = ["--sensor-px", "64,32", "--pitch-um", "24.8", "--bands-nm", "400:700:100", "--quiet"]
+
+
+@pytest.fixture(scope="module")
+def cache(tmp_path_factory):
+    return str(tmp_path_factory.mktemp("bank_kernels"))
+
+
+def _bank(out, cache, *argv) -> int:
+    return main(["bank", "--out", str(out), "--cache-dir", cache, *TINY, *argv])
+
+
+def _one_line(capsys, argv, *words):
+    assert main(argv) == 2, argv
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err and all(w in err for w in words), err
+
+
+def test_a_paper_bank_is_the_per_channel_synthesis_and_resumes(tmp_path, cache, capsys):
+    """--profile paper: each panel's kernels are the very kernels of synth --form per_channel (the paper's recipe at
+    the sensor pitch, 33 px for the tiny sensor's 396 µm margin), the paper's γ and gain, its Gaussian noise, no
+    defects or FPN; read back with every file checked. A re-run makes nothing; a deleted panel file is made again
+    with the same bytes; glass is a panel only when named."""
+    out = tmp_path / "bank"
+    assert _bank(out, cache, "--display", "glass,toled", "--profile", "paper") == 0
+    bank = read_bank(out)
+    assert [p.name for p in bank.panels] == ["glass", "toled"] and bank.margin_px == 16
+    scene = with_overrides(load_scene("monitor"), bands_nm="400:700:100", sensor_px=(64, 32), pitch_um=24.8)
+    for p in bank.panels:
+        ref = paper_channel_kernels(preset(p.name).layout, psf_lens(scene), 24.8, 33, cache_dir=cache)
+        np.testing.assert_array_equal(p.kernels, ref.kernels)
+        assert p.gamma_rgb == PAPER_GAMMA[p.name] and p.sensor.gain == PAPER_GAIN[p.name]
+        assert p.sensor.gamma_rggb[3] == pytest.approx(PAPER_GAMMA[p.name][2] / PAPER_GAIN[p.name])
+        assert (p.sensor.noise, p.sensor.lambda_source, p.defects, p.fpn, p.field) == ("gaussian", "sensor", None, None, None)
+        assert p.record["brightness"] == 1.0
+    capsys.readouterr()
+    assert _bank(out, cache, "--display", "glass,toled", "--profile", "paper") == 0
+    assert "0 made now" in capsys.readouterr().out
+    toled = out / bank.panels[1].record["file"]
+    before = toled.read_bytes()
+    toled.unlink()
+    assert _bank(out, cache, "--display", "glass,toled", "--profile", "paper") == 0
+    assert "1 made now" in capsys.readouterr().out and toled.read_bytes() == before
+    assert _bank(tmp_path / "b2", cache, "--display", "toled", "--profile", "paper") == 0
+    assert [p.name for p in read_bank(tmp_path / "b2").panels] == ["toled"]
+
+
+def test_a_physical_bank_has_field_bases_that_degrade(tmp_path, cache):
+    """--profile physical: the T-OLED at d = 2 mm gets rank-4 field bases (the camera's channel kernels at the scene's
+    band step, 2 × 2 phases here), Poisson noise, defect pixels and FPN; the Degrader takes it."""
+    out = tmp_path / "bank"
+    assert _bank(out, cache, "--display", "toled", "--field-phases", "2") == 0
+    (p,) = read_bank(out).panels
+    f = p.field
+    assert f.distance_mm == 2.0 and f.rank == 4 and len(f.live) == 4 and f.series is not None
+    assert f.bases.shape == (3, 4, 33, 33)
+    sums = np.einsum("cqr,cr->cq", f.coeffs, f.bases.astype(np.float64).sum(axis=(-2, -1)))
+    assert np.allclose(sums, 1.0, atol=1e-5)  # each phase kernel's basis form keeps its unit sum (phase_basis)
+    assert p.sensor.noise == "poisson" and p.defects is not None and p.fpn is not None
+    assert p.record["kernel_params"]["distance_mm"] == 2.0
+    dn = Degrader([p]).degrade(torch.rand(3, 32 + 32, 64 + 32), 0, (32, 64), (0, 0), torch.Generator().manual_seed(0))
+    assert dn.shape == (4, 16, 32) and dn.max() > 0
+
+
+@pytest.mark.slow
+def test_a_randomized_bank_records_its_draws(tmp_path, cache):
+    """--randomize default --panels 2: panel i is draw_panels' i (display, d, lens) with capture draw i's sensor
+    (gain × gain_scale, read noise, defects and FPN with their seeds), exposure scale and brightness (~20 s)."""
+    out = tmp_path / "bank"
+    assert _bank(out, cache, "--randomize", "default", "--panels", "2", "--field-phases", "2") == 0
+    bank = read_bank(out)
+    dists = load_distributions("default")
+    draws = draw_panels(dists, 2, 0)
+    for i, p in enumerate(bank.panels):
+        cap = draw_capture(dists, 2, 0, i)
+        assert p.name == f"random_{i:03d}" and p.field.distance_mm == pytest.approx(draws[i].display.distance_mm)
+        assert p.sensor.read_noise_e == cap.read_noise_e and p.defects == cap.defects and p.fpn == cap.fpn
+        assert p.record["brightness"] == cap.brightness and p.record["panel_draw"]["index"] == i
+    doc = json.loads((out / BANK_FILE).read_text())
+    assert doc["randomize_seed"] == 0 and doc["panels"][0]["display"]["source"].startswith("randomize")
+
+
+def test_bad_bank_options_are_refused_in_one_line(tmp_path, cache, capsys):
+    out = str(tmp_path / "b")
+    for argv, words in (
+            (["--display", "toled", "--randomize", "default"], ("--display with --randomize",)),
+            (["--panels", "3"], ("--panels and --randomize-seed go with --randomize",)),
+            (["--kernel-px", "32"], ("--kernel-px must be an odd integer",)),
+            (["--display", "toled", "--channel-kernels", "paper"], ("--channel-kernels paper", "d = 2 mm")),
+            (["--randomize", "default", "--distance-mm", "1"], ("--distance-mm with --randomize",))):
+        _one_line(capsys, ["bank", "--out", out, "--cache-dir", cache, *TINY, *argv], *words)
+    assert _bank(tmp_path / "b1", cache, "--display", "glass", "--profile", "paper") == 0
+    _one_line(capsys, ["bank", "--out", str(tmp_path / "b1"), "--cache-dir", cache, *TINY, "--display", "glass",
+                       "--profile", "paper", "--kernel-px", "21"], "holds a different bank", "kernel_px")
+    (tmp_path / "b1" / "panel_000_glass.npz").write_bytes(b"not it")
+    with pytest.raises(Exception, match="differs from its sha256"):
+        read_bank(tmp_path / "b1")
+    with pytest.raises(Exception, match="no bank.json"):
+        read_bank(tmp_path)
