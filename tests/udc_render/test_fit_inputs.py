@@ -165,3 +165,19 @@ def test_white_square_gives_gamma_per_channel(tmp_path):
         save_dng(tmp_path / name, m, CAMERA, 64, 65535)
     gamma, sigma, n = measure_gamma(inputs.read_frame(tmp_path / "g.dng"), inputs.read_frame(tmp_path / "d.dng"))
     assert n > 500 and np.all(np.abs(gamma - truth) < 3 * sigma) and np.all(np.abs(gamma / truth - 1) < 0.01)
+
+
+def test_the_weighted_log_residual_is_finite_and_smooth_where_the_model_predicts_nothing():
+    """An order a trial step predicts at ~0 gave an infinite residual and a NaN Jacobian that stopped
+    least_squares (benchmarks/bench_fit_exposures.py crashed): the continuation below 1e-6 σ keeps it finite,
+    the exact form above, value and slope continuous at the joint."""
+    from udc_render.fit.refine import _weighted_log_residual as r
+    y, s = np.array([0.0]), np.array([0.5])
+    assert np.isfinite(r(y, np.array([-1e4]), s)).all() and r(y, np.array([-60.0]), s)[0] > r(y, np.array([-40.0]), s)[0]
+    lm = np.array([0.3])
+    m = np.exp(lm)
+    assert r(y, lm, s)[0] == pytest.approx(((y - lm + s ** 2 / (2 * m * m)) * m / s)[0])
+    joint, h = float(np.log(1e-6 * 0.5)), 1e-4
+    below, above = r(y, np.array([joint - h]), s)[0], r(y, np.array([joint + h]), s)[0]
+    slope = ((0.0 - joint - 1.0) * 1e-6 * 0.5 - 0.25 / (2 * 1e-6 * 0.5)) / 0.5
+    assert (above - below) / (2 * h) == pytest.approx(slope, rel=1e-3)

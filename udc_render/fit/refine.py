@@ -169,9 +169,7 @@ def _solve(fam: Family, index, y, sig, a, kappa, delta, x0, loss: str = "linear"
         lm = _log_q(fam, x[:k], index, kappa, delta) + a @ x[k:]
         if s_abs is None:
             return (y - lm) / sig
-        m = np.exp(lm)
-        with np.errstate(divide="ignore", over="ignore"):  # an order predicted at 0: an infinite residual, a
-            return (y - lm + s_abs ** 2 / (2 * m * m)) * m / s_abs  # step the solver rejects
+        return _weighted_log_residual(y, lm, s_abs)
     lo = np.concatenate([fam.lower, [-np.inf] * a.shape[1]])
     hi = np.concatenate([fam.upper, [np.inf] * a.shape[1]])
     span = np.where(np.isfinite(hi - lo), hi - lo, 0.0)
@@ -179,6 +177,19 @@ def _solve(fam: Family, index, y, sig, a, kappa, delta, x0, loss: str = "linear"
                         x_scale="jac", xtol=1e-10, ftol=1e-10, loss=loss, f_scale=ROBUST_SCALE)
     chi2 = float(res.fun @ res.fun)
     return res.x, _covariance(res.jac, res.fun, len(y) - len(x0)), chi2, res.fun
+
+
+def _weighted_log_residual(y: np.ndarray, lm: np.ndarray, s_abs: np.ndarray, floor: float = 1e-6) -> np.ndarray:
+    """r(ln M) = (y − ln M + s² / (2 M²)) M / s, continued linearly in ln M (value and slope) below
+    M = floor · s, where it diverges as s / (2 M): an order that a trial step predicts at ~0 still costs the
+    barrier's huge residual (~1 / (2 floor)), but a finite one (an infinite residual made a NaN Jacobian that
+    stopped least_squares); no row the fit uses (M ≥ MIN_SNR s) is changed."""
+    l0 = np.log(floor * s_abs)
+    at = np.maximum(lm, l0)
+    m = np.exp(at)
+    r = (y - at + s_abs ** 2 / (2 * m * m)) * m / s_abs
+    slope = ((y - at - 1.0) * m - s_abs ** 2 / (2 * m)) / s_abs  # dr / d ln M at the floor
+    return np.where(lm < l0, r + slope * (lm - l0), r)
 
 
 def _covariance(jac: np.ndarray, r: np.ndarray, dof: int) -> np.ndarray:
