@@ -7,6 +7,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import pytest
@@ -30,3 +31,12 @@ def test_plain_install_runs_the_demo_from_another_folder(tmp_path):
                           "--out", str(tmp_path / "demo")], env=env, cwd=tmp_path, capture_output=True, text=True)
     assert run.returncode == 0, run.stderr[-2000:]
     assert (tmp_path / "demo" / "poled" / "raw.dng").is_file() and (tmp_path / "demo" / "summary.md").is_file()
+
+
+def test_every_package_folder_is_listed_in_pyproject():
+    """pyproject's explicit package list names every folder with an __init__.py (an unlisted one works in the
+    editable install and is missing from a wheel: udc_render.fit and udc_render.optics.stray were)."""
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    found = {".".join(p.parent.relative_to(ROOT).parts) for top in ("psf", "udc_render", "restore")
+             for p in (ROOT / top).rglob("__init__.py")}
+    assert found <= listed, sorted(found - listed)
