@@ -1,14 +1,15 @@
 """Re-score the test split on today's captures with the shipped weights, without retraining (issue 29:
 DeP as the paper ran it, beside DeP with the exact kernel).
 
-    python -m restore.studies.rescore OUT [--write RESULTS.md]
+    python -m restore.studies.rescore OUT [--write RESULTS.md] [--no-networks]
 
 Makes (or resumes) only the test items of `udc-render results --budget cpu`'s physical dataset (the same
 job: ids, images and seeds; restore.studies.datasets) under today's physical profile in OUT/dataset_physical,
 scores input, DeP (the paper's computed PSF), DeP (exact kernel) and the carried models of
 restore/trained/cpu (trained on the captures of their RESULTS.md run, not on these) into OUT/eval
 (restore.studies.scoring.evaluate_rows, which resumes), and writes OUT/rescore.md: the paper-protocol
-table with a header that says what changed. With --write, that section replaces the one between
+table with a header that says what changed (--no-networks: input and the two DeP rows only; the networks
+are retrained when RESULTS.md is regenerated). With --write, that section replaces the one between
 RESCORE_BEGIN and RESCORE_END in the document (appended before the held-out section the first time); the
 rest of the document stays as its run wrote it, until `udc-render results` regenerates it.
 """
@@ -16,7 +17,6 @@ from __future__ import annotations
 
 import json
 import sys
-import time
 from pathlib import Path
 
 from restore.studies.budgets import BUDGETS, DISPLAYS, ROWS
@@ -42,7 +42,13 @@ def make_test_split(out: Path, progress: bool = True) -> Path:
     return folder
 
 
-def section(results: dict, seconds: float, data: Path) -> str:
+def spent_seconds(data: Path, ev: Path) -> float:
+    """The items' seconds (timing.jsonl) plus the rows' scoring seconds (row_seconds.json), over every resume."""
+    items = [json.loads(line)["seconds"] for line in (data / "timing.jsonl").read_text().splitlines() if line.strip()]
+    return sum(items) + sum(json.loads((ev / "row_seconds.json").read_text()).values())
+
+
+def section(results: dict, seconds: float, data: Path, networks: bool = True) -> str:
     """The re-scored table as a RESULTS.md section."""
     from restore.evaluate import protocol_table
     synth = json.loads(next(data.rglob("synth.json")).read_text())
@@ -52,11 +58,13 @@ def section(results: dict, seconds: float, data: Path) -> str:
         f"The test split's {BUDGETS['cpu']['items'][2]} items made again under today's physical profile "
         f"({json.dumps(profile.get('applied', {}), sort_keys=True)}) and scored by "
         "`python -m restore.studies.rescore OUT --write RESULTS.md` "
-        f"({seconds / 3600:.2f} h on this machine). 'dep' deconvolves with the paper's computed PSF (its recipe "
+        f"({seconds / 3600:.2f} h of items and scoring on this machine, summed over resumes). 'dep' deconvolves with the paper's computed PSF (its recipe "
         "at 640 / 520 / 450 nm, as the paper's DeP did, l.277); 'dep_exact' (DeP (exact kernel)) with the "
         "camera-weighted channel kernels, the upper bound a good PSF gives; the table above this section calls "
-        "the latter 'dep'. The networks are the shipped weights, trained on the captures of the run above, not "
-        "on these: they are retrained when RESULTS.md is regenerated.", "",
+        "the latter 'dep'. " + ("The networks are the shipped weights, trained on the captures of the run above, "
+                                 "not on these: they are retrained when RESULTS.md is regenerated." if networks else
+                                 "The networks are not re-scored here (`--no-networks`): they are retrained on "
+                                 "the final profile when RESULTS.md is regenerated."), "",
         protocol_table(results, "paper"), "", RESCORE_END])
 
 
@@ -74,13 +82,13 @@ def write_into(document: Path, text: str) -> None:
     save_text(document, doc)
 
 
-def rescore(out: Path, write: Path | None = None, progress: bool = True) -> str:
-    """Make the test split, score every row, write out/rescore.md (and into `write`); returns the section."""
+def rescore(out: Path, write: Path | None = None, progress: bool = True, networks: bool = True) -> str:
+    """Make the test split, score every row (networks: also the shipped models), write out/rescore.md (and
+    into `write`); returns the section."""
     from restore.studies.scoring import evaluate_rows
-    t0 = time.perf_counter()
     data = make_test_split(out, progress)
-    results = evaluate_rows(data, shipped_models(), out / "eval", progress)
-    text = section(results, time.perf_counter() - t0, data)
+    results = evaluate_rows(data, shipped_models() if networks else {}, out / "eval", progress)
+    text = section(results, spent_seconds(data, out / "eval"), data, networks)
     save_text(out / "rescore.md", text + "\n")
     if write is not None:
         write_into(write, text)
@@ -89,9 +97,9 @@ def rescore(out: Path, write: Path | None = None, progress: bool = True) -> str:
 
 def main(argv: list[str]) -> None:
     if not argv or argv[0].startswith("-"):
-        sys.exit("usage: python -m restore.studies.rescore OUT [--write RESULTS.md]")
+        sys.exit("usage: python -m restore.studies.rescore OUT [--write RESULTS.md] [--no-networks]")
     write = Path(argv[argv.index("--write") + 1]) if "--write" in argv else None
-    print(rescore(Path(argv[0]), write))
+    print(rescore(Path(argv[0]), write, networks="--no-networks" not in argv))
 
 
 if __name__ == "__main__":
