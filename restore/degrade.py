@@ -20,6 +20,7 @@ and columns), and once per panel and frame size the sensor's maps (FPN, defects)
 from __future__ import annotations
 
 from collections import OrderedDict
+from contextlib import contextmanager
 
 import numpy as np
 import torch
@@ -33,6 +34,22 @@ __all__ = ["Degrader", "NoiseDraw", "TorchPanel", "blur", "normalised"]
 
 # The d > 0 panels' power maps a Degrader keeps (float32 at 2048 × 1024 with 256-px margins: 47 MB per panel).
 POWER_BUDGET_BYTES = 1.0e9
+# CPU threads of a Degrader's ops: one. A crop's ~40 small sensor ops and its FFTs of ~768² gain nothing from a
+# second thread and lose much when the cores are busy: on the loaded 2-core machine a d > 0 crop took 0.08 s with
+# 1 thread and 0.54 s with 2 (the sensor stage 0.004 s and 0.33 s; benchmarks/bench_degrade.py --degrade-threads).
+DEGRADE_THREADS = 1
+
+
+@contextmanager
+def cpu_threads(n: int | None):
+    """torch's intra-op CPU threads set to n inside the block (None: unchanged)."""
+    old = torch.get_num_threads()
+    if n is not None:
+        torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)
 
 
 class TorchPanel:
@@ -67,11 +84,11 @@ class TorchPanel:
         """Sensor positions of n pixels from frame index start_px on (pixel centres from the frame's centre)."""
         return (np.arange(n) + start_px - (frame_px - 1) / 2) * self.panel.pitch_um
 
-    def weight_maps(self, rows: int, cols: int, frame_hw: tuple[int, int], origin_yx: tuple[int, int],
-                    power: torch.Tensor | None) -> torch.Tensor:
-        """W_cr [3, R, rows, cols] of the crop's input (module doc) whose first pixel is frame pixel origin − margin:
-        bilinear phase weights (optics.field.phase_weights) times the exact power `power` [3, rows, cols] (None: a
-        panel without a series, whose phase powers are in the coefficients)."""
+    def weight_factors(self, rows: int, cols: int, frame_hw: tuple[int, int],
+                       origin_yx: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor]:
+        """(wy [Py, rows], C_r wx [3, R, Py, cols]) of the crop's input whose first pixel is frame pixel origin −
+        margin, so that W_cr = wyᵀ (C_cr wx) (module doc; the bilinear phase weights of optics.field.phase_weights,
+        the phase powers in C where the panel has no series)."""
         f, m = self.panel.field, self.margin_px
         py = self.positions_um(rows, origin_yx[0] - m, frame_hw[0])
         px = self.positions_um(cols, origin_yx[1] - m, frame_hw[1])
@@ -79,8 +96,7 @@ class TorchPanel:
         wy = phase_weights(py, f.shifts_y_um, d_um, z, f.period_um[1], f.periodic[0])
         wx = phase_weights(px, f.shifts_x_um, d_um, z, f.period_um[0], f.periodic[1])
         wy, wx = (torch.as_tensor(w, device=self.device).to(self.dtype) for w in (wy, wx))
-        maps = wy.T @ (self.coeff_maps @ wx)  # [3, R, rows, cols]
-        return maps if power is None else maps * power[:, None]
+        return wy, self.coeff_maps @ wx
 
     def power_frame(self, frame_hw: tuple[int, int]) -> torch.Tensor | None:
         """m_c(s(x)) [3, H + 2m, W + 2m] of the whole frame with its margins, the lattice of optics.field_power's
@@ -104,14 +120,17 @@ def blur(x: torch.Tensor, panel: TorchPanel, frame_hw: tuple[int, int], origin_y
     shape = fft_shape((rows, cols), S, m)
     spec = panel.spectra(shape)
     if panel.panel.field is None:
-        y = torch.fft.rfft2(x, s=shape) * spec[:, 0]
+        y = torch.fft.rfft2(x, s=shape).mul_(spec[:, 0])
     else:
         power = panel.power_frame(frame_hw) if power_frame is None else power_frame
-        if power is not None:
-            power = power[:, origin_yx[0]:origin_yx[0] + rows, origin_yx[1]:origin_yx[1] + cols]
-        weighted = panel.weight_maps(rows, cols, frame_hw, origin_yx, power) * x[:, None]
-        y = (torch.fft.rfft2(weighted, s=shape) * spec).sum(dim=1)
-    return torch.fft.irfft2(y, s=shape)[:, m:rows - m, m:cols - m]
+        source = x if power is None else x * power[:, origin_yx[0]:origin_yx[0] + rows, origin_yx[1]:origin_yx[1] + cols]
+        wy, cw = panel.weight_factors(rows, cols, frame_hw, origin_yx)
+        y = None
+        for r in range(cw.shape[1]):  # one basis at a time: 3 weighted images in cache, not 3R (2× faster)
+            term = torch.fft.rfft2((wy.T @ cw[:, r]).mul_(source), s=shape).mul_(spec[:, r])
+            y = term if y is None else y.add_(term)
+    # the inverse transform by axes, the rows cropped between them: 1 + (rows − 2m) / rows of irfft2's work
+    return torch.fft.irfft(torch.fft.ifft(y, dim=-2)[:, m:rows - m], n=shape[1], dim=-1)[:, :, m:cols - m]
 
 
 def normalised(dn: torch.Tensor, panel: Panel) -> torch.Tensor:
@@ -126,9 +145,10 @@ class Degrader:
     power_budget_bytes): degrade(x, i, ...) is the capture of crop x through panel i as packed DN [4, h/2, w/2]."""
 
     def __init__(self, panels: list[Panel], device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32,
-                 power_budget_bytes: float = POWER_BUDGET_BYTES):
+                 power_budget_bytes: float = POWER_BUDGET_BYTES, threads: int | None = DEGRADE_THREADS):
         self.panels = [TorchPanel(p, device, dtype) for p in panels]
         self.device, self.dtype = torch.device(device), dtype
+        self.threads = threads if self.device.type == "cpu" else None
         self.maps = FrameMaps(self.device, dtype)
         self.power_budget_bytes = power_budget_bytes
         self._power: OrderedDict = OrderedDict()
@@ -155,7 +175,11 @@ class Degrader:
                 generator: torch.Generator | None = None, draw: NoiseDraw | None = None) -> torch.Tensor:
         """Packed DN [4, h/2, w/2] (R, Gr, Gb, B; whole numbers) of crop x [3, h + 2m, w + 2m] whose output starts
         at frame pixel origin_yx (even: an R site) of a frame_hw sensor, through panel `index`; the noise from
-        `generator` (on this device), or the explicit `draw`."""
+        `generator` (on this device), or the explicit `draw`; on the CPU with self.threads threads."""
+        with cpu_threads(self.threads):
+            return self._degrade(x, index, frame_hw, origin_yx, generator, draw)
+
+    def _degrade(self, x, index, frame_hw, origin_yx, generator, draw) -> torch.Tensor:
         tp = self.panels[index]
         m = tp.margin_px
         h, w = x.shape[-2] - 2 * m, x.shape[-1] - 2 * m

@@ -9,8 +9,8 @@ in the packed RGGB layout [4, h/2, w/2] (R, Gr, Gb, B) of a crop of a frame.
     g · hot_dark_e_per_s · t, capped at min(white, black + g FW)                     (sensor.noise, sensor.defects)
 
 The FPN maps and the defect map are the sensor's, of the whole frame: drawn with the seeds and generators of
-sensor.fpn.fpn_maps and sensor.defects.defect_map (numpy, once per frame size and seed: FrameMaps; the tests
-check they equal those functions' maps), each crop taking its region. The noise comes from a torch generator
+sensor.fpn.fpn_maps and sensor.defects.defect_map (numpy, once per frame size and seed: FrameMaps, packed; the
+tests check they equal those functions' maps), each crop taking its region. The noise comes from a torch generator
 on the crop's device, or from an explicit NoiseDraw (the numpy path's own draws, for the equality tests).
 """
 from __future__ import annotations
@@ -23,7 +23,7 @@ import torch
 
 from udc_render.dataset.bank import Panel
 from udc_render.sensor.bayer import SITES
-from udc_render.sensor.defects import DefectConfig
+from udc_render.sensor.defects import DEAD, HOT, DefectConfig, defect_map
 from udc_render.sensor.fpn import CHARGE_CAP_E, FpnConfig
 from udc_render.sensor.noise import (BROOKS_LOG_SHOT_RANGE, BROOKS_READ_INTERCEPT, BROOKS_READ_SIGMA,
                                      BROOKS_READ_SLOPE, noise_lambdas)
@@ -49,7 +49,8 @@ class NoiseDraw:
 
 
 class FrameMaps:
-    """The standard-normal FPN maps and the defects' uniform map of frames, by (frame size, seed), on a device."""
+    """The sensor's frame maps on a device, packed [4, H/2, W/2] once per frame size and seed (a crop takes a slice):
+    the FPN's standard normals (sensor.fpn.fpn_maps' draws) and the defect classes (sensor.defects.defect_map's)."""
 
     def __init__(self, device: torch.device, dtype: torch.dtype):
         self.device, self.dtype = device, dtype
@@ -57,32 +58,38 @@ class FrameMaps:
         self._defects: dict = {}
 
     def _fpn_normals(self, frame_hw: tuple[int, int], seed: int) -> tuple:
+        """(z, u [4, H/2, W/2], rows [4, H/2, 1], columns [4, 1, W/2]) packed."""
         key = (tuple(frame_hw), seed)
         if key not in self._fpn:  # sensor.fpn.fpn_maps' draws
             h, w = frame_hw
             rngs = [np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4)]
             z, u = rngs[0].standard_normal((h, w)), rngs[1].standard_normal((h, w))
             r, c = rngs[2].standard_normal(h), rngs[3].standard_normal(w)
-            self._fpn[key] = tuple(torch.as_tensor(a, device=self.device).to(self.dtype) for a in (z, u, r, c))
+            rows, cols = np.broadcast_to(r[:, None], (h, 2)), np.broadcast_to(c[None, :], (2, w))
+            self._fpn[key] = tuple(packed_sites(torch.as_tensor(np.ascontiguousarray(a), device=self.device)
+                                                .to(self.dtype)) for a in (z, u, rows, cols))
         return self._fpn[key]
 
     def fpn(self, frame_hw, origin_yx, size_hw, fpn: FpnConfig) -> tuple[torch.Tensor, torch.Tensor]:
         """(gain 1 + PRNU z ≥ 0, offset DSNU u + σ_row r_i + σ_col c_j in e⁻) of the crop, packed."""
         z, u, r, c = self._fpn_normals(frame_hw, fpn.seed)
-        (y0, x0), (h, w) = origin_yx, size_hw
-        gain = torch.clamp_min(1.0 + fpn.prnu * z[y0:y0 + h, x0:x0 + w], 0.0)
-        offset = (fpn.dsnu_e * u[y0:y0 + h, x0:x0 + w] + (fpn.row_offset_e * r[y0:y0 + h])[:, None]
-                  + (fpn.column_offset_e * c[x0:x0 + w])[None, :])
-        return packed_sites(gain), packed_sites(offset)
+        ys, xs = _packed_slices(origin_yx, size_hw)
+        gain = torch.clamp_min(1.0 + fpn.prnu * z[:, ys, xs], 0.0)
+        return gain, fpn.dsnu_e * u[:, ys, xs] + fpn.row_offset_e * r[:, ys] + fpn.column_offset_e * c[:, :, xs]
 
-    def defect_uniform(self, frame_hw, origin_yx, size_hw, seed: int) -> torch.Tensor:
-        """The defect map's uniform numbers u of the crop (float64, packed): dead u < f_dead, hot f_dead ≤ u <
-        f_dead + f_hot (sensor.defects.defect_map)."""
-        key = (tuple(frame_hw), seed)
+    def defect_classes(self, frame_hw, origin_yx, size_hw, defects: DefectConfig) -> torch.Tensor:
+        """The crop's defect classes, packed int8: 0 good, 1 dead, 2 hot (sensor.defects.defect_map)."""
+        key = (tuple(frame_hw), defects.seed, defects.dead_fraction, defects.hot_fraction)
         if key not in self._defects:
-            self._defects[key] = torch.as_tensor(np.random.default_rng(seed).random(tuple(frame_hw)), device=self.device)
-        (y0, x0), (h, w) = origin_yx, size_hw
-        return packed_sites(self._defects[key][y0:y0 + h, x0:x0 + w])
+            classes = defect_map(*frame_hw, defects)
+            self._defects[key] = packed_sites(torch.as_tensor(classes, device=self.device))
+        return self._defects[key][(slice(None),) + _packed_slices(origin_yx, size_hw)]
+
+
+def _packed_slices(origin_yx, size_hw) -> tuple[slice, slice]:
+    """The packed rows and columns of a crop starting on an R site (even origin)."""
+    (y0, x0), (h, w) = origin_yx, size_hw
+    return slice(y0 // 2, (y0 + h) // 2), slice(x0 // 2, (x0 + w) // 2)
 
 
 def _normal(shape, like: torch.Tensor, generator, given: torch.Tensor | None) -> torch.Tensor:
@@ -143,11 +150,9 @@ def expose_packed(e: torch.Tensor, panel: Panel, maps: FrameMaps, frame_hw, orig
 
 def _defects(dn: torch.Tensor, defects: DefectConfig, s, maps: FrameMaps, frame_hw, origin_yx, size) -> torch.Tensor:
     """Dead pixels at black, hot ones + g · hot charge, capped (sensor.defects.apply_defects)."""
-    u = maps.defect_uniform(frame_hw, origin_yx, size, defects.seed)
-    f_dead, f_hot = defects.dead_fraction, defects.hot_fraction
-    dn = torch.where(u < f_dead, torch.full_like(dn, s.black_level_dn), dn)
+    kind = maps.defect_classes(frame_hw, origin_yx, size, defects)
     g = s.dn_per_electron
     top = min(float(s.white_level_dn), s.black_level_dn + g * s.full_well_e)
     level = torch.clamp(torch.round(torch.clamp_max(dn + g * defects.hot_charge_e(s.exposure_s), top)), 0,
                         s.white_level_dn)
-    return torch.where((u >= f_dead) & (u < f_dead + f_hot), level, dn)
+    return torch.where(kind == DEAD, s.black_level_dn, torch.where(kind == HOT, level, dn))

@@ -17,6 +17,10 @@ scaled crop. A resumed run sees the same crops, panels and noise (they depend on
 epoch's draws are recorded in online.jsonl.
 
 Validation: each val image whole, through panel j mod N, the noise seeded by (seed, 'val', j), made once.
+
+With workers > 0 (CPU only) the crops are degraded in DataLoader worker processes, one CPU thread each, while the
+training step runs: the same numbers (the draws fix every crop; a Degrader runs on one thread either way), the
+degradation's time hidden where a core is free (benchmarks/bench_degrade.py --train).
 """
 from __future__ import annotations
 
@@ -31,6 +35,7 @@ import torch
 
 from restore.data import DataError, dihedral, load_gt, read_manifest
 from restore.degrade import Degrader, normalised
+from udc_render.optics import fft_shape
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.io.exr import read_exr
 from udc_render.io.files import save_text
@@ -99,14 +104,16 @@ def region(img: np.ndarray, y0: int, x0: int, rows: int, cols: int) -> np.ndarra
         period = 2 * (size - 1)
         i %= max(period, 1)
         return np.where(i >= size, period - i, i)
-    return img[:, idx(y0, rows, img.shape[1])][:, :, idx(x0, cols, img.shape[2])]
+    if y0 >= 0 and x0 >= 0 and y0 + rows <= img.shape[1] and x0 + cols <= img.shape[2]:
+        return img[:, y0:y0 + rows, x0:x0 + cols]
+    return img[:, idx(y0, rows, img.shape[1])[:, None], idx(x0, cols, img.shape[2])[None, :]]
 
 
 class OnlineBatches:
     """The training batches of the online degradation (module doc) on a device."""
 
     def __init__(self, images: list[CleanImage], bank: Bank, degrader: Degrader, crop_px: int, batch: int,
-                 seed: int, crops_per_image: int = 1):
+                 seed: int, crops_per_image: int = 1, workers: int = 0):
         if not images:
             raise DataError("no clean images to train on: the split is empty")
         small = min(images, key=lambda im: min(im.pixels.shape[1:]))
@@ -116,6 +123,16 @@ class OnlineBatches:
         self.images, self.bank, self.degrader = images, bank, degrader
         self.crop_px, self.batch, self.seed, self.crops_per_image = crop_px, batch, seed, crops_per_image
         self.brightness = [float(p.record.get("brightness", 1.0)) for p in bank.panels]
+        if workers and degrader.device.type != "cpu":
+            raise DataError(f"--degrade-workers {workers}: worker processes degrade on the CPU; on {degrader.device} "
+                            "the degradation runs beside the training (0)")
+        self.workers = workers
+        if workers:  # made once here, so that every epoch's forked workers inherit them
+            shape = fft_shape((crop_px + 2 * degrader.margin_px,) * 2, 2 * degrader.margin_px + 1, degrader.margin_px)
+            for i, p in enumerate(degrader.panels):
+                p.spectra(shape)
+                for frame in {im.pixels.shape[1:] for im in images}:
+                    degrader.power_frame(i, frame)
 
     @property
     def count(self) -> int:
@@ -151,7 +168,23 @@ class OnlineBatches:
             for i in range(0, len(draws), self.batch):
                 xs, ys = zip(*(self.sample(d) for d in draws[i:i + self.batch]))
                 yield torch.stack(xs), torch.stack(ys)
-        return draws, batches()
+        if not self.workers:
+            return draws, batches()
+        return draws, iter(torch.utils.data.DataLoader(_Crops(self, draws), batch_size=self.batch,
+                                                       num_workers=self.workers))
+
+
+class _Crops(torch.utils.data.Dataset):
+    """An epoch's crops as a map-style dataset, degraded in DataLoader worker processes (one CPU thread each)."""
+
+    def __init__(self, batches: OnlineBatches, draws: list[dict]):
+        self.batches, self.draws = batches, draws
+
+    def __len__(self):
+        return len(self.draws)
+
+    def __getitem__(self, i: int):
+        return self.batches.sample(self.draws[i])
 
 
 def validation_pairs(images: list[CleanImage], bank: Bank, degrader: Degrader, seed: int) -> list[tuple]:
@@ -170,9 +203,10 @@ def validation_pairs(images: list[CleanImage], bank: Bank, degrader: Degrader, s
     return out
 
 
-def online_data(data: Path, bank_dir: Path, settings, device) -> tuple[OnlineBatches, list]:
+def online_data(data: Path, bank_dir: Path, settings, device, workers: int = 0) -> tuple[OnlineBatches, list]:
     """(the training batches, the validation pairs) of the online degradation (module doc) for train settings
-    with degrade = {"bank_fingerprint", "panels"}: the bank's panels on the device (float32)."""
+    with degrade = {"bank_fingerprint", "panels"}: the bank's panels on the device (float32), degraded in
+    `workers` processes (CPU; 0: in this one)."""
     if bank_dir is None:
         raise DataError("the online degradation needs a kernel bank (--bank DIR, written by `udc-render bank`)")
     d = settings.degrade
@@ -182,7 +216,7 @@ def online_data(data: Path, bank_dir: Path, settings, device) -> tuple[OnlineBat
                         f"({d['bank_fingerprint']})")
     degrader = Degrader(bank.panels, device, torch.float32)
     batches = OnlineBatches(clean_images(data, "train"), bank, degrader, settings.crop_px, settings.batch,
-                            settings.seed, settings.crops_per_pair)
+                            settings.seed, settings.crops_per_pair, workers)
     return batches, validation_pairs(clean_images(data, "val"), bank, degrader, settings.seed)
 
 

@@ -216,12 +216,13 @@ def finished_summary(out: Path, settings: TrainSettings) -> dict | None:
     return summary if plateaued else None
 
 
-def _training_data(data_dir: Path, settings: TrainSettings, dev, bank: Path | None = None) -> tuple[object, list]:
+def _training_data(data_dir: Path, settings: TrainSettings, dev, bank: Path | None = None,
+                   workers: int = 0) -> tuple[object, list]:
     """(the training batches, the validation pairs as arrays): every pair read and checked (load_pair), and
     --crop-px checked against the smallest frame; with settings.degrade, the clean images and the bank's
     panels of the online degradation (restore.online)."""
     if settings.degrade is not None:
-        data, val = online_data(data_dir, bank, settings, dev)
+        data, val = online_data(data_dir, bank, settings, dev, workers)
         h, w = min((im.pixels.shape[1:] for im in data.images), key=min)
     else:
         pairs = PairDataset(list_pairs(data_dir, "train", [settings.display]), settings.crop_px, augment=True,
@@ -308,10 +309,11 @@ def plot_loss(log: list, path: Path) -> None:
 
 
 def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "auto", checkpoint_s: float = 60.0,
-          val_every: int = 10, progress: bool = True, bank: Path | None = None) -> dict:
+          val_every: int = 10, progress: bool = True, bank: Path | None = None, degrade_workers: int = 0) -> dict:
     """Train (or resume) in `out`; returns a summary (epochs, final loss, validation PSNR, seconds).
     Nothing is written in `out` before the settings, the run folder and every pair have been checked.
-    settings.degrade: the online degradation through the kernel bank in `bank` (restore.online)."""
+    settings.degrade: the online degradation through the kernel bank in `bank` (restore.online), in degrade_workers
+    processes (CPU; 0: in this one; the same numbers either way)."""
     data_dir, out = Path(data_dir), Path(out)
     if settings.epochs < 1 or settings.batch < 1:
         raise TrainError(f"epochs = {settings.epochs}, batch = {settings.batch}: expected integers ≥ 1")
@@ -322,7 +324,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     if (done := finished_summary(out, settings)) is not None:
         return done
     dev = pick_device(device)
-    data, val_pairs = _training_data(data_dir, settings, dev, bank)
+    data, val_pairs = _training_data(data_dir, settings, dev, bank, degrade_workers)
     torch.manual_seed(settings.seed)
     model = build_model(settings.model).to(dev, memory_format=torch.channels_last)  # 1.07× (bench_train)
     opt = torch.optim.Adam(model.parameters(), lr=settings.lr, betas=(0.9, 0.999), eps=1e-8)

@@ -104,7 +104,7 @@ def test_resumed_online_training_continues_identically(tmp_path, bank, monkeypat
     assert (tmp_path / "straight" / "online.jsonl").read_text() == (tmp_path / "resumed" / "online.jsonl").read_text()
 
 
-def test_crops_take_mirrored_scene_beyond_the_frame_and_a_fresh_draw_each_epoch(tmp_path, bank):
+def test_crops_take_mirrored_scene_beyond_the_frame_a_fresh_draw_each_epoch_and_the_same_in_workers(tmp_path, bank):
     img = np.random.default_rng(0).random((3, 10, 12)).astype(np.float32)
     np.testing.assert_array_equal(region(img, -3, -4, 16, 20), np.pad(img, ((0, 0), (3, 3), (4, 4)), "reflect"))
     data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(48, 64))
@@ -114,6 +114,9 @@ def test_crops_take_mirrored_scene_beyond_the_frame_and_a_fresh_draw_each_epoch(
     x, y = next(it)
     assert x.shape == (2, 4, 16, 16) and y.shape == (2, 3, 32, 32) and x.dtype == torch.float32
     assert batches.epoch(0)[0] == d0 and batches.epoch(1)[0] != d0
+    in_workers = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels), 32, 2, seed=0, workers=1)
+    xw, yw = next(in_workers.epoch(0)[1])
+    assert torch.equal(x, xw) and torch.equal(y, yw)  # a worker process degrades the same numbers
 
 
 def test_online_command_and_its_one_line_refusals(tmp_path, bank, capsys):

@@ -1,0 +1,203 @@
+"""The online degradation's cost against a training step (issue 31: it may slow training by at most 10 %).
+
+    .venv/bin/python benchmarks/bench_degrade.py [--crop-px 256] [--batch 4] [--kernel-px 513] [--rank 4]
+        [--frame 2048,1024] [--repeats 7] [--threads N] [--bank DIR] [--device cpu|cuda]
+
+Per batch of `--batch` crops of `--crop-px` (each with the kernel's half-width of scene around it, as
+`udc-render train --degrade online` takes them): the degradation (restore.degrade.Degrader.degrade per crop,
+float32, its generator) through a d = 0 panel (one kernel per channel) and a d > 0 panel (the rank-r field
+basis with the exact power map; the map of the frame made once beforehand, timed apart), against one Adam step
+of the paper's UNet (restore.models.UNET_CONFIG) on that batch, float32 and bf16 autocast (the cpu budget's), at
+torch's thread count (and others with --step-threads). The Degrader's ops run on --degrade-threads threads
+(restore.degrade.DEGRADE_THREADS, 1 by default: see the table). The timings alternate between the rows, repeat
+by repeat, so that a load that comes and goes hits them alike; the table gives the medians, and each
+degradation's ratio to each step (medians, and in brackets the fastest repeats').
+
+--train: training itself, steps of the UNet (--autocast bf16|fp32) on batches degraded on the fly (restore.online
+.OnlineBatches: crops of two clean 2048 × 1024 images through the panels, drawn per crop) with the degradation in
+this process (workers 0) and in a DataLoader worker process (1), against the same steps on batches made
+beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median step times
+(each run's first step left out: a worker's start) less one.
+
+Without --bank the panels are synthetic with the shapes of the default bank (kernels of --kernel-px, a T-OLED
+series of 453 × 200 orders, 4 × 4 phases, Poisson noise, defects, FPN): the cost depends on the shapes, not on
+the values. With --bank DIR its first d = 0 and first d > 0 panel are timed.
+"""
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from restore.degrade import Degrader, cpu_threads
+from restore.online import CleanImage, OnlineBatches
+from restore.losses import loss_fn
+from restore.models import UNET_CONFIG, build_model
+from restore.train import TrainSettings, train_step
+from udc_render.dataset.bank import Bank, Panel, PanelField, read_bank
+from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig
+
+
+def synthetic_panels(kernel_px: int, rank: int) -> list[Panel]:
+    """A d = 0 and a d > 0 panel with the default bank's shapes (module doc)."""
+    rng = np.random.default_rng(0)
+    k = rng.random((3, kernel_px, kernel_px)).astype(np.float32)
+    k /= k.sum(axis=(1, 2), keepdims=True)
+    sensor = SensorConfig(form="per_channel", gain=6.0, gamma_rggb=(0.97 / 6,) * 4, exposure_s=0.031)
+    flat = Panel("d0", k, 1.55, (0.97,) * 3, sensor, DefectConfig(), FpnConfig(), None, {})
+    live = tuple((j, i) for j in range(4) for i in range(4))
+    series = np.zeros((3, 453, 200), complex)
+    series[:, 226, 0] = 1.0
+    series[:, :, 1:] = 1e-4 * (rng.standard_normal((3, 453, 199)) + 1j * rng.standard_normal((3, 453, 199)))
+    field = PanelField(np.repeat(k[:, None], rank, axis=1) / rank, rng.random((3, 16, rank)), live,
+                       np.arange(4) * 317 / 4, np.arange(4) * 317 / 4, (True, True), (317.0, 317.0), 2.0, 6014.0,
+                       np.ones((3, 4, 4)), series)
+    return [flat, Panel("d2", k, 1.55, (0.97,) * 3, sensor, DefectConfig(), FpnConfig(), field, {})]
+
+
+def bank_panels(folder) -> list[Panel]:
+    panels = read_bank(folder).panels
+    flat = next((p for p in panels if p.field is None), None)
+    banded = next((p for p in panels if p.field is not None), None)
+    return [p for p in (flat, banded) if p is not None]
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--crop-px", type=int, default=256)
+    ap.add_argument("--batch", type=int, default=4)
+    ap.add_argument("--kernel-px", type=int, default=513)
+    ap.add_argument("--rank", type=int, default=4)
+    ap.add_argument("--frame", default="2048,1024", help="W,H of the clean images")
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--threads", type=int, help="torch threads [torch's default]")
+    ap.add_argument("--bank", help="time this bank's panels instead of the synthetic ones")
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--degrade-threads", default="1,0",
+                    help="the Degrader's CPU threads to time, comma-separated (0: torch's setting) [1,0]")
+    ap.add_argument("--step-threads", default="0",
+                    help="the UNet step's CPU threads to time, comma-separated (0: torch's setting) [0]")
+    ap.add_argument("--train", action="store_true", help="time training steps on online batches (module doc)")
+    ap.add_argument("--steps", type=int, default=6, help="--train: steps per run [6]")
+    ap.add_argument("--rounds", type=int, default=3, help="--train: rounds of the three runs [3]")
+    ap.add_argument("--autocast", choices=("bf16", "fp32"), default="bf16", help="--train: the step's precision [bf16]")
+    a = ap.parse_args()
+    if a.train:
+        return train_runs(a)
+    if a.threads:
+        torch.set_num_threads(a.threads)
+    dev = torch.device(a.device)
+    w, h = (int(v) for v in a.frame.split(","))
+    panels = bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
+    degraders = {n: Degrader(panels, dev, threads=n or None) for n in (int(t) for t in a.degrade_threads.split(","))}
+    deg = next(iter(degraders.values()))
+    m, c = deg.margin_px, a.crop_px
+    t0 = time.perf_counter()
+    for i, p in enumerate(panels):
+        deg.power_frame(i, (h, w))
+    power_s = time.perf_counter() - t0
+    for other in degraders.values():
+        other._power = deg._power  # the same maps, made once
+    crops = torch.rand(a.batch, 3, c + 2 * m, c + 2 * m)
+    origins = [(2 * int(v), 2 * int(u)) for v, u in zip(np.linspace(0, (h - c) // 2, a.batch),
+                                                        np.linspace(0, (w - c) // 2, a.batch))]
+    model = build_model(UNET_CONFIG).to(dev, memory_format=torch.channels_last)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-4)
+    loss_of = loss_fn("l1")
+    x = torch.rand(a.batch, 4, c // 2, c // 2, device=dev).to(memory_format=torch.channels_last)
+    y = torch.rand(a.batch, 3, c, c, device=dev).to(memory_format=torch.channels_last)
+    settings = {name: TrainSettings(model=UNET_CONFIG, display="bench", autocast=ac)
+                for name, ac in (("fp32", None), ("bf16", "bf16"))}
+    step_threads = [int(t) or torch.get_num_threads() for t in a.step_threads.split(",")]
+
+    def sync():
+        if dev.type == "cuda":
+            torch.cuda.synchronize()
+
+    def degrade(d, i):
+        for b in range(a.batch):
+            d.degrade(crops[b], i, (h, w), origins[b], torch.Generator(dev).manual_seed(b))
+
+    rows = {f"degrade {p.name} ({'d > 0, rank ' + str(p.field.rank) if p.field else 'd = 0'}), "
+            f"{n or torch.get_num_threads()} thread{'s' if (n or torch.get_num_threads()) > 1 else ''}":
+            (lambda d=d, i=i: degrade(d, i)) for n, d in degraders.items() for i, p in enumerate(panels)}
+    def step(s, n):
+        with cpu_threads(n if dev.type == "cpu" else None):
+            train_step(model, opt, x, y, loss_of, s)
+
+    rows.update({f"UNet step {k}, {n} thread{'s' if n > 1 else ''}": (lambda s=s, n=n: step(s, n))
+                 for k, s in settings.items() for n in step_threads})
+    for fn in rows.values():  # warm-up: kernel spectra, FFT plans, the allocator
+        fn()
+    times = {k: [] for k in rows}
+    for _ in range(a.repeats):
+        for k, fn in rows.items():
+            sync()
+            t = time.perf_counter()
+            fn()
+            sync()
+            times[k].append(time.perf_counter() - t)
+    med = {k: statistics.median(v) for k, v in times.items()}
+    steps = [k for k in med if k.startswith("UNet")]
+    print(f"device {dev}, torch threads {torch.get_num_threads()}, batch {a.batch} × {c} px crops, margin {m} px "
+          f"(kernel {2 * m + 1} px), frame {w} × {h}, {a.repeats} repeats; "
+          f"{'bank ' + a.bank if a.bank else 'synthetic panels'}; power maps made once: {power_s:.2f} s")
+    print("ratios: a degradation's median over a step's median (and the same for their fastest repeats)")
+    print("| row | median s per batch | min | max | " + " | ".join(f"/ {s}" for s in steps) + " |")
+    print("|---|---|---|---|" + "---|" * len(steps))
+    for k, v in med.items():
+        ratios = " | ".join(f"{v / med[s]:.3f} ({min(times[k]) / min(times[s]):.3f})" if k.startswith("degrade") else ""
+                            for s in steps)
+        print(f"| {k} | {v:.3f} | {min(times[k]):.3f} | {max(times[k]):.3f} | {ratios} |")
+
+
+def train_runs(a) -> None:
+    """--train (module doc)."""
+    if a.threads:
+        torch.set_num_threads(a.threads)
+    w, h = (int(v) for v in a.frame.split(","))
+    panels = bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
+    bank = Bank(Path("."), {}, panels)
+    rng = np.random.default_rng(0)
+    images = [CleanImage(f"noise {i}", rng.random((3, h, w), dtype=np.float32)) for i in range(2)]
+    settings = TrainSettings(model=UNET_CONFIG, display="bench", autocast=None if a.autocast == "fp32" else "bf16")
+    model = build_model(UNET_CONFIG).to(memory_format=torch.channels_last)
+    opt = torch.optim.Adam(model.parameters(), lr=1e-4)
+    loss_of = loss_fn("l1")
+    c, per_image = a.crop_px, (a.steps * a.batch + 1) // 2
+
+    def run(batches) -> list[float]:
+        times, t = [], time.perf_counter()
+        for x, y in batches:
+            train_step(model, opt, x.to(memory_format=torch.channels_last), y.to(memory_format=torch.channels_last),
+                       loss_of, settings)
+            now = time.perf_counter()
+            times.append(now - t)
+            t = now
+        return times[1:]
+    ready = [(torch.rand(a.batch, 4, c // 2, c // 2), torch.rand(a.batch, 3, c, c)) for _ in range(a.steps)]
+    times: dict = {"ready batches": [], "online, workers 0": [], "online, workers 1": []}
+    for _ in range(a.rounds):  # the runs alternate, round by round
+        for name in times:
+            if name.startswith("ready"):
+                times[name] += run(ready)
+            else:
+                ob = OnlineBatches(images, bank, Degrader(panels), c, a.batch, 0, per_image, int(name[-1]))
+                times[name] += run(ob.epoch(0)[1])
+    med = {k: statistics.median(v) for k, v in times.items()}
+    print(f"torch threads {torch.get_num_threads()}, UNet {a.autocast}, batch {a.batch} × {c} px, kernel "
+          f"{panels[0].kernel_px} px, panels {', '.join(p.name for p in panels)} (drawn per crop), {a.rounds} rounds of "
+          f"{a.steps} steps per run (each run's first left out); {'bank ' + a.bank if a.bank else 'synthetic panels'}")
+    print("| run | median s per step | quartiles | slowdown vs ready batches (medians) |")
+    print("|---|---|---|---|")
+    for k, v in med.items():
+        q = statistics.quantiles(times[k], n=4)
+        print(f"| {k} | {v:.3f} | {q[0]:.3f}–{q[2]:.3f} | {v / med['ready batches'] - 1:+.1%} |")
+
+
+if __name__ == "__main__":
+    main()
