@@ -1,5 +1,6 @@
-"""`udc-render study {psf,render,capture,far_field,realism,defocus,banding,gap} --out DIR [--quick]`:
-error-versus-run-time studies of the approximation knobs, and the defocus and banding studies users run."""
+"""`udc-render study {psf,render,capture,far_field,realism,defocus,banding,gap,robustness} --out DIR [--quick]`:
+error-versus-run-time studies of the approximation knobs, the defocus and banding studies users run, and the
+robustness of a restorer trained on one panel or on randomized panels (restore.studies.robustness)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -18,6 +19,8 @@ STUDIES = {
     "banding": "the bands a display a distance d in front of the lens prints on a flat field",
     "gap": "the size of each effect beyond the paper's model (each on and off), and what it does to DeP",
     "far_field": "the far field's threshold and coarse factor (the light past the kernel window)",
+    "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
+                  "held-out and out-of-family panels (trains both: minutes with --quick, hours without)",
 }
 
 
@@ -71,6 +74,8 @@ def run(args) -> int:
         from udc_render.studies.capture_knobs import run_study
     elif args.what == "far_field":
         from udc_render.studies.capture_far import run_study
+    elif args.what == "robustness":
+        from restore.studies.robustness import run_study
     elif args.what == "render":
         from udc_render.studies.render_knobs import run_study
     else:

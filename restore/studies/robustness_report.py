@@ -1,0 +1,148 @@
+"""The robustness study's outputs (restore.studies.robustness): study_robustness.csv (one row per test set),
+study_robustness.md (the budget and wall time, the drops side by side, every panel's scores) and
+study_robustness.png (PSNR per set and model, and the drops, as bars).
+
+A set's PSNR is the mean of its panels' mean paper PSNR (every panel scores the same images); a model's drop on a
+set is its PSNR there less its PSNR on the default panel (negative: worse than on the default panel).
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from udc_render.errors import UdcError
+from udc_render.io.files import save_figure
+from udc_render.io.plots import pyplot
+from udc_render.studies.report import duration, load_average, md_table, write_tables
+
+MODELS = {"fixed": "UNet (default P-OLED)", "randomized": "UNet (randomized)"}
+SETS = {"default": "default P-OLED (d = 2 mm)", "heldout": "held-out draws within the ranges",
+        "toled": "T-OLED (d = 2 mm)", "disordered": "disordered P-OLED",
+        "micrograph": "micrograph-type layout (diamond tile)", "far": "P-OLED at d = 8 mm",
+        "toled_far": "T-OLED at d = 8 mm"}
+SHORT = {"default": "default\nP-OLED", "heldout": "held-out\ndraws", "toled": "T-OLED\n2 mm",
+         "disordered": "disordered\nP-OLED", "micrograph": "micrograph\ntile", "far": "P-OLED\n8 mm",
+         "toled_far": "T-OLED\n8 mm"}  # the figure's tick labels
+ROWS = {"input": "input (packed RAW)", **MODELS}
+COLUMNS = ["set", "panels", "images", "psnr_input_db", "psnr_fixed_db", "drop_fixed_db", "psnr_randomized_db",
+           "drop_randomized_db", "randomized_minus_fixed_db"]
+COLOURS = {"input": "0.7", "fixed": "tab:blue", "randomized": "tab:orange"}
+
+
+def summary_rows(rows: list[dict]) -> list[dict]:
+    """One row per set present (in SETS' order): panels, images, each row's mean PSNR, both models' drops
+    against their own default-panel PSNR (None without a default row) and randomized − fixed."""
+    out = []
+    for s in SETS:
+        mine = [r for r in rows if r["set"] == s]
+        if not mine:
+            continue
+        row = {"set": s, "panels": len(mine), "images": mine[0]["images"]}
+        for k in ROWS:
+            row[f"psnr_{k}_db"] = float(np.mean([r[f"psnr_{k}_db"] for r in mine]))
+        out.append(row)
+    base = next((r for r in out if r["set"] == "default"), None)
+    for row in out:
+        for k in MODELS:
+            row[f"drop_{k}_db"] = None if base is None else row[f"psnr_{k}_db"] - base[f"psnr_{k}_db"]
+        row["randomized_minus_fixed_db"] = row["psnr_randomized_db"] - row["psnr_fixed_db"]
+    return out
+
+
+def db(v) -> str:
+    """A signed difference in dB to 0.01 ('0.00' for one that rounds to zero; empty for None)."""
+    if v is None:
+        return ""
+    return "0.00" if round(v, 2) == 0 else f"{v:+.2f}"
+
+
+def budget_text(budget: dict, times: dict, train: dict, rows: list[dict]) -> list[str]:
+    """The CPU budget: the recipe and the measured seconds per stage (summed over re-runs)."""
+    w, h = budget["sensor_px"]
+    scoring = sum(r["seconds"] for r in rows)
+    total = sum(times.values()) + sum(t["seconds"] for t in train.values()) + scoring
+    banks = sum(v for k, v in times.items() if k.startswith("bank "))
+    load = load_average()
+    lines = [
+        f"- **Budget `{budget['name']}`**: UNet `{budget['model']}`, {budget['steps']} Adam steps each "
+        f"({budget['epochs']} epochs × {budget['train_images']} images × {budget['crops_per_image']} crops / batch "
+        f"{budget['batch']}), crops of {budget['crop_px']} px, lr {budget['lr']:g}, gradient clip "
+        f"{budget['clip_grad_norm']}; {budget['train_images']} training and {budget['val_images']} validation "
+        f"images of {w} × {h} px at {budget['pitch_um']:g} µm (bands {budget['bands_nm'] or 'the scene’s'}, "
+        f"{budget['field_phases']} × {budget['field_phases']} field phases); {budget['train_panels']} randomized "
+        f"training panels, {budget['heldout_panels']} held-out.",
+        f"- **Wall time (measured, this machine, summed over re-runs)**: clean images "
+        f"{duration(times.get('clean images', 0.0))}, banks {duration(banks)}, training "
+        + ", ".join(f"{MODELS[k]} {duration(t['seconds'])}" for k, t in train.items())
+        + f", scoring {duration(scoring)}; total {duration(total)} on {os.cpu_count()} CPU cores"
+        + (f" (load average {load[1]:.1f} at the end)" if load else "") + ".",
+        "- **Seeds**: " + ", ".join(f"{k} {v}" for k, v in budget["seeds"].items()) + ".",
+    ]
+    return lines
+
+
+def markdown(result: dict) -> str:
+    rows, summary = result["rows"], summary_rows(result["rows"])
+    train = result["train"]
+    lines = ["# Study: robustness of a restorer to the panel it meets", "",
+             "Two UNets with the same recipe, steps, seeds and clean crops, degraded on the fly "
+             "(`udc-render train --degrade online`): one on the `physical` profile's default P-OLED (d = 2 mm), "
+             "one on randomized panels drawn from the documented ranges. Both scored with the paper protocol's "
+             "PSNR (linear, clipped to [0, 1], border cropped; the input on its packed RAW) on the validation "
+             "images degraded once through every panel of each set, with fixed seeds. Drop: the set's PSNR less "
+             "the same model's on the default panel.", "", *budget_text(result["budget"], result["times"], train, rows),
+             "", "## PSNR (dB) and drops", ""]
+    cols = [("set", "test set"), ("panels", "panels"), ("psnr_input_db", "input"),
+            ("psnr_fixed_db", MODELS["fixed"]), ("drop_fixed_db", "drop"),
+            ("psnr_randomized_db", MODELS["randomized"]), ("drop_randomized_db", "drop"),
+            ("randomized_minus_fixed_db", "randomized − default")]
+    two = lambda v: f"{v:.2f}"  # noqa: E731
+    lines += md_table(summary, cols, {"set": lambda s: SETS[s], "psnr_input_db": two, "psnr_fixed_db": two,
+                                      "psnr_randomized_db": two, "drop_fixed_db": db, "drop_randomized_db": db,
+                                      "randomized_minus_fixed_db": db})
+    lines += ["", "Validation PSNR at the end of training (each on its own training panels' validation): "
+              + ", ".join(f"{MODELS[k]} {t['val_psnr_db']:.2f} dB after {t['steps']} steps"
+                          for k, t in train.items() if t.get("val_psnr_db") is not None) + ".",
+              "", "## Every panel", ""]
+    pcols = [("set", "set"), ("panel", "panel"), ("family", "family"), ("distance_mm", "d (mm)"),
+             ("psnr_input_db", "input"), ("psnr_fixed_db", MODELS["fixed"]),
+             ("psnr_randomized_db", MODELS["randomized"])]
+    lines += md_table(rows, pcols, {"psnr_input_db": two, "psnr_fixed_db": two, "psnr_randomized_db": two,
+                                    "distance_mm": lambda v: f"{v:.2f}"})
+    return "\n".join(lines) + "\n"
+
+
+def plot(summary: list[dict], path: Path) -> None:
+    """Two panels: PSNR per set (input, both models) and both models' drops, as grouped bars."""
+    plt = pyplot()
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4))
+    x = np.arange(len(summary))
+    labels = [SHORT[r["set"]] for r in summary]
+    for i, k in enumerate(ROWS):
+        ax.bar(x + (i - 1) * 0.27, [r[f"psnr_{k}_db"] for r in summary], 0.27, label=ROWS[k], color=COLOURS[k])
+    for i, k in enumerate(MODELS):
+        bx.bar(x + (i - 0.5) * 0.38, [r[f"drop_{k}_db"] or 0.0 for r in summary], 0.38, label=MODELS[k],
+               color=COLOURS[k])
+    bx.axhline(0, color="k", lw=0.8)
+    for a, title, ylabel in ((ax, "paper PSNR per test set", "PSNR (dB)"),
+                             (bx, "drop against the default panel", "ΔPSNR (dB)")):
+        a.set_xticks(x, labels, fontsize=8)
+        a.set_title(title, fontsize=10)
+        a.set_ylabel(ylabel)
+        a.grid(axis="y", alpha=0.3)
+        a.legend(fontsize=7)
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def write_report(out: Path, result: dict) -> None:
+    """study_robustness.csv, .md and .png in `out`; every score must be finite."""
+    bad = [(r["set"], r["panel"], k) for r in result["rows"] for k in ROWS if not math.isfinite(r[f"psnr_{k}_db"])]
+    if bad:
+        raise UdcError(f"study robustness: non-finite PSNR for {bad[0]} (and {len(bad) - 1} more)")
+    summary = summary_rows(result["rows"])
+    write_tables(Path(out), "study_robustness", summary, COLUMNS, markdown(result))
+    plot(summary, Path(out) / "study_robustness.png")

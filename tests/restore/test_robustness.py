@@ -1,0 +1,90 @@
+"""`udc-render study robustness` (restore.studies.robustness): the report on hand-made rows, and the quick study."""
+from __future__ import annotations
+
+import csv
+import json
+import math
+
+import numpy as np
+import pytest
+
+from restore.studies.robustness_report import COLUMNS, SETS, summary_rows, write_report
+from udc_render.errors import UdcError
+
+BUDGET = {"name": "quick", "model": {"type": "unet", "width": 8}, "steps": 40, "epochs": 10, "train_images": 8,
+          "crops_per_image": 2, "batch": 4, "crop_px": 32, "lr": 3e-3, "clip_grad_norm": None, "val_images": 4,
+          "sensor_px": [128, 64], "pitch_um": 24.8, "bands_nm": "400:700:100", "field_phases": 2, "train_panels": 4,
+          "heldout_panels": 2, "seeds": {"train": 0, "score": 2026}}
+
+
+def _row(s, panel, inp, fixed, rnd):
+    return {"set": s, "panel": panel, "family": "poled", "distance_mm": 2.0, "images": 4, "psnr_input_db": inp,
+            "psnr_fixed_db": fixed, "psnr_randomized_db": rnd, "seconds": 1.5}
+
+
+def _result(rows):
+    return {"rows": rows, "budget": BUDGET, "times": {"clean images": 0.5, "bank default": 2.0},
+            "train": {"fixed": {"seconds": 10.0, "steps": 40, "val_psnr_db": 20.0},
+                      "randomized": {"seconds": 12.0, "steps": 40, "val_psnr_db": 19.0}}}
+
+
+def test_the_drops_are_against_each_models_own_default_panel_score():
+    """A set's PSNR is its panels' mean; each model's drop is its set PSNR less its own default-panel PSNR."""
+    rows = [_row("default", "poled", 12.0, 24.0, 22.0), _row("heldout", "random_000", 10.0, 18.0, 21.0),
+            _row("heldout", "random_001", 14.0, 20.0, 23.0), _row("far", "poled", 11.0, 19.5, 21.5)]
+    s = {r["set"]: r for r in summary_rows(rows)}
+    assert list(s) == ["default", "heldout", "far"]  # SETS' order, only the sets present
+    assert s["heldout"]["panels"] == 2 and s["heldout"]["psnr_fixed_db"] == 19.0 and s["heldout"]["psnr_input_db"] == 12.0
+    assert s["heldout"]["drop_fixed_db"] == pytest.approx(-5.0) and s["heldout"]["drop_randomized_db"] == pytest.approx(0.0)
+    assert s["far"]["drop_fixed_db"] == pytest.approx(-4.5) and s["far"]["randomized_minus_fixed_db"] == pytest.approx(2.0)
+    assert s["default"]["drop_fixed_db"] == 0.0
+    assert summary_rows(rows[1:])[0]["drop_fixed_db"] is None  # no default row: no drop
+
+
+def test_the_report_writes_its_table_figure_and_budget(tmp_path):
+    rows = [_row(s, f"p_{s}", 10.0 + i, 20.0 - i, 19.0) for i, s in enumerate(SETS)]
+    write_report(tmp_path, _result(rows))
+    with open(tmp_path / "study_robustness.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [r["set"] for r in table] == list(SETS) and list(table[0]) == COLUMNS
+    assert float(table[6]["drop_fixed_db"]) == pytest.approx(-6.0) and float(table[6]["drop_randomized_db"]) == 0.0
+    md = (tmp_path / "study_robustness.md").read_text()
+    assert "40 Adam steps" in md and "crops of 32 px" in md and "total 35 s" in md  # 0.5 + 2 + 10 + 12 + 7 × 1.5
+    assert "| T-OLED at d = 8 mm | 1 | 16.00 | 14.00 | -6.00 | 19.00 | 0.00 | +5.00 |" in md
+    assert (tmp_path / "study_robustness.png").stat().st_size > 1000
+
+
+def test_a_non_finite_score_is_refused_in_one_line(tmp_path):
+    rows = [_row("default", "poled", 12.0, math.nan, 22.0)]
+    with pytest.raises(UdcError, match=r"non-finite PSNR for \('default', 'poled', 'fixed'\)"):
+        write_report(tmp_path, _result(rows))
+
+
+@pytest.mark.slow
+def test_the_quick_study_scores_every_set_and_resumes(tmp_path):
+    """The quick study (~3-4 min on 2 loaded cores): seven sets, both models' scores finite and every panel scored
+    on the same images; a re-run with a score row removed re-scores only that row, to the same values."""
+    from restore.studies.robustness import BUDGETS, SCORES_FILE, run_study
+    out, cache = tmp_path / "study", str(tmp_path / "kernels")
+    result = run_study(out, quick=True, cache_dir=cache, progress=False)
+    b = BUDGETS["quick"]
+    with open(out / "study_robustness.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [r["set"] for r in table] == list(SETS) and list(table[0]) == COLUMNS
+    assert [int(r["panels"]) for r in table] == [1, b.heldout_panels, 1, 1, 1, 1, 1]
+    assert all(math.isfinite(float(r[c])) for r in table for c in COLUMNS[3:])
+    assert all(r["images"] == b.val_images and len(r["per_image_db"]["randomized"]) == b.val_images
+               for r in result["rows"])
+    assert result["train"]["fixed"]["steps"] == result["train"]["randomized"]["steps"] == b.steps
+    trained = json.loads((out / "train" / "randomized" / "train.json").read_text())
+    assert trained["degrade"]["panels"] == [f"random_{i:03d}" for i in range(b.train_panels)]
+    far = {r["set"]: (r["panel"], r["distance_mm"]) for r in result["rows"] if r["set"] in ("far", "toled_far")}
+    assert far == {"far": ("poled", 8.0), "toled_far": ("toled", 8.0)}
+    lines = (out / SCORES_FILE).read_text().splitlines()
+    (out / SCORES_FILE).write_text("\n".join(lines[:-1]) + "\n")
+    again = run_study(out, quick=True, cache_dir=cache, progress=False)
+    last = json.loads(lines[-1])
+    redone = again["rows"][-1]
+    assert (redone["set"], redone["panel"]) == (last["set"], last["panel"])
+    assert np.allclose(redone["per_image_db"]["fixed"], last["per_image_db"]["fixed"], atol=1e-6)
+    assert again["rows"][:-1] == result["rows"][:-1]
