@@ -263,7 +263,7 @@ def score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
 def run_study(out: Path, quick: bool = False, cache_dir: str | None = None, progress: bool = True) -> dict:
     """The study (module doc) in `out`, or the rest of an interrupted one; writes the report and returns
     {"rows", "budget", "times", "train"}."""
-    out = Path(out)
+    out = Path(out).resolve()  # the tile's path is in the micrograph bank's settings: one spelling per folder
     out.mkdir(parents=True, exist_ok=True)
     b = BUDGETS["quick" if quick else "full"]
     times = Times(out)

@@ -118,7 +118,7 @@ def markdown(result: dict) -> str:
 def plot(summary: list[dict], path: Path) -> None:
     """Two panels: PSNR per set (input, both models) and both models' drops, as grouped bars."""
     plt = pyplot()
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(12, 4))
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(13, 4))
     x = np.arange(len(summary))
     labels = [SHORT[r["set"]] for r in summary]
     for i, k in enumerate(ROWS):
@@ -126,14 +126,15 @@ def plot(summary: list[dict], path: Path) -> None:
     for i, k in enumerate(MODELS):
         bx.bar(x + (i - 0.5) * 0.38, [r[f"drop_{k}_db"] or 0.0 for r in summary], 0.38, label=MODELS[k],
                color=COLOURS[k])
+    ax.set_ylim(0, 1.3 * max(r[f"psnr_{k}_db"] for r in summary for k in ROWS))  # room for the legend
     bx.axhline(0, color="k", lw=0.8)
-    for a, title, ylabel in ((ax, "paper PSNR per test set", "PSNR (dB)"),
-                             (bx, "drop against the default panel", "ΔPSNR (dB)")):
+    for a, title, ylabel, where in ((ax, "paper PSNR per test set", "PSNR (dB)", "upper left"),
+                                    (bx, "drop against the default panel", "ΔPSNR (dB)", "upper right")):
         a.set_xticks(x, labels, fontsize=8)
         a.set_title(title, fontsize=10)
         a.set_ylabel(ylabel)
         a.grid(axis="y", alpha=0.3)
-        a.legend(fontsize=7)
+        a.legend(fontsize=7, loc=where)
     save_figure(fig, path)
     plt.close(fig)
 
