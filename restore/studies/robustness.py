@@ -148,7 +148,8 @@ def diamond_tile(path: Path) -> Path:
 
 
 def outside_displays(out: Path, poled: Display, toled: Display) -> dict:
-    """{set: its displays} outside the family (module doc), from the physical profile's presets."""
+    """{set: its displays} of the test sets made from the physical profile's presets `poled` and `toled` (module
+    doc): the disordered P-OLED, the micrograph tile, both presets at FAR_DISTANCE_MM, the T-OLED as it is."""
     d = DISORDER
     disordered = replace(poled, name="poled_disordered", source="robustness study: the P-OLED preset, disordered",
                          layout=layouts.disordered(poled.layout, d["cells"], d["position_sd_um"], d["size_sd"],
