@@ -137,7 +137,8 @@ class ModelRestorer:
         self.name = settings.name or self.record["model_config"]["type"]
 
     def displays(self, data_dir: Path) -> list[str]:
-        return [self.record["display"]]
+        """The display it was trained on; a model trained online, the bank's panels it drew from."""
+        return self.record["display"].split(",")
 
     def prepare(self, pairs_by_display: dict) -> None:
         pass

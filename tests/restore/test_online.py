@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -136,3 +137,15 @@ def test_online_command_and_its_one_line_refusals(tmp_path, bank, capsys):
         assert main(base[:-1] + ["--out", str(tmp_path / "r2"), *argv]) == 2, argv
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and words in err, err
+
+
+def test_a_model_trained_online_is_scored_on_its_panels_displays(tmp_path, bank, capsys):
+    """evaluate without --display scores a model trained online on the dataset's displays named as the bank's
+    panels it drew from (here a dataset whose display is 'soft')."""
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2), ("test", 1)), size_px=(48, 64), displays=("soft",))
+    s = _settings(bank, epochs=1, batch=2, crop_px=32)
+    s = replace(s, display="soft", degrade={**s.degrade, "panels": ["soft"]})
+    train(data, tmp_path / "run", s, progress=False, bank=bank)
+    assert main(["evaluate", "--data", str(data), "--model", str(tmp_path / "run" / "model.pt"), "--out",
+                 str(tmp_path / "eval")]) == 0
+    assert "soft" in capsys.readouterr().out
