@@ -61,3 +61,15 @@ def test_rows_log_resumes_and_ignores_a_torn_line(tmp_path):
     log.write_text('{"image": "a", "rows": [{"row": "x"}]}\n{"image": "b", "rows": [{"ro')
     assert read_rows(log) == {"a": [{"row": "x"}]}
     assert read_rows(tmp_path / "none.jsonl") == {}
+
+
+def test_dep_candidates_are_compared_with_the_captures_they_restore_and_off_effects_are_marked():
+    """A DeP candidate runs on the shipped profile's captures: its change is against that row, not the bare
+    base; a hit by an effect the physical profile leaves off says so, with its evidence."""
+    from udc_render.studies.gap_effects import EFFECTS
+    off = next(e for e in EFFECTS if not e.default_on)
+    rows = [_row("physical, every effect off", "base", 23.0), _row("physical (every default)", "profile", 22.0),
+            _row("DeP: exact kernel", "dep", 22.5), _row(f"{off.name} on", "effect", 15.0)]
+    s = {r["row"]: r["dep_change_db"] for r in summarise(rows)}
+    assert s["DeP: exact kernel"] == pytest.approx(0.5) and s["physical (every default)"] == pytest.approx(-1.0)
+    assert f"{off.name} on (-8.00 dB; off in physical: {off.evidence})" in verdict(summarise(rows))

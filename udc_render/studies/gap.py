@@ -206,9 +206,9 @@ def rows_for_image(image: str, content: str, item: int, setups: dict, progress_b
     return rows
 
 
-def read_rows(log: Path) -> dict[str, list[dict]]:
-    """{image: its rows} from an earlier run's log (one JSON line per finished image; a torn last line is
-    ignored): the study resumes image by image."""
+def read_log(log: Path) -> dict[str, dict]:
+    """{image: its entry (rows, seconds)} from an earlier run's log (one JSON line per finished image; a torn
+    last line is ignored): the study resumes image by image."""
     done = {}
     if log.is_file():
         for line in log.read_text().splitlines():
@@ -216,8 +216,13 @@ def read_rows(log: Path) -> dict[str, list[dict]]:
                 entry = json.loads(line)
             except json.JSONDecodeError:
                 continue
-            done[entry["image"]] = entry["rows"]
+            done[entry["image"]] = entry
     return done
+
+
+def read_rows(log: Path) -> dict[str, list[dict]]:
+    """{image: its rows} of read_log."""
+    return {image: entry["rows"] for image, entry in read_log(log).items()}
 
 
 def run_study(out_dir, quick: bool = False, images: tuple[str, ...] = (), progress: bool = True) -> list[dict]:
@@ -226,21 +231,24 @@ def run_study(out_dir, quick: bool = False, images: tuple[str, ...] = (), progre
     setups = base_setups(c["sensor_px"])
     content = ([(i, "dead leaves") for i in c["content"]] + [(i, "--images") for i in images]
                + [(i, "built-in photographs (enlarged)") for i in c["photographs"]])
-    t0 = time.perf_counter()
     bar = tqdm(total=len(content) * len(DISPLAYS) * len(EFFECTS), desc="study gap", unit="row", disable=not progress)
     log = Path(out_dir) / f"rows_{'quick' if quick else 'full'}.jsonl"
-    done = read_rows(log)
-    rows = []
+    done = read_log(log)
+    rows, seconds = [], 0.0
     for item, (image, kind) in enumerate(content):
         if image in done:  # scored by an earlier, interrupted run of the same grid
-            rows += done[image]
+            rows += done[image]["rows"]
+            seconds += done[image].get("seconds", 0.0)
             bar.update(len(DISPLAYS) * len(EFFECTS))
             continue
+        t0 = time.perf_counter()
         rank = sum(1 for _, k in content[:item] if k == kind)
         new = rows_for_image(image, kind, item, setups, bar, rank)
+        took = time.perf_counter() - t0
         with open(log, "a") as f:
-            f.write(json.dumps({"image": image, "rows": new}) + "\n")
+            f.write(json.dumps({"image": image, "rows": new, "seconds": took}) + "\n")
         rows += new
+        seconds += took
     bar.close()
-    write_report(Path(out_dir), rows, setups, c, time.perf_counter() - t0, quick)
+    write_report(Path(out_dir), rows, setups, c, seconds, quick)  # the images' seconds, over every resume
     return rows

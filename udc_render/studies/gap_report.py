@@ -20,10 +20,15 @@ PAPER_DEP_DB = {"toled": 28.50, "poled": 16.97}  # the paper's DeP on its real p
 SHORTFALL_DB = (6.0, 10.0)  # how much worse the paper's real P-OLED is for DeP than ours (issue 29)
 
 
+SHIPPED_ROW = "physical (every default)"  # the captures the DeP candidates restore
+
+
 def summarise(rows: list[dict]) -> list[dict]:
     """Means over the images of each (row, display, content group), with DeP's change against the base row
-    of the same display and image (a DeP candidate run on fewer images is compared on those)."""
+    of the same display and image; a DeP candidate's against the shipped profile's row, whose captures it
+    restores (one run on fewer images is compared on those)."""
     base = {(r["display"], r["image"]): r["dep_db"] for r in rows if r["kind"] == "base"}
+    shipped = {(r["display"], r["image"]): r["dep_db"] for r in rows if r["row"] == SHIPPED_ROW}
     keys = list(dict.fromkeys((r["row"], r["display"], r["content"]) for r in rows))
     out = []
     for row, display, content in keys:
@@ -32,7 +37,8 @@ def summarise(rows: list[dict]) -> list[dict]:
         for k in ("capture_vs_base_db", "light_moved"):
             if k in rs[0]:
                 m[k] = float(np.mean([r[k] for r in rs]))
-        m["dep_change_db"] = float(np.mean([r["dep_db"] - base[(r["display"], r["image"])] for r in rs]))
+        ref = shipped if rs[0]["kind"] == "dep" else base
+        m["dep_change_db"] = float(np.mean([r["dep_db"] - ref[(r["display"], r["image"])] for r in rs]))
         out.append({"row": row, "display": display, "content": content, "images": len(rs), "kind": rs[0]["kind"],
                     "paper_dep_db": PAPER_DEP_DB[display], **m})
     return out
@@ -54,11 +60,17 @@ def verdict(summary: list[dict]) -> str:
             f"(level {base['level']:.3f} of white); the paper's DeP scored {base['paper_dep_db']:.2f} dB on its real "
             f"panel.")
     if hits:
-        names = ", ".join(f"{s['row']} ({s['dep_change_db']:+.2f} dB)" for s in hits)
+        names = ", ".join(f"{s['row']} ({s['dep_change_db']:+.2f} dB{_off_note(s['row'])})" for s in hits)
         return f"{head} Lowering DeP by 6 dB or more: {names}."
     return (f"{head} **No effect measured here makes DeP 6–10 dB worse.** The largest change is {worst['row']}: "
             f"{worst['dep_change_db']:+.2f} dB; the shipped profile with every default: "
             + next(f"{s['dep_change_db']:+.2f} dB." for s in cands if s["row"] == "physical (every default)"))
+
+
+def _off_note(row: str) -> str:
+    """'; off in physical: <its evidence>' for an effect the physical profile leaves off, else ''."""
+    effect = next((e for e in EFFECTS if f"{e.name} on" == row), None)
+    return "" if effect is None or effect.default_on else f"; off in physical: {effect.evidence}"
 
 
 def plot(summary: list[dict], path: Path) -> None:
@@ -76,7 +88,7 @@ def plot(summary: list[dict], path: Path) -> None:
     ax.axvline(0, color="k", lw=0.8)
     ax.set_yticks(np.arange(len(names)) + 0.4 - h / 2, names, fontsize=8)
     ax.invert_yaxis()
-    ax.set(xlabel="DeP PSNR − the bare base's (dB, paper protocol)", title="What each effect does to DeP (paper PSF)")
+    ax.set(xlabel="DeP PSNR − the bare base's (DeP candidates: − the shipped profile's) (dB, paper protocol)", title="What each effect does to DeP (paper PSF)")
     ax.grid(True, axis="x", alpha=0.3)
     ax.legend(fontsize=7, loc="lower left")
     save_plot(fig, path)
@@ -100,7 +112,8 @@ def write_report(out: Path, rows: list[dict], setups: dict, c: dict, seconds: fl
           f"{'Quick run. ' if quick else ''}The default monitor scene at {w} × {h} px, both displays, the paper "
           "protocol (linear, [0, 1] of the white level). Every row's DeP uses the paper's computed PSF "
           "(its recipe at 640 / 520 / 450 nm) and the γ of the bare model; 'DeP − base' is against the row "
-          "'physical, every effect off' of the same display and content; 'capture vs base' and 'light moved' "
+          "'physical, every effect off' of the same display and content (a DeP candidate's: against "
+          "'physical (every default)', whose captures it restores); 'capture vs base' and 'light moved' "
           "compare the effect's capture with that row's (same noise seed). Module doc: udc_render/studies/gap.py.", "",
           "## The answer", "", verdict(summary), "",
           "## Means per content group", "", *md_table(summary, [(k, HEADERS[k]) for k in COLUMNS], fmt), "",
