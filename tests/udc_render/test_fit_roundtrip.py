@@ -188,3 +188,18 @@ def test_what_cannot_be_fitted_is_refused_in_one_line(case, says, tmp_path, caps
     assert main(["fit", "--psf", *paths, "--black-level", "64", "--quiet", "--out", str(tmp_path / "o"), *extra]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and says in err and "Traceback" not in err
+
+
+def test_an_opening_the_orders_do_not_determine_is_refused():
+    """A P-OLED in one exposure at 0.1 of the full well (benchmarks/bench_fit_exposures.py's seed 3): 13 powers
+    left the open fraction at 0.005 ± 0.15 (truth 0.23), accepted before; now refused in one line."""
+    from udc_render.fit import FitError
+    from udc_render.fit.inputs import Frame
+    rng = np.random.default_rng([3, 7])
+    rot = rng.uniform(-4, 4)
+    frames = S.psf_measurement(layouts.poled(), shape_hw=(400, 400), offset_px=tuple(rng.uniform(-6, 6, 2)),
+                               rotation_deg=rot, peaks_fw=(0.1,), hot_pixels=3, seed=3, window_px=383)
+    plane = merge_psf([Frame("f0", frames[0].astype(float), "mono", None, 64.0, 65535.0, 16)], 650.0, CAMERA)
+    with pytest.raises(FitError, match="do not determine the poled opening") as err:
+        fit_psf(plane, FitSpec(psf=("x",)).optics(), "poled", window_px=383)
+    assert "\n" not in str(err.value)

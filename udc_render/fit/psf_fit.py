@@ -27,6 +27,7 @@ from udc_render.fit.refine import FamilyFit, Geometry, fit_family
 from udc_render.fit.synthetic import render_window
 
 CHI2_MAX, LOG_RMS_MAX = 9.0, 0.2
+SHAPE_REL_SIGMA_MAX = 0.25  # a shape parameter whose σ exceeds this share of its value is not determined
 MIN_ORDERS_ACROSS = 3  # the window must hold ± this many spacings (and an aperture) around the spot
 
 
@@ -137,9 +138,24 @@ def fit_psf(plane: Plane, optics: Optics, family_name: str, micrograph=None, win
     chosen = min(candidates, key=lambda c: c.fit.chi2_red)
     if chosen.fit.chi2_red > CHI2_MAX and chosen.fit.rms_log > LOG_RMS_MAX:
         raise FitError(f"--family {family_name}: the best family ({chosen.family.name}) leaves a residual far above the "
-                       f"noise (χ²/dof {chosen.fit.chi2_red:.3g}, orders' powers off by {chosen.fit.rms_log:.0%} RMS): "
+                       f"noise (χ²/dof {chosen.fit.chi2_red:.3g}, orders' powers off by {chosen.fit.rms_log * 100:.3g} % RMS): "
                        "the layout is not one of the families; try --family micrograph with the panel's micrograph")
+    _refuse_undetermined(chosen, family_name)
     return PsfFit(plane, window, peaks, candidates, skipped, chosen)
+
+
+def _refuse_undetermined(c: Candidate, family_name: str) -> None:
+    """Refuse a shape the orders do not determine: fewer rows than parameters + 2, or a shape parameter's σ
+    above SHAPE_REL_SIGMA_MAX of its value (a P-OLED in one exposure at 0.1 of the full well: 4–13 rows, the
+    open fraction 0.41 ± 3.1 or 0.005 ± 0.15, where the truth is 0.23)."""
+    f, k = c.fit, len(c.family.names)
+    sig = np.sqrt(np.maximum(np.diag(f.cov)[:k], 0.0))
+    loose = [f"{n} {v:.3g} ± {s:.2g}" for n, v, s in zip(c.family.names, f.x[:k], sig)
+             if not s <= SHAPE_REL_SIGMA_MAX * abs(v)]
+    if int(f.used.sum()) < len(f.x) + 2 or loose:
+        raise FitError(f"--family {family_name}: the orders measured ({int(f.used.sum())} powers) do not determine "
+                       f"the {c.family.name} opening ({', '.join(loose) or 'fewer powers than parameters + 2'}): "
+                       "give a brighter exposure, or a second one 10x longer")
 
 
 def orders_table(c: Candidate) -> dict:
