@@ -192,6 +192,15 @@ def udc():
 
 
 @pytest.fixture(scope="module")
+def tiny_dataset_scene(tmp_path_factory):
+    """The dataset tests' scene: 64 × 32 px at 49.6 µm, 3 bands, 2 spp, a 150 µm margin (4 px: 9 px kernels)."""
+    path = tmp_path_factory.mktemp("scene") / "mon.toml"
+    write_scene(path, monitor_doc(sensor_px=(64, 32), pitch_um=49.6, render={"spp": 2, "margin_um": 150},
+                                  bands={"range_nm": [400, 700], "step_nm": 100}))
+    return path
+
+
+@pytest.fixture(scope="module")
 def render_cache(tmp_path_factory):
     """A fresh UDC_RENDER_CACHE (LLVM probe verdicts) for a render test module, not the user's."""
     with pytest.MonkeyPatch.context() as mp:

@@ -26,12 +26,8 @@ FOLDERS = ["train/shard_0000/item_000000", "train/shard_0001/item_000001", "val/
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory, udc):
-    """64 × 32 px at 49.6 µm, 3 bands, 2 spp, a 150 µm margin (4 px: 9 px kernels)."""
-    path = tmp_path_factory.mktemp("scene") / "mon.toml"
-    udc.write_scene(path, udc.monitor_doc(sensor_px=(64, 32), pitch_um=49.6, render={"spp": 2, "margin_um": 150},
-                                          bands={"range_nm": [400, 700], "step_nm": 100}))
-    return path
+def scene(tiny_dataset_scene):
+    return tiny_dataset_scene
 
 
 def args(scene, out, *extra):

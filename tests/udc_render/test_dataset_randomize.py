@@ -3,7 +3,6 @@ resume, every draw recorded in capture.json, synth.json, item.json and job.json 
 API's, within its range, and bad input answered with one line and exit status 2."""
 import json
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -11,6 +10,7 @@ import pytest
 from udc_render.cli import main
 from udc_render.dataset import randomize as R
 from udc_render.io.exr import read_exr
+from tests.udc_render.test_dataset import tree
 
 pytestmark = pytest.mark.usefixtures("render_cache")
 
@@ -20,12 +20,8 @@ FOLDERS = ["train/shard_0000/item_000000", "train/shard_0001/item_000001", "val/
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory, udc):
-    """64 × 32 px at 49.6 µm, 3 bands, 2 spp, a 150 µm margin (4 px: 9 px kernels)."""
-    path = tmp_path_factory.mktemp("scene") / "mon.toml"
-    udc.write_scene(path, udc.monitor_doc(sensor_px=(64, 32), pitch_um=49.6, render={"spp": 2, "margin_um": 150},
-                                          bands={"range_nm": [400, 700], "step_nm": 100}))
-    return path
+def scene(tiny_dataset_scene):
+    return tiny_dataset_scene
 
 
 def args(scene, out, *extra):
@@ -38,11 +34,6 @@ def reference(scene, tmp_path_factory):
     out = tmp_path_factory.mktemp("ref") / "data"
     assert main(args(scene, out)) == 0
     return out
-
-
-def tree(out: Path) -> dict:
-    return {p.relative_to(out).as_posix(): p.read_bytes() for p in sorted(out.rglob("*"))
-            if p.is_file() and p.name not in ("timing.jsonl", ".lock")}
 
 
 def one_error_line(err: str) -> str:
