@@ -2,7 +2,6 @@
 (byte-identical to an uninterrupted run, no duplicates, stale temporary folders removed), the
 job-parameter check, a 2-process pool and a Dask cluster giving the same bytes, and bad input
 answered with one line and exit status 2."""
-import argparse
 import json
 import shutil
 import signal
