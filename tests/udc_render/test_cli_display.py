@@ -18,6 +18,7 @@ COMMANDS = {
     "calibrate": ["calibrate", "--quick"],
     "train": ["train", "--data", "DATA", "--model", "unet"],
     "evaluate": ["evaluate", "--data", "DATA", "--model", "input"],
+    "bank": ["bank"],
 }
 ALLOWED = "glass (or none), toled, poled, a display file (.toml) or a micrograph image (.png/.tif/.tiff/.exr)"
 
