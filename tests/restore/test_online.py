@@ -13,6 +13,7 @@ from restore.degrade import Degrader
 from restore.online import OnlineBatches, clean_images, region, validation_pairs
 from restore.train import TrainSettings, load_model, predict, train
 from tests.conftest import write_pairs
+from tests.restore.test_train import train_interrupted_at_epoch_2
 from udc_render.cli import main
 from udc_render.dataset.bank import Panel, read_bank, save_panel, write_bank_json
 from udc_render.sensor import SensorConfig, demosaic_bilinear, unpack_rggb
@@ -87,17 +88,7 @@ def test_resumed_online_training_continues_identically(tmp_path, bank, monkeypat
     data = write_pairs(tmp_path / "pairs", splits=(("train", 3),), size_px=(48, 64))
     s = _settings(bank, epochs=4, batch=2, crop_px=32, lr=1e-3)
     train(data, tmp_path / "straight", s, progress=False, bank=bank)
-    import restore.train as T
-    real = T.learning_rate
-
-    def stop_at_third_epoch(settings, epoch):
-        if epoch == 2:
-            raise KeyboardInterrupt
-        return real(settings, epoch)
-    monkeypatch.setattr(T, "learning_rate", stop_at_third_epoch)
-    with pytest.raises(KeyboardInterrupt):
-        train(data, tmp_path / "resumed", s, checkpoint_s=0, progress=False, bank=bank)
-    monkeypatch.setattr(T, "learning_rate", real)
+    train_interrupted_at_epoch_2(monkeypatch, data, tmp_path / "resumed", s, bank=bank)
     train(data, tmp_path / "resumed", s, progress=False, bank=bank)
     a = torch.load(tmp_path / "straight" / "model.pt", weights_only=False)["state_dict"]
     b = torch.load(tmp_path / "resumed" / "model.pt", weights_only=False)["state_dict"]

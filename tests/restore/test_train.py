@@ -48,22 +48,27 @@ def test_tiny_unet_learns_and_beats_the_identity_on_held_out_pairs(tmp_path):
         assert (tmp_path / "run" / f).is_file()
 
 
+def train_interrupted_at_epoch_2(monkeypatch, data, out, settings, **kw) -> None:
+    """train(...) stopped by a KeyboardInterrupt as epoch 2 starts (after checkpointing epochs 0 and 1)."""
+    import restore.train as T
+    real = T.learning_rate
+
+    def stop_at_third_epoch(s, epoch):
+        if epoch == 2:
+            raise KeyboardInterrupt
+        return real(s, epoch)
+    with monkeypatch.context() as m:
+        m.setattr(T, "learning_rate", stop_at_third_epoch)
+        with pytest.raises(KeyboardInterrupt):
+            train(data, out, settings, checkpoint_s=0, progress=False, **kw)
+
+
 def test_resumed_training_gives_the_uninterrupted_weights(tmp_path, monkeypatch):
     data = write_pairs(tmp_path / "pairs", splits=(("train", 4),), size_px=(32, 32))
     s = TrainSettings(model=TINY_RESNET, display="blur", epochs=4, batch=2, crop_px=16, lr=1e-3)
     train(data, tmp_path / "straight", s, progress=False)
-    import restore.train as T
-    real = T.learning_rate
-
-    def stop_at_third_epoch(settings, epoch):
-        if epoch == 2:
-            raise KeyboardInterrupt
-        return real(settings, epoch)
-    monkeypatch.setattr(T, "learning_rate", stop_at_third_epoch)
-    with pytest.raises(KeyboardInterrupt):
-        train(data, tmp_path / "resumed", s, checkpoint_s=0, progress=False)
+    train_interrupted_at_epoch_2(monkeypatch, data, tmp_path / "resumed", s)
     assert torch.load(tmp_path / "resumed" / "checkpoint.pt", weights_only=False)["epoch"] == 2
-    monkeypatch.setattr(T, "learning_rate", real)
     summary = train(data, tmp_path / "resumed", s, progress=False)
     seconds = [r["seconds"] for r in torch.load(tmp_path / "resumed" / "checkpoint.pt", weights_only=False)["log"]]
     assert seconds == sorted(seconds) and summary["seconds"] >= seconds[-1]  # wall time counted across the resume
