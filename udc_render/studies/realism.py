@@ -34,8 +34,6 @@ from tqdm import tqdm
 from psf import Lens, compute_kernels, layouts
 from udc_render.io.plots import mtf_lines, pyplot
 from udc_render.optics import displays as D, gamma as G
-from udc_render.scene import load_scene
-from udc_render.scene.geometry import psf_lens
 from udc_render.sensor import rgb_to_rggb
 from udc_render.studies import realism_capture as rc
 from udc_render.studies.realism_banding import banding_row
@@ -178,13 +176,8 @@ def pitch_order_row() -> dict:
 
 def transmission_fit_rows(widths_nm) -> list[dict]:
     """The P-OLED polyimide × cathode fit at each Urbach width on the default rig: γ and T(λ)."""
-    from psf.cache import cached
-    lens, edges = psf_lens(load_scene("monitor")), np.arange(400.0, 701.0, 10.0)
-    gains = {}
-    for name, lay in (("glass", None), ("poled", layouts.poled())):
-        ks, _ = cached(compute_kernels, "mono", lay, lens, True, wavelengths_nm=0.5 * (edges[1:] + edges[:-1]),
-                       pixel_um=PIXEL_UM, size_px=511, sensor_um=(2048 * PIXEL_UM, 1024 * PIXEL_UM))
-        gains[name] = G.kernel_gain(ks)
+    from udc_render.optics.fit_gains import FIT_EDGES_NM as edges, fit_gains
+    gains = {name: fit_gains(lay) for name, lay in (("glass", None), ("poled", layouts.poled()))}
     w, rows = G.white_weights(edges, "Nikon 5100 (NPL)"), []
     for width in widths_nm:
         scale, edge, cathode = D.fit_poled_transmission(gains["poled"], gains["glass"], edges, urbach_width_nm=width)

@@ -2,9 +2,9 @@
 
 T(λ): the T-OLED's flat T (optics.displays.TOLED_T, fitted to the paper's γ) × transmission_scale; the
 P-OLED's polyimide edge × silver cathode at the drawn Urbach width w, its (scale, edge, cathode) fitted
-to the paper's γ (0.34/0.34/0.34/0.20) at each width (POLED_T_TABLE, every 2 nm from 8 to 30 nm:
+to the paper's γ (0.34/0.34/0.34/0.20) at each width (POLED_T_TABLE, every 1 nm from 8 to 30 nm:
 optics.displays.fit_poled_transmission on the default rig, as `udc-render study realism` does) and
-interpolated linearly in w (γ within 0.25 % of the paper's at every width, 0.25 nm steps), then
+interpolated linearly in w (γ within 0.08 % of the paper's at every width, 0.25 nm steps), then
 × transmission_scale. The gain is the paper's for the family (6, 25).
 """
 from __future__ import annotations
@@ -19,10 +19,14 @@ PANEL_NAME = "random"  # the drawn display's name: its capture's folder in an it
 # w (nm): (scale, edge_nm, cathode_nm), the fit at each Urbach width (module doc; 20 nm: the preset's constants;
 # tests/udc_render/test_randomize.py re-fits two rows from the default rig's kernels, -m slow)
 POLED_T_TABLE = {
-    8.0: (0.0829717, 455.463, 7.04651), 10.0: (0.0849655, 453.119, 7.49275), 12.0: (0.0874161, 450.907, 8.00738),
-    14.0: (0.0904635, 448.847, 8.60423), 16.0: (0.0942937, 446.957, 9.29936), 18.0: (0.0991251, 445.245, 10.1066),
-    20.0: (0.105223, 443.714, 11.0389), 22.0: (0.112937, 442.363, 12.1124), 24.0: (0.122759, 441.196, 13.3506),
-    26.0: (0.135424, 440.213, 14.7895), 28.0: (0.152088, 439.419, 16.4861), 30.0: (0.174683, 438.818, 18.5326),
+    8.0: (0.0870588, 455.94, 8.25635), 9.0: (0.0881316, 454.756, 8.46883), 10.0: (0.0893219, 453.603, 8.69859),
+    11.0: (0.0906431, 452.485, 8.94672), 12.0: (0.0921141, 451.404, 9.21513), 13.0: (0.0937585, 450.362, 9.50615),
+    14.0: (0.0956034, 449.362, 9.82228), 15.0: (0.0976787, 448.406, 10.1659), 16.0: (0.100017, 447.494, 10.5395),
+    17.0: (0.102655, 446.628, 10.9451), 18.0: (0.105631, 445.808, 11.385), 19.0: (0.108992, 445.035, 11.8616),
+    20.0: (0.112792, 444.308, 12.3775), 21.0: (0.117094, 443.628, 12.9359), 22.0: (0.121974, 442.994, 13.5405),
+    23.0: (0.127527, 442.408, 14.1961), 24.0: (0.13387, 441.868, 14.9085), 25.0: (0.14115, 441.377, 15.685),
+    26.0: (0.149558, 440.933, 16.535), 27.0: (0.159339, 440.538, 17.4702), 28.0: (0.170824, 440.192, 18.5062),
+    29.0: (0.184457, 439.896, 19.6633), 30.0: (0.200859, 439.651, 20.9689),
 }
 # The largest transmission_scale that keeps T ≤ 1 at every wavelength, per family
 MAX_TRANSMISSION_SCALE = {"toled": 1.0 / TOLED_T, "poled": 1.0 / max(v[0] for v in POLED_T_TABLE.values())}
