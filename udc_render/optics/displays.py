@@ -20,7 +20,7 @@ Presets (docs/PHYSICS.md §2):
   also cuts G's blue tail (best 0.344/0.335/0.200); the thin metal cathode, which transmits less
   towards the red, lifts G against R. The paper's 2.9 % transmission (a spectrophotometer, l.114)
   disagrees with its own γ and gain (0.029 × 25 = 0.73, not 0.34); we reproduce γ (what the captures
-  show), which implies ≈ 1.4 % through the whole stack (``study realism`` reports it).
+  show), which implies 1.2 % through the whole stack (τ · mean T; ``study realism`` reports it).
 
 A display file (TOML) describes any other display, and a micrograph image is a display of that
 layout; ``load_display`` reads every command's --display (scenes/README.md).
@@ -66,7 +66,7 @@ def thin_metal_transmission(wavelength_nm, thickness_nm: float) -> np.ndarray:
     """Power transmission of a silver film much thinner than the wavelength between two media of index n
     (Tinkham's thin-film formula, Phys. Rev. 104, 845, 1956): T = |1 + Z0 σ_s / 2n|⁻², with the Drude
     sheet conductance above the collision rate, Z0 σ_s = i 2π d λ / λ_p² (λ_p: plasma wavelength).
-    It falls towards the red: T(450 nm) = 0.82, T(650 nm) = 0.69 for d = 11 nm."""
+    It falls towards the red: T(450 nm) = 0.73, T(650 nm) = 0.56 for d = 12.4 nm."""
     x = 2.0 * np.pi * thickness_nm * np.asarray(wavelength_nm, float) / SILVER_PLASMA_WAVELENGTH_NM ** 2
     return 1.0 / (1.0 + (x / (2.0 * STACK_INDEX)) ** 2)
 
