@@ -175,7 +175,7 @@ def test_table_refits_and_gives_the_papers_gamma_between_its_rows():
     """On the default rig's gains (optics.fit_gains, as study realism; minutes without the kernel cache):
     two rows re-fitted to 1e-4, and γ within 0.3 % of the paper's at every 0.5 nm from 8 to 30 nm (the table every 1 nm)."""
     from udc_render.optics import gamma as G
-    from udc_render.optics.fit_gains import FIT_EDGES_NM as edges, fit_gains
+    from udc_render.calibration.fit_gains import FIT_EDGES_NM as edges, fit_gains
     gains = {name: fit_gains(lay) for name, lay in (("glass", None), ("poled", layouts.poled()))}
     for w in (8.0, 26.0):
         fit = D.fit_poled_transmission(gains["poled"], gains["glass"], edges, urbach_width_nm=w)

@@ -45,9 +45,9 @@ def _centre(a, frac=0.25):
 def test_presets_reproduce_the_papers_gammas():
     """The fitted T(λ) constants give all four γ (R, Gr, Gb, B) within 0.2 % of the paper's: T-OLED 0.97,
     P-OLED 0.34/0.34/0.34/0.20, on the default rig's gains with the calibration square's far field
-    (optics.fit_gains), and refitting returns the stored constants."""
+    (calibration.fit_gains), and refitting returns the stored constants."""
     from psf import layouts
-    from udc_render.optics.fit_gains import FIT_EDGES_NM as edges, fit_gains
+    from udc_render.calibration.fit_gains import FIT_EDGES_NM as edges, fit_gains
     from udc_render.sensor import rgb_to_rggb
     g = {name: fit_gains(lay) for name, lay in (("glass", None), ("toled", layouts.toled()),
                                                   ("poled", layouts.poled()))}
@@ -66,11 +66,11 @@ def test_presets_reproduce_the_papers_gammas():
 
 @pytest.mark.slow
 def test_virtual_calibration_measures_the_papers_gamma_through_the_poled(tmp_path):
-    """calibration.gamma's white-square protocol on the default rig (the square and region optics.fit_gains
+    """calibration.gamma's white-square protocol on the default rig (the square and region calibration.fit_gains
     assumes) gives the P-OLED's γ: truth within 0.3 % of the paper's, the noisy regression within 1.5 %."""
     from udc_render.calibration.gamma import calibrate_gamma
     from udc_render.calibration.rig import Rig
-    from udc_render.optics.fit_gains import FIT_REGION_PX, FIT_SQUARE_PX
+    from udc_render.calibration.fit_gains import FIT_REGION_PX, FIT_SQUARE_PX
     from udc_render.sensor import rgb_to_rggb
     r = calibrate_gamma(Rig(D.preset("poled"), out=tmp_path))
     assert (r["square_px"], r["region_px"]) == (FIT_SQUARE_PX, FIT_REGION_PX)

@@ -14,27 +14,13 @@ import numpy as np
 
 from udc_render.calibration.rig import CHANNELS, Rig, check
 from udc_render.content.monitor_image import decode
+from udc_render.optics.far_field import far_square_share
 from udc_render.optics.gamma import channel_gamma, kernel_gain, white_weights
 from udc_render.pipeline import SynthError
 from udc_render.sensor import pack_rggb, rgb_to_rggb
 
 GAMMA_LEVELS = tuple(range(0, 256, 10))
 GAMMA_TOL = 0.02
-
-
-def far_square_share(far, side_x_px: float, side_y_px: float, region_px: int) -> np.ndarray:
-    """[K] the share of the transmitted power that the far field f (optics.far_field.FarField) brings to the
-    region's pixels, on average, from a uniform square side_x × side_y render pixels centred on them:
-    Σ_J f[J] A_x(J) A_y(J), A(J) the mean over the region's pixels p of the share of coarse pixel J's render
-    offsets u whose source p − u lies in the square (|p − u| ≤ side / 2; side inf: a square that reaches the
-    render grid's edges, continued past them as the far field continues the render)."""
-    c, h = far.coarse, far.kernels.shape[-1] // 2
-    offsets = (np.arange(-h, h + 1) * c)[:, None] + np.arange(c)[None, :] - (c - 1) // 2  # [J, c] render px
-    p = np.arange(region_px) - (region_px - 1) / 2
-
-    def share(side):
-        return (np.abs(p[None, None, :] - offsets[:, :, None]) <= side / 2).mean(axis=(1, 2))
-    return np.einsum("kij,i,j->k", far.kernels, share(side_y_px), share(side_x_px))
 
 
 def true_gamma(rig: Rig, band_image, square_px: tuple[float, float] = (0.0, 0.0), region_px: int = 0) -> np.ndarray:

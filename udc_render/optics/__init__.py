@@ -8,7 +8,6 @@
     far_field.py    the light past the kernel window: the far field of the two-scale kernel (FarField)
     displays.py     Display, Transmission, the presets (glass, T-OLED, P-OLED), display TOML files,
                     the analytic γ of a display and the transmission fits
-    fit_gains.py    the kernel gains those fits use: the default rig's, with the calibration square's far field
 """
 from udc_render.optics.apply import OpticsResult, apply_kernels
 from udc_render.optics.bright import BrightPixels

@@ -47,7 +47,8 @@ ALLOWED = (f"glass (or none), toled, poled, a display file (.toml) or a microgra
 TRANSMISSION_TYPES = ("flat", "edge", "polyimide", "csv")
 
 # Fitted by fit_toled_transmission / fit_poled_transmission for the default rig (monitor white D65,
-# Nikon 5100 (NPL), 30 bands of 10 nm, 511-px kernels at 1.55 µm); tests/test_displays.py re-fits them.
+# Nikon 5100 (NPL), 30 bands of 10 nm, 511-px kernels at 1.55 µm, with the far field the γ calibration's white
+# square collects: calibration.fit_gains); tests/udc_render/test_synth.py re-fits them.
 TOLED_T = 0.78566
 # P-OLED: the Urbach width is not fitted (the γ fix three numbers): 20 nm, the blue edge of a yellow
 # aromatic polyimide film (DuPont Kapton HN data sheet: ~0 at 450 nm to ~0.5 at 550 nm, 25 µm film).

@@ -124,6 +124,21 @@ def make_far_field(core, far, coarse: int, acceptance: float, threshold: float) 
                     float(threshold), clipped)
 
 
+def far_square_share(far, side_x_px: float, side_y_px: float, region_px: int) -> np.ndarray:
+    """[K] the share of the transmitted power that the far field f (optics.far_field.FarField) brings to the
+    region's pixels, on average, from a uniform square side_x × side_y render pixels centred on them:
+    Σ_J f[J] A_x(J) A_y(J), A(J) the mean over the region's pixels p of the share of coarse pixel J's render
+    offsets u whose source p − u lies in the square (|p − u| ≤ side / 2; side inf: a square that reaches the
+    render grid's edges, continued past them as the far field continues the render)."""
+    c, h = far.coarse, far.kernels.shape[-1] // 2
+    offsets = (np.arange(-h, h + 1) * c)[:, None] + np.arange(c)[None, :] - (c - 1) // 2  # [J, c] render px
+    p = np.arange(region_px) - (region_px - 1) / 2
+
+    def share(side):
+        return (np.abs(p[None, None, :] - offsets[:, :, None]) <= side / 2).mean(axis=(1, 2))
+    return np.einsum("kij,i,j->k", far.kernels, share(side_y_px), share(side_x_px))
+
+
 def _upsampling(n_out: int, start: int, n_blocks: int, coarse: int) -> np.ndarray:
     """[n_out, n_blocks + 2]: linear interpolation at render pixels start … start + n_out − 1 from the coarse
     samples of blocks −1 … n_blocks (block B centred at render pixel Bc + (c − 1)/2)."""

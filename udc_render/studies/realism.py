@@ -34,6 +34,7 @@ from tqdm import tqdm
 from psf import Lens, compute_kernels, layouts
 from udc_render.io.plots import mtf_lines, pyplot
 from udc_render.optics import displays as D, gamma as G
+from udc_render.calibration.fit_gains import FIT_EDGES_NM, fit_gains
 from udc_render.sensor import rgb_to_rggb
 from udc_render.studies import realism_capture as rc
 from udc_render.studies.realism_banding import banding_row
@@ -176,7 +177,7 @@ def pitch_order_row() -> dict:
 
 def transmission_fit_rows(widths_nm) -> list[dict]:
     """The P-OLED polyimide × cathode fit at each Urbach width on the default rig: γ and T(λ)."""
-    from udc_render.optics.fit_gains import FIT_EDGES_NM as edges, fit_gains
+    edges = FIT_EDGES_NM
     gains = {name: fit_gains(lay) for name, lay in (("glass", None), ("poled", layouts.poled()))}
     w, rows = G.white_weights(edges, "Nikon 5100 (NPL)"), []
     for width in widths_nm:

@@ -6,7 +6,7 @@ The rig: the monitor scene's lens (6 mm, f/1.8), 30 bands of 10 nm from 400 to 7
 that the virtual γ calibration's white square brings to its region (calibration.gamma, the default rig:
 FIT_SQUARE_PX, FIT_REGION_PX):
 
-    g_k = τ_k (1 − o_k) + τ_k a_k,   a_k = calibration.gamma.far_square_share(f_k, square, square, region)
+    g_k = τ_k (1 − o_k) + τ_k a_k,   a_k = optics.far_field.far_square_share(f_k, square, square, region)
 
 the core window's light plus the far field's (optics.far_field, at the synthesis' default threshold and coarse
 factor), as the captures have it. So T(λ) is fitted to what the calibration measures (the paper's γ is a
@@ -20,6 +20,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from udc_render.optics.far_field import acceptance_um, far_square_share, far_window_px, make_far_field
+from udc_render.optics.gamma import kernel_gain
+from udc_render.scene import load_scene
+from udc_render.scene.geometry import psf_lens
+from udc_render.synth_config import DEFAULT_FAR_FIELD_COARSE, DEFAULT_FAR_FIELD_THRESHOLD
+
 FIT_EDGES_NM = np.arange(400.0, 701.0, 10.0)
 FIT_PIXEL_UM, FIT_SIZE_PX = 1.55, 511
 FIT_FRAME_UM = (2048 * 1.55, 1024 * 1.55)
@@ -30,15 +36,9 @@ FIT_SQUARE_PX, FIT_REGION_PX = 576.0, 60
 
 def fit_gains(layout, far_field: bool = True, use_cache: bool = True) -> np.ndarray:
     """[30] g_k of `layout` (None: the bare lens) on the default rig (module doc); far_field False: τ (1 − o)."""
-    from udc_render.calibration.gamma import far_square_share
     from psf import compute_kernels
     from psf.cache import cached
     from psf.far import CACHE_NAME, order_kernels
-    from udc_render.optics.far_field import acceptance_um, far_window_px, make_far_field
-    from udc_render.optics.gamma import kernel_gain
-    from udc_render.scene import load_scene
-    from udc_render.scene.geometry import psf_lens
-    from udc_render.synth_config import DEFAULT_FAR_FIELD_COARSE, DEFAULT_FAR_FIELD_THRESHOLD
     lens = psf_lens(load_scene("monitor"))
     wl = 0.5 * (FIT_EDGES_NM[1:] + FIT_EDGES_NM[:-1])
     core, _ = cached(compute_kernels, "mono", layout, lens, use_cache, wavelengths_nm=wl, pixel_um=FIT_PIXEL_UM,
