@@ -34,8 +34,8 @@ from udc_render.metrics import BORDER_TEXT, PROTOCOLS, border_px, encode_srgb
 from udc_render.sensor import demosaic_bilinear, unpack_rggb
 
 MAC_INPUT_SHAPE = (1, 4, 512, 1024)  # the paper's: 512 × 1024 × 4 packed RAW
-ROW_ORDER = ("input", "dep", "dep_exact", "resnet", "unet_syn", "unet")  # the paper's Table 2 order, and DeP (exact
-# kernel) after its DeP; unet_syn: UNet (Syn)
+ROW_ORDER = ("input", "dep", "dep_exact", "resnet", "unet_syn", "unet", "unet_random")  # the paper's Table 2 order,
+# DeP (exact kernel) after its DeP, UNet (randomized) after the UNet; unet_syn: UNet (Syn)
 DISPLAY_TITLES = {"toled": "T-OLED", "poled": "P-OLED"}
 METRICS = {"paper": ("psnr_db_paper", "ssim_paper"), "srgb": ("psnr_db_srgb", "ssim_srgb", "lpips_srgb")}
 # the paper protocol's text describes udc_render.metrics.paper_linear, which keeps the border: restore.metrics

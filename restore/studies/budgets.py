@@ -9,7 +9,8 @@ BUDGETS = {
     "quick": {"items": (4, 1, 2), "sensor_px": (256, 128), "epochs": {"unet": 2, "resnet": 1},
               "crop_px": {"unet": 64, "resnet": 32}, "crops_per_pair": 1, "batch": 2, "face_sensor_px": (512, 256),
               "heldout_items": 2, "lr": 1e-4, "plateau_db": 0.1, "val_every": 1,
-              "models": {"unet": {"type": "unet", "width": 8}, "resnet": {"type": "resnet", "features": 8, "blocks": 2}}},
+              "models": {"unet": {"type": "unet", "width": 8}, "resnet": {"type": "resnet", "features": 8, "blocks": 2}},
+              "random_panels": 2},
     # cpu: epoch caps, not targets; each model stops at the 0.1 dB plateau, which needs ≥ 6 validations in the
     # last two fifths, so ≥ 26 epochs at val_every 2. Validation on the central 768-px square (a ResNet validation
     # of 20 whole frames would take 6 min). The forward in bfloat16 (half the step time on this CPU,
@@ -19,11 +20,11 @@ BUDGETS = {
             "crop_px": {"unet": 256, "resnet": 128}, "crops_per_pair": 2, "batch": 4, "face_sensor_px": (2048, 1024),
             "heldout_items": None, "lr": 2e-4, "plateau_db": 0.1, "val_every": 2, "val_crop_px": 768,
             "clip_grad_norm": 0.5, "autocast": "bf16", "models": {"unet": None, "resnet": None},
-            "carry": "restore/trained/cpu"},
+            "random_panels": 16, "carry": "restore/trained/cpu"},
     "paper": {"items": (400, 40, 60), "sensor_px": (2048, 1024), "epochs": {"unet": 400, "resnet": 400},
               "crop_px": {"unet": 256, "resnet": 256}, "crops_per_pair": 1, "batch": 4, "face_sensor_px": (2048, 1024),
               "lr": 1e-4,
-              "models": {"unet": None, "resnet": None}},
+              "models": {"unet": None, "resnet": None}, "random_panels": 32},
 }
 DISPLAYS = ("toled", "poled")
 DISPLAY_NAMES = {"toled": "T-OLED", "poled": "P-OLED"}
@@ -31,9 +32,11 @@ PROFILES = ("physical", "paper")  # udc_render.profiles: the captures, and the p
 
 
 # (row, model kind, the profile whose pairs train it): the paper's rows; UNet (Syn) is trained on the paper's
-# own synthesis and tested on the physical captures, as the paper's synthetic-to-real row.
-# Trained in this order: the ResNet, the slowest, last.
-ROWS = (("unet", "unet", "physical"), ("unet_syn", "unet", "paper"), ("resnet", "resnet", "physical"))
+# own synthesis and tested on the physical captures, as the paper's synthetic-to-real row; UNet (randomized)
+# on the physical dataset's clean renders degraded on the fly through randomized panels (restore.studies.
+# random_row; 'random_panels' per display). Trained in this order: the ResNet, the slowest, last.
+ROWS = (("unet", "unet", "physical"), ("unet_syn", "unet", "paper"), ("unet_random", "unet", "random"),
+        ("resnet", "resnet", "physical"))
 
 
 def run_dir(out: Path, row: str, display: str) -> Path:

@@ -25,7 +25,7 @@ def ordering_checks(results: dict) -> list[tuple[str, bool, str]]:
         if u is not None and s is not None:
             checks.append((f"UNet (Syn) below UNet on {d} (PSNR)", s < u,
                            f"{s:.2f} vs {u:.2f} dB: gap {u - s:.2f} dB (paper {PAPER_SYN_GAP_DB[d]:g} dB)"))
-    for name in ("input", "dep", "dep_exact", "resnet", "unet_syn", "unet"):
+    for name in ("input", "dep", "dep_exact", "resnet", "unet_syn", "unet", "unet_random"):
         t, p = psnr(name, "toled"), psnr(name, "poled")
         if t is not None and p is not None:
             checks.append((f"P-OLED harder than T-OLED for {name} (PSNR)", p < t, f"{p:.2f} vs {t:.2f} dB"))

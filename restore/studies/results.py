@@ -30,12 +30,13 @@ def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, 
     there into a run folder that lacks it (restore.studies.carry)."""
     from restore.models import RESNET_CONFIG, UNET_CONFIG
     from restore.studies.carry import bring_back, keep
+    from restore.studies.random_row import online_settings, random_bank
     from restore.train import TrainSettings, data_fingerprint, train
     defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
     models = {}
     for row, kind, profile in ROWS:
         cfg = dict(b["models"][kind] or defaults[kind])
-        data = datasets[profile]
+        data = datasets["physical" if profile == "random" else profile]  # random: the physical clean renders
         for d in DISPLAYS:
             t = time.perf_counter()
             run = run_dir(out, row, d)
@@ -44,9 +45,13 @@ def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, 
                                      data_fingerprint=data_fingerprint(data), plateau_db=b.get("plateau_db"),
                                      val_crop_px=b.get("val_crop_px"), clip_grad_norm=b.get("clip_grad_norm"),
                                      autocast=b.get("autocast"))
+            bank = random_bank(out, b, d, progress) if profile == "random" else None
+            if bank is not None:
+                settings = online_settings(settings, bank)
             if carry:
                 bring_back(carry / run.name, run, settings)
-            train(data, run, settings, val_every=b.get("val_every", 10), progress=progress)
+            train(data, run, settings, val_every=b.get("val_every", 10), progress=progress,
+                  bank=None if bank is None else bank.folder)
             if carry:
                 keep(run, carry / run.name)
             models[(row, d)] = run / "model.pt"

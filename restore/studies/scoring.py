@@ -81,7 +81,9 @@ def evaluate_rows(data: Path, models: dict, ev: Path, progress: bool) -> dict:
         if stamps.get(method) == stamp and all(d in scored.get(name, {}).get("displays", {}) for d in displays):
             continue
         t = time.perf_counter()
-        evaluate(data, method, ev, EvalSettings(name=None if method in BUILTIN_METHODS else name), progress=progress)
+        builtin = method in BUILTIN_METHODS  # a model is scored on its row's display (an online one: not its panels)
+        evaluate(data, method, ev, EvalSettings(name=None if builtin else name,
+                                                displays=None if builtin else tuple(displays)), progress=progress)
         seconds[name] = time.perf_counter() - t
         stamps[method] = stamp
         save_json(seconds_path, seconds)

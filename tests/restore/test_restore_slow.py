@@ -24,18 +24,20 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     from restore.studies.results import run_results
     r = run_results(tmp_path / "res", "quick", progress=False)
     methods = r["results"]["methods"]
-    assert set(methods) == {"input", "dep", "unet", "resnet", "unet_syn"}
+    assert set(methods) == {"input", "dep", "dep_exact", "unet", "resnet", "unet_syn", "unet_random"}
     for d in ("toled", "poled"):
         # DeP improves on the degraded input on rendered T-OLED and P-OLED pairs
         assert methods["dep"]["displays"][d]["psnr_db_paper"] > methods["input"]["displays"][d]["psnr_db_paper"]
         assert np.isfinite(methods["unet"]["displays"][d]["psnr_db_paper"])
+        assert np.isfinite(methods["unet_random"]["displays"][d]["psnr_db_paper"])  # trained online, scored on d
+        assert (tmp_path / "res" / "banks" / f"random_{d}" / "bank.json").is_file()
     doc = (tmp_path / "res" / "RESULTS.md").read_text()
     assert doc.startswith("# Restoration results")
     assert "## Training (quick budget)" in doc and "![training curves](figures/training_curves.png)" in doc
     assert (tmp_path / "res" / "figures" / "training_curves.png").is_file()
     assert "| test | " in doc  # the content table per split
     # two training lines, a row in each protocol's table, one held out, one per display in the error bands
-    assert doc.count("| unet_syn |") == 7 and "## Where the error lies (spatial frequency)" in doc
+    assert doc.count("| unet_syn |") == 7 and doc.count("| unet_random |") == 7 and "## Where the error lies (spatial frequency)" in doc
     assert (tmp_path / "res" / "figures" / "error_bands_poled.png").is_file()
     assert set(r["heldout"]["methods"]) == set(methods) and "## Held-out photographs (a content check)" in doc
     assert r["heldout"]["methods"]["input"]["displays"]["toled"]["images"] == 2
@@ -53,9 +55,9 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     untouched = {p: p.stat().st_mtime_ns for p in res.rglob("*") if p.name in ("timing.jsonl", "loss.csv")}
     same = {p: p.read_bytes() for p in res.rglob("*") if p.name in ("model.pt", "manifest.jsonl")}
     again = run_results(res, "quick", progress=False)
-    assert len(untouched) == 3 + 3 * 2 and all(p.stat().st_mtime_ns == t for p, t in untouched.items())
-    assert len(same) == 3 + 3 * 2 and all(p.read_bytes() == b for p, b in same.items())
-    assert len(scores) == 2 * 5 * 2 and all(p.stat().st_mtime_ns == t for p, t in scores.items())
+    assert len(untouched) == 3 + 4 * 2 and all(p.stat().st_mtime_ns == t for p, t in untouched.items())
+    assert len(same) == 3 + 4 * 2 and all(p.read_bytes() == b for p, b in same.items())
+    assert len(scores) == 2 * 7 * 2 and all(p.stat().st_mtime_ns == t for p, t in scores.items())
     assert all(json.loads((res / ev / "row_seconds.json").read_text()) == v for ev, v in row_seconds.items())
     for d in ("toled", "poled"):  # the same weights on the same pairs
         assert (again["results"]["methods"]["unet"]["displays"][d]["psnr_db_paper"] ==

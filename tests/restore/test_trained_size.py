@@ -1,5 +1,5 @@
 """The shipped weights (restore/trained) stay bounded: each retrain adds its float16 model.pt files to the
-git history (the cpu run's six: 77 MB, about 71 MB packed), so they are replaced only when RESULTS.md is
+git history (the cpu run's eight, with the two UNet (randomized): 113 MB, about 104 MB packed), so they are replaced only when RESULTS.md is
 regenerated, and the folder holds the models and their small records only."""
 import subprocess
 from pathlib import Path
@@ -7,7 +7,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
-MAX_TOTAL_MB = 80  # today 74 MB: 4 UNets of 17.9 MB and 2 ResNets of 2.8 MB (float16 state dicts)
+# 6 UNets of 17.9 MB (unet, unet_syn, unet_random × 2 displays) and 2 ResNets of 2.8 MB: 113 MB (float16 state
+# dicts); 80 MB until the UNet (randomized) row (issue 31) added two UNets
+MAX_TOTAL_MB = 120
 SMALL = {".json": 64_000, ".csv": 64_000, ".png": 256_000}  # bytes per file beside model.pt
 
 

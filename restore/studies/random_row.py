@@ -1,0 +1,68 @@
+"""The UNet (randomized) row of `udc-render results`: the paper's UNet, trained on the fly (restore.online) on
+the clean renders of the physical dataset's train split, each crop degraded through a panel drawn from a bank
+of the display's family, and tested on the physical captures like every other row.
+
+The bank (out/banks/random_<display>, udc_render.dataset.bank_make): b['random_panels'] panels drawn from the
+documented ranges (randomize `default`) with the family fixed to the display's, seed RANDOMIZE_SEED, at the
+datasets' rig (the monitor scene at the budget's frame, the physical profile's synthesis settings, the kernel
+size `udc-render bank` takes). Validation: the val split's clean renders, image j through panel j mod N.
+What it tests: a restorer trained across the unknowns of its panel, on the one panel the captures show
+(the default P-OLED or T-OLED: a point inside the ranges), and through the per-channel form it trains on
+against the spectral captures it is scored on.
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import replace
+from pathlib import Path
+
+from restore.train import TrainSettings
+from udc_render.dataset.bank import Bank, read_bank
+from udc_render.dataset.bank_make import bank_settings, make_bank, random_specs
+from udc_render.dataset.randomize import default_distributions, parse
+from udc_render.io.files import save_json
+from udc_render.pipeline import SynthConfig
+from udc_render.profiles import describe, resolve_profile
+from udc_render.scene import load_scene
+from udc_render.scene.geometry import camera_geometry
+from udc_render.scene.overrides import with_overrides
+
+RANDOM_ROW = "unet_random"
+RANDOMIZE_SEED = 0
+SECONDS_FILE = "seconds.json"  # out/banks/seconds.json: {bank: seconds spent making it, summed over invocations}
+
+
+def family_distributions(display: str):
+    """randomize `default` with display.family fixed to `display` ('toled' or 'poled')."""
+    return parse({"display": {"family": display}}, f"results: the {display} family", default_distributions())
+
+
+def random_bank(out: Path, b: dict, display: str, progress: bool) -> Bank:
+    """The row's bank for `display` (module doc), made or finished in out/banks/random_<display>."""
+    scene = with_overrides(load_scene("monitor"), sensor_px=b["sensor_px"])  # the datasets' (restore.studies.datasets)
+    cfg, _ = resolve_profile("physical", SynthConfig(), [])
+    size = 2 * (camera_geometry(scene).margin_px // scene.render.supersample) + 1  # as `udc-render bank`
+    specs = random_specs(family_distributions(display), b["random_panels"], RANDOMIZE_SEED, scene, cfg)
+    extra = {"profile": describe(cfg.profile), "study": "results", "row": RANDOM_ROW, "family": display}
+    folder = out / "banks" / f"random_{display}"
+    t0 = time.perf_counter()
+    if make_bank(folder, specs, bank_settings(scene, cfg, size, specs, extra), size, progress=progress)["made"]:
+        path = out / "banks" / SECONDS_FILE
+        seconds = json.loads(path.read_text()) if path.is_file() else {}
+        seconds[folder.name] = round(seconds.get(folder.name, 0.0) + time.perf_counter() - t0, 2)
+        save_json(path, seconds)
+    return read_bank(folder)
+
+
+def bank_hours(out: Path) -> float:
+    """The hours spent making the row's banks (out/banks/seconds.json; 0 before any)."""
+    path = out / "banks" / SECONDS_FILE
+    return sum(json.loads(path.read_text()).values()) / 3600 if path.is_file() else 0.0
+
+
+def online_settings(settings: TrainSettings, bank: Bank) -> TrainSettings:
+    """`settings` (the UNet row's recipe) trained on the fly through `bank`'s panels."""
+    names = [p.name for p in bank.panels]
+    return replace(settings, display=",".join(names),
+                   degrade={"mode": "online", "bank_fingerprint": bank.fingerprint, "panels": names})
