@@ -52,6 +52,18 @@ def paper_metrics(restored: np.ndarray | None, gt: np.ndarray, packed: np.ndarra
     return {"psnr_db_paper": psnr_db(a, b), "ssim_paper": ssim(a, b)}
 
 
+def level_matched_psnr_db(restored: np.ndarray | None, gt: np.ndarray, packed: np.ndarray | None = None) -> float:
+    """The paper protocol's PSNR after each channel of the restored image (or of `packed`) is scaled by its
+    least-squares gain onto the truth, g_c = Σ a_c b_c / Σ a_c² on the protocol's pair, and clipped again: the
+    level and colour balance solved per image with the truth (an oracle). What it leaves is the error in the
+    image's structure; the plain PSNR less this one is what the level and balance cost."""
+    a, b = _paper_pair(restored, gt, packed)
+    flat_a, flat_b = a.reshape(a.shape[0], -1).astype(np.float64), b.reshape(b.shape[0], -1).astype(np.float64)
+    power = np.einsum("cn,cn->c", flat_a, flat_a)
+    gain = np.where(power > 0, np.einsum("cn,cn->c", flat_a, flat_b) / np.where(power > 0, power, 1.0), 1.0)
+    return psnr_db(np.clip(a * gain[:, None, None], 0.0, 1.0).astype(a.dtype), b)
+
+
 def image_metrics(restored: np.ndarray, gt: np.ndarray, balance: np.ndarray, lpips_model,
                   packed: np.ndarray | None = None) -> dict:
     """The scores of a restored [3, H, W] image against its ground truth under both protocols

@@ -7,7 +7,8 @@ and clean crops, on
 Both are scored, with the paper protocol's PSNR (restore.metrics.paper_metrics: linear, clipped to [0, 1],
 border cropped), on the validation images, each degraded once through each panel of a test set (restore.online.
 validation_pairs: image j's noise from (SCORE_SEED, 'val', j)), beside the input (the packed RAW, as
-restore.evaluate scores the input row):
+restore.evaluate scores the input row), and with the level-matched PSNR (restore.metrics.level_matched_psnr_db:
+each channel's level solved with the truth; randomized T and brightness make the absolute level ambiguous):
     default      the default P-OLED (a's training panel);
     heldout      draws within the ranges that neither model trained on (randomize `default`, seed 1);
     disordered   the P-OLED with fabrication disorder (psf.layouts.disordered: a 2 × 2 supercell, openings moved
@@ -40,7 +41,7 @@ from tqdm import tqdm
 
 from psf import layouts
 from restore.degrade import Degrader
-from restore.metrics import paper_metrics
+from restore.metrics import level_matched_psnr_db, paper_metrics
 from restore.online import clean_images, images_fingerprint, validation_pairs
 from restore.studies.robustness_report import MODELS, SETS, write_report
 from restore.train import TrainSettings, load_model, predict, train
@@ -100,7 +101,7 @@ BUDGETS = {
     # the CPU budget: 512 × 256 px of 6.2 µm (the default frame's field of view, 129-px kernels), the scene's bands
     "full": Budget("full", (512, 256), 6.2, None, 4, train_images=48, val_images=8, train_panels=16,
                    heldout_panels=8, model={"type": "unet", "width": 16, "depth": 4}, crop_px=128, batch=4,
-                   crops_per_image=4, epochs=60, lr=5e-4, clip_grad_norm=0.5),
+                   crops_per_image=4, epochs=240, lr=5e-4, clip_grad_norm=0.5),
 }
 
 
@@ -232,10 +233,12 @@ def score_panel(models: dict, bank: Bank, index: int, images: list) -> dict[str,
     panel = bank.panels[index]
     one = Bank(bank.folder, bank.settings, [panel])
     pairs = validation_pairs(images, one, Degrader([panel], "cpu", torch.float32), SCORE_SEED)
-    per_image = {"input": [paper_metrics(None, gt, packed=x)["psnr_db_paper"] for x, gt in pairs]}
+    per_image = {"input": [paper_metrics(None, gt, packed=x)["psnr_db_paper"] for x, gt in pairs],
+                 "input_level": [level_matched_psnr_db(None, gt, packed=x) for x, gt in pairs]}
     for key, model in models.items():
-        per_image[key] = [paper_metrics(predict(model, x, torch.device("cpu")), gt)["psnr_db_paper"]
-                          for x, gt in pairs]
+        out = [(predict(model, x, torch.device("cpu")), gt) for x, gt in pairs]
+        per_image[key] = [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in out]
+        per_image[f"{key}_level"] = [level_matched_psnr_db(y, gt) for y, gt in out]
     return per_image
 
 

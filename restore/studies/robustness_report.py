@@ -3,7 +3,9 @@ study_robustness.md (the budget and wall time, the drops side by side, every pan
 study_robustness.png (PSNR per set and model, and the drops, as bars).
 
 A set's PSNR is the mean of its panels' mean paper PSNR (every panel scores the same images); a model's drop on a
-set is its PSNR there less its PSNR on the default panel (negative: worse than on the default panel).
+set is its PSNR there less its PSNR on the default panel (negative: worse than on the default panel). The same
+for the level-matched PSNR (restore.metrics.level_matched_psnr_db: each channel's level solved per image with the
+truth), which separates the error in the image's structure from a wrong level or colour balance.
 """
 from __future__ import annotations
 
@@ -28,7 +30,9 @@ SHORT = {"default": "default\nP-OLED", "heldout": "held-out\ndraws", "toled": "T
          "toled_far": "T-OLED\n8 mm"}  # the figure's tick labels
 ROWS = {"input": "input (packed RAW)", **MODELS}
 COLUMNS = ["set", "panels", "images", "psnr_input_db", "psnr_fixed_db", "drop_fixed_db", "psnr_randomized_db",
-           "drop_randomized_db", "randomized_minus_fixed_db"]
+           "drop_randomized_db", "randomized_minus_fixed_db", "psnr_input_level_db", "psnr_fixed_level_db",
+           "drop_fixed_level_db", "psnr_randomized_level_db", "drop_randomized_level_db",
+           "randomized_minus_fixed_level_db"]
 COLOURS = {"input": "0.7", "fixed": "tab:blue", "randomized": "tab:orange"}
 
 
@@ -42,13 +46,16 @@ def summary_rows(rows: list[dict]) -> list[dict]:
             continue
         row = {"set": s, "panels": len(mine), "images": mine[0]["images"]}
         for k in ROWS:
-            row[f"psnr_{k}_db"] = float(np.mean([r[f"psnr_{k}_db"] for r in mine]))
+            for tail in ("", "_level"):
+                row[f"psnr_{k}{tail}_db"] = float(np.mean([r[f"psnr_{k}{tail}_db"] for r in mine]))
         out.append(row)
     base = next((r for r in out if r["set"] == "default"), None)
     for row in out:
-        for k in MODELS:
-            row[f"drop_{k}_db"] = None if base is None else row[f"psnr_{k}_db"] - base[f"psnr_{k}_db"]
-        row["randomized_minus_fixed_db"] = row["psnr_randomized_db"] - row["psnr_fixed_db"]
+        for tail in ("", "_level"):
+            for k in MODELS:
+                key = f"psnr_{k}{tail}_db"
+                row[f"drop_{k}{tail}_db"] = None if base is None else row[key] - base[key]
+            row[f"randomized_minus_fixed{tail}_db"] = row[f"psnr_randomized{tail}_db"] - row[f"psnr_fixed{tail}_db"]
     return out
 
 
@@ -95,18 +102,19 @@ def markdown(result: dict) -> str:
              "images degraded once through every panel of each set, with fixed seeds. Drop: the set's PSNR less "
              "the same model's on the default panel.", "", *budget_text(result["budget"], result["times"], train, rows),
              "", "## PSNR (dB) and drops", ""]
-    cols = [("set", "test set"), ("panels", "panels"), ("psnr_input_db", "input"),
-            ("psnr_fixed_db", MODELS["fixed"]), ("drop_fixed_db", "drop"),
-            ("psnr_randomized_db", MODELS["randomized"]), ("drop_randomized_db", "drop"),
-            ("randomized_minus_fixed_db", "randomized − default")]
-    two = lambda v: f"{v:.2f}"  # noqa: E731
-    lines += md_table(summary, cols, {"set": lambda s: SETS[s], "psnr_input_db": two, "psnr_fixed_db": two,
-                                      "psnr_randomized_db": two, "drop_fixed_db": db, "drop_randomized_db": db,
-                                      "randomized_minus_fixed_db": db})
+    lines += psnr_table(summary, "")
+    lines += ["", "## Level-matched PSNR (dB) and drops", "",
+              "Each channel of each output (and of the input) scaled by its least-squares gain onto the truth "
+              "before the paper protocol's PSNR (`restore.metrics.level_matched_psnr_db`): the level and colour "
+              "balance solved per image with the truth, an oracle no restorer has. What is left is the error in "
+              "the image's structure (blur, noise, artefacts); the table above less this one is what a wrong "
+              "level or balance costs.", ""]
+    lines += psnr_table(summary, "_level")
     lines += ["", "Validation PSNR at the end of training (each on its own training panels' validation): "
               + ", ".join(f"{MODELS[k]} {t['val_psnr_db']:.2f} dB after {t['steps']} steps"
                           for k, t in train.items() if t.get("val_psnr_db") is not None) + ".",
               "", "## Every panel", ""]
+    two = lambda v: f"{v:.2f}"  # noqa: E731
     pcols = [("set", "set"), ("panel", "panel"), ("family", "family"), ("distance_mm", "d (mm)"),
              ("psnr_input_db", "input"), ("psnr_fixed_db", MODELS["fixed"]),
              ("psnr_randomized_db", MODELS["randomized"])]
@@ -115,20 +123,39 @@ def markdown(result: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def psnr_table(summary: list[dict], tail: str) -> list[str]:
+    """The sets' PSNR and drops (tail '': paper PSNR; '_level': level-matched) as a Markdown table."""
+    cols = [("set", "test set"), ("panels", "panels"), (f"psnr_input{tail}_db", "input"),
+            (f"psnr_fixed{tail}_db", MODELS["fixed"]), (f"drop_fixed{tail}_db", "drop"),
+            (f"psnr_randomized{tail}_db", MODELS["randomized"]), (f"drop_randomized{tail}_db", "drop"),
+            (f"randomized_minus_fixed{tail}_db", "randomized − default")]
+    two = lambda v: f"{v:.2f}"  # noqa: E731
+    return md_table(summary, cols, {"set": lambda s: SETS[s], f"psnr_input{tail}_db": two,
+                                    f"psnr_fixed{tail}_db": two, f"psnr_randomized{tail}_db": two,
+                                    f"drop_fixed{tail}_db": db, f"drop_randomized{tail}_db": db,
+                                    f"randomized_minus_fixed{tail}_db": db})
+
+
 def plot(summary: list[dict], path: Path) -> None:
     """Two panels: PSNR per set (input, both models) and both models' drops, as grouped bars."""
     plt = pyplot()
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(13, 4))
+    fig, (ax, cx, bx) = plt.subplots(1, 3, figsize=(19, 4))
     x = np.arange(len(summary))
     labels = [SHORT[r["set"]] for r in summary]
     for i, k in enumerate(ROWS):
         ax.bar(x + (i - 1) * 0.27, [r[f"psnr_{k}_db"] for r in summary], 0.27, label=ROWS[k], color=COLOURS[k])
+        cx.bar(x + (i - 1) * 0.27, [r[f"psnr_{k}_level_db"] for r in summary], 0.27, label=ROWS[k],
+               color=COLOURS[k])
     for i, k in enumerate(MODELS):
         bx.bar(x + (i - 0.5) * 0.38, [r[f"drop_{k}_db"] or 0.0 for r in summary], 0.38, label=MODELS[k],
                color=COLOURS[k])
-    ax.set_ylim(0, 1.3 * max(r[f"psnr_{k}_db"] for r in summary for k in ROWS))  # room for the legend
+    top = 1.3 * max(r[f"psnr_{k}{t}_db"] for r in summary for k in ROWS for t in ("", "_level"))
+    ax.set_ylim(0, top)  # room for the legend
+    cx.set_ylim(0, top)
     bx.axhline(0, color="k", lw=0.8)
     for a, title, ylabel, where in ((ax, "paper PSNR per test set", "PSNR (dB)", "upper left"),
+                                    (cx, "level-matched PSNR (level and balance solved with the truth)", "PSNR (dB)",
+                                     "upper left"),
                                     (bx, "drop against the default panel", "ΔPSNR (dB)", "upper right")):
         a.set_xticks(x, labels, fontsize=8)
         a.set_title(title, fontsize=10)
@@ -141,7 +168,8 @@ def plot(summary: list[dict], path: Path) -> None:
 
 def write_report(out: Path, result: dict) -> None:
     """study_robustness.csv, .md and .png in `out`; every score must be finite."""
-    bad = [(r["set"], r["panel"], k) for r in result["rows"] for k in ROWS if not math.isfinite(r[f"psnr_{k}_db"])]
+    bad = [(r["set"], r["panel"], k) for r in result["rows"] for k in ROWS for t in ("", "_level")
+           if not math.isfinite(r[f"psnr_{k}{t}_db"])]
     if bad:
         raise UdcError(f"study robustness: non-finite PSNR for {bad[0]} (and {len(bad) - 1} more)")
     summary = summary_rows(result["rows"])

@@ -104,3 +104,21 @@ def test_validation_psnr_clips_both_images_to_0_1():
     assert validation_psnr(_Constant(0.75), pairs, cpu) == pytest.approx(20 * math.log10(4), rel=1e-12)
     assert validation_psnr(_Constant(2.0), pairs[:1], cpu) == math.inf
     assert validation_psnr(_Constant(0.5), [], cpu) is None
+
+
+def test_level_matched_psnr_solves_each_channels_gain():
+    """An output at half the level in R and twice in B, plus noise: the plain PSNR pays for the level, the
+    level-matched one equals the PSNR of the noise alone (scaled by the same gains), for RGB and packed RAW."""
+    from restore.metrics import level_matched_psnr_db, paper_metrics
+    from udc_render.metrics import psnr_db
+    rng = np.random.default_rng(0)
+    gt = rng.uniform(0.05, 0.45, (3, 96, 128))
+    noise = rng.normal(0, 0.01, gt.shape)
+    gains = np.array([0.5, 1.0, 2.0])[:, None, None]
+    out = gains * (gt + noise)
+    plain, matched = paper_metrics(out, gt)["psnr_db_paper"], level_matched_psnr_db(out, gt)
+    crop = (slice(None), slice(16, -16), slice(16, -16))
+    assert matched - plain > 20 and matched == pytest.approx(psnr_db((gt + noise)[crop], gt[crop]), abs=0.05)
+    from udc_render.sensor import mosaic_of, pack_rggb
+    packed = 0.3 * pack_rggb(mosaic_of(gt))
+    assert level_matched_psnr_db(None, gt, packed=packed) > 150  # an exact gain: no error left but rounding

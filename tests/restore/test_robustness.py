@@ -17,9 +17,11 @@ BUDGET = {"name": "quick", "model": {"type": "unet", "width": 8}, "steps": 40, "
           "heldout_panels": 2, "seeds": {"train": 0, "score": 2026}}
 
 
-def _row(s, panel, inp, fixed, rnd):
+def _row(s, panel, inp, fixed, rnd, level_db=1.0):
+    """A score row; its level-matched PSNR is each PSNR + level_db."""
     return {"set": s, "panel": panel, "family": "poled", "distance_mm": 2.0, "images": 4, "psnr_input_db": inp,
-            "psnr_fixed_db": fixed, "psnr_randomized_db": rnd, "seconds": 1.5}
+            "psnr_fixed_db": fixed, "psnr_randomized_db": rnd, "psnr_input_level_db": inp + level_db,
+            "psnr_fixed_level_db": fixed + level_db, "psnr_randomized_level_db": rnd + level_db, "seconds": 1.5}
 
 
 def _result(rows):
@@ -38,6 +40,7 @@ def test_the_drops_are_against_each_models_own_default_panel_score():
     assert s["heldout"]["drop_fixed_db"] == pytest.approx(-5.0) and s["heldout"]["drop_randomized_db"] == pytest.approx(0.0)
     assert s["far"]["drop_fixed_db"] == pytest.approx(-4.5) and s["far"]["randomized_minus_fixed_db"] == pytest.approx(2.0)
     assert s["default"]["drop_fixed_db"] == 0.0
+    assert s["heldout"]["psnr_fixed_level_db"] == 20.0 and s["far"]["drop_fixed_level_db"] == pytest.approx(-4.5)
     assert summary_rows(rows[1:])[0]["drop_fixed_db"] is None  # no default row: no drop
 
 
@@ -51,6 +54,7 @@ def test_the_report_writes_its_table_figure_and_budget(tmp_path):
     md = (tmp_path / "study_robustness.md").read_text()
     assert "40 Adam steps" in md and "crops of 32 px" in md and "total 35 s" in md  # 0.5 + 2 + 10 + 12 + 7 × 1.5
     assert "| T-OLED at d = 8 mm | 1 | 16.00 | 14.00 | -6.00 | 19.00 | 0.00 | +5.00 |" in md
+    assert "| T-OLED at d = 8 mm | 1 | 17.00 | 15.00 | -6.00 | 20.00 | 0.00 | +5.00 |" in md  # level-matched
     assert (tmp_path / "study_robustness.png").stat().st_size > 1000
 
 
