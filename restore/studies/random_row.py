@@ -12,20 +12,19 @@ against the spectral captures it is scored on.
 """
 from __future__ import annotations
 
-import json
 import time
 from dataclasses import replace
 from pathlib import Path
 
+from restore.studies.stage_times import StageTimes
 from restore.train import TrainSettings
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.dataset.bank_make import bank_settings, make_bank, random_specs
 from udc_render.dataset.randomize import default_distributions, parse
-from udc_render.io.files import save_json
 from udc_render.pipeline import SynthConfig
 from udc_render.profiles import describe, resolve_profile
 from udc_render.scene import load_scene
-from udc_render.scene.geometry import camera_geometry
+from udc_render.scene.geometry import sensor_kernel_px
 from udc_render.scene.overrides import with_overrides
 
 RANDOM_ROW = "unet_random"
@@ -42,23 +41,19 @@ def random_bank(out: Path, b: dict, display: str, progress: bool) -> Bank:
     """The row's bank for `display` (module doc), made or finished in out/banks/random_<display>."""
     scene = with_overrides(load_scene("monitor"), sensor_px=b["sensor_px"])  # the datasets' (restore.studies.datasets)
     cfg, _ = resolve_profile("physical", SynthConfig(), [])
-    size = 2 * (camera_geometry(scene).margin_px // scene.render.supersample) + 1  # as `udc-render bank`
+    size = sensor_kernel_px(scene)
     specs = random_specs(family_distributions(display), b["random_panels"], RANDOMIZE_SEED, scene, cfg)
     extra = {"profile": describe(cfg.profile), "study": "results", "row": RANDOM_ROW, "family": display}
     folder = out / "banks" / f"random_{display}"
     t0 = time.perf_counter()
     if make_bank(folder, specs, bank_settings(scene, cfg, size, specs, extra), size, progress=progress)["made"]:
-        path = out / "banks" / SECONDS_FILE
-        seconds = json.loads(path.read_text()) if path.is_file() else {}
-        seconds[folder.name] = round(seconds.get(folder.name, 0.0) + time.perf_counter() - t0, 2)
-        save_json(path, seconds)
+        StageTimes(out / "banks" / SECONDS_FILE).add(folder.name, time.perf_counter() - t0)
     return read_bank(folder)
 
 
 def bank_hours(out: Path) -> float:
     """The hours spent making the row's banks (out/banks/seconds.json; 0 before any)."""
-    path = out / "banks" / SECONDS_FILE
-    return sum(json.loads(path.read_text()).values()) / 3600 if path.is_file() else 0.0
+    return sum(StageTimes(out / "banks" / SECONDS_FILE).seconds.values()) / 3600
 
 
 def online_settings(settings: TrainSettings, bank: Bank) -> TrainSettings:

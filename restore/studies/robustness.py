@@ -44,18 +44,19 @@ from restore.degrade import Degrader
 from restore.metrics import level_matched_psnr_db, paper_metrics
 from restore.online import clean_images, images_fingerprint, validation_pairs
 from restore.studies.robustness_report import MODELS, SETS, write_report
+from restore.studies.stage_times import StageTimes
 from restore.train import TrainSettings, load_model, predict, train
 from udc_render.content.charts import dead_leaves_colour
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.dataset.bank_make import bank_settings, make_bank, preset_specs, random_specs
 from udc_render.dataset.randomize import load_distributions
 from udc_render.io.exr import save_exr
-from udc_render.io.files import save_json, save_text
+from udc_render.io.files import save_text
 from udc_render.optics.displays import Display, micrograph_display, preset
 from udc_render.pipeline import SynthConfig
 from udc_render.profiles import describe, resolve_profile
 from udc_render.scene import load_scene
-from udc_render.scene.geometry import camera_geometry
+from udc_render.scene.geometry import sensor_kernel_px
 from udc_render.scene.overrides import with_overrides
 
 TRAIN_SEED, RANDOMIZE_SEED, HELDOUT_SEED, SCORE_SEED, IMAGES_SEED = 0, 0, 1, 2026, 31
@@ -108,11 +109,6 @@ BUDGETS = {
 def study_scene(b: Budget):
     """The monitor scene at the budget's frame, pitch and bands."""
     return with_overrides(load_scene("monitor"), bands_nm=b.bands_nm, sensor_px=b.sensor_px, pitch_um=b.pitch_um)
-
-
-def kernel_px(scene) -> int:
-    """The scene's kernel size at the sensor pitch (as `udc-render bank`'s default)."""
-    return 2 * (camera_geometry(scene).margin_px // scene.render.supersample) + 1
 
 
 def write_clean_images(folder: Path, b: Budget) -> Path:
@@ -174,23 +170,11 @@ def bank_specs(out: Path, b: Budget, scene, cfg: SynthConfig) -> dict:
     return specs
 
 
-class Times:
-    """times.json: seconds per stage, summed over re-runs."""
-
-    def __init__(self, out: Path):
-        self.path = out / TIMES_FILE
-        self.seconds = json.loads(self.path.read_text()) if self.path.is_file() else {}
-
-    def add(self, stage: str, seconds: float) -> None:
-        self.seconds[stage] = round(self.seconds.get(stage, 0.0) + seconds, 2)
-        save_json(self.path, self.seconds)
-
-
-def make_banks(out: Path, b: Budget, times: Times, cache_dir: str | None, progress: bool) -> dict[str, Bank]:
+def make_banks(out: Path, b: Budget, times: StageTimes, cache_dir: str | None, progress: bool) -> dict[str, Bank]:
     """Every bank of the study under out/banks (made or finished now; make_bank resumes)."""
     scene = study_scene(b)
     cfg, _ = resolve_profile("physical", SynthConfig(field_phases=b.field_phases, kernel_cache=cache_dir), [])
-    size = kernel_px(scene)
+    size = sensor_kernel_px(scene)
     extra = {"profile": describe(cfg.profile), "study": "robustness", "budget": b.name}
     banks = {}
     for name, specs in bank_specs(out, b, scene, cfg).items():
@@ -270,7 +254,7 @@ def run_study(out: Path, quick: bool = False, cache_dir: str | None = None, prog
     out = Path(out).resolve()  # the tile's path is in the micrograph bank's settings: one spelling per folder
     out.mkdir(parents=True, exist_ok=True)
     b = BUDGETS["quick" if quick else "full"]
-    times = Times(out)
+    times = StageTimes(out / TIMES_FILE)
     t0 = time.perf_counter()
     data = write_clean_images(out / "clean", b)
     if "clean images" not in times.seconds:

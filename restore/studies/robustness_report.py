@@ -59,6 +59,11 @@ def summary_rows(rows: list[dict]) -> list[dict]:
     return out
 
 
+def two(v) -> str:
+    """A PSNR in dB to 0.01."""
+    return f"{v:.2f}"
+
+
 def db(v) -> str:
     """A signed difference in dB to 0.01 ('0.00' for one that rounds to zero; empty for None)."""
     if v is None:
@@ -114,7 +119,6 @@ def markdown(result: dict) -> str:
               + ", ".join(f"{MODELS[k]} {t['val_psnr_db']:.2f} dB after {t['steps']} steps"
                           for k, t in train.items() if t.get("val_psnr_db") is not None) + ".",
               "", "## Every panel", ""]
-    two = lambda v: f"{v:.2f}"  # noqa: E731
     pcols = [("set", "set"), ("panel", "panel"), ("family", "family"), ("distance_mm", "d (mm)"),
              ("psnr_input_db", "input"), ("psnr_fixed_db", MODELS["fixed"]),
              ("psnr_randomized_db", MODELS["randomized"])]
@@ -129,7 +133,6 @@ def psnr_table(summary: list[dict], tail: str) -> list[str]:
             (f"psnr_fixed{tail}_db", MODELS["fixed"]), (f"drop_fixed{tail}_db", "drop"),
             (f"psnr_randomized{tail}_db", MODELS["randomized"]), (f"drop_randomized{tail}_db", "drop"),
             (f"randomized_minus_fixed{tail}_db", "randomized − default")]
-    two = lambda v: f"{v:.2f}"  # noqa: E731
     return md_table(summary, cols, {"set": lambda s: SETS[s], f"psnr_input{tail}_db": two,
                                     f"psnr_fixed{tail}_db": two, f"psnr_randomized{tail}_db": two,
                                     f"drop_fixed{tail}_db": db, f"drop_randomized{tail}_db": db,

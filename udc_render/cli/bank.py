@@ -13,7 +13,7 @@ from pathlib import Path
 from udc_render.cli.args import (UserError, add_channel_kernels_argument, add_display_argument, capture_setup,
                                  field_rank, float_pair, non_negative, odd_size, out_dir, positive)
 from udc_render.scene import load_scene
-from udc_render.scene.geometry import camera_geometry
+from udc_render.scene.geometry import sensor_kernel_px
 from udc_render.scene.overrides import with_overrides
 
 DEFAULT_DISPLAYS = "toled,poled"
@@ -73,7 +73,7 @@ def _scene(args):
 def _kernel_px(args, scene) -> int:
     if args.kernel_px is not None:
         return args.kernel_px
-    return 2 * (camera_geometry(scene).margin_px // scene.render.supersample) + 1
+    return sensor_kernel_px(scene)
 
 
 def run(args) -> int:

@@ -113,6 +113,12 @@ class RenderGrid:
         return 2 * int(self.margin_px) + 1
 
 
+def sensor_kernel_px(scene: Scene) -> int:
+    """The largest odd kernel at the sensor pitch that the render margin allows: 2 (margin // supersample) + 1
+    (a kernel bank's default size: `udc-render bank`, the robustness study, the UNet (randomized) row)."""
+    return 2 * (camera_geometry(scene).margin_px // scene.render.supersample) + 1
+
+
 def render_grid(scene: Scene) -> RenderGrid:
     geom = camera_geometry(scene)
     return RenderGrid(pitch_um=float(geom.pitch_um), margin_px=int(geom.margin_px),
