@@ -15,9 +15,10 @@ degradation's ratio to each step (medians, and in brackets the fastest repeats')
 
 --train: training itself, steps of the UNet (--autocast bf16|fp32) on batches degraded on the fly (restore.online
 .OnlineBatches: crops of two clean 2048 × 1024 images through the panels, drawn per crop) with the degradation in
-this process (workers 0) and in a DataLoader worker process (1), against the same steps on batches made
+this process (workers 0) and, on the CPU, in a DataLoader worker process (1), against the same steps on batches made
 beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median step times
-(each run's first step left out: a worker's start) less one.
+(each run's first step left out: a worker's start) less one. --device cuda: the steps and the degradation on the
+GPU (float32 panels), timed to a synchronize after each step.
 
 Without --bank the panels are synthetic with the shapes of the default bank (kernels of --kernel-px, a T-OLED
 series of 453 × 200 orders, 4 × 4 phases, Poisson noise, defects, FPN): the cost depends on the shapes, not on
@@ -159,13 +160,14 @@ def train_runs(a) -> None:
     """--train (module doc)."""
     if a.threads:
         torch.set_num_threads(a.threads)
+    dev = torch.device(a.device)
     w, h = (int(v) for v in a.frame.split(","))
     panels = bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
     bank = Bank(Path("."), {}, panels)
     rng = np.random.default_rng(0)
     images = [CleanImage(f"noise {i}", rng.random((3, h, w), dtype=np.float32)) for i in range(2)]
     settings = TrainSettings(model=UNET_CONFIG, display="bench", autocast=None if a.autocast == "fp32" else "bf16")
-    model = build_model(UNET_CONFIG).to(memory_format=torch.channels_last)
+    model = build_model(UNET_CONFIG).to(dev, memory_format=torch.channels_last)
     opt = torch.optim.Adam(model.parameters(), lr=1e-4)
     loss_of = loss_fn("l1")
     c, per_image = a.crop_px, (a.steps * a.batch + 1) // 2
@@ -175,21 +177,26 @@ def train_runs(a) -> None:
         for x, y in batches:
             train_step(model, opt, x.to(memory_format=torch.channels_last), y.to(memory_format=torch.channels_last),
                        loss_of, settings)
+            if dev.type == "cuda":
+                torch.cuda.synchronize()
             now = time.perf_counter()
             times.append(now - t)
             t = now
         return times[1:]
-    ready = [(torch.rand(a.batch, 4, c // 2, c // 2), torch.rand(a.batch, 3, c, c)) for _ in range(a.steps)]
-    times: dict = {"ready batches": [], "online, workers 0": [], "online, workers 1": []}
+    ready = [(torch.rand(a.batch, 4, c // 2, c // 2, device=dev), torch.rand(a.batch, 3, c, c, device=dev))
+             for _ in range(a.steps)]
+    times: dict = {"ready batches": [], "online, workers 0": []}
+    if dev.type == "cpu":  # worker processes degrade on the CPU (restore.online.OnlineBatches)
+        times["online, workers 1"] = []
     for _ in range(a.rounds):  # the runs alternate, round by round
         for name in times:
             if name.startswith("ready"):
                 times[name] += run(ready)
             else:
-                ob = OnlineBatches(images, bank, Degrader(panels), c, a.batch, 0, per_image, int(name[-1]))
+                ob = OnlineBatches(images, bank, Degrader(panels, dev), c, a.batch, 0, per_image, int(name[-1]))
                 times[name] += run(ob.epoch(0)[1])
     med = {k: statistics.median(v) for k, v in times.items()}
-    print(f"torch threads {torch.get_num_threads()}, UNet {a.autocast}, batch {a.batch} × {c} px, kernel "
+    print(f"device {dev}, torch threads {torch.get_num_threads()}, UNet {a.autocast}, batch {a.batch} × {c} px, kernel "
           f"{panels[0].kernel_px} px, panels {', '.join(p.name for p in panels)} (drawn per crop), {a.rounds} rounds of "
           f"{a.steps} steps per run (each run's first left out); {'bank ' + a.bank if a.bank else 'synthetic panels'}")
     print("| run | median s per step | quartiles | slowdown vs ready batches (medians) |")

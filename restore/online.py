@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from restore.data import DataError, dihedral, load_gt, read_manifest
+from restore.data import DataError, load_gt, read_manifest
 from restore.degrade import Degrader, normalised
 from udc_render.optics import fft_shape
 from udc_render.dataset.bank import Bank, read_bank
@@ -97,16 +97,29 @@ def images_fingerprint(data: Path) -> str:
     return h.hexdigest()[:16]
 
 
-def region(img: np.ndarray, y0: int, x0: int, rows: int, cols: int) -> np.ndarray:
-    """img[:, y0:y0 + rows, x0:x0 + cols] with the image mirrored beyond its edges (edge pixels not repeated)."""
+def region(img, y0: int, x0: int, rows: int, cols: int):
+    """img[:, y0:y0 + rows, x0:x0 + cols] with the image mirrored beyond its edges (edge pixels not repeated); img a
+    numpy array or a torch tensor (indexed on its own device)."""
     def idx(start, n, size):
         i = np.abs(np.arange(start, start + n))
         period = 2 * (size - 1)
         i %= max(period, 1)
-        return np.where(i >= size, period - i, i)
+        i = np.where(i >= size, period - i, i)
+        return torch.as_tensor(i, device=img.device) if isinstance(img, torch.Tensor) else i
     if y0 >= 0 and x0 >= 0 and y0 + rows <= img.shape[1] and x0 + cols <= img.shape[2]:
         return img[:, y0:y0 + rows, x0:x0 + cols]
     return img[:, idx(y0, rows, img.shape[1])[:, None], idx(x0, cols, img.shape[2])[None, :]]
+
+
+def dihedral_tensor(a: torch.Tensor, mode: int) -> torch.Tensor:
+    """restore.data.dihedral on a tensor: bit 0 transpose, bit 1 flip rows, bit 2 flip columns."""
+    if mode & 1:
+        a = a.transpose(-1, -2)
+    if mode & 2:
+        a = a.flip(-2)
+    if mode & 4:
+        a = a.flip(-1)
+    return a
 
 
 class OnlineBatches:
@@ -121,6 +134,9 @@ class OnlineBatches:
             raise DataError(f"--crop-px = {crop_px}: larger than the {small.pixels.shape[2]} × "
                             f"{small.pixels.shape[1]} px image {small.name}")
         self.images, self.bank, self.degrader = images, bank, degrader
+        # the clean pixels where the degradation runs, moved once: a crop is then cut, turned and scaled there
+        # (on a GPU, cutting crops on the CPU and sending them cost 6× the training step: bench_degrade --train)
+        self.pixels = [torch.from_numpy(im.pixels).to(degrader.device) for im in images]
         self.crop_px, self.batch, self.seed, self.crops_per_image = crop_px, batch, seed, crops_per_image
         self.brightness = [float(p.record.get("brightness", 1.0)) for p in bank.panels]
         if workers and degrader.device.type != "cpu":
@@ -150,13 +166,12 @@ class OnlineBatches:
 
     def sample(self, d: dict) -> tuple[torch.Tensor, torch.Tensor]:
         """(input [4, c/2, c/2], target [3, c, c]) of draw d, on the device."""
-        img, m, c = self.images[d["image"]].pixels, self.degrader.margin_px, self.crop_px
-        clean = dihedral(region(img, d["y0"] - m, d["x0"] - m, c + 2 * m, c + 2 * m), d["mode"])
-        x = torch.from_numpy(np.ascontiguousarray(clean)) * self.brightness[d["panel"]]
-        dev = self.degrader.device
-        gen = torch.Generator(dev).manual_seed(d["noise_seed"])
+        img, m, c = self.pixels[d["image"]], self.degrader.margin_px, self.crop_px
+        clean = dihedral_tensor(region(img, d["y0"] - m, d["x0"] - m, c + 2 * m, c + 2 * m), d["mode"])
+        x = (clean * self.brightness[d["panel"]]).contiguous()
+        gen = torch.Generator(self.degrader.device).manual_seed(d["noise_seed"])
         dn = self.degrader.degrade(x, d["panel"], img.shape[1:], (d["y0"], d["x0"]), gen)
-        target = x[:, m:m + c, m:m + c].to(dev, torch.float32)
+        target = x[:, m:m + c, m:m + c].float()
         return normalised(dn, self.bank.panels[d["panel"]]).float(), target
 
     def epoch(self, epoch: int):

@@ -31,12 +31,18 @@ DEFECTS = DefectConfig(dead_fraction=0.01, hot_fraction=0.01)  # many, so that b
 
 
 @pytest.fixture(scope="module")
-def tiny(udc, tmp_path_factory, render_cache):
-    """A 128 × 64 px monitor scene of the astronaut (24.8 µm pixels, 3 bands, 33-px kernels), rendered once."""
+def tiny_scene(udc, tmp_path_factory):
+    """A 128 × 64 px monitor scene of the astronaut (24.8 µm pixels, 3 bands, 33-px kernels), not rendered: the
+    field and CUDA tests need its geometry alone (and run where Mitsuba is absent)."""
     folder = tmp_path_factory.mktemp("degrade")
-    scene = udc.write_scene(folder / "s.toml", udc.monitor_doc(image="builtin:astronaut",
-                                                               bands={"range_nm": [400, 700], "step_nm": 100}))
-    return scene, render_scene(scene, progress=False), str(folder / "kernels")
+    return udc.write_scene(folder / "s.toml", udc.monitor_doc(image="builtin:astronaut",
+                                                              bands={"range_nm": [400, 700], "step_nm": 100}))
+
+
+@pytest.fixture(scope="module")
+def tiny(tiny_scene, render_cache):
+    """The tiny scene rendered once, and its kernel cache folder."""
+    return tiny_scene, render_scene(tiny_scene, progress=False), str(tiny_scene.resolve("kernels"))
 
 
 def _synth(tiny, noise: str):
@@ -102,21 +108,21 @@ def test_electrons_and_blur_equal_the_numpy_path(tiny):
 
 
 @pytest.fixture(scope="module")
-def field_kernels(tiny):
+def field_kernels(tiny_scene):
     """Kernels at 450 / 520 / 640 nm through the T-OLED at d = 2 mm, 4 × 4 field phases, 33 px (a stand-in for
     the channels: the blend's algebra does not care how the three kernel sets were weighted)."""
-    scene, _, _ = tiny
+    scene = tiny_scene
     frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
     return compute_kernels(layouts.toled(), psf_lens(scene), (450.0, 520.0, 640.0), pixel_um=scene.sensor.pitch_um,
                            size_px=33, distance_mm=2.0, sensor_um=frame_um)
 
 
 @pytest.mark.parametrize("rank", [4, None])
-def test_field_blend_equals_convolve_field(tiny, field_kernels, rank):
+def test_field_blend_equals_convolve_field(tiny_scene, field_kernels, rank):
     """d > 0: the panel's rank-r (or exact) blend with the exact power map equals optics.field.convolve_field on the
     frame with its margins (float64 1e-12, float32 1e-5 of the peak), and a crop of the frame equals the crop of
     the whole frame's result (the field follows the crop's place)."""
-    scene, _, _ = tiny
+    scene = tiny_scene
     ks, grid = field_kernels, sensor_grid(scene, 33)
     m, H, W = grid.margin_px, scene.sensor.height_px, scene.sensor.width_px
     shape = (H + 2 * m, W + 2 * m)
@@ -178,10 +184,10 @@ def test_bad_crops_are_refused():
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
-def test_cuda_equals_cpu(tiny, field_kernels):
+def test_cuda_equals_cpu(tiny_scene, field_kernels):
     """The one code path on a GPU (d > 0, FPN, defects): its blur within 1e-12 of the CPU's (float64), the same DN
     for the same draw, and its own generator's draws on the device."""
-    scene, _, _ = tiny
+    scene = tiny_scene
     grid = sensor_grid(scene, 33)
     panel = _panel("toled", field_kernels.kernels, grid.pitch_um, (0.97, 0.97, 0.97), SensorConfig(form="per_channel"),
                    SynthConfig(defects=DEFECTS, fpn=FpnConfig()), panel_field(field_kernels, scene, grid, 4))

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 import torch
 
-from restore.degrade import Degrader
-from restore.online import OnlineBatches, clean_images, region, validation_pairs
+from restore.data import dihedral
+from restore.degrade import Degrader, normalised
+from restore.online import OnlineBatches, clean_images, dihedral_tensor, region, validation_pairs
 from restore.train import TrainSettings, load_model, predict, train
 from tests.conftest import write_pairs
 from tests.restore.test_train import train_interrupted_at_epoch_2
@@ -99,6 +100,9 @@ def test_resumed_online_training_continues_identically(tmp_path, bank, monkeypat
 def test_crops_take_mirrored_scene_beyond_the_frame_a_fresh_draw_each_epoch_and_the_same_in_workers(tmp_path, bank):
     img = np.random.default_rng(0).random((3, 10, 12)).astype(np.float32)
     np.testing.assert_array_equal(region(img, -3, -4, 16, 20), np.pad(img, ((0, 0), (3, 3), (4, 4)), "reflect"))
+    np.testing.assert_array_equal(region(torch.from_numpy(img), -3, -4, 16, 20).numpy(), region(img, -3, -4, 16, 20))
+    for mode in range(8):  # the crops are turned on the device as restore.data.dihedral turns arrays
+        np.testing.assert_array_equal(dihedral_tensor(torch.from_numpy(img), mode).numpy(), dihedral(img, mode))
     data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(48, 64))
     b = read_bank(bank)
     batches = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels), 32, 2, seed=0)
@@ -106,6 +110,13 @@ def test_crops_take_mirrored_scene_beyond_the_frame_a_fresh_draw_each_epoch_and_
     x, y = next(it)
     assert x.shape == (2, 4, 16, 16) and y.shape == (2, 3, 32, 32) and x.dtype == torch.float32
     assert batches.epoch(0)[0] == d0 and batches.epoch(1)[0] != d0
+    d, m = d0[0], batches.degrader.margin_px  # the first crop, cut from the numpy image as the module doc says
+    gt = clean_images(data, "train")[d["image"]].pixels
+    clean = torch.from_numpy(np.ascontiguousarray(dihedral(region(gt, d["y0"] - m, d["x0"] - m, 32 + 2 * m,
+                                                                  32 + 2 * m), d["mode"])))
+    dn = batches.degrader.degrade(clean, d["panel"], gt.shape[1:], (d["y0"], d["x0"]),
+                                  torch.Generator().manual_seed(d["noise_seed"]))
+    assert torch.equal(x[0], normalised(dn, b.panels[d["panel"]]).float()) and torch.equal(y[0], clean[:, m:-m, m:-m])
     in_workers = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels), 32, 2, seed=0, workers=1)
     xw, yw = next(in_workers.epoch(0)[1])
     assert torch.equal(x, xw) and torch.equal(y, yw)  # a worker process degrades the same numbers
