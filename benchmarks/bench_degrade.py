@@ -15,7 +15,7 @@ degradation's ratio to each step (medians, and in brackets the fastest repeats')
 
 --train: training itself, steps of the UNet (--autocast bf16|fp32) on batches degraded on the fly (restore.online
 .OnlineBatches: crops of two clean 2048 × 1024 images through the panels, drawn per crop) with the degradation in
-this process (workers 0) and, on the CPU, in a DataLoader worker process (1), against the same steps on batches made
+this process (workers 0) and in a DataLoader worker process (1; on a GPU, a thread on its own stream), against the same steps on batches made
 beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median step times
 (each run's first step left out: a worker's start) less one. --device cuda: the steps and the degradation on the
 GPU (float32 panels), timed to a synchronize after each step.
@@ -185,9 +185,7 @@ def train_runs(a) -> None:
         return times[1:]
     ready = [(torch.rand(a.batch, 4, c // 2, c // 2, device=dev), torch.rand(a.batch, 3, c, c, device=dev))
              for _ in range(a.steps)]
-    times: dict = {"ready batches": [], "online, workers 0": []}
-    if dev.type == "cpu":  # worker processes degrade on the CPU (restore.online.OnlineBatches)
-        times["online, workers 1"] = []
+    times: dict = {"ready batches": [], "online, workers 0": [], "online, workers 1": []}
     for _ in range(a.rounds):  # the runs alternate, round by round
         for name in times:
             if name.startswith("ready"):

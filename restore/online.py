@@ -18,14 +18,17 @@ epoch's draws are recorded in online.jsonl.
 
 Validation: each val image whole, through panel j mod N, the noise seeded by (seed, 'val', j), made once.
 
-With workers > 0 (CPU only) the crops are degraded in DataLoader worker processes, one CPU thread each, while the
+With workers > 0 on the CPU the crops are degraded in DataLoader worker processes, one CPU thread each, while the
 training step runs: the same numbers (the draws fix every crop; a Degrader runs on one thread either way), the
-degradation's time hidden where a core is free (benchmarks/bench_degrade.py --train).
+degradation's time hidden where a core is free (benchmarks/bench_degrade.py --train). On a GPU, workers = 1
+makes the next batches in a thread on a CUDA stream of its own (_ahead), the same numbers.
 """
 from __future__ import annotations
 
 import hashlib
 import json
+import queue
+import threading
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -139,11 +142,11 @@ class OnlineBatches:
         self.pixels = [torch.from_numpy(im.pixels).to(degrader.device) for im in images]
         self.crop_px, self.batch, self.seed, self.crops_per_image = crop_px, batch, seed, crops_per_image
         self.brightness = [float(p.record.get("brightness", 1.0)) for p in bank.panels]
-        if workers and degrader.device.type != "cpu":
-            raise DataError(f"--degrade-workers {workers}: worker processes degrade on the CPU; on {degrader.device} "
-                            "the degradation runs beside the training (0)")
+        if workers > 1 and degrader.device.type != "cpu":
+            raise DataError(f"--degrade-workers {workers}: on {degrader.device} the degradation runs in this process "
+                            "(0) or in one thread on its own stream (1)")
         self.workers = workers
-        if workers:  # made once here, so that every epoch's forked workers inherit them
+        if workers and degrader.device.type == "cpu":  # made once here, so that every epoch's forked workers inherit them
             shape = fft_shape((crop_px + 2 * degrader.margin_px,) * 2, 2 * degrader.margin_px + 1, degrader.margin_px)
             for i, p in enumerate(degrader.panels):
                 p.spectra(shape)
@@ -185,8 +188,52 @@ class OnlineBatches:
                 yield torch.stack(xs), torch.stack(ys)
         if not self.workers:
             return draws, batches()
+        if self.degrader.device.type != "cpu":
+            return draws, _ahead(batches, self.degrader.device)
         return draws, iter(torch.utils.data.DataLoader(_Crops(self, draws), batch_size=self.batch,
                                                        num_workers=self.workers))
+
+
+def _ahead(batches, device: torch.device, depth: int = 2):
+    """The batches of `batches()` made `depth` ahead in a thread on a stream of its own (a GPU's), while the
+    caller trains: torch leaves Python's lock while it launches work, so the two threads' launches overlap, and
+    the caller's stream waits on each batch's event before using it. The same numbers: a crop depends on its
+    draw alone."""
+    side, done, out = torch.cuda.Stream(device), threading.Event(), queue.Queue(depth)
+    side.wait_stream(torch.cuda.current_stream(device))  # the images and panels moved there before
+
+    def make():
+        try:
+            with torch.cuda.stream(side):
+                for x, y in batches():
+                    ready = torch.cuda.Event()
+                    ready.record(side)
+                    while not done.is_set():
+                        try:
+                            out.put((x, y, ready), timeout=0.1)
+                            break
+                        except queue.Full:
+                            pass
+                    if done.is_set():
+                        return
+            out.put(None)
+        except BaseException as e:  # raised again in the caller's thread
+            out.put(e)
+    thread = threading.Thread(target=make, daemon=True)
+    thread.start()
+    try:
+        while (item := out.get()) is not None:
+            if isinstance(item, BaseException):
+                raise item
+            x, y, ready = item
+            main = torch.cuda.current_stream(device)
+            main.wait_event(ready)
+            x.record_stream(main)
+            y.record_stream(main)
+            yield x, y
+    finally:
+        done.set()
+        thread.join()
 
 
 class _Crops(torch.utils.data.Dataset):

@@ -33,8 +33,9 @@ def register(sub) -> None:
                         "images, each through a panel drawn from --bank, on the training device [dataset]")
     p.add_argument("--bank", type=Path, help="with --degrade online: a kernel bank written by `udc-render bank`")
     p.add_argument("--degrade-workers", type=int, default=0,
-                   help="with --degrade online on the CPU: processes that degrade the next crops while the model trains "
-                        "(one thread each; the same numbers as 0, in this process) [0]")
+                   help="with --degrade online: on the CPU, processes that degrade the next crops while the model "
+                        "trains (one thread each); on a GPU, 1: a thread on its own CUDA stream; the same numbers as 0, "
+                        "in this process [0]")
     p.add_argument("--model", required=True, choices=("unet", "resnet"),
                    help="the model type (restore/models.py): unet: the paper's UNet with two sub-encoders; resnet: "
                         "the paper's ResNet baseline")
