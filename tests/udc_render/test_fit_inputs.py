@@ -163,8 +163,10 @@ def test_white_square_gives_gamma_per_channel(tmp_path):
     glass, disp = S.white_pair(truth, display_gain=6.0, seed=3)
     for name, m in (("g.dng", glass), ("d.dng", disp)):
         save_dng(tmp_path / name, m, CAMERA, 64, 65535)
-    gamma, sigma, n = measure_gamma(inputs.read_frame(tmp_path / "g.dng"), inputs.read_frame(tmp_path / "d.dng"))
-    assert n > 500 and np.all(np.abs(gamma - truth) < 3 * sigma) and np.all(np.abs(gamma / truth - 1) < 0.01)
+    m = measure_gamma(inputs.read_frame(tmp_path / "g.dng"), inputs.read_frame(tmp_path / "d.dng"))
+    assert m.pixels > 500 and np.all(np.abs(m.gamma - truth) < 3 * m.sigma) and np.all(np.abs(m.gamma / truth - 1) < 0.01)
+    # the 128-px square (rows and columns 64 … 191) and its central half: 31 px in from each side, 66 px
+    assert m.square_xy_px == (128, 128) and m.region_xy_px == (66, 66)
 
 
 def test_the_weighted_log_residual_is_finite_and_smooth_where_the_model_predicts_nothing():

@@ -34,21 +34,30 @@ FIT_FRAME_UM = (2048 * 1.55, 1024 * 1.55)
 FIT_SQUARE_PX, FIT_REGION_PX = 576.0, 60
 
 
-def fit_gains(layout, far_field: bool = True, use_cache: bool = True) -> np.ndarray:
-    """[30] g_k of `layout` (None: the bare lens) on the default rig (module doc); far_field False: τ (1 − o)."""
+def square_gains(layout, lens, wavelengths_nm, pixel_um: float, size_px: int, frame_um: tuple[float, float],
+                 square_xy_px: tuple[float, float] | None, region_xy_px: tuple[int, int], use_cache: bool = True):
+    """[K] g_k of `layout` (None: the bare lens) at the wavelengths (module doc), its kernels size_px of pixel_um
+    on a frame_um sensor, for a white square of square_xy_px (x, y) sensor px around a region of region_xy_px;
+    square None: the core alone, τ (1 − o)."""
     from psf import compute_kernels
     from psf.cache import cached
     from psf.far import CACHE_NAME, order_kernels
-    lens = psf_lens(load_scene("monitor"))
-    wl = 0.5 * (FIT_EDGES_NM[1:] + FIT_EDGES_NM[:-1])
-    core, _ = cached(compute_kernels, "mono", layout, lens, use_cache, wavelengths_nm=wl, pixel_um=FIT_PIXEL_UM,
-                     size_px=FIT_SIZE_PX, sensor_um=FIT_FRAME_UM)
-    if not far_field:
+    wl = np.asarray(wavelengths_nm, float)
+    core, _ = cached(compute_kernels, "mono", layout, lens, use_cache, wavelengths_nm=wl, pixel_um=pixel_um,
+                     size_px=size_px, sensor_um=frame_um)
+    if square_xy_px is None:
         return kernel_gain(core)
     coarse = DEFAULT_FAR_FIELD_COARSE
-    size, _ = far_window_px(FIT_FRAME_UM, (FIT_SIZE_PX // 2) * FIT_PIXEL_UM, coarse * FIT_PIXEL_UM)
-    far, _ = cached(order_kernels, CACHE_NAME, layout, lens, use_cache, wavelengths_nm=wl,
-                    pixel_um=coarse * FIT_PIXEL_UM, size_px=size)
-    ff = make_far_field(core, far, coarse, acceptance_um(FIT_FRAME_UM), DEFAULT_FAR_FIELD_THRESHOLD)
-    return kernel_gain(core) + np.asarray(core.transmittance) * far_square_share(ff, FIT_SQUARE_PX, FIT_SQUARE_PX,
-                                                                                  FIT_REGION_PX)
+    size, _ = far_window_px(frame_um, (size_px // 2) * pixel_um, coarse * pixel_um)
+    far, _ = cached(order_kernels, CACHE_NAME, layout, lens, use_cache, wavelengths_nm=wl, pixel_um=coarse * pixel_um,
+                    size_px=size)
+    ff = make_far_field(core, far, coarse, acceptance_um(frame_um), DEFAULT_FAR_FIELD_THRESHOLD)
+    return kernel_gain(core) + np.asarray(core.transmittance) * far_square_share(ff, *square_xy_px, *region_xy_px)
+
+
+def fit_gains(layout, far_field: bool = True, use_cache: bool = True) -> np.ndarray:
+    """[30] g_k of `layout` (None: the bare lens) on the default rig (module doc); far_field False: τ (1 − o)."""
+    wl = 0.5 * (FIT_EDGES_NM[1:] + FIT_EDGES_NM[:-1])
+    return square_gains(layout, psf_lens(load_scene("monitor")), wl, FIT_PIXEL_UM, FIT_SIZE_PX, FIT_FRAME_UM,
+                        (FIT_SQUARE_PX, FIT_SQUARE_PX) if far_field else None, (FIT_REGION_PX, FIT_REGION_PX),
+                        use_cache)

@@ -7,10 +7,14 @@ gain. Here: the square is where the glass capture exceeds half its 99.5th percen
 (each side) is the region; per channel (a CFA's sites named by the pattern, Gr the green on the red rows; a
 colour image's R, G, G, B; a grey image's one value four times) γ_c = mean(display) / mean(glass) above
 black, σ_γ = std(display − γ glass) / (√n mean(glass)).
-T(λ) (optics.gamma): γ_c = G Σ_k W_ck T_k τ_k (1 − o_k) / Σ_k W_ck τ⁰_k (1 − o⁰_k), W the camera's electrons per
-band from the monitor's white, τ (1 − o) the kernels' share inside the window (the fitted layout's and the
-bare lens's, psf.compute_kernels at the band centres, KERNEL_PX px), G the display capture's gain over
-the glass capture's (--white-gain). Flat T: weighted least squares over R, G, B; when the channels
+T(λ) (optics.gamma): γ_c = G Σ_k W_ck T_k g_k / Σ_k W_ck g⁰_k, W the camera's electrons per band from the
+monitor's white, G the display capture's gain over the glass capture's (--white-gain), and g the share of the
+aperture's power that the measured square brings to the region, for the fitted layout and (g⁰) the bare lens:
+g_k = τ_k (1 − o_k) + τ_k a_k (calibration.fit_gains.square_gains), the kernels' share inside the KERNEL_PX
+window (psf.compute_kernels at the band centres) and a_k the far field's from the square found here
+(optics.far_field.far_square_share, its sides and the region's in sensor pixels). What the far field adds
+depends on the square: on the P-OLED preset 1.6 % in R for the default rig's square (576 px around a 60-px
+region), 8 % for a white frame (calibration.fit_gains); a fit without it put T that much too high. Flat T: weighted least squares over R, G, B; when the channels
 disagree with it (χ²/dof > 4 and a channel more than 2 % off), the polyimide T(λ) of the P-OLED preset
 (scale, absorption edge, cathode) is fitted instead (optics.displays.fit_poled_transmission), σ by its
 Jacobian.
@@ -22,11 +26,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from psf import Lens, compute_kernels
-from psf.cache import cached
+from psf import Lens
+from udc_render.calibration.fit_gains import square_gains
 from udc_render.fit.inputs import FitError, Frame, saturated
 from udc_render.optics.displays import Display, Transmission, fit_poled_transmission, poled_transmission
-from udc_render.optics.gamma import channel_gamma, kernel_gain, white_weights
+from udc_render.optics.gamma import channel_gamma, white_weights
 
 CHANNEL_NAMES = ("R", "Gr", "Gb", "B")
 KERNEL_PX = 511
@@ -36,7 +40,7 @@ SENSOR_UM = (2048 * 1.55, 1024 * 1.55)
 @dataclass(frozen=True)
 class WhiteFit:
     """γ (R, Gr, Gb, B) ± σ, the pixels per channel, the fitted transmission, its parameters ± σ, the γ it
-    gives, the gain."""
+    gives, the gain, and the square's and region's sides (x, y; sensor px)."""
     gamma: np.ndarray
     gamma_sigma: np.ndarray
     pixels: int
@@ -44,6 +48,8 @@ class WhiteFit:
     params: dict
     gamma_model: np.ndarray
     gain: float
+    square_xy_px: tuple[int, int]
+    region_xy_px: tuple[int, int]
 
 
 def channels(frame: Frame) -> list[np.ndarray]:
@@ -69,8 +75,19 @@ def _planes(frame: Frame) -> list[np.ndarray]:
     return [frame.dn - frame.black_dn] * 4
 
 
-def measure_gamma(glass: Frame, display: Frame) -> tuple[np.ndarray, np.ndarray, int]:
-    """(γ [4], σ [4], pixels per channel) of the module doc."""
+@dataclass(frozen=True)
+class WhiteSquare:
+    """γ (R, Gr, Gb, B) ± σ measured on a white-square pair, the pixels per channel, and where: the square's and
+    the region's sides (x, y) in sensor pixels."""
+    gamma: np.ndarray
+    sigma: np.ndarray
+    pixels: int
+    square_xy_px: tuple[int, int]
+    region_xy_px: tuple[int, int]
+
+
+def measure_gamma(glass: Frame, display: Frame) -> WhiteSquare:
+    """γ and σ per channel, and the square and region they come from (module doc)."""
     if glass.shape != display.shape:
         raise FitError(f"--white: {glass.path} and {display.path} differ in size: expected one camera and framing")
     gp, dp = _planes(glass), _planes(display)
@@ -81,7 +98,9 @@ def measure_gamma(glass: Frame, display: Frame) -> tuple[np.ndarray, np.ndarray,
         raise FitError(f"--white {glass.path}: no white square found (fewer than 64 pixels above half the brightest)")
     r0, r1, c0, c1 = rows.min(), rows.max(), cols.min(), cols.max()
     region = np.zeros(glass.shape, bool)
-    region[r0 + (r1 - r0) // 4:r1 - (r1 - r0) // 4 + 1, c0 + (c1 - c0) // 4:c1 - (c1 - c0) // 4 + 1] = True
+    rows_r = slice(r0 + (r1 - r0) // 4, r1 - (r1 - r0) // 4 + 1)
+    cols_r = slice(c0 + (c1 - c0) // 4, c1 - (c1 - c0) // 4 + 1)
+    region[rows_r, cols_r] = True
     gamma, sigma, n = np.zeros(4), np.zeros(4), []
     raw = lambda f, c: f.dn[..., (0, 1, 1, 2)[c]] if f.kind == "rgb" else f.dn  # noqa: E731
     for c, mask in enumerate(channels(glass)):
@@ -94,28 +113,28 @@ def measure_gamma(glass: Frame, display: Frame) -> tuple[np.ndarray, np.ndarray,
         gamma[c] = d.mean() / g.mean()
         sigma[c] = np.std(d - gamma[c] * g) / (math.sqrt(g.size) * g.mean())
         n.append(g.size)
-    return gamma, sigma, min(n)
+    return WhiteSquare(gamma, sigma, min(n), (int(c1 - c0 + 1), int(r1 - r0 + 1)),
+                       (cols_r.stop - cols_r.start, rows_r.stop - rows_r.start))
 
 
-def band_gains(layout, lens: Lens, edges_nm, pixel_um: float) -> tuple[np.ndarray, np.ndarray]:
-    """(display, glass) τ_k (1 − o_k) at the band centres (module doc); the bare lens's through the kernel
-    cache (the same every run), the fitted layout's not."""
+def band_gains(layout, lens: Lens, edges_nm, pixel_um: float, square_xy_px: tuple | None = None,
+               region_xy_px: tuple = (1, 1)) -> tuple[np.ndarray, np.ndarray]:
+    """(display, glass) g_k at the band centres for a white square of square_xy_px around a region of
+    region_xy_px, sensor px (module doc; square None: τ_k (1 − o_k), the core alone); the bare lens's through the
+    kernel cache (the same every run), the fitted layout's not."""
     centres = 0.5 * (edges_nm[1:] + edges_nm[:-1])
-    out = []
-    for lay in (layout, None):
-        ks, _ = cached(compute_kernels, "mono", lay, lens, lay is None, wavelengths_nm=centres, pixel_um=pixel_um,
-                       size_px=KERNEL_PX, sensor_um=SENSOR_UM)
-        out.append(kernel_gain(ks))
-    return out[0], out[1]
+    return tuple(square_gains(lay, lens, centres, pixel_um, KERNEL_PX, SENSOR_UM, square_xy_px, region_xy_px,
+                              use_cache=lay is None) for lay in (layout, None))
 
 
 def _rgb(gamma_rggb: np.ndarray) -> np.ndarray:
     return np.array([gamma_rggb[0], 0.5 * (gamma_rggb[1] + gamma_rggb[2]), gamma_rggb[3]])
 
 
-def fit_transmission(gamma, sigma, layout, lens: Lens, edges_nm, pixel_um: float, camera: str, gain: float):
+def fit_transmission(square: WhiteSquare, layout, lens: Lens, edges_nm, pixel_um: float, camera: str, gain: float):
     """(Transmission, {parameter: (value, σ)}, γ (R, Gr, Gb, B) it gives) of the module doc."""
-    d_gain, g_gain = band_gains(layout, lens, edges_nm, pixel_um)
+    gamma, sigma = square.gamma, square.sigma
+    d_gain, g_gain = band_gains(layout, lens, edges_nm, pixel_um, square.square_xy_px, square.region_xy_px)
     w = white_weights(edges_nm, camera)
     unit = channel_gamma(w, Display("t", layout, Transmission("flat", 1.0), gain), d_gain, g_gain, edges_nm)
     a = np.array([unit[0], unit[1], unit[1], unit[2]])
@@ -145,7 +164,7 @@ def fit_transmission(gamma, sigma, layout, lens: Lens, edges_nm, pixel_um: float
 def fit_white(glass: Frame, display: Frame, layout, lens: Lens, edges_nm, pixel_um: float, camera: str,
               gain: float) -> WhiteFit:
     """γ and T(λ) of the module doc."""
-    gamma, sigma, n = measure_gamma(glass, display)
-    trans, params, model = fit_transmission(gamma, sigma, layout, lens, np.asarray(edges_nm, float), pixel_um,
-                                            camera, gain)
-    return WhiteFit(gamma, sigma, n, trans, params, model, gain)
+    square = measure_gamma(glass, display)
+    trans, params, model = fit_transmission(square, layout, lens, np.asarray(edges_nm, float), pixel_um, camera, gain)
+    return WhiteFit(square.gamma, square.sigma, square.pixels, trans, params, model, gain, square.square_xy_px,
+                    square.region_xy_px)

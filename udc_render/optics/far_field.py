@@ -124,19 +124,22 @@ def make_far_field(core, far, coarse: int, acceptance: float, threshold: float) 
                     float(threshold), clipped)
 
 
-def far_square_share(far, side_x_px: float, side_y_px: float, region_px: int) -> np.ndarray:
+def far_square_share(far, side_x_px: float, side_y_px: float, region_px: int,
+                     region_y_px: int | None = None) -> np.ndarray:
     """[K] the share of the transmitted power that the far field f (optics.far_field.FarField) brings to the
-    region's pixels, on average, from a uniform square side_x × side_y render pixels centred on them:
-    Σ_J f[J] A_x(J) A_y(J), A(J) the mean over the region's pixels p of the share of coarse pixel J's render
+    region's pixels, on average, from a uniform square (or rectangle) side_x × side_y render pixels centred on
+    them: Σ_J f[J] A_x(J) A_y(J), A(J) the mean over the region's pixels p of the share of coarse pixel J's render
     offsets u whose source p − u lies in the square (|p − u| ≤ side / 2; side inf: a square that reaches the
-    render grid's edges, continued past them as the far field continues the render)."""
+    render grid's edges, continued past them as the far field continues the render). The region is region_px
+    wide and region_y_px (default region_px) tall."""
     c, h = far.coarse, far.kernels.shape[-1] // 2
     offsets = (np.arange(-h, h + 1) * c)[:, None] + np.arange(c)[None, :] - (c - 1) // 2  # [J, c] render px
-    p = np.arange(region_px) - (region_px - 1) / 2
 
-    def share(side):
+    def share(side, n):
+        p = np.arange(n) - (n - 1) / 2
         return (np.abs(p[None, None, :] - offsets[:, :, None]) <= side / 2).mean(axis=(1, 2))
-    return np.einsum("kij,i,j->k", far.kernels, share(side_y_px), share(side_x_px))
+    rows = region_px if region_y_px is None else region_y_px
+    return np.einsum("kij,i,j->k", far.kernels, share(side_y_px, rows), share(side_x_px, region_px))
 
 
 def _upsampling(n_out: int, start: int, n_blocks: int, coarse: int) -> np.ndarray:
