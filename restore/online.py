@@ -21,7 +21,8 @@ Validation: each val image whole, through panel j mod N, the noise seeded by (se
 With workers > 0 on the CPU the crops are degraded in DataLoader worker processes, one CPU thread each, while the
 training step runs: the same numbers (the draws fix every crop; a Degrader runs on one thread either way), the
 degradation's time hidden where a core is free (benchmarks/bench_degrade.py --train). On a GPU, workers = 1
-makes the next batches in a thread on a CUDA stream of its own (_ahead), the same numbers.
+makes the next batches in a thread on a CUDA stream of its own (_ahead), the same numbers. workers None (the
+default): 0 on the CPU, 1 on a GPU.
 """
 from __future__ import annotations
 
@@ -129,7 +130,7 @@ class OnlineBatches:
     """The training batches of the online degradation (module doc) on a device."""
 
     def __init__(self, images: list[CleanImage], bank: Bank, degrader: Degrader, crop_px: int, batch: int,
-                 seed: int, crops_per_image: int = 1, workers: int = 0):
+                 seed: int, crops_per_image: int = 1, workers: int | None = None):
         if not images:
             raise DataError("no clean images to train on: the split is empty")
         small = min(images, key=lambda im: min(im.pixels.shape[1:]))
@@ -142,6 +143,8 @@ class OnlineBatches:
         self.pixels = [torch.from_numpy(im.pixels).to(degrader.device) for im in images]
         self.crop_px, self.batch, self.seed, self.crops_per_image = crop_px, batch, seed, crops_per_image
         self.brightness = [float(p.record.get("brightness", 1.0)) for p in bank.panels]
+        if workers is None:  # the default: in this process on the CPU, a thread beside the training on a GPU
+            workers = 0 if degrader.device.type == "cpu" else 1
         if workers > 1 and degrader.device.type != "cpu":
             raise DataError(f"--degrade-workers {workers}: on {degrader.device} the degradation runs in this process "
                             "(0) or in one thread on its own stream (1)")
@@ -265,7 +268,8 @@ def validation_pairs(images: list[CleanImage], bank: Bank, degrader: Degrader, s
     return out
 
 
-def online_data(data: Path, bank_dir: Path, settings, device, workers: int = 0) -> tuple[OnlineBatches, list]:
+def online_data(data: Path, bank_dir: Path, settings, device, workers: int | None = None
+                ) -> tuple[OnlineBatches, list]:
     """(the training batches, the validation pairs) of the online degradation (module doc) for train settings
     with degrade = {"bank_fingerprint", "panels"}: the bank's panels on the device (float32), degraded in
     `workers` processes (CPU; 0: in this one)."""

@@ -217,7 +217,7 @@ def finished_summary(out: Path, settings: TrainSettings) -> dict | None:
 
 
 def _training_data(data_dir: Path, settings: TrainSettings, dev, bank: Path | None = None,
-                   workers: int = 0) -> tuple[object, list]:
+                   workers: int | None = None) -> tuple[object, list]:
     """(the training batches, the validation pairs as arrays): every pair read and checked (load_pair), and
     --crop-px checked against the smallest frame; with settings.degrade, the clean images and the bank's
     panels of the online degradation (restore.online)."""
@@ -309,11 +309,12 @@ def plot_loss(log: list, path: Path) -> None:
 
 
 def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "auto", checkpoint_s: float = 60.0,
-          val_every: int = 10, progress: bool = True, bank: Path | None = None, degrade_workers: int = 0) -> dict:
+          val_every: int = 10, progress: bool = True, bank: Path | None = None, degrade_workers: int | None = None) -> dict:
     """Train (or resume) in `out`; returns a summary (epochs, final loss, validation PSNR, seconds).
     Nothing is written in `out` before the settings, the run folder and every pair have been checked.
     settings.degrade: the online degradation through the kernel bank in `bank` (restore.online), in degrade_workers
-    processes (CPU; 0: in this one; the same numbers either way)."""
+    processes on the CPU (0: in this one) or a thread on a GPU (1); None: 0 on the CPU, 1 on a GPU; the same
+    numbers either way."""
     data_dir, out = Path(data_dir), Path(out)
     if settings.epochs < 1 or settings.batch < 1:
         raise TrainError(f"epochs = {settings.epochs}, batch = {settings.batch}: expected integers ≥ 1")
@@ -367,7 +368,8 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
             t_ckpt = time.perf_counter()
     bar.close()
     epochs_done = log[-1]["epoch"] if log else 0
-    final = {"model_config": model_config(model), "state_dict": model.state_dict(), "display": settings.display,
+    weights = {k: v.detach().cpu() for k, v in model.state_dict().items()}  # loadable where no GPU is
+    final = {"model_config": model_config(model), "state_dict": weights, "display": settings.display,
              "settings": asdict(settings), "epochs_done": epochs_done, "plateau_step": plateau}
     save_torch(out / "model.pt", final)
     summary = {"epochs": epochs_done, "epochs_planned": settings.epochs, "steps": step, "plateau_step": plateau,

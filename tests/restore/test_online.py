@@ -155,8 +155,8 @@ def test_a_model_trained_online_is_scored_on_its_panels_displays(tmp_path, bank,
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
 def test_on_a_gpu_the_batches_made_ahead_in_a_thread_are_the_same(tmp_path, bank):
-    """--degrade-workers 1 on a GPU: the batches made in a thread on their own stream equal those made in the
-    process (the same generators' draws); two threads are refused in one line."""
+    """--degrade-workers 1 on a GPU (its default): the batches made in a thread on their own stream equal those made
+    in the process (the same generators' draws); two threads are refused in one line."""
     data = write_pairs(tmp_path / "pairs", splits=(("train", 3),), size_px=(48, 64))
     b = read_bank(bank)
 
@@ -164,8 +164,9 @@ def test_on_a_gpu_the_batches_made_ahead_in_a_thread_are_the_same(tmp_path, bank
         ob = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels, device), 32, 2, seed=0, crops_per_image=3,
                            workers=workers)
         return [(x.cpu(), y.cpu()) for x, y in ob.epoch(1)[1]]
-    inline, ahead = epoch("cuda", 0), epoch("cuda", 1)
+    inline, ahead = epoch("cuda", 0), epoch("cuda", None)  # the default on a GPU: the thread
     assert len(inline) == len(ahead) == 5 and inline[0][0].abs().max() > 0
     assert all(torch.equal(a[0], c[0]) and torch.equal(a[1], c[1]) for a, c in zip(inline, ahead))
+    assert OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels, "cuda"), 32, 2, seed=0).workers == 1
     with pytest.raises(DataError, match="--degrade-workers 2: on cuda"):
         OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels, "cuda"), 32, 2, seed=0, workers=2)

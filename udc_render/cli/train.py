@@ -32,10 +32,10 @@ def register(sub) -> None:
                    help="dataset: the dataset's captures; online: a fresh degradation of every crop of the clean "
                         "images, each through a panel drawn from --bank, on the training device [dataset]")
     p.add_argument("--bank", type=Path, help="with --degrade online: a kernel bank written by `udc-render bank`")
-    p.add_argument("--degrade-workers", type=int, default=0,
+    p.add_argument("--degrade-workers", type=int, default=None,
                    help="with --degrade online: on the CPU, processes that degrade the next crops while the model "
                         "trains (one thread each); on a GPU, 1: a thread on its own CUDA stream; the same numbers as 0, "
-                        "in this process [0]")
+                        "in this process [0 on the CPU, 1 on a GPU]")
     p.add_argument("--model", required=True, choices=("unet", "resnet"),
                    help="the model type (restore/models.py): unet: the paper's UNet with two sub-encoders; resnet: "
                         "the paper's ResNet baseline")
@@ -81,7 +81,7 @@ def run(args) -> int:
                              crop_px=args.crop_px, crops_per_pair=args.crops_per_pair, lr=args.lr,
                              loss=args.loss, seed=args.seed, data_fingerprint=fingerprint,
                              autocast=args.autocast, degrade=degrade)
-    if args.degrade_workers < 0 or (args.degrade_workers and args.degrade != "online"):
+    if args.degrade_workers is not None and (args.degrade_workers < 0 or args.degrade != "online"):
         raise UserError(f"--degrade-workers {args.degrade_workers}: expected a count ≥ 0, with --degrade online")
     s = train(args.data, args.out, settings, args.device, args.checkpoint_s, progress=not args.quiet, bank=args.bank,
               degrade_workers=args.degrade_workers)
