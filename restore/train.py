@@ -313,8 +313,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     """Train (or resume) in `out`; returns a summary (epochs, final loss, validation PSNR, seconds).
     Nothing is written in `out` before the settings, the run folder and every pair have been checked.
     settings.degrade: the online degradation through the kernel bank in `bank` (restore.online), in degrade_workers
-    processes on the CPU (0: in this one) or a thread on a GPU (1); None: 0 on the CPU, 1 on a GPU; the same
-    numbers either way."""
+    processes on the CPU (0: in this one) or a thread on a GPU (1); None: 1; the same numbers either way."""
     data_dir, out = Path(data_dir), Path(out)
     if settings.epochs < 1 or settings.batch < 1:
         raise TrainError(f"epochs = {settings.epochs}, batch = {settings.batch}: expected integers ≥ 1")
