@@ -204,23 +204,27 @@ def _ahead(batches, device: torch.device, depth: int = 2):
     side, done, out = torch.cuda.Stream(device), threading.Event(), queue.Queue(depth)
     side.wait_stream(torch.cuda.current_stream(device))  # the images and panels moved there before
 
+    def put(item) -> bool:
+        """Queue the item unless the caller has stopped (then False): never blocks past the caller."""
+        while not done.is_set():
+            try:
+                out.put(item, timeout=0.1)
+                return True
+            except queue.Full:
+                pass
+        return False
+
     def make():
         try:
             with torch.cuda.stream(side):
                 for x, y in batches():
                     ready = torch.cuda.Event()
                     ready.record(side)
-                    while not done.is_set():
-                        try:
-                            out.put((x, y, ready), timeout=0.1)
-                            break
-                        except queue.Full:
-                            pass
-                    if done.is_set():
+                    if not put((x, y, ready)):
                         return
-            out.put(None)
+            put(None)
         except BaseException as e:  # raised again in the caller's thread
-            out.put(e)
+            put(e)
     thread = threading.Thread(target=make, daemon=True)
     thread.start()
     try:

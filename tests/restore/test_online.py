@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import json
 import math
+import threading
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -167,6 +169,15 @@ def test_on_a_gpu_the_batches_made_ahead_in_a_thread_are_the_same(tmp_path, bank
     inline, ahead = epoch("cuda", 0), epoch("cuda", None)  # the default on a GPU: the thread
     assert len(inline) == len(ahead) == 5 and inline[0][0].abs().max() > 0
     assert all(torch.equal(a[0], c[0]) and torch.equal(a[1], c[1]) for a, c in zip(inline, ahead))
-    assert OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels, "cuda"), 32, 2, seed=0).workers == 1
+    ob = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels, "cuda"), 32, 2, seed=0, crops_per_image=3)
+    assert ob.workers == 1
+    it = ob.epoch(0)[1]  # a loop that stops after 3 of 5 batches, the thread waiting to queue its end: closed at once
+    for _ in range(3):
+        next(it)
+    time.sleep(1.0)
+    closer = threading.Thread(target=it.close)
+    closer.start()
+    closer.join(timeout=10)
+    assert not closer.is_alive()
     with pytest.raises(DataError, match="--degrade-workers 2: on cuda"):
         OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels, "cuda"), 32, 2, seed=0, workers=2)
