@@ -103,16 +103,28 @@ def images_fingerprint(data: Path) -> str:
 
 def region(img, y0: int, x0: int, rows: int, cols: int):
     """img[:, y0:y0 + rows, x0:x0 + cols] with the image mirrored beyond its edges (edge pixels not repeated); img a
-    numpy array or a torch tensor (indexed on its own device)."""
-    def idx(start, n, size):
+    numpy array or a torch tensor (on its own device). Axis by axis: inside the image a slice; a tensor's mirror
+    within one reflection, flipped slices joined; else a gather (a 768² crop of a 2048 × 1024 tensor mirrored on
+    one side: 0.6 ms, where one 2-D fancy index took 7 ms)."""
+    def axis(a, dim: int, start: int, n: int):
+        size = a.shape[dim]
+        if 0 <= start and start + n <= size:
+            return a[(slice(None),) * dim + (slice(start, start + n),)]
+        lo, hi = max(start, 0), min(start + n, size)
+        if isinstance(a, torch.Tensor) and hi > lo and -start < size and start + n - size < size:
+            parts = [a.narrow(dim, 1, -start).flip(dim)] if start < 0 else []
+            parts.append(a.narrow(dim, lo, hi - lo))
+            if start + n > size:
+                parts.append(a.narrow(dim, 2 * size - 1 - start - n, start + n - size).flip(dim))
+            return torch.cat(parts, dim)
         i = np.abs(np.arange(start, start + n))
         period = 2 * (size - 1)
         i %= max(period, 1)
         i = np.where(i >= size, period - i, i)
-        return torch.as_tensor(i, device=img.device) if isinstance(img, torch.Tensor) else i
-    if y0 >= 0 and x0 >= 0 and y0 + rows <= img.shape[1] and x0 + cols <= img.shape[2]:
-        return img[:, y0:y0 + rows, x0:x0 + cols]
-    return img[:, idx(y0, rows, img.shape[1])[:, None], idx(x0, cols, img.shape[2])[None, :]]
+        if isinstance(a, torch.Tensor):
+            return a.index_select(dim, torch.as_tensor(i, device=a.device))
+        return np.take(a, i, axis=dim)
+    return axis(axis(img, 1, y0, rows), 2, x0, cols)
 
 
 def dihedral_tensor(a: torch.Tensor, mode: int) -> torch.Tensor:
