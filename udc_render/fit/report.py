@@ -121,6 +121,8 @@ def markdown(result: dict) -> str:
         w = result["white"]
         out += ["", "## γ and transmission from the white square", "",
                 "γ R/Gr/Gb/B: " + ", ".join(fmt(g) for g in w["gamma"]) + f" (gain {w['gain']:g}, {w['pixels']} px per channel)",
+                "the square {0} × {1} px, the region {2} × {3} px (its far field counted in the gains)".format(
+                    *w["square_px"], *w["region_px"]),
                 f"T(λ): {w['transmission']['type']}: " + ", ".join(f"{k} {fmt(v)}" for k, v in w["parameters"].items()),
                 "γ it gives: " + "/".join(f"{g:.4f}" for g in w["gamma_model"])]
     if result.get("noise"):
