@@ -15,8 +15,8 @@ degradation's ratio to each step (medians, and in brackets the fastest repeats')
 
 --train: training itself, steps of the UNet (--autocast bf16|fp32) on batches degraded on the fly (restore.online
 .OnlineBatches: crops of two clean 2048 × 1024 images through the panels, drawn per crop) with the degradation in
-this process (workers 0) and in a DataLoader worker process (1; on a GPU, a thread on its own stream), against the same steps on batches made
-beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median step times
+this process (workers 0) and in a DataLoader worker process (1; on a GPU, a thread on its own stream), against
+the same steps on batches made beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median step times
 (each run's first step left out: a worker's start) less one. --device cuda: the steps and the degradation on the
 GPU (float32 panels), timed to a synchronize after each step.
 
@@ -194,9 +194,10 @@ def train_runs(a) -> None:
                 ob = OnlineBatches(images, bank, Degrader(panels, dev), c, a.batch, 0, per_image, int(name[-1]))
                 times[name] += run(ob.epoch(0)[1])
     med = {k: statistics.median(v) for k, v in times.items()}
-    print(f"device {dev}, torch threads {torch.get_num_threads()}, UNet {a.autocast}, batch {a.batch} × {c} px, kernel "
-          f"{panels[0].kernel_px} px, panels {', '.join(p.name for p in panels)} (drawn per crop), {a.rounds} rounds of "
-          f"{a.steps} steps per run (each run's first left out); {'bank ' + a.bank if a.bank else 'synthetic panels'}")
+    print(f"device {dev}, torch threads {torch.get_num_threads()}, UNet {a.autocast}, batch {a.batch} × {c} px, "
+          f"kernel {panels[0].kernel_px} px, panels {', '.join(p.name for p in panels)} (drawn per crop), {a.rounds} "
+          f"rounds of {a.steps} steps per run (each run's first left out); "
+          f"{'bank ' + a.bank if a.bank else 'synthetic panels'}")
     print("| run | median s per step | quartiles | slowdown vs ready batches (medians) |")
     print("|---|---|---|---|")
     for k, v in med.items():

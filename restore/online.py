@@ -160,7 +160,7 @@ class OnlineBatches:
             raise DataError(f"--degrade-workers {workers}: on {degrader.device} the degradation runs in this process "
                             "(0) or in one thread on its own stream (1)")
         self.workers = workers
-        if workers and degrader.device.type == "cpu":  # made once here, so that every epoch's forked workers inherit them
+        if workers and degrader.device.type == "cpu":  # made once here: every epoch's forked workers inherit them
             shape = fft_shape((crop_px + 2 * degrader.margin_px,) * 2, 2 * degrader.margin_px + 1, degrader.margin_px)
             for i, p in enumerate(degrader.panels):
                 p.spectra(shape)

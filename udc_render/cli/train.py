@@ -34,8 +34,8 @@ def register(sub) -> None:
     p.add_argument("--bank", type=Path, help="with --degrade online: a kernel bank written by `udc-render bank`")
     p.add_argument("--degrade-workers", type=int, default=None,
                    help="with --degrade online: on the CPU, processes that degrade the next crops while the model "
-                        "trains (one thread each); on a GPU, 1: a thread on its own CUDA stream; the same numbers as 0, "
-                        "in this process [1]")
+                        "trains (one thread each); on a GPU, 1: a thread on its own CUDA stream; the same numbers "
+                        "as 0, in this process [1]")
     p.add_argument("--model", required=True, choices=("unet", "resnet"),
                    help="the model type (restore/models.py): unet: the paper's UNet with two sub-encoders; resnet: "
                         "the paper's ResNet baseline")

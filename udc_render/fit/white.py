@@ -13,8 +13,9 @@ aperture's power that the measured square brings to the region, for the fitted l
 g_k = τ_k (1 − o_k) + τ_k a_k (calibration.fit_gains.square_gains), the kernels' share inside the KERNEL_PX
 window (psf.compute_kernels at the band centres) and a_k the far field's from the square found here
 (optics.far_field.far_square_share, its sides and the region's in sensor pixels). What the far field adds
-depends on the square: on the P-OLED preset 1.6 % in R for the default rig's square (576 px around a 60-px
-region), 8 % for a white frame (calibration.fit_gains); a fit without it put T that much too high. Flat T: weighted least squares over R, G, B; when the channels
+depends on the square: on the P-OLED preset nothing for a square inside the window, 1.6 % in R for the default
+rig's 576-px square around a 60-px region, 4–5 % for a 1200-px square or a white frame (docs/PHYSICS.md §8); a
+fit without it put T that much too high. Flat T: weighted least squares over R, G, B; when the channels
 disagree with it (χ²/dof > 4 and a channel more than 2 % off), the polyimide T(λ) of the P-OLED preset
 (scale, absorption edge, cathode) is fitted instead (optics.displays.fit_poled_transmission), σ by its
 Jacobian.
