@@ -53,7 +53,7 @@ def toled_fit(tmp_path_factory):
     edges = np.array([400.0, 500.0, 600.0, 700.0])
     from udc_render.fit.white import band_gains
     from psf import Lens
-    d_gain, g_gain = band_gains(lay, Lens(), edges, 1.55, (128, 128), (66, 66))  # white_pair's square, its region
+    d_gain, g_gain = band_gains(lay, Lens(), edges, 1.55, (128, 128), (66, 66), (256 * 1.55, 256 * 1.55))
     rgb = channel_gamma(white_weights(edges, CAMERA), Display("t", lay, Transmission("flat", 0.6), 6.0), d_gain,
                         g_gain, edges)
     glass, disp = S.white_pair((rgb[0], rgb[1], rgb[1], rgb[2]), display_gain=6.0, seed=13)
@@ -158,7 +158,9 @@ def test_a_large_white_square_brings_the_far_field_and_the_fit_gives_the_presets
     from udc_render.optics.displays import poled_transmission
     lay, edges, gain = layouts.poled(), np.array([400.0, 500.0, 600.0, 700.0]), 4.0
     w, display = white_weights(edges, CAMERA), Display("t", lay, poled_transmission(), gain)
-    truth = channel_gamma(w, display, *band_gains(lay, Lens(), edges, 1.55, (1200, 1200), (602, 602)), edges)
+    frame_um = (1280 * 1.55, 1280 * 1.55)  # the capture's frame bounds the far field the fit computes
+    truth = channel_gamma(w, display, *band_gains(lay, Lens(), edges, 1.55, (1200, 1200), (602, 602), frame_um),
+                          edges)
     core = channel_gamma(w, display, *band_gains(lay, Lens(), edges, 1.55), edges)
     assert np.all(truth / core - 1 > 0.03)
     glass, disp = S.white_pair((truth[0], truth[1], truth[1], truth[2]), display_gain=gain, shape_hw=(1280, 1280),

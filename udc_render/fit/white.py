@@ -12,7 +12,8 @@ monitor's white, G the display capture's gain over the glass capture's (--white-
 aperture's power that the measured square brings to the region, for the fitted layout and (g⁰) the bare lens:
 g_k = τ_k (1 − o_k) + τ_k a_k (calibration.fit_gains.square_gains), the kernels' share inside the KERNEL_PX
 window (psf.compute_kernels at the band centres) and a_k the far field's from the square found here
-(optics.far_field.far_square_share, its sides and the region's in sensor pixels). What the far field adds
+(optics.far_field.far_square_share, its sides and the region's in sensor pixels; the far field computed over
+the capture's frame). What the far field adds
 depends on the square: on the P-OLED preset nothing for a square inside the window, 1.6 % in R for the default
 rig's 576-px square around a 60-px region, 4–5 % for a 1200-px square or a white frame (docs/PHYSICS.md §8); a
 fit without it put T that much too high. Flat T: weighted least squares over R, G, B; when the channels
@@ -35,7 +36,7 @@ from udc_render.optics.gamma import channel_gamma, white_weights
 
 CHANNEL_NAMES = ("R", "Gr", "Gb", "B")
 KERNEL_PX = 511
-SENSOR_UM = (2048 * 1.55, 1024 * 1.55)
+SENSOR_UM = (2048 * 1.55, 1024 * 1.55)  # the paper's frame: band_gains' default when no capture gives one
 
 
 @dataclass(frozen=True)
@@ -79,12 +80,13 @@ def _planes(frame: Frame) -> list[np.ndarray]:
 @dataclass(frozen=True)
 class WhiteSquare:
     """γ (R, Gr, Gb, B) ± σ measured on a white-square pair, the pixels per channel, and where: the square's and
-    the region's sides (x, y) in sensor pixels."""
+    the region's sides and the frame's (x, y) in sensor pixels."""
     gamma: np.ndarray
     sigma: np.ndarray
     pixels: int
     square_xy_px: tuple[int, int]
     region_xy_px: tuple[int, int]
+    frame_xy_px: tuple[int, int]
 
 
 def measure_gamma(glass: Frame, display: Frame) -> WhiteSquare:
@@ -115,16 +117,16 @@ def measure_gamma(glass: Frame, display: Frame) -> WhiteSquare:
         sigma[c] = np.std(d - gamma[c] * g) / (math.sqrt(g.size) * g.mean())
         n.append(g.size)
     return WhiteSquare(gamma, sigma, min(n), (int(c1 - c0 + 1), int(r1 - r0 + 1)),
-                       (cols_r.stop - cols_r.start, rows_r.stop - rows_r.start))
+                       (cols_r.stop - cols_r.start, rows_r.stop - rows_r.start), (glass.shape[1], glass.shape[0]))
 
 
 def band_gains(layout, lens: Lens, edges_nm, pixel_um: float, square_xy_px: tuple | None = None,
-               region_xy_px: tuple = (1, 1)) -> tuple[np.ndarray, np.ndarray]:
+               region_xy_px: tuple = (1, 1), frame_um: tuple = SENSOR_UM) -> tuple[np.ndarray, np.ndarray]:
     """(display, glass) g_k at the band centres for a white square of square_xy_px around a region of
-    region_xy_px, sensor px (module doc; square None: τ_k (1 − o_k), the core alone); the bare lens's through the
-    kernel cache (the same every run), the fitted layout's not."""
+    region_xy_px, sensor px, on a frame_um sensor (module doc; square None: τ_k (1 − o_k), the core alone); the
+    bare lens's through the kernel cache (the same every run), the fitted layout's not."""
     centres = 0.5 * (edges_nm[1:] + edges_nm[:-1])
-    return tuple(square_gains(lay, lens, centres, pixel_um, KERNEL_PX, SENSOR_UM, square_xy_px, region_xy_px,
+    return tuple(square_gains(lay, lens, centres, pixel_um, KERNEL_PX, tuple(frame_um), square_xy_px, region_xy_px,
                               use_cache=lay is None) for lay in (layout, None))
 
 
@@ -135,7 +137,8 @@ def _rgb(gamma_rggb: np.ndarray) -> np.ndarray:
 def fit_transmission(square: WhiteSquare, layout, lens: Lens, edges_nm, pixel_um: float, camera: str, gain: float):
     """(Transmission, {parameter: (value, σ)}, γ (R, Gr, Gb, B) it gives) of the module doc."""
     gamma, sigma = square.gamma, square.sigma
-    d_gain, g_gain = band_gains(layout, lens, edges_nm, pixel_um, square.square_xy_px, square.region_xy_px)
+    frame_um = (square.frame_xy_px[0] * pixel_um, square.frame_xy_px[1] * pixel_um)  # the far field's extent
+    d_gain, g_gain = band_gains(layout, lens, edges_nm, pixel_um, square.square_xy_px, square.region_xy_px, frame_um)
     w = white_weights(edges_nm, camera)
     unit = channel_gamma(w, Display("t", layout, Transmission("flat", 1.0), gain), d_gain, g_gain, edges_nm)
     a = np.array([unit[0], unit[1], unit[1], unit[2]])
