@@ -169,6 +169,12 @@ class OnlineBatches:
 
     @property
     def count(self) -> int:
+        """The clean images (as a dataset's PairBatches.count is its pairs)."""
+        return len(self.images)
+
+    @property
+    def crops(self) -> int:
+        """An epoch's crops: crops_per_image of each image."""
         return len(self.images) * self.crops_per_image
 
     def draw(self, epoch: int, k: int) -> dict:
@@ -193,7 +199,7 @@ class OnlineBatches:
 
     def epoch(self, epoch: int):
         """(the epoch's draws in order, an iterator of batches (x [B, 4, c/2, c/2], y [B, 3, c, c]) on the device)."""
-        order = np.random.default_rng([self.seed, epoch]).permutation(self.count)
+        order = np.random.default_rng([self.seed, epoch]).permutation(self.crops)
         draws = [self.draw(epoch, int(k)) for k in order]
 
         def batches():
