@@ -114,14 +114,16 @@ def load_pair(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
     return packed, gt
 
 
-def dihedral(a: np.ndarray, mode: int) -> np.ndarray:
-    """One of the 8 flips/transposes of the last two axes: bit 0 transpose, bit 1 flip rows, bit 2 flip columns."""
+def dihedral(a, mode: int):
+    """One of the 8 flips/transposes of the last two axes of an array or a tensor (views of an array): bit 0
+    transpose, bit 1 flip rows, bit 2 flip columns."""
+    flip = (lambda v, axis: v.flip(axis)) if isinstance(a, torch.Tensor) else np.flip
     if mode & 1:
-        a = np.swapaxes(a, -1, -2)
+        a = a.swapaxes(-1, -2)
     if mode & 2:
-        a = a[..., ::-1, :]
+        a = flip(a, -2)
     if mode & 4:
-        a = a[..., :, ::-1]
+        a = flip(a, -1)
     return a
 
 

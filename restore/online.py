@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from restore.data import DataError, load_gt, read_manifest
+from restore.data import DataError, dihedral, load_gt, read_manifest
 from restore.degrade import Degrader, normalised
 from udc_render.optics import fft_shape
 from udc_render.dataset.bank import Bank, read_bank
@@ -127,17 +127,6 @@ def region(img, y0: int, x0: int, rows: int, cols: int):
     return axis(axis(img, 1, y0, rows), 2, x0, cols)
 
 
-def dihedral_tensor(a: torch.Tensor, mode: int) -> torch.Tensor:
-    """restore.data.dihedral on a tensor: bit 0 transpose, bit 1 flip rows, bit 2 flip columns."""
-    if mode & 1:
-        a = a.transpose(-1, -2)
-    if mode & 2:
-        a = a.flip(-2)
-    if mode & 4:
-        a = a.flip(-1)
-    return a
-
-
 class OnlineBatches:
     """The training batches of the online degradation (module doc) on a device."""
 
@@ -190,7 +179,7 @@ class OnlineBatches:
     def sample(self, d: dict) -> tuple[torch.Tensor, torch.Tensor]:
         """(input [4, c/2, c/2], target [3, c, c]) of draw d, on the device."""
         img, m, c = self.pixels[d["image"]], self.degrader.margin_px, self.crop_px
-        clean = dihedral_tensor(region(img, d["y0"] - m, d["x0"] - m, c + 2 * m, c + 2 * m), d["mode"])
+        clean = dihedral(region(img, d["y0"] - m, d["x0"] - m, c + 2 * m, c + 2 * m), d["mode"])
         x = (clean * self.brightness[d["panel"]]).contiguous()
         gen = torch.Generator(self.degrader.device).manual_seed(d["noise_seed"])
         dn = self.degrader.degrade(x, d["panel"], img.shape[1:], (d["y0"], d["x0"]), gen)

@@ -13,7 +13,7 @@ import torch
 
 from restore.data import DataError, dihedral
 from restore.degrade import Degrader, normalised
-from restore.online import OnlineBatches, clean_images, dihedral_tensor, region, validation_pairs
+from restore.online import OnlineBatches, clean_images, region, validation_pairs
 from restore.train import TrainSettings, load_model, predict, train
 from tests.conftest import write_pairs
 from tests.restore.test_train import train_interrupted_at_epoch_2
@@ -104,7 +104,7 @@ def test_crops_take_mirrored_scene_beyond_the_frame_a_fresh_draw_each_epoch_and_
     np.testing.assert_array_equal(region(img, -3, -4, 16, 20), np.pad(img, ((0, 0), (3, 3), (4, 4)), "reflect"))
     np.testing.assert_array_equal(region(torch.from_numpy(img), -3, -4, 16, 20).numpy(), region(img, -3, -4, 16, 20))
     for mode in range(8):  # the crops are turned on the device as restore.data.dihedral turns arrays
-        np.testing.assert_array_equal(dihedral_tensor(torch.from_numpy(img), mode).numpy(), dihedral(img, mode))
+        np.testing.assert_array_equal(dihedral(torch.from_numpy(img), mode).numpy(), dihedral(img, mode))
     data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(48, 64))
     b = read_bank(bank)
     batches = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels), 32, 2, seed=0)
