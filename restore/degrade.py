@@ -16,6 +16,8 @@ the result equals `synth --form per_channel` (tests/restore/test_degrade.py: flo
 electrons and to the DN after quantisation; float32 within the tolerances stated there). Everything runs in
 torch on the input's device, but for the set-up computed with numpy: the 1-D phase weights of a crop (its rows
 and columns), and once per panel and frame size the sensor's maps (FPN, defects) and the exact power map.
+Degrader.degrade_batch takes a batch of crops, each through its own panel: on a GPU as one batch (blur_batch,
+restore.degrade_sensor.expose_batch), each crop's numbers those of its own degradation.
 """
 from __future__ import annotations
 
@@ -25,12 +27,12 @@ from contextlib import contextmanager
 import numpy as np
 import torch
 
-from restore.degrade_sensor import FrameMaps, NoiseDraw, expose_packed, packed_sites
+from restore.degrade_sensor import FrameMaps, NoiseDraw, expose_batch, host_to, packed_sites, per_crop
 from udc_render.dataset.bank import Panel
 from psf.banding import power_lattice
 from udc_render.optics import fft_shape, phase_weights
 
-__all__ = ["Degrader", "NoiseDraw", "TorchPanel", "blur", "normalised"]
+__all__ = ["Degrader", "NoiseDraw", "TorchPanel", "blur", "blur_batch", "normalised"]
 
 # The d > 0 panels' power maps a Degrader keeps (float32 at 2048 × 1024 with 256-px margins: 47 MB per panel).
 POWER_BUDGET_BYTES = 1.0e9
@@ -84,19 +86,17 @@ class TorchPanel:
         """Sensor positions of n pixels from frame index start_px on (pixel centres from the frame's centre)."""
         return (np.arange(n) + start_px - (frame_px - 1) / 2) * self.panel.pitch_um
 
-    def weight_factors(self, rows: int, cols: int, frame_hw: tuple[int, int],
-                       origin_yx: tuple[int, int]) -> tuple[torch.Tensor, torch.Tensor]:
-        """(wy [Py, rows], C_r wx [3, R, Py, cols]) of the crop's input whose first pixel is frame pixel origin −
-        margin, so that W_cr = wyᵀ (C_cr wx) (module doc; the bilinear phase weights of optics.field.phase_weights,
-        the phase powers in C where the panel has no series)."""
+    def phase_weights(self, rows: int, cols: int, frame_hw: tuple[int, int],
+                      origin_yx: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """(wy [Py, rows], wx [Px, cols]) of the crop's input whose first pixel is frame pixel origin − margin, so
+        that W_cr = wyᵀ (C_cr wx) (module doc; the bilinear phase weights of optics.field.phase_weights, the phase
+        powers in C = coeff_maps where the panel has no series)."""
         f, m = self.panel.field, self.margin_px
         py = self.positions_um(rows, origin_yx[0] - m, frame_hw[0])
         px = self.positions_um(cols, origin_yx[1] - m, frame_hw[1])
         d_um, z = f.distance_mm * 1000, f.image_distance_um
-        wy = phase_weights(py, f.shifts_y_um, d_um, z, f.period_um[1], f.periodic[0])
-        wx = phase_weights(px, f.shifts_x_um, d_um, z, f.period_um[0], f.periodic[1])
-        wy, wx = (torch.as_tensor(w, device=self.device).to(self.dtype) for w in (wy, wx))
-        return wy, self.coeff_maps @ wx
+        return (phase_weights(py, f.shifts_y_um, d_um, z, f.period_um[1], f.periodic[0]),
+                phase_weights(px, f.shifts_x_um, d_um, z, f.period_um[0], f.periodic[1]))
 
     def power_frame(self, frame_hw: tuple[int, int]) -> torch.Tensor | None:
         """m_c(s(x)) [3, H + 2m, W + 2m] of the whole frame with its margins, the lattice of optics.field_power's
@@ -115,28 +115,83 @@ def blur(x: torch.Tensor, panel: TorchPanel, frame_hw: tuple[int, int], origin_y
          power_frame: torch.Tensor | None = None) -> torch.Tensor:
     """The panel's blur of one crop x [3, h + 2m, w + 2m] (its output pixel (0, 0) at frame pixel origin_yx):
     [3, h, w] (module doc). power_frame: the panel's power_frame(frame_hw), made once (None: made here)."""
-    m, S = panel.margin_px, panel.size_px
+    if power_frame is None and panel.panel.field is not None:
+        power_frame = panel.power_frame(frame_hw)
+    return blur_batch(x[None], [panel], [(frame_hw, origin_yx)], [power_frame])[0]
+
+
+def blur_batch(x: torch.Tensor, panels: list[TorchPanel], crops: list, powers: list) -> torch.Tensor:
+    """blur of each crop x[b] [3, h + 2m, w + 2m] through panels[b] (one kernel size), at crops[b] = (frame_hw,
+    origin_yx) with powers[b] its panel's power_frame (None where d = 0 or without a series): [B, 3, h, w]. The
+    batch's transforms run as one, each spectrum multiplying the run of consecutive crops of its panel (a crop's
+    numbers are those of its own blur; Degrader sorts a batch by panel)."""
+    flat = [b for b, p in enumerate(panels) if p.panel.field is None]
+    nf = len(flat)
+    if flat != list(range(nf)):  # the d = 0 crops first, then back in the callers' order
+        order = flat + [b for b, p in enumerate(panels) if p.panel.field is not None]
+        y = blur_batch(x[host_to(torch.tensor(order), x.device)], [panels[b] for b in order],
+                       [crops[b] for b in order], [powers[b] for b in order])
+        return y[host_to(torch.from_numpy(np.argsort(order)), x.device)]
+    m, S = panels[0].margin_px, panels[0].size_px
     rows, cols = x.shape[-2:]
     shape = fft_shape((rows, cols), S, m)
-    spec = panel.spectra(shape)
-    if panel.panel.field is None:
-        y = torch.fft.rfft2(x, s=shape).mul_(spec[:, 0])
-    else:
-        power = panel.power_frame(frame_hw) if power_frame is None else power_frame
-        source = x if power is None else x * power[:, origin_yx[0]:origin_yx[0] + rows, origin_yx[1]:origin_yx[1] + cols]
-        wy, cw = panel.weight_factors(rows, cols, frame_hw, origin_yx)
-        y = None
-        for r in range(cw.shape[1]):  # one basis at a time: 3 weighted images in cache, not 3R (2× faster)
-            term = torch.fft.rfft2((wy.T @ cw[:, r]).mul_(source), s=shape).mul_(spec[:, r])
-            y = term if y is None else y.add_(term)
+    parts = []
+    if nf:
+        y = torch.fft.rfft2(x[:nf], s=shape)
+        for tp, run in _runs(panels[:nf]):
+            y[run].mul_(tp.spectra(shape)[:, 0])
+        parts.append(y)
+    if nf < len(panels):
+        parts.append(_field_spectra(x[nf:], panels[nf:], crops[nf:], powers[nf:], shape))
+    y = parts[0] if len(parts) == 1 else torch.cat(parts)
     # the inverse transform by axes, the rows cropped between them: 1 + (rows − 2m) / rows of irfft2's work
-    return torch.fft.irfft(torch.fft.ifft(y, dim=-2)[:, m:rows - m], n=shape[1], dim=-1)[:, :, m:cols - m]
+    return torch.fft.irfft(torch.fft.ifft(y, dim=-2)[..., m:rows - m, :], n=shape[1], dim=-1)[..., m:cols - m]
 
 
-def normalised(dn: torch.Tensor, panel: Panel) -> torch.Tensor:
-    """The restorers' input: (DN − black) / (white − black) (udc_render.io.capture.load_packed)."""
-    s = panel.sensor
-    return (dn - s.black_level_dn) / float(s.white_level_dn - s.black_level_dn)
+def _runs(panels: list[TorchPanel]) -> list[tuple[TorchPanel, slice]]:
+    """(panel, slice) of each run of consecutive crops through one panel."""
+    runs, start = [], 0
+    for b in range(1, len(panels) + 1):
+        if b == len(panels) or panels[b] is not panels[start]:
+            runs.append((panels[start], slice(start, b)))
+            start = b
+    return runs
+
+
+def _field_spectra(x, panels, crops, powers, shape) -> torch.Tensor:
+    """Σ_r FFT(W_cr x_c) · FFT(B_cr) [B, 3, …] of d > 0 crops x [B, 3, rows, cols] (module doc): one basis at a
+    time, the batch's weights W_r = wyᵀ (C_r wx) made by two batched products and its weighted images transformed
+    together. Panels of other field shapes (rank, phases) go one crop at a time."""
+    if len({tp.coeff_maps.shape for tp in panels}) > 1:
+        return torch.cat([_field_spectra(x[b:b + 1], panels[b:b + 1], crops[b:b + 1], powers[b:b + 1], shape)
+                          for b in range(len(panels))])
+    rows, cols = x.shape[-2:]
+    if any(p is not None for p in powers):
+        x = torch.stack([xb if p is None else xb * p[:, y0:y0 + rows, x0:x0 + cols]
+                         for xb, p, (_, (y0, x0)) in zip(x, powers, crops)])
+    wy, wx = (host_to(torch.from_numpy(np.stack(w)), x.device, panels[0].dtype)
+              for w in zip(*(tp.phase_weights(rows, cols, *crop) for tp, crop in zip(panels, crops))))
+    coeffs = torch.stack([tp.coeff_maps for tp in panels]) if len(_runs(panels)) > 1 else panels[0].coeff_maps[None]
+    cw = coeffs @ wx[:, None, None]  # [B, 3, R, Py, cols]
+    wyt = wy.transpose(-1, -2)[:, None]  # [B, 1, rows, Py]
+    y = None
+    for r in range(cw.shape[2]):  # one basis at a time: 3B weighted images in memory, not 3RB
+        terms = torch.fft.rfft2((wyt @ cw[:, :, r]).mul_(x), s=shape)
+        for tp, run in _runs(panels):
+            terms[run].mul_(tp.spectra(shape)[:, r])
+        y = terms if y is None else y.add_(terms)
+    return y
+
+
+def normalised(dn: torch.Tensor, panel: Panel | list[Panel]) -> torch.Tensor:
+    """The restorers' input: (DN − black) / (white − black) (udc_render.io.capture.load_packed); a batch [B, …]
+    with a list of its crops' panels."""
+    if isinstance(panel, Panel):
+        s = panel.sensor
+        return (dn - s.black_level_dn) / float(s.white_level_dn - s.black_level_dn)
+    sensors = [p.sensor for p in panel]
+    return ((dn - per_crop([s.black_level_dn for s in sensors], dn))
+            / per_crop([float(s.white_level_dn - s.black_level_dn) for s in sensors], dn))
 
 
 class Degrader:
@@ -145,10 +200,12 @@ class Degrader:
     power_budget_bytes): degrade(x, i, ...) is the capture of crop x through panel i as packed DN [4, h/2, w/2]."""
 
     def __init__(self, panels: list[Panel], device: torch.device | str = "cpu", dtype: torch.dtype = torch.float32,
-                 power_budget_bytes: float = POWER_BUDGET_BYTES, threads: int | None = DEGRADE_THREADS):
+                 power_budget_bytes: float = POWER_BUDGET_BYTES, threads: int | None = DEGRADE_THREADS,
+                 batched: bool | None = None):
         self.panels = [TorchPanel(p, device, dtype) for p in panels]
         self.device, self.dtype = torch.device(device), dtype
         self.threads = threads if self.device.type == "cpu" else None
+        self.batched = self.device.type != "cpu" if batched is None else batched  # degrade_batch's doc
         self.maps = FrameMaps(self.device, dtype)
         self.power_budget_bytes = power_budget_bytes
         self._power: OrderedDict = OrderedDict()
@@ -175,28 +232,58 @@ class Degrader:
                 generator: torch.Generator | None = None, draw: NoiseDraw | None = None) -> torch.Tensor:
         """Packed DN [4, h/2, w/2] (R, Gr, Gb, B; whole numbers) of crop x [3, h + 2m, w + 2m] whose output starts
         at frame pixel origin_yx (even: an R site) of a frame_hw sensor, through panel `index`; the noise from
-        `generator` (on this device), or the explicit `draw`; on the CPU with self.threads threads."""
-        with cpu_threads(self.threads):
-            return self._degrade(x, index, frame_hw, origin_yx, generator, draw)
+        `generator` (on this device), or the explicit `draw`: degrade_batch of one crop."""
+        return self.degrade_batch(x[None], [index], [(frame_hw, origin_yx)], [generator], [draw])[0]
 
-    def _degrade(self, x, index, frame_hw, origin_yx, generator, draw) -> torch.Tensor:
-        tp = self.panels[index]
-        m = tp.margin_px
+    def degrade_batch(self, x: torch.Tensor, indices: list[int], crops: list, generators: list | None = None,
+                      draws: list | None = None) -> torch.Tensor:
+        """Packed DN [B, 4, h/2, w/2] of crops x [B, 3, h + 2m, w + 2m], crop b through panel indices[b] at crops[b]
+        = (frame_hw, origin_yx) (as degrade), its noise from generators[b] or draws[b]; on the CPU with
+        self.threads threads. With self.batched (by default on a GPU) the batch's operations run as one where
+        the crops allow it (their FFTs, the sensor of crops alike), in a fraction of the launches of one call per
+        crop: the GPU's cost (half the time on an H100). Else crop by crop: on one CPU thread a batch's weighted
+        images leave the cache (d > 0: 1.5× slower as one batch; benchmarks/README.md). Each crop's numbers are
+        its own, the same DN either way (tests/restore/test_degrade.py)."""
+        indices, crops = list(indices), list(crops)
+        generators, draws = generators or [None] * len(indices), draws or [None] * len(indices)
+        sizes = {self.panels[i].size_px for i in indices}
+        if len(sizes) > 1:
+            raise ValueError(f"a batch's panels have kernels of {sorted(sizes)} px: one size per batch")
+        with cpu_threads(self.threads):
+            if self.batched:  # sorted by panel, the d = 0 ones first (blur_batch's runs), then put back
+                order = sorted(range(len(indices)), key=lambda b: (self.panels[indices[b]].panel.field is not None,
+                                                                   indices[b]))
+                if order == sorted(order):
+                    return self._degrade(x, indices, crops, generators, draws)
+                x = x.to(self.device)[host_to(torch.tensor(order), self.device)]
+                pick = lambda seq: [seq[b] for b in order]  # noqa: E731
+                dn = self._degrade(x, pick(indices), pick(crops), pick(generators), pick(draws))
+                return dn[host_to(torch.from_numpy(np.argsort(order)), self.device)]
+            return torch.cat([self._degrade(x[b:b + 1], indices[b:b + 1], crops[b:b + 1], generators[b:b + 1],
+                                            draws[b:b + 1]) for b in range(len(indices))])
+
+    def _degrade(self, x, indices, crops, generators, draws) -> torch.Tensor:
+        tps = [self.panels[i] for i in indices]
+        m = tps[0].margin_px
         h, w = x.shape[-2] - 2 * m, x.shape[-1] - 2 * m
-        y0, x0 = origin_yx
-        if x.shape[0] != 3 or h < 2 or w < 2 or h % 2 or w % 2 or y0 % 2 or x0 % 2:
-            raise ValueError(f"crop {tuple(x.shape)} at {origin_yx}: expected [3, h + {2 * m}, w + {2 * m}] with h, w "
-                             "and the origin even (whole RGGB cells)")
-        if y0 < 0 or x0 < 0 or y0 + h > frame_hw[0] or x0 + w > frame_hw[1]:
-            raise ValueError(f"crop of {h} × {w} px at {origin_yx} leaves the {frame_hw[0]} × {frame_hw[1]} px frame")
-        power = self.power_frame(index, frame_hw) if tp.panel.field is not None else None
-        y = blur(x.to(self.device, self.dtype), tp, frame_hw, origin_yx, power).clamp_min(0)
-        s = tp.panel.sensor
-        per_e = s.dn_per_electron / s.gain / s.range_dn  # normalised units per e⁻ at gain 1
-        e = torch.as_tensor(s.gamma_rggb, device=self.device, dtype=self.dtype)[:, None, None] * packed_sites(y) / per_e
-        if s.cos4_falloff:
-            e = e * packed_sites(self._cos4(h, w, frame_hw, origin_yx, s))
-        return expose_packed(e, tp.panel, self.maps, frame_hw, origin_yx, generator, draw)
+        for (frame_hw, (y0, x0)) in crops:
+            if x.shape[1] != 3 or h < 2 or w < 2 or h % 2 or w % 2 or y0 % 2 or x0 % 2:
+                raise ValueError(f"crop {tuple(x.shape[1:])} at {(y0, x0)}: expected [3, h + {2 * m}, w + {2 * m}] "
+                                 "with h, w and the origin even (whole RGGB cells)")
+            if y0 < 0 or x0 < 0 or y0 + h > frame_hw[0] or x0 + w > frame_hw[1]:
+                raise ValueError(f"crop of {h} × {w} px at {(y0, x0)} leaves the {frame_hw[0]} × {frame_hw[1]} px frame")
+        powers = [self.power_frame(i, frame) if tp.panel.field is not None else None
+                  for i, tp, (frame, _) in zip(indices, tps, crops)]
+        y = blur_batch(x.to(self.device, self.dtype), tps, crops, powers).clamp_min(0)
+        sensors = [tp.panel.sensor for tp in tps]
+        gamma = per_crop([s.gamma_rggb for s in sensors], y)
+        per_e = per_crop([s.dn_per_electron / s.gain / s.range_dn for s in sensors], y)  # normalised units per e⁻
+        e = gamma * packed_sites(y) / per_e
+        if any(s.cos4_falloff for s in sensors):
+            cos4 = torch.stack([self._cos4(h, w, frame, origin, s) if s.cos4_falloff else torch.ones_like(y[0, 0])
+                                for s, (frame, origin) in zip(sensors, crops)])
+            e = e * packed_sites(cos4[:, None])
+        return expose_batch(e, [tp.panel for tp in tps], self.maps, crops, generators, draws)
 
     def _cos4(self, h: int, w: int, frame_hw, origin_yx, s) -> torch.Tensor:
         """cos⁴θ [h, w] of the crop's pixels, r from the frame's centre (sensor.radiometry.cos4_map)."""

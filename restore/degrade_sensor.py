@@ -30,12 +30,28 @@ from udc_render.sensor.noise import (BROOKS_LOG_SHOT_RANGE, BROOKS_READ_INTERCEP
 
 
 def packed_sites(a: torch.Tensor) -> torch.Tensor:
-    """[3, h, w] camera RGB → [4, h/2, w/2] the value of each RGGB site's colour at that site (R, Gr, Gb, B);
-    a [1, h, w] or [h, w] map → its four site planes."""
+    """[..., 3, h, w] camera RGB → [..., 4, h/2, w/2] the value of each RGGB site's colour at that site (R, Gr, Gb,
+    B); a [..., 1, h, w] or [h, w] map → its four site planes."""
     if a.dim() == 2:
         a = a[None]
-    colour = (0, 1, 1, 2) if a.shape[0] == 3 else (0, 0, 0, 0)
-    return torch.stack([a[c, i::2, j::2] for c, (i, j) in zip(colour, SITES)])
+    colour = (0, 1, 1, 2) if a.shape[-3] == 3 else (0, 0, 0, 0)
+    return torch.stack([a[..., c, i::2, j::2] for c, (i, j) in zip(colour, SITES)], dim=-3)
+
+
+def per_crop(values, like: torch.Tensor) -> torch.Tensor:
+    """Per-crop numbers [B] or [B, K] (Python floats, computed in double as the scalars they stand for) as a tensor
+    [B, 1, 1, 1] or [B, K, 1, 1] on like's device and in its precision: one copy for the whole batch."""
+    t = host_to(torch.tensor(values, dtype=torch.float64), like.device, like.dtype)
+    return t.reshape(t.shape[0], -1, 1, 1)
+
+
+def host_to(t: torch.Tensor, device: torch.device, dtype: torch.dtype | None = None) -> torch.Tensor:
+    """A host tensor on the device (in dtype), without waiting for the device: on a GPU copied from pinned memory
+    asynchronously (a pageable copy waits for the stream, and each wait let the GPU run dry: benchmarks/
+    profile_online.py)."""
+    if device.type == "cuda":
+        t = t.pin_memory().to(device, non_blocking=True)
+    return t.to(device, dtype)
 
 
 @dataclass(frozen=True)
@@ -70,20 +86,30 @@ class FrameMaps:
                                                 .to(self.dtype)) for a in (z, u, rows, cols))
         return self._fpn[key]
 
-    def fpn(self, frame_hw, origin_yx, size_hw, fpn: FpnConfig) -> tuple[torch.Tensor, torch.Tensor]:
-        """(gain 1 + PRNU z ≥ 0, offset DSNU u + σ_row r_i + σ_col c_j in e⁻) of the crop, packed."""
-        z, u, r, c = self._fpn_normals(frame_hw, fpn.seed)
-        ys, xs = _packed_slices(origin_yx, size_hw)
-        gain = torch.clamp_min(1.0 + fpn.prnu * z[:, ys, xs], 0.0)
-        return gain, fpn.dsnu_e * u[:, ys, xs] + fpn.row_offset_e * r[:, ys] + fpn.column_offset_e * c[:, :, xs]
+    def fpn(self, crops: list, size_hw, fpns: list[FpnConfig]) -> tuple[torch.Tensor, torch.Tensor]:
+        """(gain 1 + PRNU z ≥ 0, offset DSNU u + σ_row r_i + σ_col c_j in e⁻) [B, 4, h/2, w/2] of crops [(frame_hw,
+        origin_yx)] of size_hw, packed, each with its sensor's FpnConfig."""
+        parts = []
+        for (frame_hw, origin_yx), fpn in zip(crops, fpns):
+            z, u, r, c = self._fpn_normals(frame_hw, fpn.seed)
+            ys, xs = _packed_slices(origin_yx, size_hw)
+            parts.append((z[:, ys, xs], u[:, ys, xs], r[:, ys], c[:, :, xs]))
+        z, u, r, c = (torch.stack(a) for a in zip(*parts))
+        prnu, dsnu, rows, cols = per_crop([(f.prnu, f.dsnu_e, f.row_offset_e, f.column_offset_e) for f in fpns],
+                                          z).unbind(1)
+        gain = torch.clamp_min(1.0 + prnu[:, None] * z, 0.0)
+        return gain, dsnu[:, None] * u + rows[:, None] * r + cols[:, None] * c
 
-    def defect_classes(self, frame_hw, origin_yx, size_hw, defects: DefectConfig) -> torch.Tensor:
-        """The crop's defect classes, packed int8: 0 good, 1 dead, 2 hot (sensor.defects.defect_map)."""
-        key = (tuple(frame_hw), defects.seed, defects.dead_fraction, defects.hot_fraction)
-        if key not in self._defects:
-            classes = defect_map(*frame_hw, defects)
-            self._defects[key] = packed_sites(torch.as_tensor(classes, device=self.device))
-        return self._defects[key][(slice(None),) + _packed_slices(origin_yx, size_hw)]
+    def defect_classes(self, crops: list, size_hw, defects: list[DefectConfig]) -> torch.Tensor:
+        """The crops' defect classes [B, 4, h/2, w/2], packed int8: 0 good, 1 dead, 2 hot (sensor.defects.defect_map)."""
+        out = []
+        for (frame_hw, origin_yx), d in zip(crops, defects):
+            key = (tuple(frame_hw), d.seed, d.dead_fraction, d.hot_fraction)
+            if key not in self._defects:
+                classes = defect_map(*frame_hw, d)
+                self._defects[key] = packed_sites(torch.as_tensor(classes, device=self.device))
+            out.append(self._defects[key][(slice(None),) + _packed_slices(origin_yx, size_hw)])
+        return torch.stack(out)
 
 
 def _packed_slices(origin_yx, size_hw) -> tuple[slice, slice]:
@@ -112,47 +138,82 @@ def gaussian_lambdas(sensor, generator, device) -> tuple[tuple, tuple]:
     return tuple(map(float, read)), tuple(map(float, shot))
 
 
-def expose_packed(e: torch.Tensor, panel: Panel, maps: FrameMaps, frame_hw, origin_yx,
-                  generator: torch.Generator | None = None, draw: NoiseDraw | None = None) -> torch.Tensor:
-    """Packed DN [4, h/2, w/2] of the mean electrons e [4, h/2, w/2] of a crop at origin_yx of a frame_hw sensor
-    (module doc; sensor.noise.expose and sensor.defects.apply_defects in torch)."""
-    s, draw = panel.sensor, draw or NoiseDraw()
-    g, black, R, fw = s.dn_per_electron, s.black_level_dn, s.range_dn, s.full_well_e
+def _kind(panel: Panel) -> tuple:
+    """What decides a crop's sensor operations (not their numbers): crops alike are exposed as one batch."""
+    return panel.sensor.noise, panel.fpn is None, panel.defects is None
+
+
+def expose_batch(e: torch.Tensor, panels: list[Panel], maps: FrameMaps, crops: list,
+                 generators: list | None = None, draws: list | None = None) -> torch.Tensor:
+    """Packed DN [B, 4, h/2, w/2] of the mean electrons e [B, 4, h/2, w/2] of crops [(frame_hw, origin_yx)], crop b
+    behind panels[b]'s sensor, its noise from generators[b] (on e's device) or the explicit draws[b] (module doc;
+    sensor.noise.expose and sensor.defects.apply_defects in torch). Crops whose sensors work alike (_kind) go
+    through as one batch, their numbers per crop; a crop's draws come from its own generator alone, so that a crop
+    gets the same numbers in any batch."""
+    n = e.shape[0]
+    generators, draws = generators or [None] * n, [d or NoiseDraw() for d in (draws or [None] * n)]
+    groups: dict = {}
+    for b, p in enumerate(panels):
+        groups.setdefault(_kind(p), []).append(b)
+    if len(groups) == 1:
+        return _expose_alike(e, panels, maps, crops, generators, draws)
+    out = torch.empty_like(e)
+    for members in groups.values():
+        pick = lambda seq: [seq[b] for b in members]  # noqa: E731
+        idx = host_to(torch.tensor(members), e.device)
+        out[idx] = _expose_alike(e[idx], pick(panels), maps, pick(crops), pick(generators), pick(draws))
+    return out
+
+
+def _expose_alike(e, panels, maps, crops, generators, draws) -> torch.Tensor:
+    """expose_batch for crops of one _kind."""
+    s0, sensors = panels[0].sensor, [p.sensor for p in panels]
     size = (2 * e.shape[-2], 2 * e.shape[-1])
+    g, black, fw = (per_crop([getattr(s, k) for s in sensors], e) for k in ("dn_per_electron", "black_level_dn",
+                                                                             "full_well_e"))
     e = torch.nan_to_num(e, nan=0.0, posinf=torch.finfo(e.dtype).max)
     off = None
-    if panel.fpn is not None:
-        gain_map, off = maps.fpn(frame_hw, origin_yx, size, panel.fpn)
-        e = torch.clamp_max(e, CHARGE_CAP_E) * gain_map + panel.fpn.dark_charge_e(s.exposure_s)
-    if s.noise == "poisson":
-        cap = 2 * fw + 100 + 40 * s.read_noise_e
-        n = (draw.shot_e if draw.shot_e is not None
-             else torch.poisson(torch.clamp_max(e, cap), generator=generator)).to(e.device, e.dtype)
-        if s.read_noise_e > 0:
-            n = n + s.read_noise_e * _normal(e.shape, e, generator, draw.normal)
+    if panels[0].fpn is not None:
+        gain_map, off = maps.fpn(crops, size, [p.fpn for p in panels])
+        dark = per_crop([p.fpn.dark_charge_e(p.sensor.exposure_s) for p in panels], e)
+        e = torch.clamp_max(e, CHARGE_CAP_E) * gain_map + dark
+    if s0.noise == "poisson":
+        caps = [2 * s.full_well_e + 100 + 40 * s.read_noise_e for s in sensors]
+        n = torch.stack([d.shot_e.to(e.device, e.dtype) if d.shot_e is not None
+                         else torch.poisson(torch.clamp_max(eb, cap), generator=gen)
+                         for eb, cap, gen, d in zip(e, caps, generators, draws)])
+        if any(s.read_noise_e > 0 for s in sensors):
+            normal = torch.stack([_normal(eb.shape, eb, gen, d.normal) if s.read_noise_e > 0 else torch.zeros_like(eb)
+                                  for eb, gen, d, s in zip(e, generators, draws, sensors)])
+            n = n + per_crop([s.read_noise_e for s in sensors], e) * normal
         if off is not None:
             n = n + off
-        sig = black + g * torch.clamp_max(n, fw)
-    elif s.noise == "gaussian":
-        lam_read, lam_shot = draw.lambdas or gaussian_lambdas(s, generator, e.device)
-        cap = 2 * (g * fw / R) + 1600 * max(lam_shot) + 40 * math.sqrt(max(lam_read))
-        w = torch.clamp_max(g * e / R, cap)
-        lr, ls = (torch.as_tensor(v, device=e.device, dtype=e.dtype)[:, None, None] for v in (lam_read, lam_shot))
-        y = w + _normal(e.shape, e, generator, draw.normal) * torch.sqrt(lr + ls * w)
+        sig = black + g * torch.minimum(n, fw)
+    elif s0.noise == "gaussian":
+        lam = [d.lambdas or gaussian_lambdas(s, gen, e.device) for s, gen, d in zip(sensors, generators, draws)]
+        R = per_crop([s.range_dn for s in sensors], e)
+        cap = per_crop([2 * (s.dn_per_electron * s.full_well_e / s.range_dn) + 1600 * max(ls) + 40 * math.sqrt(max(lr))
+                        for s, (lr, ls) in zip(sensors, lam)], e)
+        w = torch.minimum(g * e / R, cap)
+        lr, ls = (per_crop([v[i] for v in lam], e) for i in (0, 1))
+        normal = torch.stack([_normal(eb.shape, eb, gen, d.normal) for eb, gen, d in zip(e, generators, draws)])
+        y = w + normal * torch.sqrt(lr + ls * w)
         if off is not None:
-            y = y + (g / R) * off
-        sig = black + R * torch.clamp_max(y, g * fw / R)
+            y = y + per_crop([s.dn_per_electron / s.range_dn for s in sensors], e) * off
+        sig = black + R * torch.minimum(y, per_crop([s.dn_per_electron * s.full_well_e / s.range_dn for s in sensors], e))
     else:
-        sig = black + g * torch.clamp_max(e if off is None else e + off, fw)
-    dn = torch.clamp(torch.round(sig), 0, s.white_level_dn)
-    return dn if panel.defects is None else _defects(dn, panel.defects, s, maps, frame_hw, origin_yx, size)
+        sig = black + g * torch.minimum(e if off is None else e + off, fw)
+    white = per_crop([s.white_level_dn for s in sensors], e)
+    dn = torch.clamp(torch.round(sig), torch.zeros_like(white), white)
+    return dn if panels[0].defects is None else _defects(dn, panels, maps, crops, size, black, white)
 
 
-def _defects(dn: torch.Tensor, defects: DefectConfig, s, maps: FrameMaps, frame_hw, origin_yx, size) -> torch.Tensor:
+def _defects(dn: torch.Tensor, panels, maps: FrameMaps, crops, size, black, white) -> torch.Tensor:
     """Dead pixels at black, hot ones + g · hot charge, capped (sensor.defects.apply_defects)."""
-    kind = maps.defect_classes(frame_hw, origin_yx, size, defects)
-    g = s.dn_per_electron
-    top = min(float(s.white_level_dn), s.black_level_dn + g * s.full_well_e)
-    level = torch.clamp(torch.round(torch.clamp_max(dn + g * defects.hot_charge_e(s.exposure_s), top)), 0,
-                        s.white_level_dn)
-    return torch.where(kind == DEAD, s.black_level_dn, torch.where(kind == HOT, level, dn))
+    kind = maps.defect_classes(crops, size, [p.defects for p in panels])
+    sensors = [p.sensor for p in panels]
+    hot = per_crop([s.dn_per_electron * p.defects.hot_charge_e(s.exposure_s) for s, p in zip(sensors, panels)], dn)
+    top = per_crop([min(float(s.white_level_dn), s.black_level_dn + s.dn_per_electron * s.full_well_e)
+                    for s in sensors], dn)
+    level = torch.clamp(torch.round(torch.minimum(dn + hot, top)), torch.zeros_like(white), white)
+    return torch.where(kind == DEAD, black, torch.where(kind == HOT, level, dn))

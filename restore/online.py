@@ -39,6 +39,7 @@ import torch
 
 from restore.data import DataError, dihedral, load_gt, read_manifest
 from restore.degrade import Degrader, normalised
+from restore.degrade_sensor import per_crop
 from udc_render.optics import fft_shape
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.io.exr import read_exr
@@ -177,14 +178,22 @@ class OnlineBatches:
                 "noise_seed": int(rng.integers(2 ** 63 - 1))}
 
     def sample(self, d: dict) -> tuple[torch.Tensor, torch.Tensor]:
-        """(input [4, c/2, c/2], target [3, c, c]) of draw d, on the device."""
-        img, m, c = self.pixels[d["image"]], self.degrader.margin_px, self.crop_px
-        clean = dihedral(region(img, d["y0"] - m, d["x0"] - m, c + 2 * m, c + 2 * m), d["mode"])
-        x = (clean * self.brightness[d["panel"]]).contiguous()
-        gen = torch.Generator(self.degrader.device).manual_seed(d["noise_seed"])
-        dn = self.degrader.degrade(x, d["panel"], img.shape[1:], (d["y0"], d["x0"]), gen)
-        target = x[:, m:m + c, m:m + c].float()
-        return normalised(dn, self.bank.panels[d["panel"]]).float(), target
+        """(input [4, c/2, c/2], target [3, c, c]) of draw d, on the device: samples of one draw."""
+        x, y = self.samples([d])
+        return x[0], y[0]
+
+    def samples(self, draws: list[dict]) -> tuple[torch.Tensor, torch.Tensor]:
+        """(inputs [B, 4, c/2, c/2], targets [B, 3, c, c]) of the draws, on the device, degraded as one batch
+        (Degrader.degrade_batch: each crop's numbers those of its own degradation)."""
+        m, c = self.degrader.margin_px, self.crop_px
+        clean = torch.stack([dihedral(region(self.pixels[d["image"]], d["y0"] - m, d["x0"] - m, c + 2 * m, c + 2 * m),
+                                      d["mode"]) for d in draws])
+        panels = [self.bank.panels[d["panel"]] for d in draws]
+        x = clean * per_crop([self.brightness[d["panel"]] for d in draws], clean)
+        gens = [torch.Generator(self.degrader.device).manual_seed(d["noise_seed"]) for d in draws]
+        crops = [(self.pixels[d["image"]].shape[1:], (d["y0"], d["x0"])) for d in draws]
+        dn = self.degrader.degrade_batch(x, [d["panel"] for d in draws], crops, gens)
+        return normalised(dn, panels).float(), x[:, :, m:m + c, m:m + c].float().contiguous()
 
     def epoch(self, epoch: int):
         """(the epoch's draws in order, an iterator of batches (x [B, 4, c/2, c/2], y [B, 3, c, c]) on the device)."""
@@ -193,8 +202,7 @@ class OnlineBatches:
 
         def batches():
             for i in range(0, len(draws), self.batch):
-                xs, ys = zip(*(self.sample(d) for d in draws[i:i + self.batch]))
-                yield torch.stack(xs), torch.stack(ys)
+                yield self.samples(draws[i:i + self.batch])
         if not self.workers:
             return draws, batches()
         if self.degrader.device.type != "cpu":
