@@ -4,21 +4,22 @@
         [--frame 2048,1024] [--repeats 7] [--threads N] [--bank DIR] [--device cpu|cuda]
 
 Per batch of `--batch` crops of `--crop-px` (each with the kernel's half-width of scene around it, as
-`udc-render train --degrade online` takes them): the degradation (restore.degrade.Degrader.degrade per crop,
-float32, its generator) through a d = 0 panel (one kernel per channel) and a d > 0 panel (the rank-r field
-basis with the exact power map; the map of the frame made once beforehand, timed apart), against one Adam step
-of the paper's UNet (restore.models.UNET_CONFIG) on that batch, float32 and bf16 autocast (the cpu budget's), at
-torch's thread count (and others with --step-threads). The Degrader's ops run on --degrade-threads threads
-(restore.degrade.DEGRADE_THREADS, 1 by default: see the table). The timings alternate between the rows, repeat
-by repeat, so that a load that comes and goes hits them alike; the table gives the medians, and each
-degradation's ratio to each step (medians, and in brackets the fastest repeats').
+`udc-render train --degrade online` takes them): the degradation (restore.degrade.Degrader.degrade_batch, crop
+by crop and as one batch, float32, a generator per crop) through a d = 0 panel (one kernel per channel) and a
+d > 0 panel (the rank-r field basis with the exact power map; the map of the frame made once beforehand, timed
+apart), against one Adam step of the paper's UNet (restore.models.UNET_CONFIG) on that batch, float32 and bf16
+autocast (the cpu budget's), at torch's thread count (and others with --step-threads). The Degrader's ops run
+on --degrade-threads threads (restore.degrade.DEGRADE_THREADS, 1 by default: see the table). The timings
+alternate between the rows, repeat by repeat, so that a load that comes and goes hits them alike; the table
+gives the medians, and each degradation's ratio to each step (medians, and in brackets the fastest repeats').
 
 --train: training itself, steps of the UNet (--autocast bf16|fp32) on batches degraded on the fly (restore.online
 .OnlineBatches: crops of two clean 2048 × 1024 images through the panels, drawn per crop) with the degradation in
-this process (workers 0) and in a DataLoader worker process (1; on a GPU, a thread on its own stream), against
-the same steps on batches made beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median step times
-(each run's first step left out: a worker's start) less one. --device cuda: the steps and the degradation on the
-GPU (float32 panels), timed to a synchronize after each step.
+this process (workers 0) and in a DataLoader worker process (1), crop by crop on the CPU; on a GPU workers 1 is
+a thread on its own stream and a batch is degraded as one (the Degrader's defaults). Against the same steps on
+batches made beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median
+step times (each run's first step left out: a worker's start) less one. --device cuda: the steps and the
+degradation on the GPU (float32 panels), timed to a synchronize after each step.
 
 Without --bank the panels are synthetic with the shapes of the default bank (kernels of --kernel-px, a T-OLED
 series of 453 × 200 orders, 4 × 4 phases, Poisson noise, defects, FPN): the cost depends on the shapes, not on
@@ -119,13 +120,15 @@ def main() -> None:
         if dev.type == "cuda":
             torch.cuda.synchronize()
 
-    def degrade(d, i):
-        for b in range(a.batch):
-            d.degrade(crops[b], i, (h, w), origins[b], torch.Generator(dev).manual_seed(b))
+    def degrade(d, i, batched):
+        d.batched = batched
+        d.degrade_batch(crops, [i] * a.batch, [((h, w), o) for o in origins],
+                        [torch.Generator(dev).manual_seed(b) for b in range(a.batch)])
 
     rows = {f"degrade {p.name} ({'d > 0, rank ' + str(p.field.rank) if p.field else 'd = 0'}), "
-            f"{n or torch.get_num_threads()} thread{'s' if (n or torch.get_num_threads()) > 1 else ''}":
-            (lambda d=d, i=i: degrade(d, i)) for n, d in degraders.items() for i, p in enumerate(panels)}
+            f"{n or torch.get_num_threads()} thread{'s' if (n or torch.get_num_threads()) > 1 else ''}, "
+            f"{'one batch' if batched else 'crop by crop'}": (lambda d=d, i=i, batched=batched: degrade(d, i, batched))
+            for n, d in degraders.items() for i, p in enumerate(panels) for batched in (False, True)}
     def step(s, n):
         with cpu_threads(n if dev.type == "cpu" else None):
             train_step(model, opt, x, y, loss_of, s)

@@ -87,8 +87,8 @@ class FrameMaps:
         return self._fpn[key]
 
     def fpn(self, crops: list, size_hw, fpns: list[FpnConfig]) -> tuple[torch.Tensor, torch.Tensor]:
-        """(gain 1 + PRNU z ≥ 0, offset DSNU u + σ_row r_i + σ_col c_j in e⁻) [B, 4, h/2, w/2] of crops [(frame_hw,
-        origin_yx)] of size_hw, packed, each with its sensor's FpnConfig."""
+        """(gain 1 + PRNU z ≥ 0, offset DSNU u + σ_row r_i + σ_col c_j in e⁻) [B, 4, h/2, w/2] of crops
+        [(frame_hw, origin_yx)] of size_hw, packed, each with its sensor's FpnConfig."""
         parts = []
         for (frame_hw, origin_yx), fpn in zip(crops, fpns):
             z, u, r, c = self._fpn_normals(frame_hw, fpn.seed)
@@ -101,7 +101,8 @@ class FrameMaps:
         return gain, dsnu[:, None] * u + rows[:, None] * r + cols[:, None] * c
 
     def defect_classes(self, crops: list, size_hw, defects: list[DefectConfig]) -> torch.Tensor:
-        """The crops' defect classes [B, 4, h/2, w/2], packed int8: 0 good, 1 dead, 2 hot (sensor.defects.defect_map)."""
+        """The crops' defect classes [B, 4, h/2, w/2], packed int8: 0 good, 1 dead, 2 hot
+        (sensor.defects.defect_map)."""
         out = []
         for (frame_hw, origin_yx), d in zip(crops, defects):
             key = (tuple(frame_hw), d.seed, d.dead_fraction, d.hot_fraction)
@@ -200,7 +201,8 @@ def _expose_alike(e, panels, maps, crops, generators, draws) -> torch.Tensor:
         y = w + normal * torch.sqrt(lr + ls * w)
         if off is not None:
             y = y + per_crop([s.dn_per_electron / s.range_dn for s in sensors], e) * off
-        sig = black + R * torch.minimum(y, per_crop([s.dn_per_electron * s.full_well_e / s.range_dn for s in sensors], e))
+        top = per_crop([s.dn_per_electron * s.full_well_e / s.range_dn for s in sensors], e)
+        sig = black + R * torch.minimum(y, top)
     else:
         sig = black + g * torch.minimum(e if off is None else e + off, fw)
     white = per_crop([s.white_level_dn for s in sensors], e)
