@@ -169,7 +169,7 @@ def test_a_large_white_square_brings_the_far_field_and_the_fit_gives_the_presets
         save_dng(tmp_path / name, m, CAMERA, 64, 65535)
     fit = fit_white(read_frame(tmp_path / "g.dng", 64), read_frame(tmp_path / "d.dng", 64), lay, Lens(), edges, 1.55,
                     CAMERA, gain)
-    assert fit.square_xy_px == (1200, 1200) and fit.region_xy_px == (602, 602)
+    assert fit.measured.square_xy_px == (1200, 1200) and fit.measured.region_xy_px == (602, 602)
     model = np.array([fit.gamma_model[0], fit.gamma_model[1], fit.gamma_model[3]])
     assert np.all(np.abs(model / truth - 1) < 0.005), (model, truth)
     scale, s_scale = fit.params["scale"]

@@ -204,9 +204,9 @@ def run_fit(spec: FitSpec, out: Path, progress=None) -> dict:
     if flat:
         result["flat"] = _flat_record(flat)
     if white:
-        result["white"] = {"gamma": [pm(g, s) for g, s in zip(white.gamma, white.gamma_sigma)], "gain": white.gain,
-                           "pixels": white.pixels,
-                           "square_px": list(white.square_xy_px), "region_px": list(white.region_xy_px),
+        m = white.measured
+        result["white"] = {"gamma": [pm(g, s) for g, s in zip(m.gamma, m.sigma)], "gain": white.gain,
+                           "pixels": m.pixels, "square_px": list(m.square_xy_px), "region_px": list(m.region_xy_px),
                            "transmission": white.transmission.describe(),
                            "parameters": {k: pm(*v) for k, v in white.params.items()},
                            "gamma_model": list(white.gamma_model)}

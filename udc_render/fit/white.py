@@ -39,21 +39,6 @@ KERNEL_PX = 511
 SENSOR_UM = (2048 * 1.55, 1024 * 1.55)  # the paper's frame: band_gains' default when no capture gives one
 
 
-@dataclass(frozen=True)
-class WhiteFit:
-    """γ (R, Gr, Gb, B) ± σ, the pixels per channel, the fitted transmission, its parameters ± σ, the γ it
-    gives, the gain, and the square's and region's sides (x, y; sensor px)."""
-    gamma: np.ndarray
-    gamma_sigma: np.ndarray
-    pixels: int
-    transmission: Transmission
-    params: dict
-    gamma_model: np.ndarray
-    gain: float
-    square_xy_px: tuple[int, int]
-    region_xy_px: tuple[int, int]
-
-
 def channels(frame: Frame) -> list[np.ndarray]:
     """[4] (R, Gr, Gb, B) masks [H, W] of a frame's pixels (module doc)."""
     h, w = frame.shape
@@ -87,6 +72,17 @@ class WhiteSquare:
     square_xy_px: tuple[int, int]
     region_xy_px: tuple[int, int]
     frame_xy_px: tuple[int, int]
+
+
+@dataclass(frozen=True)
+class WhiteFit:
+    """What the white-square pair measured (WhiteSquare: γ ± σ, pixels, sides), the fitted transmission, its
+    parameters ± σ, the γ (R, Gr, Gb, B) it gives, and the gain."""
+    measured: WhiteSquare
+    transmission: Transmission
+    params: dict
+    gamma_model: np.ndarray
+    gain: float
 
 
 def measure_gamma(glass: Frame, display: Frame) -> WhiteSquare:
@@ -170,5 +166,4 @@ def fit_white(glass: Frame, display: Frame, layout, lens: Lens, edges_nm, pixel_
     """γ and T(λ) of the module doc."""
     square = measure_gamma(glass, display)
     trans, params, model = fit_transmission(square, layout, lens, np.asarray(edges_nm, float), pixel_um, camera, gain)
-    return WhiteFit(square.gamma, square.sigma, square.pixels, trans, params, model, gain, square.square_xy_px,
-                    square.region_xy_px)
+    return WhiteFit(square, trans, params, model, gain)
