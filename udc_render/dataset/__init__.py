@@ -206,7 +206,7 @@ def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None,
         t0 = time.perf_counter()
         wanted = sum(1 for t in tasks if splits is None or t.split in splits)
         bar = tqdm(total=wanted, initial=wanted - len(todo), desc="dataset", unit="item",
-                   disable=None if progress else True)
+                   disable=not progress)  # also into a log file: a job run in the background shows where it is
         try:
             with open(out / "timing.jsonl", "a") as log:
                 for r in run_all(todo):
