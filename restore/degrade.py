@@ -245,6 +245,9 @@ class Degrader:
         images leave the cache (d > 0: 1.5× slower as one batch; benchmarks/README.md). Each crop's numbers are
         its own, the same DN either way (tests/restore/test_degrade.py)."""
         indices, crops = list(indices), list(crops)
+        if not indices or len(crops) != len(indices) or x.shape[0] != len(indices):
+            raise ValueError(f"degrade_batch: {x.shape[0]} crops, {len(indices)} panel indices and {len(crops)} "
+                             "places: expected one of each per crop, at least one crop")
         generators, draws = generators or [None] * len(indices), draws or [None] * len(indices)
         sizes = {self.panels[i].size_px for i in indices}
         if len(sizes) > 1:
@@ -253,7 +256,7 @@ class Degrader:
             if self.batched:  # sorted by panel, the d = 0 ones first (blur_batch's runs), then put back
                 order = sorted(range(len(indices)), key=lambda b: (self.panels[indices[b]].panel.field is not None,
                                                                    indices[b]))
-                if order == sorted(order):
+                if order == list(range(len(order))):
                     return self._degrade(x, indices, crops, generators, draws)
                 x = x.to(self.device)[host_to(torch.tensor(order), self.device)]
                 pick = lambda seq: [seq[b] for b in order]  # noqa: E731

@@ -247,6 +247,9 @@ def test_bad_crops_are_refused():
         deg.degrade(torch.zeros(3, 13, 14), 0, (64, 64), (0, 0))
     with pytest.raises(ValueError, match="leaves the 64 × 64 px frame"):
         deg.degrade(torch.zeros(3, 14, 14), 0, (64, 64), (60, 0))
+    for x, indices in ((torch.zeros(0, 3, 14, 14), []), (torch.zeros(2, 3, 14, 14), [0])):
+        with pytest.raises(ValueError, match="expected one of each per crop, at least one crop"):
+            deg.degrade_batch(x, indices, [((64, 64), (0, 0))] * len(indices))
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device")
