@@ -102,17 +102,17 @@ def images_fingerprint(data: Path) -> str:
     return h.hexdigest()[:16]
 
 
-def region(img, y0: int, x0: int, rows: int, cols: int):
-    """img[:, y0:y0 + rows, x0:x0 + cols] with the image mirrored beyond its edges (edge pixels not repeated); img a
-    numpy array or a torch tensor (on its own device). Axis by axis: inside the image a slice; a tensor's mirror
+def region(img: torch.Tensor, y0: int, x0: int, rows: int, cols: int) -> torch.Tensor:
+    """img[:, y0:y0 + rows, x0:x0 + cols] of a tensor [C, H, W] (on its own device) with the image mirrored beyond
+    its edges (edge pixels not repeated: numpy's 'reflect'). Axis by axis: inside the image a slice; a mirror
     within one reflection, flipped slices joined; else a gather (a 768² crop of a 2048 × 1024 tensor mirrored on
     one side: 0.6 ms, where one 2-D fancy index took 7 ms)."""
-    def axis(a, dim: int, start: int, n: int):
+    def axis(a: torch.Tensor, dim: int, start: int, n: int) -> torch.Tensor:
         size = a.shape[dim]
         if 0 <= start and start + n <= size:
-            return a[(slice(None),) * dim + (slice(start, start + n),)]
+            return a.narrow(dim, start, n)
         lo, hi = max(start, 0), min(start + n, size)
-        if isinstance(a, torch.Tensor) and hi > lo and -start < size and start + n - size < size:
+        if hi > lo and -start < size and start + n - size < size:
             parts = [a.narrow(dim, 1, -start).flip(dim)] if start < 0 else []
             parts.append(a.narrow(dim, lo, hi - lo))
             if start + n > size:
@@ -122,9 +122,7 @@ def region(img, y0: int, x0: int, rows: int, cols: int):
         period = 2 * (size - 1)
         i %= max(period, 1)
         i = np.where(i >= size, period - i, i)
-        if isinstance(a, torch.Tensor):
-            return a.index_select(dim, torch.as_tensor(i, device=a.device))
-        return np.take(a, i, axis=dim)
+        return a.index_select(dim, torch.as_tensor(i, device=a.device))
     return axis(axis(img, 1, y0, rows), 2, x0, cols)
 
 
@@ -278,7 +276,7 @@ def validation_pairs(images: list[CleanImage], bank: Bank, degrader: Degrader, s
         p = j % len(bank.panels)
         b = float(bank.panels[p].record.get("brightness", 1.0))
         h, w = im.pixels.shape[1:]
-        x = torch.from_numpy(region(im.pixels, -m, -m, h + 2 * m, w + 2 * m)) * b
+        x = region(torch.from_numpy(im.pixels), -m, -m, h + 2 * m, w + 2 * m) * b
         gen = torch.Generator(degrader.device).manual_seed(int(np.random.SeedSequence([seed, VAL_STREAM, j])
                                                                .generate_state(1, np.uint64)[0] >> 1))
         dn = degrader.degrade(x, p, (h, w), (0, 0), gen)

@@ -101,8 +101,10 @@ def test_resumed_online_training_continues_identically(tmp_path, bank, monkeypat
 
 def test_crops_take_mirrored_scene_beyond_the_frame_a_fresh_draw_each_epoch_and_the_same_in_workers(tmp_path, bank):
     img = np.random.default_rng(0).random((3, 10, 12)).astype(np.float32)
-    np.testing.assert_array_equal(region(img, -3, -4, 16, 20), np.pad(img, ((0, 0), (3, 3), (4, 4)), "reflect"))
-    np.testing.assert_array_equal(region(torch.from_numpy(img), -3, -4, 16, 20).numpy(), region(img, -3, -4, 16, 20))
+    for y0, x0, pad in ((-3, -4, (3, 4)), (-13, -15, (13, 15))):  # one reflection (slices), several (a gather)
+        padded = np.pad(img, ((0, 0), (pad[0], pad[0]), (pad[1], pad[1])), "reflect")
+        np.testing.assert_array_equal(region(torch.from_numpy(img), y0, x0, *padded.shape[1:]).numpy(), padded)
+    np.testing.assert_array_equal(region(torch.from_numpy(img), 2, 3, 5, 6).numpy(), img[:, 2:7, 3:9])
     for mode in range(8):  # the crops are turned on the device as restore.data.dihedral turns arrays
         np.testing.assert_array_equal(dihedral(torch.from_numpy(img), mode).numpy(), dihedral(img, mode))
     data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(48, 64))
@@ -114,8 +116,9 @@ def test_crops_take_mirrored_scene_beyond_the_frame_a_fresh_draw_each_epoch_and_
     assert batches.epoch(0)[0] == d0 and batches.epoch(1)[0] != d0
     d, m = d0[0], batches.degrader.margin_px  # the first crop, cut from the numpy image as the module doc says
     gt = clean_images(data, "train")[d["image"]].pixels
-    clean = torch.from_numpy(np.ascontiguousarray(dihedral(region(gt, d["y0"] - m, d["x0"] - m, 32 + 2 * m,
-                                                                  32 + 2 * m), d["mode"])))
+    y0, x0, n = d["y0"], d["x0"], 32 + 2 * m
+    scene = np.pad(gt, ((0, 0), (m, m), (m, m)), "reflect")[:, y0:y0 + n, x0:x0 + n]
+    clean = torch.from_numpy(np.ascontiguousarray(dihedral(scene, d["mode"])))
     dn = batches.degrader.degrade(clean, d["panel"], gt.shape[1:], (d["y0"], d["x0"]),
                                   torch.Generator().manual_seed(d["noise_seed"]))
     assert torch.equal(x[0], normalised(dn, b.panels[d["panel"]]).float()) and torch.equal(y[0], clean[:, m:-m, m:-m])
