@@ -171,13 +171,14 @@ def _field_spectra(x, panels, crops, powers, shape) -> torch.Tensor:
                          for xb, p, (_, (y0, x0)) in zip(x, powers, crops)])
     wy, wx = (host_to(torch.from_numpy(np.stack(w)), x.device, panels[0].dtype)
               for w in zip(*(tp.phase_weights(rows, cols, *crop) for tp, crop in zip(panels, crops))))
-    coeffs = torch.stack([tp.coeff_maps for tp in panels]) if len(_runs(panels)) > 1 else panels[0].coeff_maps[None]
+    runs = _runs(panels)
+    coeffs = torch.stack([tp.coeff_maps for tp in panels]) if len(runs) > 1 else panels[0].coeff_maps[None]
     cw = coeffs @ wx[:, None, None]  # [B, 3, R, Py, cols]
     wyt = wy.transpose(-1, -2)[:, None]  # [B, 1, rows, Py]
     y = None
     for r in range(cw.shape[2]):  # one basis at a time: 3B weighted images in memory, not 3RB
         terms = torch.fft.rfft2((wyt @ cw[:, :, r]).mul_(x), s=shape)
-        for tp, run in _runs(panels):
+        for tp, run in runs:
             terms[run].mul_(tp.spectra(shape)[:, r])
         y = terms if y is None else y.add_(terms)
     return y

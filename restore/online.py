@@ -126,6 +126,11 @@ def region(img: torch.Tensor, y0: int, x0: int, rows: int, cols: int) -> torch.T
     return axis(axis(img, 1, y0, rows), 2, x0, cols)
 
 
+def panel_brightness(panel) -> float:
+    """The scale of a panel's clean scene: a drawn panel's exposure.brightness, 1 for a preset (module doc)."""
+    return float(panel.record.get("brightness", 1.0))
+
+
 class OnlineBatches:
     """The training batches of the online degradation (module doc) on a device."""
 
@@ -142,7 +147,7 @@ class OnlineBatches:
         # (on a GPU, cutting crops on the CPU and sending them cost 6× the training step: bench_degrade --train)
         self.pixels = [torch.from_numpy(im.pixels).to(degrader.device) for im in images]
         self.crop_px, self.batch, self.seed, self.crops_per_image = crop_px, batch, seed, crops_per_image
-        self.brightness = [float(p.record.get("brightness", 1.0)) for p in bank.panels]
+        self.brightness = [panel_brightness(p) for p in bank.panels]
         workers = 1 if workers is None else workers  # the default: one worker process (CPU) or thread (GPU)
         if workers > 1 and degrader.device.type != "cpu":
             raise DataError(f"--degrade-workers {workers}: on {degrader.device} the degradation runs in this process "
@@ -274,7 +279,7 @@ def validation_pairs(images: list[CleanImage], bank: Bank, degrader: Degrader, s
     out, m = [], degrader.margin_px
     for j, im in enumerate(images):
         p = j % len(bank.panels)
-        b = float(bank.panels[p].record.get("brightness", 1.0))
+        b = panel_brightness(bank.panels[p])
         h, w = im.pixels.shape[1:]
         x = region(torch.from_numpy(im.pixels), -m, -m, h + 2 * m, w + 2 * m) * b
         gen = torch.Generator(degrader.device).manual_seed(int(np.random.SeedSequence([seed, VAL_STREAM, j])
