@@ -27,7 +27,8 @@ from contextlib import contextmanager
 import numpy as np
 import torch
 
-from restore.degrade_sensor import FrameMaps, NoiseDraw, expose_batch, host_to, packed_sites, per_crop
+from restore.degrade_sensor import FrameMaps, NoiseDraw, expose_batch, packed_sites
+from restore.tensors import host_to, per_crop
 from udc_render.dataset.bank import Panel
 from psf.banding import power_lattice
 from udc_render.optics import fft_shape, phase_weights

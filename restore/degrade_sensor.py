@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from restore.tensors import host_to, per_crop
 from udc_render.dataset.bank import Panel
 from udc_render.sensor.bayer import SITES
 from udc_render.sensor.defects import DEAD, HOT, DefectConfig, defect_map
@@ -36,22 +37,6 @@ def packed_sites(a: torch.Tensor) -> torch.Tensor:
         a = a[None]
     colour = (0, 1, 1, 2) if a.shape[-3] == 3 else (0, 0, 0, 0)
     return torch.stack([a[..., c, i::2, j::2] for c, (i, j) in zip(colour, SITES)], dim=-3)
-
-
-def per_crop(values, like: torch.Tensor) -> torch.Tensor:
-    """Per-crop numbers [B] or [B, K] (Python floats, computed in double as the scalars they stand for) as a tensor
-    [B, 1, 1, 1] or [B, K, 1, 1] on like's device and in its precision: one copy for the whole batch."""
-    t = host_to(torch.tensor(values, dtype=torch.float64), like.device, like.dtype)
-    return t.reshape(t.shape[0], -1, 1, 1)
-
-
-def host_to(t: torch.Tensor, device: torch.device, dtype: torch.dtype | None = None) -> torch.Tensor:
-    """A host tensor on the device (in dtype), without waiting for the device: on a GPU copied from pinned memory
-    asynchronously (a pageable copy waits for the stream, and each wait let the GPU run dry: benchmarks/
-    profile_online.py)."""
-    if device.type == "cuda":
-        t = t.pin_memory().to(device, non_blocking=True)
-    return t.to(device, dtype)
 
 
 @dataclass(frozen=True)

@@ -39,7 +39,7 @@ import torch
 
 from restore.data import DataError, dihedral, load_gt, read_manifest
 from restore.degrade import Degrader, normalised
-from restore.degrade_sensor import per_crop
+from restore.tensors import per_crop
 from udc_render.optics import fft_shape
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.io.exr import read_exr
