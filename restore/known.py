@@ -88,6 +88,24 @@ def rggb_kernels(kernel_set) -> np.ndarray:
     return np.stack([k[0], k[1], k[1], k[2]]).astype(np.float32)
 
 
+def packed_from_sensor(kernels: np.ndarray) -> np.ndarray:
+    """[4, k, k] float32 unit-sum kernels R, Gr, Gb, B at the packed planes' pitch from channel kernels
+    [3, S, S] (R, G, B; S odd, centre c = S // 2) at the sensor pitch, such as a kernel bank's: each integrated over a
+    packed pixel (2 × 2 sensor pixels) centred on the kernel's centre and sampled every 2 pixels,
+        k[i, j] = Σ_{a, b ∈ {−1, 0, 1}} h(a) h(b) K[c + 2i + a, c + 2j + b],  h = (½, 1, ½),  |i|, |j| ≤ c // 2,
+    then normalised: a sensor-pitch delta becomes a packed delta, a shift of 2 px one of 1 px."""
+    k = np.asarray(kernels, np.float64)
+    if k.ndim != 3 or k.shape[0] != 3 or k.shape[1] != k.shape[2] or k.shape[1] % 2 == 0:
+        raise DataError(f"kernels: shape {k.shape}: expected [3, S, S] (R, G, B) with S odd")
+    p = np.pad(k, ((0, 0), (1, 1), (1, 1)))
+    box = 0.5 * p[:, :-2] + p[:, 1:-1] + 0.5 * p[:, 2:]
+    box = 0.5 * box[:, :, :-2] + box[:, :, 1:-1] + 0.5 * box[:, :, 2:]
+    c = k.shape[1] // 2
+    packed = box[:, c % 2::2, c % 2::2]
+    packed /= packed.sum(axis=(1, 2), keepdims=True)
+    return np.stack([packed[0], packed[1], packed[1], packed[2]]).astype(np.float32)
+
+
 def known_kernels_rggb(pair: Pair, size_px: int | None = None, use_cache: bool = True,
                        source: str = "paper") -> np.ndarray:
     """[4, k, k] unit-sum kernels at the packed-plane pitch for R, Gr, Gb, B; `source`: DEP_KERNELS

@@ -4,11 +4,15 @@ Two UNets are trained with the online degradation (restore.online, restore.train
 and clean crops, on
     (a) the default panel: a bank of the `physical` profile's P-OLED preset (d = 2 mm, its field bases);
     (b) randomized panels: a bank of N panels drawn from the documented ranges (randomize `default`, seed 0).
-Both are scored, with the paper protocol's PSNR (restore.metrics.paper_metrics: linear, clipped to [0, 1],
-border cropped), on the validation images, each degraded once through each panel of a test set (restore.online.
+Both are scored with the paper protocol's PSNR (restore.metrics.paper_metrics: linear, clipped to [0, 1], border
+cropped) on the validation images, each degraded once through each panel of a test set (restore.online.
 validation_pairs: image j's noise from (SCORE_SEED, 'val', j)), beside the input (the packed RAW, as
-restore.evaluate scores the input row), and with the level-matched PSNR (restore.metrics.level_matched_psnr_db:
-each channel's level solved with the truth; randomized T and brightness make the absolute level ambiguous):
+restore.evaluate scores the input row) and DeP (restore.dep) given the panel's own kernels (the bank's, a
+power-weighted mean over the field phases, at the packed pitch: restore.known.packed_from_sensor) and γ: a reference
+that knows the panel, blind only to its field dependence; and DeP on the same captures without the sensor's
+noise, fixed-pattern noise and defects (quantised all the same): what the noise costs. Each also with the
+level-matched PSNR (restore.metrics.level_matched_psnr_db: each channel's level solved with the truth; randomized T
+and brightness make the absolute level ambiguous):
     default      the default P-OLED (a's training panel);
     heldout      draws within the ranges that neither model trained on (randomize `default`, seed 1);
     disordered   the P-OLED with fabrication disorder (psf.layouts.disordered: a 2 × 2 supercell, openings moved
@@ -41,9 +45,11 @@ from tqdm import tqdm
 
 from psf import layouts
 from restore.degrade import Degrader
+from restore.dep import dep_restore
+from restore.known import packed_from_sensor
 from restore.metrics import level_matched_psnr_db, paper_metrics
 from restore.online import clean_images, images_fingerprint, validation_pairs
-from restore.studies.robustness_report import MODELS, SETS, write_report
+from restore.studies.robustness_report import MODELS, ROWS, SETS, write_report
 from restore.studies.stage_times import StageTimes
 from restore.train import TrainSettings, load_model, predict, train
 from udc_render.content.charts import dead_leaves_colour
@@ -212,13 +218,31 @@ def read_scores(path: Path) -> list[dict]:
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()] if path.is_file() else []
 
 
+def dep_outputs(panel, pairs: list) -> list[np.ndarray]:
+    """DeP (restore.dep) of each packed input with the panel's own kernels (restore.known.packed_from_sensor) and γ:
+    the reference that knows the panel exactly (module doc); the Wiener sampler of image j seeded (SCORE_SEED, j)."""
+    kernels = packed_from_sensor(panel.kernels)
+    return [dep_restore(x, panel.gamma_rgb, kernels, rng=[SCORE_SEED, j]).rgb for j, (x, _) in enumerate(pairs)]
+
+
+def panel_pairs(bank: Bank, panel, images: list) -> list[tuple]:
+    """The validation images degraded once through `panel` (restore.online.validation_pairs, SCORE_SEED)."""
+    return validation_pairs(images, Bank(bank.folder, bank.settings, [panel]), Degrader([panel], "cpu", torch.float32),
+                            SCORE_SEED)
+
+
 def score_panel(models: dict, bank: Bank, index: int, images: list) -> dict[str, dict]:
-    """{row key: scores} of the input and each model on `images` degraded once through panel `index` (module doc)."""
+    """{row key: scores} of the input, DeP with the panel's kernel (on the capture, and on the capture without the
+    sensor's noise) and each model on `images` degraded once through panel `index` (module doc)."""
     panel = bank.panels[index]
-    one = Bank(bank.folder, bank.settings, [panel])
-    pairs = validation_pairs(images, one, Degrader([panel], "cpu", torch.float32), SCORE_SEED)
+    pairs = panel_pairs(bank, panel, images)
     per_image = {"input": [paper_metrics(None, gt, packed=x)["psnr_db_paper"] for x, gt in pairs],
                  "input_level": [level_matched_psnr_db(None, gt, packed=x) for x, gt in pairs]}
+    quiet = replace(panel, sensor=replace(panel.sensor, noise="none"), defects=None, fpn=None)
+    for key, p, these in (("dep", panel, pairs), ("dep_noiseless", quiet, panel_pairs(bank, quiet, images))):
+        dep = list(zip(dep_outputs(p, these), (gt for _, gt in these)))
+        per_image[key] = [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in dep]
+        per_image[f"{key}_level"] = [level_matched_psnr_db(y, gt) for y, gt in dep]
     for key, model in models.items():
         out = [(predict(model, x, torch.device("cpu")), gt) for x, gt in pairs]
         per_image[key] = [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in out]
@@ -227,10 +251,10 @@ def score_panel(models: dict, bank: Bank, index: int, images: list) -> dict[str,
 
 
 def score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
-    """Every (set, panel) row of scores.jsonl: the input's and both models' paper PSNR, per image and mean;
-    rows already there are kept."""
+    """Every (set, panel) row of scores.jsonl: the paper PSNR of the input, DeP and both models, per image and
+    mean; rows already there with every row's score are kept."""
     path = out / SCORES_FILE
-    rows = read_scores(path)
+    rows = [r for r in read_scores(path) if all(f"psnr_{k}_db" in r for k in ROWS)]  # older rows lack a row: redone
     done = {(r["set"], r["panel"]) for r in rows}
     models = {key: load_model(out / "train" / key / "model.pt", "cpu")[0] for key in MODELS}
     images = clean_images(data, "val")

@@ -1,6 +1,8 @@
 """The robustness study's outputs (restore.studies.robustness): study_robustness.csv (one row per test set),
 study_robustness.md (the budget and wall time, the drops side by side, every panel's scores) and
-study_robustness.png (PSNR per set and model, and the drops, as bars).
+study_robustness.png (PSNR per set and row, and the drops, as bars). The rows: the input, DeP given the panel's
+own kernel and γ (a reference that knows the panel), the same DeP on the captures without the sensor's noise (what
+the noise costs it; no drop is taken for either) and the two UNets.
 
 A set's PSNR is the mean of its panels' mean paper PSNR (every panel scores the same images); a model's drop on a
 set is its PSNR there less its PSNR on the default panel (negative: worse than on the default panel). The same
@@ -28,12 +30,15 @@ SETS = {"default": "default P-OLED (d = 2 mm)", "heldout": "held-out draws withi
 SHORT = {"default": "default\nP-OLED", "heldout": "held-out\ndraws", "toled": "T-OLED\n2 mm",
          "disordered": "disordered\nP-OLED", "micrograph": "micrograph\ntile", "far": "P-OLED\n8 mm",
          "toled_far": "T-OLED\n8 mm"}  # the figure's tick labels
-ROWS = {"input": "input (packed RAW)", **MODELS}
-COLUMNS = ["set", "panels", "images", "psnr_input_db", "psnr_fixed_db", "drop_fixed_db", "psnr_randomized_db",
-           "drop_randomized_db", "randomized_minus_fixed_db", "psnr_input_level_db", "psnr_fixed_level_db",
+DEP = "DeP (the panel's kernel)"  # restore.studies.robustness.dep_outputs: it knows the panel's kernels and γ
+QUIET = "DeP, no noise"  # the same, on the captures without the sensor's noise, FPN and defects
+ROWS = {"input": "input (packed RAW)", "dep": DEP, "dep_noiseless": QUIET, **MODELS}
+COLUMNS = ["set", "panels", "images", "psnr_input_db", "psnr_dep_db", "psnr_dep_noiseless_db", "psnr_fixed_db",
+           "drop_fixed_db", "psnr_randomized_db", "drop_randomized_db", "randomized_minus_fixed_db",
+           "psnr_input_level_db", "psnr_dep_level_db", "psnr_dep_noiseless_level_db", "psnr_fixed_level_db",
            "drop_fixed_level_db", "psnr_randomized_level_db", "drop_randomized_level_db",
            "randomized_minus_fixed_level_db"]
-COLOURS = {"input": "0.7", "fixed": "tab:blue", "randomized": "tab:orange"}
+COLOURS = {"input": "0.7", "dep": "0.35", "dep_noiseless": "0.55", "fixed": "tab:blue", "randomized": "tab:orange"}
 
 
 def summary_rows(rows: list[dict]) -> list[dict]:
@@ -105,7 +110,10 @@ def markdown(result: dict) -> str:
              "one on randomized panels drawn from the documented ranges. Both scored with the paper protocol's "
              "PSNR (linear, clipped to [0, 1], border cropped; the input on its packed RAW) on the validation "
              "images degraded once through every panel of each set, with fixed seeds. Drop: the set's PSNR less "
-             "the same model's on the default panel.", "", *budget_text(result["budget"], result["times"], train, rows),
+             "the same model's on the default panel. DeP is given each panel's own kernels (the bank's, at the "
+             "packed pitch) and γ: a reference that knows the panel, blind only to its field dependence; 'DeP, no "
+             "noise' is the same on the captures without the sensor's noise, fixed-pattern noise and defects.", "",
+             *budget_text(result["budget"], result["times"], train, rows),
              "", "## PSNR (dB) and drops", ""]
     lines += psnr_table(summary, "")
     lines += ["", "## Level-matched PSNR (dB) and drops", "",
@@ -120,35 +128,40 @@ def markdown(result: dict) -> str:
                           for k, t in train.items() if t.get("val_psnr_db") is not None) + ".",
               "", "## Every panel", ""]
     pcols = [("set", "set"), ("panel", "panel"), ("family", "family"), ("distance_mm", "d (mm)"),
-             ("psnr_input_db", "input"), ("psnr_fixed_db", MODELS["fixed"]),
-             ("psnr_randomized_db", MODELS["randomized"])]
-    lines += md_table(rows, pcols, {"psnr_input_db": two, "psnr_fixed_db": two, "psnr_randomized_db": two,
+             ("psnr_input_db", "input"), ("psnr_dep_db", DEP), ("psnr_dep_noiseless_db", QUIET),
+             ("psnr_fixed_db", MODELS["fixed"]), ("psnr_randomized_db", MODELS["randomized"])]
+    lines += md_table(rows, pcols, {"psnr_input_db": two, "psnr_dep_db": two, "psnr_dep_noiseless_db": two,
+                                    "psnr_fixed_db": two, "psnr_randomized_db": two,
                                     "distance_mm": lambda v: f"{v:.2f}"})
     return "\n".join(lines) + "\n"
 
 
 def psnr_table(summary: list[dict], tail: str) -> list[str]:
     """The sets' PSNR and drops (tail '': paper PSNR; '_level': level-matched) as a Markdown table."""
-    cols = [("set", "test set"), ("panels", "panels"), (f"psnr_input{tail}_db", "input"),
+    cols = [("set", "test set"), ("panels", "panels"), (f"psnr_input{tail}_db", "input"), (f"psnr_dep{tail}_db", DEP),
+            (f"psnr_dep_noiseless{tail}_db", QUIET),
             (f"psnr_fixed{tail}_db", MODELS["fixed"]), (f"drop_fixed{tail}_db", "drop"),
             (f"psnr_randomized{tail}_db", MODELS["randomized"]), (f"drop_randomized{tail}_db", "drop"),
             (f"randomized_minus_fixed{tail}_db", "randomized − default")]
-    return md_table(summary, cols, {"set": lambda s: SETS[s], f"psnr_input{tail}_db": two,
+    return md_table(summary, cols, {"set": lambda s: SETS[s], f"psnr_input{tail}_db": two, f"psnr_dep{tail}_db": two,
+                                    f"psnr_dep_noiseless{tail}_db": two,
                                     f"psnr_fixed{tail}_db": two, f"psnr_randomized{tail}_db": two,
                                     f"drop_fixed{tail}_db": db, f"drop_randomized{tail}_db": db,
                                     f"randomized_minus_fixed{tail}_db": db})
 
 
 def plot(summary: list[dict], path: Path) -> None:
-    """Two panels: PSNR per set (input, both models) and both models' drops, as grouped bars."""
+    """Three panels: the paper and the level-matched PSNR per set (every row) and both models' drops, as grouped
+    bars."""
     plt = pyplot()
     fig, (ax, cx, bx) = plt.subplots(1, 3, figsize=(19, 4))
     x = np.arange(len(summary))
     labels = [SHORT[r["set"]] for r in summary]
+    w = 0.8 / len(ROWS)
     for i, k in enumerate(ROWS):
-        ax.bar(x + (i - 1) * 0.27, [r[f"psnr_{k}_db"] for r in summary], 0.27, label=ROWS[k], color=COLOURS[k])
-        cx.bar(x + (i - 1) * 0.27, [r[f"psnr_{k}_level_db"] for r in summary], 0.27, label=ROWS[k],
-               color=COLOURS[k])
+        at = x + (i - (len(ROWS) - 1) / 2) * w
+        ax.bar(at, [r[f"psnr_{k}_db"] for r in summary], w, label=ROWS[k], color=COLOURS[k])
+        cx.bar(at, [r[f"psnr_{k}_level_db"] for r in summary], w, label=ROWS[k], color=COLOURS[k])
     for i, k in enumerate(MODELS):
         bx.bar(x + (i - 0.5) * 0.38, [r[f"drop_{k}_db"] or 0.0 for r in summary], 0.38, label=MODELS[k],
                color=COLOURS[k])

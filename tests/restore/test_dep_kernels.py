@@ -10,7 +10,7 @@ import pytest
 
 from restore.data import DataError, list_pairs
 from restore.evaluate import EvalSettings, evaluate
-from restore.known import known_kernels_rggb
+from restore.known import known_kernels_rggb, packed_from_sensor
 from udc_render.cli import main
 
 TINY = ["--sensor-px", "128,64", "--pitch-um", "24.8", "--bands-nm", "400:700:100", "--quiet"]
@@ -77,3 +77,32 @@ def test_dep_and_dep_exact_are_rows_of_their_own(data, tmp_path):
         assert np.isfinite(r["displays"]["toled"]["psnr_db_paper"])
     table = (tmp_path / "eval" / "results.md").read_text()
     assert table.index("| dep |") < table.index("| dep_exact |")
+
+
+def test_packed_from_sensor_integrates_over_the_packed_pixel_about_the_centre():
+    """A sensor-pitch delta at the centre is a packed delta at the centre; a shift of 2 px is one of 1 packed px,
+    a shift of 1 px splits in halves; a Gaussian of variance σ² becomes (σ² + ½) / 4 (the 2-px box adds ½ px²)."""
+    for size in (129, 131):
+        c = size // 2
+        k = np.zeros((3, size, size))
+        k[:, c, c] = 1
+        packed = packed_from_sensor(k)
+        h = packed.shape[-1] // 2
+        assert packed.shape == (4, 65, 65) and packed[:, h, h].tolist() == [1.0] * 4
+        k = np.zeros((3, size, size))
+        k[:, c + 2, c + 1] = 1  # 2 px down, 1 px right
+        packed = packed_from_sensor(k)[0]
+        assert packed[h + 1, h] == packed[h + 1, h + 1] == 0.5 and packed.sum() == 1.0
+    y, x = np.mgrid[-64:65, -64:65]
+    sigma = np.array([3.0, 4.0, 5.0])
+    k = np.exp(-(x ** 2 + y ** 2)[None] / (2 * sigma[:, None, None] ** 2))
+    packed = packed_from_sensor(k / k.sum(axis=(1, 2), keepdims=True)).astype(np.float64)
+    u = np.arange(-32, 33)
+    variance = (packed.sum(axis=1) * u ** 2).sum(axis=1)  # along x, R Gr Gb B
+    np.testing.assert_allclose(variance, (np.array([9.0, 16, 16, 25]) + 0.5) / 4, rtol=1e-6)
+    np.testing.assert_allclose(packed.sum(axis=(1, 2)), 1.0, rtol=1e-6)
+
+
+def test_packed_from_sensor_refuses_a_kernel_of_even_size_in_one_line():
+    with pytest.raises(DataError, match=r"kernels: shape \(3, 64, 64\): expected \[3, S, S\] \(R, G, B\) with S odd"):
+        packed_from_sensor(np.ones((3, 64, 64)))

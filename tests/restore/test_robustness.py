@@ -17,11 +17,13 @@ BUDGET = {"name": "quick", "model": {"type": "unet", "width": 8}, "steps": 40, "
           "heldout_panels": 2, "seeds": {"train": 0, "score": 2026}}
 
 
-def _row(s, panel, inp, fixed, rnd, level_db=1.0):
+def _row(s, panel, inp, fixed, rnd, level_db=1.0, dep=15.0):
     """A score row; its level-matched PSNR is each PSNR + level_db."""
     return {"set": s, "panel": panel, "family": "poled", "distance_mm": 2.0, "images": 4, "psnr_input_db": inp,
-            "psnr_fixed_db": fixed, "psnr_randomized_db": rnd, "psnr_input_level_db": inp + level_db,
-            "psnr_fixed_level_db": fixed + level_db, "psnr_randomized_level_db": rnd + level_db, "seconds": 1.5}
+            "psnr_dep_db": dep, "psnr_dep_noiseless_db": dep + 3, "psnr_fixed_db": fixed, "psnr_randomized_db": rnd,
+            "psnr_input_level_db": inp + level_db, "psnr_dep_level_db": dep + level_db,
+            "psnr_dep_noiseless_level_db": dep + 3 + level_db, "psnr_fixed_level_db": fixed + level_db,
+            "psnr_randomized_level_db": rnd + level_db, "seconds": 1.5}
 
 
 def _result(rows):
@@ -53,8 +55,8 @@ def test_the_report_writes_its_table_figure_and_budget(tmp_path):
     assert float(table[6]["drop_fixed_db"]) == pytest.approx(-6.0) and float(table[6]["drop_randomized_db"]) == 0.0
     md = (tmp_path / "study_robustness.md").read_text()
     assert "40 Adam steps" in md and "crops of 32 px" in md and "total 35 s" in md  # 0.5 + 2 + 10 + 12 + 7 × 1.5
-    assert "| T-OLED at d = 8 mm | 1 | 16.00 | 14.00 | -6.00 | 19.00 | 0.00 | +5.00 |" in md
-    assert "| T-OLED at d = 8 mm | 1 | 17.00 | 15.00 | -6.00 | 20.00 | 0.00 | +5.00 |" in md  # level-matched
+    assert "| T-OLED at d = 8 mm | 1 | 16.00 | 15.00 | 18.00 | 14.00 | -6.00 | 19.00 | 0.00 | +5.00 |" in md
+    assert "| T-OLED at d = 8 mm | 1 | 17.00 | 16.00 | 19.00 | 15.00 | -6.00 | 20.00 | 0.00 | +5.00 |" in md  # level-matched
     assert (tmp_path / "study_robustness.png").stat().st_size > 1000
 
 
@@ -78,6 +80,7 @@ def test_the_quick_study_scores_every_set_and_resumes(tmp_path):
     assert [int(r["panels"]) for r in table] == [1, b.heldout_panels, 1, 1, 1, 1, 1]
     assert all(math.isfinite(float(r[c])) for r in table for c in COLUMNS[3:])
     assert all(r["images"] == b.val_images and len(r["per_image_db"]["randomized"]) == b.val_images
+               and len(r["per_image_db"]["dep"]) == len(r["per_image_db"]["dep_noiseless"]) == b.val_images
                for r in result["rows"])
     assert result["train"]["fixed"]["steps"] == result["train"]["randomized"]["steps"] == b.steps
     trained = json.loads((out / "train" / "randomized" / "train.json").read_text())
