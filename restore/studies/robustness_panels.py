@@ -1,0 +1,191 @@
+"""How many randomized panels a restorer needs to generalise (the question behind `random_panels`): UNet
+(randomized) trained with the robustness study's recipe on the first N panels of its randomized bank, scored on
+the study's held-out draws, default P-OLED and T-OLED, beside the study's own models.
+
+    python -m restore.studies.robustness_panels OUT [--counts 4,8] [--quick]
+
+OUT is a `udc-render study robustness` folder of the same budget (finished first, or resumed: its banks, clean
+images, models and scores). Draws are independent per panel index (udc_render.dataset.randomize.draw_panel), so
+the first N panels of the bank are a draw of N panels; the study's own randomized model is N = train_panels. Each
+N trains in OUT/train/randomized_n<N> (the same seeds, steps and images; restore.train resumes it), its scores go
+to OUT/panels_scores.jsonl (a row per (N, set, panel), kept on a re-run) and the report to
+OUT/study_robustness_panels.{md,csv,png}. The validation pairs are the study's (panel_pairs, SCORE_SEED), so
+N = train_panels reads the study's own scores.
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from restore.metrics import level_matched_psnr_db, paper_metrics
+from restore.online import clean_images
+from restore.studies.options import parse_options
+from restore.studies.robustness import (BUDGETS, SCORES_FILE, Budget, panel_pairs, read_scores, run_study,
+                                        train_settings)
+from restore.studies.robustness_report import SETS, two
+from restore.train import load_model, predict, train
+from udc_render.dataset.bank import Bank, read_bank
+from udc_render.errors import UdcError
+from udc_render.io.files import save_figure, save_text
+from udc_render.io.plots import pyplot
+from udc_render.studies.report import duration, md_table, write_tables
+
+COUNTS = (4, 8)  # with the study's own 16: a factor of two apart
+PANEL_SETS = ("heldout", "default", "toled")
+ROWS_FILE, STEM = "panels_scores.jsonl", "study_robustness_panels"
+COLUMNS = ["panels", "steps", "train_s", *(f"psnr_{s}{t}_db" for s in PANEL_SETS for t in ("", "_level"))]
+
+
+def first_panels(bank: Bank, n: int) -> Bank:
+    """The bank cut to its first n panels (module doc: a draw of n panels)."""
+    if not 1 <= n <= len(bank.panels):
+        raise UdcError(f"--counts: {n} panels: expected 1 to {len(bank.panels)} (the bank's randomized panels)")
+    return Bank(bank.folder, bank.settings, bank.panels[:n])
+
+
+def train_counts(out: Path, b: Budget, counts: list[int], data: Path, progress: bool) -> dict:
+    """{N: train summary} of the randomized UNet on the first N panels (restore.train resumes each)."""
+    bank = read_bank(out / "banks" / "random")
+    return {n: train(data, out / "train" / f"randomized_n{n}", train_settings(b, first_panels(bank, n), data),
+                     device="cpu", checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
+                     bank=bank.folder) for n in counts}
+
+
+def score_counts(out: Path, counts: list[int], data: Path, progress: bool) -> list[dict]:
+    """Every (N, set, panel) row of panels_scores.jsonl (kept rows are not recomputed)."""
+    path = out / ROWS_FILE
+    rows = read_scores(path)
+    done = {(r["panels"], r["set"], r["panel"]) for r in rows}
+    banks = {s: read_bank(out / "banks" / s) for s in PANEL_SETS}
+    images = clean_images(data, "val")
+    todo = [(n, s, i) for n in counts for s in PANEL_SETS for i, p in enumerate(banks[s].panels)
+            if (n, s, p.name) not in done]
+    models = {n: load_model(out / "train" / f"randomized_n{n}" / "model.pt", "cpu")[0] for n in {t[0] for t in todo}}
+    for n, s, i in tqdm(todo, desc="score", unit="panel", disable=not progress):
+        t0 = time.perf_counter()
+        panel = banks[s].panels[i]
+        scored = [(predict(models[n], x, torch.device("cpu")), gt) for x, gt in panel_pairs(banks[s], panel, images)]
+        rows.append({"panels": n, "set": s, "panel": panel.name,
+                     "psnr_db": float(np.mean([paper_metrics(y, gt)["psnr_db_paper"] for y, gt in scored])),
+                     "psnr_level_db": float(np.mean([level_matched_psnr_db(y, gt) for y, gt in scored])),
+                     "seconds": round(time.perf_counter() - t0, 2)})
+        save_text(path, "".join(json.dumps(r) + "\n" for r in rows))
+    return rows
+
+
+def set_means(rows: list[dict], key: str) -> dict:
+    """{set: the mean over its panels of rows[key]} for the sets of PANEL_SETS present."""
+    return {s: float(np.mean([r[key] for r in rows if r["set"] == s])) for s in PANEL_SETS
+            if any(r["set"] == s for r in rows)}
+
+
+def summary(rows: list[dict], study: list[dict], b: Budget, trained: dict, study_train: dict) -> list[dict]:
+    """One row per N (ascending): its steps and training seconds, and each set's paper and level-matched PSNR; the
+    study's own randomized model is N = b.train_panels."""
+    runs = {n: ([r for r in rows if r["panels"] == n], "psnr_db", "psnr_level_db", trained[n]) for n in trained}
+    runs[b.train_panels] = (study, "psnr_randomized_db", "psnr_randomized_level_db", study_train)
+    out = []
+    for n in sorted(runs):
+        mine, key, level, t = runs[n]
+        row = {"panels": n, "steps": t.get("steps"), "train_s": t.get("seconds")}
+        for tail, k in (("", key), ("_level", level)):
+            row.update({f"psnr_{s}{tail}_db": v for s, v in set_means(mine, k).items()})
+        out.append(row)
+    return out
+
+
+def references(study: list[dict]) -> dict:
+    """{name: {set: PSNR}} of the study's specialist (UNet on the default P-OLED) and DeP with each panel's kernel."""
+    return {"UNet (default P-OLED)": set_means(study, "psnr_fixed_db"),
+            "DeP (the panel's kernel)": set_means(study, "psnr_dep_db")}
+
+
+def markdown(table: list[dict], refs: dict, b: Budget) -> str:
+    cols = [("panels", "panels N"), ("steps", "steps"), ("train_s", "training")]
+    cols += [(f"psnr_{s}{t}_db", f"{SETS[s]}{' (level-matched)' if t else ''}") for t in ("", "_level")
+             for s in PANEL_SETS]
+    fmt = {c: two for c, _ in cols[3:]}
+    fmt["train_s"] = duration
+    ref_rows = [{"name": name, **{f"psnr_{s}_db": v for s, v in r.items()}} for name, r in refs.items()]
+    return "\n".join([
+        "# Study: how many randomized panels a restorer needs", "",
+        f"UNet (randomized) of the robustness study's `{b.name}` budget trained on the first N of its "
+        f"{b.train_panels} randomized panels, with the same seeds, steps and images, and scored (paper protocol's "
+        "PSNR, dB) on the study's test sets: the held-out draws within the ranges, the default P-OLED and the "
+        f"T-OLED. N = {b.train_panels} is the study's own model. "
+        "`python -m restore.studies.robustness_panels OUT`.", "",
+        *md_table(table, cols, fmt), "",
+        "The study's references on the same images (not trained on randomized panels):", "",
+        *md_table(ref_rows, [("name", "row"), *((f"psnr_{s}_db", SETS[s]) for s in PANEL_SETS)],
+                  {f"psnr_{s}_db": two for s in PANEL_SETS}), ""])
+
+
+def plot(table: list[dict], refs: dict, path: Path) -> None:
+    """PSNR per set against N (log axis), paper and level-matched, with DeP's held-out PSNR as a line."""
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    n = [r["panels"] for r in table]
+    for ax, tail, title in ((axes[0], "", "paper PSNR"), (axes[1], "_level", "level-matched PSNR")):
+        for s in PANEL_SETS:
+            ax.plot(n, [r.get(f"psnr_{s}{tail}_db") for r in table], "o-", label=SETS[s])
+        ax.axhline(refs["DeP (the panel's kernel)"]["heldout"], color="0.4", ls="--", lw=0.8,
+                   label="DeP (the panel's kernel), held-out draws")
+        ax.set_xscale("log", base=2)
+        ax.set_xticks(n, [str(v) for v in n])
+        ax.set_xlabel("randomized training panels N")
+        ax.set_ylabel("PSNR (dB)")
+        ax.set_title(title, fontsize=10)
+        ax.grid(alpha=0.3)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8)
+    fig.subplots_adjust(bottom=0.24, wspace=0.25)
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def run_panels(out: Path, counts: list[int], quick: bool = False, progress: bool = True) -> list[dict]:
+    """The robustness study in `out` (finished or resumed), then each N of `counts`: trained, scored, reported."""
+    b = BUDGETS["quick" if quick else "full"]
+    counts = sorted(set(counts) - {b.train_panels})
+    for n in counts:
+        if not 1 <= n < b.train_panels:
+            raise UdcError(f"--counts: {n} panels: expected 1 to {b.train_panels} (the study's randomized panels)")
+    result = run_study(out, quick, progress=progress)
+    out = Path(out).resolve()
+    data = out / "clean"
+    trained = train_counts(out, b, counts, data, progress)
+    rows = score_counts(out, counts, data, progress)
+    study = [r for r in read_scores(out / SCORES_FILE) if r["set"] in PANEL_SETS]
+    table = summary(rows, study, b, trained, result["train"]["randomized"])
+    refs = references(study)
+    write_tables(out, STEM, table, COLUMNS, markdown(table, refs, b))
+    plot(table, refs, out / f"{STEM}.png")
+    return table
+
+
+def main(argv: list[str]) -> None:
+    usage = "python -m restore.studies.robustness_panels OUT [--counts 4,8] [--quick]"
+    quick = "--quick" in argv
+    pos, o = parse_options([a for a in argv if a != "--quick"], usage)
+    if len(pos) != 1:
+        sys.exit(f"usage: {usage}")
+    try:
+        counts = [int(v) for v in o["counts"].split(",")] if "counts" in o else list(COUNTS)
+    except ValueError:
+        sys.exit(f"error: --counts = {o['counts']!r}: expected panel counts separated by commas, e.g. 4,8")
+    try:
+        table = run_panels(Path(pos[0]), counts, quick)
+    except (UdcError, OSError) as exc:
+        sys.exit(f"error: {exc}")
+    print((Path(pos[0]) / f"{STEM}.md").read_text(), end="")
+    print(f"N = {', '.join(str(r['panels']) for r in table)}")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,56 @@
+"""restore.studies.robustness_panels: the randomized UNet on the first N panels of the robustness study's bank."""
+from __future__ import annotations
+
+import csv
+import math
+
+import pytest
+
+from restore.studies.robustness import BUDGETS
+from restore.studies.robustness_panels import COLUMNS, PANEL_SETS, STEM, first_panels, run_panels, summary
+from udc_render.dataset.bank import Bank
+from udc_render.errors import UdcError
+
+
+def _study_row(s, panel, rnd, fixed=10.0, dep=12.0):
+    return {"set": s, "panel": panel, "psnr_randomized_db": rnd, "psnr_randomized_level_db": rnd + 1,
+            "psnr_fixed_db": fixed, "psnr_dep_db": dep}
+
+
+def test_the_summary_puts_the_studys_own_model_at_its_panel_count():
+    """N rows in ascending order, each set the mean over its panels; N = train_panels from the study's rows."""
+    b = BUDGETS["full"]
+    rows = [{"panels": 4, "set": "heldout", "panel": "random_000", "psnr_db": 20.0, "psnr_level_db": 21.0},
+            {"panels": 4, "set": "heldout", "panel": "random_001", "psnr_db": 22.0, "psnr_level_db": 23.0},
+            {"panels": 4, "set": "toled", "panel": "toled", "psnr_db": 18.0, "psnr_level_db": 19.0}]
+    study = [_study_row("heldout", "random_000", 24.0), _study_row("heldout", "random_001", 26.0),
+             _study_row("toled", "toled", 21.0)]
+    table = summary(rows, study, b, {4: {"steps": 100, "seconds": 5.0}}, {"steps": 100, "seconds": 6.0})
+    assert [r["panels"] for r in table] == [4, b.train_panels]
+    assert table[0]["psnr_heldout_db"] == 21.0 and table[0]["psnr_heldout_level_db"] == 22.0
+    assert table[1]["psnr_heldout_db"] == 25.0 and table[1]["psnr_toled_level_db"] == 22.0
+    assert "psnr_default_db" not in table[0]  # a set without rows has no mean
+
+
+def test_a_panel_count_outside_the_bank_is_refused_in_one_line(tmp_path):
+    bank = Bank(tmp_path, {}, ["p0", "p1", "p2"])
+    assert first_panels(bank, 2).panels == ["p0", "p1"]
+    with pytest.raises(UdcError, match=r"--counts: 4 panels: expected 1 to 3"):
+        first_panels(bank, 4)
+    with pytest.raises(UdcError, match=r"--counts: 0 panels: expected 1 to 4"):  # refused before any computation
+        run_panels(tmp_path / "study", [0], quick=True, progress=False)
+    assert not (tmp_path / "study").exists()
+
+
+@pytest.mark.slow
+def test_the_quick_study_trains_and_scores_a_smaller_panel_count(tmp_path):
+    """The quick robustness study, then N = 2 of its 4 panels: the same steps, every set scored and finite;
+    N = 4 is the study's own randomized model."""
+    b = BUDGETS["quick"]
+    table = run_panels(tmp_path / "study", [2], quick=True, progress=False)
+    assert [r["panels"] for r in table] == [2, b.train_panels] and table[0]["steps"] == table[1]["steps"] == b.steps
+    with open(tmp_path / "study" / f"{STEM}.csv") as f:
+        written = list(csv.DictReader(f))
+    assert list(written[0]) == COLUMNS and len(written) == 2
+    assert all(math.isfinite(float(r[f"psnr_{s}{t}_db"])) for r in written for s in PANEL_SETS for t in ("", "_level"))
+    assert (tmp_path / "study" / f"{STEM}.png").stat().st_size > 1000
