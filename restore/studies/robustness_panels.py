@@ -28,7 +28,7 @@ from restore.online import clean_images
 from restore.studies.options import parse_options
 from restore.studies.robustness import (BUDGETS, SCORES_FILE, Budget, panel_pairs, read_scores, run_study,
                                         train_settings)
-from restore.studies.robustness_report import SETS, two
+from restore.studies.robustness_report import DEP, MODELS, SETS, two
 from restore.train import load_model, predict, train
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.errors import UdcError
@@ -102,8 +102,7 @@ def summary(rows: list[dict], study: list[dict], b: Budget, trained: dict, study
 
 def references(study: list[dict]) -> dict:
     """{name: {set: PSNR}} of the study's specialist (UNet on the default P-OLED) and DeP with each panel's kernel."""
-    return {"UNet (default P-OLED)": set_means(study, "psnr_fixed_db"),
-            "DeP (the panel's kernel)": set_means(study, "psnr_dep_db")}
+    return {MODELS["fixed"]: set_means(study, "psnr_fixed_db"), DEP: set_means(study, "psnr_dep_db")}
 
 
 def markdown(table: list[dict], refs: dict, b: Budget) -> str:
@@ -134,8 +133,7 @@ def plot(table: list[dict], refs: dict, path: Path) -> None:
     for ax, tail, title in ((axes[0], "", "paper PSNR"), (axes[1], "_level", "level-matched PSNR")):
         for s in PANEL_SETS:
             ax.plot(n, [r.get(f"psnr_{s}{tail}_db") for r in table], "o-", label=SETS[s])
-        ax.axhline(refs["DeP (the panel's kernel)"]["heldout"], color="0.4", ls="--", lw=0.8,
-                   label="DeP (the panel's kernel), held-out draws")
+        ax.axhline(refs[DEP]["heldout"], color="0.4", ls="--", lw=0.8, label=f"{DEP}, held-out draws")
         ax.set_xscale("log", base=2)
         ax.set_xticks(n, [str(v) for v in n])
         ax.set_xlabel("randomized training panels N")
