@@ -68,7 +68,8 @@ def test_evaluation_stamp_follows_the_checkpoint_and_the_data(tmp_path):
 
 def test_machine_time_is_summed_from_what_each_stage_recorded(tmp_path):
     """The budget table adds the datasets' item seconds, the models' summaries and the rows' scoring seconds
-    (each summed over resumed parts), plus this invocation's redone stages: a golden total."""
+    (each summed over resumed parts; a model's active time where it has a loss log), plus this invocation's
+    redone stages: a golden total."""
     import json
     from restore.studies.results_document import budget_section
     out = tmp_path / "res"
@@ -80,14 +81,16 @@ def test_machine_time_is_summed_from_what_each_stage_recorded(tmp_path):
     for name, seconds in (("unet_toled", 1800.0), ("resnet_poled", 5400.0)):
         (out / "train" / name).mkdir(parents=True)
         (out / "train" / name / "train_summary.json").write_text(json.dumps({"seconds": seconds}))
+    (out / "train" / "unet_toled" / "loss.csv").write_text(  # 3 epochs of 720 s, the last one paused for 3 h
+        "epoch,step,lr,loss,val_psnr_db,seconds\n1,1,0,0,,720\n2,2,0,0,,1440\n3,3,0,0,,12960\n")
     (out / "eval").mkdir()
     (out / "eval" / "row_seconds.json").write_text(json.dumps({"input": 360.0, "dep": 3240.0}))  # 1 h
     lines = budget_section(out, datasets, {"error_bands_s": 720.0, "faces_s": 1080.0})  # 0.2 h and 0.3 h
     text = "\n".join(lines)
     assert "| dataset, physical profile | 1.00 |" in text and "| dataset, paper profile | 2.00 |" in text
-    assert "| training, 2 models | 2.00 |" in text and "| scoring, test split | 1.00 |" in text
+    assert "| training, 2 models | 2.20 |" in text  # 0.7 h active (720 + 720 + 1.5 × 720 s) and 1.5 h and "| scoring, test split | 1.00 |" in text
     assert "| held-out photographs: dataset | 0.00 |" in text  # not made: nothing counted
-    assert "| **total** | **6.50** |" in text and "this run took 0.81 of it" in text
+    assert "| **total** | **6.70** |" in text and "this run took 0.84 of it" in text
 
 
 def test_training_table_reports_each_models_trend_at_the_end(tmp_path):
@@ -106,4 +109,17 @@ def test_training_table_reports_each_models_trend_at_the_end(tmp_path):
     (run / "train_summary.json").write_text(json.dumps({"epochs": 32, "epochs_planned": 32, "steps": 2400,
                                                         "plateaued": False, "val_psnr_db": 24.75, "seconds": 3600}))
     lines = training_table(tmp_path, BUDGETS["cpu"])
-    assert lines[2] == "| unet | toled | 32 (32) | 2400 | 1.00 | **not reached** | 24.75 | +0.16 |"
+    assert lines[2] == "| unet | toled | 32 (32) | 2400 | 1.00 | 0.44 | **not reached** | 24.75 | +0.16 |"  # 16 × 100 s
+
+
+def test_active_time_leaves_out_a_pause_and_keeps_the_validated_epochs():
+    """9 epochs of 30 s and 11 validated ones of 36 s, one of them stretched by a 2 h pause: the paused epoch
+    counts 1.5 × the median (36 s), the rest as they ran; golden sums."""
+    from restore.train import active_seconds
+    epochs = [30.0, 36.0] * 9 + [36.0, 36.0]
+    epochs[7] += 7200.0
+    log = [{"seconds": float(sum(epochs[:k + 1]))} for k in range(len(epochs))]
+    assert log[-1]["seconds"] == 7866.0
+    assert active_seconds(log) == 666.0 - 36.0 + 54.0
+    assert active_seconds(log[:0]) == 0.0
+    assert active_seconds([{"seconds": 30.0}] * 1) == 30.0
