@@ -151,20 +151,6 @@ def read_log(path: Path) -> list[dict]:
         return [{k: (float(v) if v != "" else None) for k, v in row.items()} for row in csv.DictReader(f)]
 
 
-EPOCH_CAP_X_MEDIAN = 1.5  # an epoch counted at most this many times the median epoch (active_seconds)
-
-
-def active_seconds(log: list[dict], cap_x_median: float = EPOCH_CAP_X_MEDIAN) -> float:
-    """The run's time without its stalls: Σ_e min(t_e − t_{e−1}, cap · median_e(t_e − t_{e−1})) over the
-    cumulative `seconds` of its loss log. A paused process (SIGSTOP) or a job sharing the cores stretches a
-    few epochs by up to hours; a validated epoch is within 1.5× of one that is not (results logs: +10–25 %)."""
-    t = np.array([0.0] + [r["seconds"] for r in log], dtype=np.float64)
-    epochs = np.diff(t)
-    if epochs.size == 0:
-        return 0.0
-    return float(np.minimum(epochs, cap_x_median * np.median(epochs)).sum())
-
-
 def predict(model: torch.nn.Module, packed: np.ndarray, device: torch.device) -> np.ndarray:
     """[3, H, W] float32 restored image of one packed RAW [4, H/2, W/2] (channels_last: 1.4–1.5× faster
     inference on the CPU, benchmarks/README.md)."""

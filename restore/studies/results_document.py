@@ -18,8 +18,8 @@ from restore.studies.faces import faces_markdown
 from restore.studies.heldout import HELD_OUT
 from restore.studies.orderings import ordering_checks
 from restore.studies.scoring import BAND_CROP_PX, BAND_ITEMS
-from restore.train import (EPOCH_CAP_X_MEDIAN, PLATEAU_MIN_VALIDATIONS, active_seconds, read_log, trend_db_per_fifth,
-                           validations)
+from restore.studies.stage_times import EPOCH_CAP_X_MEDIAN, active_seconds
+from restore.train import PLATEAU_MIN_VALIDATIONS, read_log, trend_db_per_fifth, validations
 from udc_render.io.plots import pyplot, save_plot
 
 
@@ -101,7 +101,7 @@ def evaluation_hours(ev: Path) -> float:
 
 
 def training_hours(out: Path) -> dict[tuple[str, str], float]:
-    """{(row, display): the run's active time (h), restore.train.active_seconds of its loss.csv (its
+    """{(row, display): the run's active time (h), stage_times.active_seconds of its loss.csv (its
     train_summary.json's wall time where a run has no log)}."""
     hours = {}
     for row, _, _ in ROWS:
@@ -214,7 +214,7 @@ def training_section(b: dict, budget: str, out: Path) -> list[str]:
             "validation −1.6 dB); its gradient norms were 0.09–0.33 with outliers to 0.74, hence the clip at 0.5.", "",
             *random_row_text(b), "", *training_table(out, b), "",
             f"Wall time is from start to end over the resumed parts; active time is the loss log's, {ACTIVE_TIME_RULE} "
-            "(restore.train.active_seconds): a run paused while another job had the cores, or sharing them, "
+            "(restore.studies.stage_times.active_seconds): a run paused while another job had the cores, or sharing them, "
             "stretches a few epochs by up to hours."]
 
 

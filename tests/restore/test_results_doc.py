@@ -115,7 +115,7 @@ def test_training_table_reports_each_models_trend_at_the_end(tmp_path):
 def test_active_time_leaves_out_a_pause_and_keeps_the_validated_epochs():
     """9 epochs of 30 s and 11 validated ones of 36 s, one of them stretched by a 2 h pause: the paused epoch
     counts 1.5 × the median (36 s), the rest as they ran; golden sums."""
-    from restore.train import active_seconds
+    from restore.studies.stage_times import active_seconds
     epochs = [30.0, 36.0] * 9 + [36.0, 36.0]
     epochs[7] += 7200.0
     log = [{"seconds": float(sum(epochs[:k + 1]))} for k in range(len(epochs))]
