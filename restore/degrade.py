@@ -238,9 +238,10 @@ class Degrader:
         return self.degrade_batch(x[None], [index], [(frame_hw, origin_yx)], [generator], [draw])[0]
 
     def degrade_batch(self, x: torch.Tensor, indices: list[int], crops: list, generators: list | None = None,
-                      draws: list | None = None) -> torch.Tensor:
+                      draws: list | None = None, captures: list[Panel] | None = None) -> torch.Tensor:
         """Packed DN [B, 4, h/2, w/2] of crops x [B, 3, h + 2m, w + 2m], crop b through panel indices[b] at crops[b]
-        = (frame_hw, origin_yx) (as degrade), its noise from generators[b] or draws[b]; on the CPU with
+        = (frame_hw, origin_yx) (as degrade), its noise from generators[b] or draws[b], behind the sensor, FPN and
+        defects of captures[b] (restore.captures.captured_panel; default: its panel's); on the CPU with
         self.threads threads. With self.batched (by default on a GPU) the batch's operations run as one where
         the crops allow it (their FFTs, the sensor of crops alike), in a fraction of the launches of one call per
         crop: the GPU's cost (half the time on an H100). Else crop by crop: on one CPU thread a batch's weighted
@@ -251,6 +252,9 @@ class Degrader:
             raise ValueError(f"degrade_batch: {x.shape[0]} crops, {len(indices)} panel indices and {len(crops)} "
                              "places: expected one of each per crop, at least one crop")
         generators, draws = generators or [None] * len(indices), draws or [None] * len(indices)
+        captures = captures or [self.panels[i].panel for i in indices]
+        if len(captures) != len(indices):
+            raise ValueError(f"degrade_batch: {len(captures)} captures for {len(indices)} crops")
         sizes = {self.panels[i].size_px for i in indices}
         if len(sizes) > 1:
             raise ValueError(f"a batch's panels have kernels of {sorted(sizes)} px: one size per batch")
@@ -259,15 +263,15 @@ class Degrader:
                 order = sorted(range(len(indices)), key=lambda b: (self.panels[indices[b]].panel.field is not None,
                                                                    indices[b]))
                 if order == list(range(len(order))):
-                    return self._degrade(x, indices, crops, generators, draws)
+                    return self._degrade(x, indices, crops, generators, draws, captures)
                 x = x.to(self.device)[host_to(torch.tensor(order), self.device)]
                 pick = lambda seq: [seq[b] for b in order]  # noqa: E731
-                dn = self._degrade(x, pick(indices), pick(crops), pick(generators), pick(draws))
+                dn = self._degrade(x, pick(indices), pick(crops), pick(generators), pick(draws), pick(captures))
                 return dn[host_to(torch.from_numpy(np.argsort(order)), self.device)]
             return torch.cat([self._degrade(x[b:b + 1], indices[b:b + 1], crops[b:b + 1], generators[b:b + 1],
-                                            draws[b:b + 1]) for b in range(len(indices))])
+                                            draws[b:b + 1], captures[b:b + 1]) for b in range(len(indices))])
 
-    def _degrade(self, x, indices, crops, generators, draws) -> torch.Tensor:
+    def _degrade(self, x, indices, crops, generators, draws, captures) -> torch.Tensor:
         tps = [self.panels[i] for i in indices]
         m = tps[0].margin_px
         h, w = x.shape[-2] - 2 * m, x.shape[-1] - 2 * m
@@ -280,7 +284,7 @@ class Degrader:
         powers = [self.power_frame(i, frame) if tp.panel.field is not None else None
                   for i, tp, (frame, _) in zip(indices, tps, crops)]
         y = blur_batch(x.to(self.device, self.dtype), tps, crops, powers).clamp_min(0)
-        sensors = [tp.panel.sensor for tp in tps]
+        sensors = [c.sensor for c in captures]
         gamma = per_crop([s.gamma_rggb for s in sensors], y)
         per_e = per_crop([s.dn_per_electron / s.gain / s.range_dn for s in sensors], y)  # normalised units per e⁻
         e = gamma * packed_sites(y) / per_e
@@ -288,7 +292,7 @@ class Degrader:
             cos4 = torch.stack([self._cos4(h, w, frame, origin, s) if s.cos4_falloff else torch.ones_like(y[0, 0])
                                 for s, (frame, origin) in zip(sensors, crops)])
             e = e * packed_sites(cos4[:, None])
-        return expose_batch(e, [tp.panel for tp in tps], self.maps, crops, generators, draws)
+        return expose_batch(e, captures, self.maps, crops, generators, draws)
 
     def _cos4(self, h: int, w: int, frame_hw, origin_yx, s) -> torch.Tensor:
         """cos⁴θ [h, w] of the crop's pixels, r from the frame's centre (sensor.radiometry.cos4_map)."""

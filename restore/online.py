@@ -13,8 +13,9 @@ place (even rows and columns: it starts on an R site) and the noise seed of a to
 The crop takes the panel's margin of scene around it; beyond the frame (gt.exr holds no more scene) the image is
 mirrored. Input: the degraded crop's (DN − black) / (white − black) [4, c/2, c/2]; target: the clean crop × the
 panel's brightness [3, c, c] (a drawn panel's exposure.brightness; 1 for a preset), the input made from the same
-scaled crop. A resumed run sees the same crops, panels and noise (they depend on (seed, epoch, k) alone); each
-epoch's draws are recorded in online.jsonl.
+scaled crop. With capture draws (--capture-draws, restore.captures) the crop also draws its own sensor and
+exposure, brightness included, instead of its panel's. A resumed run sees the same crops, panels, captures and
+noise (they depend on (seed, epoch, k) alone); each epoch's draws are recorded in online.jsonl.
 
 Validation: each val image whole, through panel j mod N, the noise seeded by (seed, 'val', j), made once.
 
@@ -37,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from restore.captures import CaptureDraws, captured_panel, crop_capture, crop_values, load_capture_draws
 from restore.data import DataError, dihedral, load_gt, read_manifest
 from restore.degrade import Degrader, normalised
 from restore.tensors import per_crop
@@ -135,7 +137,8 @@ class OnlineBatches:
     """The training batches of the online degradation (module doc) on a device."""
 
     def __init__(self, images: list[CleanImage], bank: Bank, degrader: Degrader, crop_px: int, batch: int,
-                 seed: int, crops_per_image: int = 1, workers: int | None = None):
+                 seed: int, crops_per_image: int = 1, workers: int | None = None,
+                 captures: CaptureDraws | None = None):
         if not images:
             raise DataError("no clean images to train on: the split is empty")
         small = min(images, key=lambda im: min(im.pixels.shape[1:]))
@@ -148,6 +151,7 @@ class OnlineBatches:
         self.pixels = [torch.from_numpy(im.pixels).to(degrader.device) for im in images]
         self.crop_px, self.batch, self.seed, self.crops_per_image = crop_px, batch, seed, crops_per_image
         self.brightness = [panel_brightness(p) for p in bank.panels]
+        self.captures = captures
         workers = 1 if workers is None else workers  # the default: one worker process (CPU) or thread (GPU)
         if workers > 1 and degrader.device.type != "cpu":
             raise DataError(f"--degrade-workers {workers}: on {degrader.device} the degradation runs in this process "
@@ -171,14 +175,18 @@ class OnlineBatches:
         return len(self.images) * self.crops_per_image
 
     def draw(self, epoch: int, k: int) -> dict:
-        """Crop k of the epoch (module doc): image, panel, transform, origin (even), noise seed."""
+        """Crop k of the epoch (module doc): image, panel, transform, origin (even), noise seed; with capture
+        draws, its capture (restore.captures.crop_capture)."""
         rng = np.random.default_rng([self.seed, epoch, k])
         image = int(rng.integers(len(self.images)))
         h, w = self.images[image].pixels.shape[1:]
         c = self.crop_px
-        return {"image": image, "panel": int(rng.integers(len(self.bank.panels))), "mode": int(rng.integers(8)),
-                "y0": 2 * int(rng.integers((h - c) // 2 + 1)), "x0": 2 * int(rng.integers((w - c) // 2 + 1)),
-                "noise_seed": int(rng.integers(2 ** 63 - 1))}
+        d = {"image": image, "panel": int(rng.integers(len(self.bank.panels))), "mode": int(rng.integers(8)),
+             "y0": 2 * int(rng.integers((h - c) // 2 + 1)), "x0": 2 * int(rng.integers((w - c) // 2 + 1)),
+             "noise_seed": int(rng.integers(2 ** 63 - 1))}
+        if self.captures is not None:
+            d["capture"] = crop_capture(self.captures, self.seed, epoch, k)
+        return d
 
     def sample(self, d: dict) -> tuple[torch.Tensor, torch.Tensor]:
         """(input [4, c/2, c/2], target [3, c, c]) of draw d, on the device: samples of one draw."""
@@ -192,10 +200,13 @@ class OnlineBatches:
         clean = torch.stack([dihedral(region(self.pixels[d["image"]], d["y0"] - m, d["x0"] - m, c + 2 * m, c + 2 * m),
                                       d["mode"]) for d in draws])
         panels = [self.bank.panels[d["panel"]] for d in draws]
-        x = clean * per_crop([self.brightness[d["panel"]] for d in draws], clean)
+        if self.captures is not None:
+            panels = [captured_panel(p, d["capture"]) for p, d in zip(panels, draws)]
+        brightness = [d["capture"].brightness if "capture" in d else self.brightness[d["panel"]] for d in draws]
+        x = clean * per_crop(brightness, clean)
         gens = [torch.Generator(self.degrader.device).manual_seed(d["noise_seed"]) for d in draws]
         crops = [(self.pixels[d["image"]].shape[1:], (d["y0"], d["x0"])) for d in draws]
-        dn = self.degrader.degrade_batch(x, [d["panel"] for d in draws], crops, gens)
+        dn = self.degrader.degrade_batch(x, [d["panel"] for d in draws], crops, gens, captures=panels)
         return normalised(dn, panels).float(), x[:, :, m:m + c, m:m + c].float().contiguous()
 
     def epoch(self, epoch: int):
@@ -303,13 +314,27 @@ def online_data(data: Path, bank_dir: Path, settings, device, workers: int | Non
                         f"({d['bank_fingerprint']})")
     degrader = Degrader(bank.panels, device, torch.float32)
     batches = OnlineBatches(clean_images(data, "train"), bank, degrader, settings.crop_px, settings.batch,
-                            settings.seed, settings.crops_per_pair, workers)
+                            settings.seed, settings.crops_per_pair, workers, run_captures(d))
     return batches, validation_pairs(clean_images(data, "val"), bank, degrader, settings.seed)
+
+
+def run_captures(degrade: dict) -> CaptureDraws | None:
+    """The capture draws a run's settings.degrade names ({"captures": CaptureDraws.describe()}), read again and
+    checked against what the run recorded; None without."""
+    if "captures" not in degrade:
+        return None
+    recorded = degrade["captures"]
+    draws = load_capture_draws(recorded["spec"])
+    if draws.describe() != recorded:
+        raise DataError(f"--capture-draws {recorded['spec']}: its distributions (sha {draws.describe()['sha256']}) "
+                        f"are not the run's ({recorded['sha256']}): the file changed since the run began")
+    return draws
 
 
 class DrawLog:
     """online.jsonl in a run folder: one line per epoch, its crops' [image, panel, transform, y0, x0, noise seed]
-    in the order trained (written with each checkpoint; a resumed run keeps the epochs its checkpoint holds)."""
+    in the order trained, followed with capture draws by the crop's drawn values (restore.captures.CROP_KEYS)
+    (written with each checkpoint; a resumed run keeps the epochs its checkpoint holds)."""
     FILE = "online.jsonl"
 
     def __init__(self, out: Path, epochs_done: int):
@@ -319,7 +344,8 @@ class DrawLog:
 
     def add(self, epoch: int, draws: list[dict]) -> None:
         keys = ("image", "panel", "mode", "y0", "x0", "noise_seed")
-        self.lines.append(json.dumps({"epoch": epoch + 1, "crops": [[d[k] for k in keys] for d in draws]}))
+        self.lines.append(json.dumps({"epoch": epoch + 1, "crops": [[d[k] for k in keys] + (
+            crop_values(d["capture"]) if "capture" in d else []) for d in draws]}))
 
     def save(self) -> None:
         save_text(self.path, "\n".join(self.lines) + "\n")

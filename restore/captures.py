@@ -1,0 +1,74 @@
+"""A capture of its own for every crop of the online degradation (`udc-render train --degrade online
+--capture-draws default|FILE.toml`, restore.online): the crop's sensor and exposure drawn from the
+distributions' sensor.* and exposure.* (udc_render.dataset.randomize.draw_capture, the draws a randomized
+dataset's item makes), through the kernels of its panel. Without it a crop takes its panel's capture, so N panels
+give N sensors and N brightness levels.
+
+A crop's capture replaces on its panel (captured_panel):
+- the gain: the panel's family gain (its gain ÷ its own gain_scale) × the crop's gain_scale;
+- the exposure: the panel's exposure rule (its exposure ÷ its own exposure.scale) × the crop's exposure.scale;
+- the read noise and the fixed-pattern noise's amplitudes (PRNU, DSNU, row and column offsets, dark current);
+- the brightness of the clean scene (exposure.brightness).
+It keeps the panel's defect map (its seed and fractions) and its FPN maps' seed: a map of the whole frame per
+crop would cost a frame's draws for each (restore.degrade_sensor.FrameMaps keeps them per panel), and the maps'
+pattern is not what a restorer must generalise over; their amplitudes are. The crop's drawn values
+(CROP_KEYS) go into online.jsonl.
+
+Streams: crop k of epoch e draws with draw_capture(…, seed = SeedSequence([seed, crc32('online capture'), e]),
+item = k): a crop's capture depends on (seed, epoch, k) alone, as its image and panel do.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import zlib
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from udc_render.dataset.bank import Panel
+from udc_render.dataset.randomize import CaptureDraw, Distributions, draw_capture, load_distributions
+
+CAPTURE_STREAM = zlib.crc32(b"online capture")
+CROP_KEYS = ("sensor.gain_scale", "sensor.read_noise_e", "sensor.prnu", "sensor.dsnu_e", "sensor.row_offset_e",
+             "sensor.column_offset_e", "sensor.dark_current_e_per_s", "exposure.scale", "exposure.brightness")
+
+
+@dataclass(frozen=True)
+class CaptureDraws:
+    """The distributions that every crop's capture is drawn from, and the --capture-draws they came from."""
+    spec: str
+    dists: Distributions
+
+    def describe(self) -> dict:
+        """What a training run records (train.json) and a resumed one must match."""
+        return {"spec": self.spec, "sha256": hashlib.sha256(json.dumps(self.dists.describe(), sort_keys=True)
+                                                            .encode()).hexdigest()[:16]}
+
+
+def load_capture_draws(spec: str) -> CaptureDraws:
+    """'default' (the documented ranges) or a TOML file of distributions (udc_render.dataset.randomize)."""
+    return CaptureDraws(str(spec), load_distributions(spec))
+
+
+def crop_capture(draws: CaptureDraws, seed: int, epoch: int, k: int) -> CaptureDraw:
+    """Crop k of epoch `epoch`'s capture (module doc: its streams)."""
+    epoch_seed = int(np.random.SeedSequence([int(seed), CAPTURE_STREAM, int(epoch)]).generate_state(1, np.uint64)[0]
+                     >> 1)
+    return draw_capture(draws.dists, 1, epoch_seed, int(k))
+
+
+def captured_panel(panel: Panel, cap: CaptureDraw) -> Panel:
+    """The panel as capture `cap` sees it (module doc): its kernels and defect map, the capture's gain, exposure,
+    read noise and FPN amplitudes (on the panel's FPN seed; a panel without FPN keeps none)."""
+    own = panel.record.get("capture_draw", {})
+    sensor = replace(panel.sensor, gain=panel.sensor.gain / own.get("gain_scale", 1.0) * cap.gain_scale,
+                     exposure_s=panel.sensor.exposure_s / own.get("exposure_scale", 1.0) * cap.exposure_scale,
+                     read_noise_e=float(cap.read_noise_e))
+    fpn = None if panel.fpn is None else replace(cap.fpn, seed=panel.fpn.seed)
+    return replace(panel, sensor=sensor, fpn=fpn)
+
+
+def crop_values(cap: CaptureDraw) -> list[float]:
+    """The crop's drawn values in CROP_KEYS order (online.jsonl)."""
+    return [float(cap.values[k]) for k in CROP_KEYS]
