@@ -19,7 +19,9 @@ this process (workers 0) and in a DataLoader worker process (1), crop by crop on
 a thread on its own stream and a batch is degraded as one (the Degrader's defaults). Against the same steps on
 batches made beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median
 step times (each run's first step left out: a worker's start) less one. --device cuda: the steps and the
-degradation on the GPU (float32 panels), timed to a synchronize after each step.
+degradation on the GPU (float32 panels), timed to a synchronize after each step. --capture-draws adds a run of
+workers 1 in which every crop draws its own sensor and exposure (restore.captures, `udc-render train
+--capture-draws default`).
 
 Without --bank the panels are synthetic with the shapes of the default bank (kernels of --kernel-px, a T-OLED
 series of 453 × 200 orders, 4 × 4 phases, Poisson noise, defects, FPN): the cost depends on the shapes, not on
@@ -35,6 +37,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from restore.captures import load_capture_draws
 from restore.degrade import Degrader, cpu_threads
 from restore.online import CleanImage, OnlineBatches
 from restore.losses import loss_fn
@@ -87,6 +90,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=6, help="--train: steps per run [6]")
     ap.add_argument("--rounds", type=int, default=3, help="--train: rounds of the three runs [3]")
     ap.add_argument("--autocast", choices=("bf16", "fp32"), default="bf16", help="--train: the step's precision [bf16]")
+    ap.add_argument("--capture-draws", action="store_true", help="--train: add a run with a capture per crop")
     a = ap.parse_args()
     if a.train:
         return train_runs(a)
@@ -188,13 +192,17 @@ def train_runs(a) -> None:
         return times[1:]
     ready = [(torch.rand(a.batch, 4, c // 2, c // 2, device=dev), torch.rand(a.batch, 3, c, c, device=dev))
              for _ in range(a.steps)]
-    times: dict = {"ready batches": [], "online, workers 0": [], "online, workers 1": []}
+    online = {"online, workers 0": (0, None), "online, workers 1": (1, None)}  # name: (workers, capture draws)
+    if a.capture_draws:
+        online["online, workers 1, a capture per crop"] = (1, load_capture_draws("default"))
+    times: dict = {"ready batches": [], **{name: [] for name in online}}
     for _ in range(a.rounds):  # the runs alternate, round by round
         for name in times:
             if name.startswith("ready"):
                 times[name] += run(ready)
             else:
-                ob = OnlineBatches(images, bank, Degrader(panels, dev), c, a.batch, 0, per_image, int(name[-1]))
+                workers, captures = online[name]
+                ob = OnlineBatches(images, bank, Degrader(panels, dev), c, a.batch, 0, per_image, workers, captures)
                 times[name] += run(ob.epoch(0)[1])
     med = {k: statistics.median(v) for k, v in times.items()}
     print(f"device {dev}, torch threads {torch.get_num_threads()}, UNet {a.autocast}, batch {a.batch} × {c} px, "
