@@ -15,14 +15,13 @@ from __future__ import annotations
 import math
 import tomllib
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 
 import numpy as np
 
-from udc_render.dataset.randomize.panels import MAX_TRANSMISSION_SCALE
-from udc_render.errors import UdcError
+from udc_render.dataset.randomize.panels import MAX_TRANSMISSION_SCALE, RandomizeError
 from udc_render.io.files import read_toml
 
 KINDS = ("uniform", "log_uniform", "choice")
@@ -30,22 +29,22 @@ DEFAULT = "default"
 DEFAULT_FILE = "default.toml"
 
 
-class RandomizeError(UdcError):
-    """A bad randomization file or value; one line naming the file, key, value and what is allowed."""
-
-
 @dataclass(frozen=True)
 class Allowed:
     """What a parameter may take: numbers in [lo, hi] (lo excluded when lo_open; whole numbers when
-    integer), or one of `words`; `what` describes it for the error line."""
+    integer), one of `words`, or a file's path (path: any text, checked by load_distributions); `what`
+    describes it for the error line."""
     lo: float = 0.0
     hi: float = math.inf
     lo_open: bool = False
     integer: bool = False
     words: tuple[str, ...] = ()
     what: str = ""
+    path: bool = False
 
     def admits(self, v) -> bool:
+        if self.path:
+            return isinstance(v, str)
         if self.words:
             return isinstance(v, str) and v in self.words
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
@@ -55,6 +54,8 @@ class Allowed:
         return ((v > self.lo) if self.lo_open else (v >= self.lo)) and v <= self.hi
 
     def describe(self) -> str:
+        if self.path:
+            return f"a path{' ' + self.what if self.what else ''}"
         if self.words:
             return "one of " + ", ".join(self.words)
         rng = f"{'(' if self.lo_open else '['}{self.lo:g}, {self.hi:g}]"
@@ -65,11 +66,14 @@ def _num(lo, hi, what="", lo_open=False, integer=False) -> Allowed:
     return Allowed(lo, hi, lo_open, integer, (), what)
 
 
-FAMILIES = ("toled", "poled")
-_FAMILY = {  # per display family, under [display.<family>]
+PRESET_FAMILIES = ("toled", "poled")
+FAMILIES = (*PRESET_FAMILIES, "file")  # file: a user's display file or micrograph (panels.file_display)
+_PRESET = {  # per preset family, under [display.<family>]
     "pitch_um": _num(1.0, 1e4, "µm (the square cell's side)"),
     "open_fraction": _num(0.0, 0.75, "(open area / cell)", lo_open=True),
-    "transmission_scale": _num(0.0, 10.0, "(× the preset's T(λ); T stays ≤ 1)", lo_open=True),
+}
+_FAMILY = {  # per display family, the file family included
+    "transmission_scale": _num(0.0, 10.0, "(× the family's T(λ); T stays ≤ 1)", lo_open=True),
     "haze": _num(0.0, 0.5, "(share of the light scattered past 2.5°; optics.stray)"),
     "disorder_cells": _num(1, 8, "(supercell side, cells)", integer=True),
     "disorder_position_um": _num(0.0, 20.0, "µm (σ of each opening's shift)"),
@@ -78,7 +82,12 @@ _FAMILY = {  # per display family, under [display.<family>]
 SCHEMA: dict[str, Allowed] = {
     "display.family": Allowed(words=FAMILIES),
     "display.distance_mm": _num(0.0, 100.0, "mm (display to the lens's principal plane)"),
+    **{f"display.{f}.{k}": a for f in PRESET_FAMILIES for k, a in _PRESET.items()},
     **{f"display.{f}.{k}": a for f in FAMILIES for k, a in _FAMILY.items()},
+    "display.file.path": Allowed(path=True, what="to a display file (.toml) or a micrograph image, relative to the "
+                                                 "distributions file ('': none)"),
+    "display.file.length_scale": _num(0.1, 10.0, "(× every length of the file's layout: its pitch and openings, "
+                                                 "or a micrograph's pixel size)", lo_open=True),
     "display.toled.slit_height_fraction": _num(0.05, 1.0, "(of the cell)"),
     "display.poled.small_to_large": _num(0.0, 1.0, "(small / large opening radius)", lo_open=True),
     "display.poled.urbach_width_nm": _num(8.0, 30.0, "nm (the fitted table's range)"),
@@ -177,7 +186,7 @@ def parse_dist(value, key: str, where: str) -> Dist:
         total = float(sum(weights))
         return Dist("choice", values=tuple(_typed(v, allowed) for v in values),
                     weights=tuple(float(w) / total for w in weights))
-    if allowed.words or allowed.integer:
+    if allowed.words or allowed.integer or allowed.path:
         fail(f"a fixed value or dist = 'choice' ({allowed.describe()})")
     low, high = value.get("low"), value.get("high")
     if not (allowed.admits(low) and allowed.admits(high)):
@@ -191,7 +200,7 @@ def parse_dist(value, key: str, where: str) -> Dist:
 
 def _typed(v, allowed: Allowed):
     """A fixed or listed value as drawn: a word, a whole number, or a float."""
-    return v if allowed.words else int(v) if allowed.integer else float(v)
+    return v if allowed.words or allowed.path else int(v) if allowed.integer else float(v)
 
 
 def _flatten(table: dict, prefix: str, where: str, out: dict) -> None:
@@ -234,6 +243,9 @@ def _check_together(dists: dict, where: str) -> None:
         raise RandomizeError(f"{where}: display.toled.open_fraction = {dists['display.toled.open_fraction'].describe()!r}"
                              f": expected at most the smallest display.toled.slit_height_fraction ({slit:g}): the "
                              "slit is as wide as the open area needs")
+    if "file" in dists["display.family"].support and "" in dists["display.file.path"].support:
+        raise RandomizeError(f"{where}: display.family = {dists['display.family'].describe()!r}: the family 'file' "
+                             "needs display.file.path = a display file (.toml) or a micrograph image")
     for family, top in MAX_TRANSMISSION_SCALE.items():
         key = f"display.{family}.transmission_scale"
         if max(dists[key].support) > top:
@@ -253,7 +265,20 @@ def load_distributions(spec: str | Path) -> Distributions:
     path = Path(spec)
     if path.suffix.lower() != ".toml":
         raise RandomizeError(f"--randomize = {str(spec)!r}: expected {DEFAULT} or a .toml file of distributions")
-    return parse(read_toml(path, RandomizeError, "--randomize"), str(path), default_distributions())
+    dists = parse(read_toml(path, RandomizeError, "--randomize"), str(path), default_distributions())
+    return _with_display_files(dists, path)
+
+
+def _with_display_files(dists: Distributions, toml: Path) -> Distributions:
+    """display.file.path's values made absolute (relative ones from the TOML file's folder), each checked to be
+    a file."""
+    key, d = "display.file.path", dists["display.file.path"]
+    paths = tuple("" if v == "" else str((toml.parent / v).resolve()) for v in d.values)
+    for given, found in zip(d.values, paths):
+        if found and not Path(found).is_file():
+            raise RandomizeError(f"{toml}: {key} = {given!r}: no such file ({found}); expected a display file "
+                                 "(.toml) or a micrograph image")
+    return Distributions({**dists.dists, key: replace(d, values=paths)}, dists.source)
 
 
 def stream(seed: int, *keys) -> np.random.Generator:

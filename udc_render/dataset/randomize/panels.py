@@ -6,13 +6,25 @@ to the paper's γ (0.34/0.34/0.34/0.20) at each width (POLED_T_TABLE, every 1 nm
 optics.displays.fit_poled_transmission on the default rig, as `udc-render study realism` does) and
 interpolated linearly in w (γ within 0.08 % of the paper's at every width, 0.25 nm steps), then
 × transmission_scale. The gain is the paper's for the family (6, 25).
+
+The family 'file' is a user's panel (file_display): a display file (`udc-render fit` writes one) or a micrograph
+image, every length of its layout × length_scale (a periodic layout's pitch and openings, a micrograph's pixel
+size), its T(λ) × transmission_scale (refused where T would pass 1), its gain, at the drawn distance.
 """
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
 from psf import layouts
-from udc_render.optics.displays import PAPER_GAIN, TOLED_T, Display, Transmission, poled_transmission
+from psf.micrograph import MicrographLayout
+from udc_render.errors import UdcError
+from udc_render.optics.displays import PAPER_GAIN, TOLED_T, Display, Transmission, load_display, poled_transmission
+
+class RandomizeError(UdcError):
+    """A bad randomization file or value; one line naming the file, key, value and what is allowed."""
+
 
 PANEL_NAME = "random"  # the drawn display's name: its capture's folder in an item
 
@@ -49,20 +61,69 @@ def panel_transmission(family: str, values: dict) -> Transmission:
     return poled_transmission(scale * s, edge, cathode, w)
 
 
+def disordered(base, values: dict, seed: int, what: str):
+    """`base`, or its disordered supercell (psf.layouts.disordered, its own `seed`) when either disorder σ is > 0."""
+    if not (values["disorder_position_um"] > 0 or values["disorder_size_sd"] > 0):
+        return base
+    if not isinstance(base, layouts.PeriodicLayout):
+        raise RandomizeError(f"display.file.disorder_*: {what} is a micrograph: expected disorder_position_um = 0 "
+                             "and disorder_size_sd = 0 (disorder moves the openings of a periodic layout)")
+    return layouts.disordered(base, int(values["disorder_cells"]), values["disorder_position_um"],
+                              values["disorder_size_sd"], seed)
+
+
 def panel_layout(family: str, values: dict, seed: int):
-    """The family's layout at the drawn values; a disordered supercell (psf.layouts.disordered, its own
-    `seed`) when either disorder σ is > 0."""
+    """A preset family's layout at the drawn values, disordered where drawn so."""
     if family == "toled":
         base = layouts.toled(values["pitch_um"], values["open_fraction"], values["slit_height_fraction"])
     else:
         base = layouts.poled(values["pitch_um"], values["open_fraction"], values["small_to_large"])
-    if values["disorder_position_um"] > 0 or values["disorder_size_sd"] > 0:
-        return layouts.disordered(base, int(values["disorder_cells"]), values["disorder_position_um"],
-                                  values["disorder_size_sd"], seed)
-    return base
+    return disordered(base, values, seed, family)
+
+
+def scaled_layout(layout, s: float):
+    """Every length of a layout × s: a periodic layout's pitch and its openings' centres and sizes, or a
+    micrograph's pixel size (its tile as it is)."""
+    if isinstance(layout, MicrographLayout):
+        return replace(layout, pixel_um=layout.pixel_um * s)
+    lengths = ("cx_um", "cy_um", "width_um", "height_um", "rx_um", "ry_um")
+    openings = tuple(replace(o, **{k: getattr(o, k) * s for k in lengths if hasattr(o, k)}) for o in layout.openings)
+    return replace(layout, pitch_x_um=layout.pitch_x_um * s, pitch_y_um=layout.pitch_y_um * s, openings=openings)
+
+
+def scaled_transmission(t: Transmission, s: float) -> Transmission:
+    """T(λ) × s, in the transmission's own parameters (a flat value, an edge's or polyimide's scale, a table)."""
+    if t.kind == "flat":
+        return replace(t, value=t.value * s)
+    if t.kind == "csv":
+        return replace(t, table_t=tuple(v * s for v in t.table_t))
+    return replace(t, scale=t.scale * s)
+
+
+T_CHECK_NM = np.arange(350.0, 801.0)  # where a scaled file T(λ) must stay ≤ 1
+
+
+def file_display(values: dict, distance_mm: float, seed: int, source: str) -> Display:
+    """The family 'file' at the drawn values (module doc)."""
+    path = values["path"]
+    try:
+        base = load_display(path)
+    except ValueError as e:  # a DisplayError, or psf's LayoutError of a micrograph
+        raise RandomizeError(f"display.file.path = {path!r}: {e}") from None
+    if base.is_glass:
+        raise RandomizeError(f"display.file.path = {path!r}: a bare lens (glass): expected a display")
+    t = scaled_transmission(base.transmission, values["transmission_scale"])
+    top = float(np.max(t(T_CHECK_NM)))
+    if top > 1.0 + 1e-12:
+        raise RandomizeError(f"display.file.transmission_scale = {values['transmission_scale']:g}: puts the T(λ) of "
+                             f"{path} at {top:.3g}: expected T ≤ 1 (at most {1.0 / (top / values['transmission_scale']):.3g})")
+    layout = disordered(scaled_layout(base.layout, values["length_scale"]), values, seed, path)
+    return Display(PANEL_NAME, layout, t, base.gain, float(distance_mm), source=f"{source}; {base.name} from {path}")
 
 
 def panel_display(family: str, values: dict, distance_mm: float, seed: int, source: str) -> Display:
     """The drawn panel, named PANEL_NAME."""
+    if family == "file":
+        return file_display(values, distance_mm, seed, source)
     return Display(PANEL_NAME, panel_layout(family, values, seed), panel_transmission(family, values),
                    PAPER_GAIN[family], float(distance_mm), source=source)
