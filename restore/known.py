@@ -81,11 +81,17 @@ def packed_channel_kernels(layout, lens: Lens, camera: str, sensor_pitch_um: flo
     return camera_channel_kernels(layout, lens, camera, 2 * float(sensor_pitch_um), size_px, use_cache)
 
 
-def rggb_kernels(kernel_set) -> np.ndarray:
-    """[4, k, k] float32 unit-sum kernels R, Gr, Gb, B from a channel KernelSet [3] (R, G, B)."""
-    k = kernel_set.kernels.astype(np.float64)
+def rggb_stack(kernels: np.ndarray) -> np.ndarray:
+    """[4, k, k] float32 R, Gr, Gb, B from channel kernels [3, k, k] (R, G, B), each normalised to unit sum
+    (in float64): both greens take G."""
+    k = np.asarray(kernels, np.float64)
     k = k / k.sum(axis=(1, 2), keepdims=True)
     return np.stack([k[0], k[1], k[1], k[2]]).astype(np.float32)
+
+
+def rggb_kernels(kernel_set) -> np.ndarray:
+    """[4, k, k] float32 unit-sum kernels R, Gr, Gb, B from a channel KernelSet [3] (R, G, B)."""
+    return rggb_stack(kernel_set.kernels)
 
 
 def packed_from_sensor(kernels: np.ndarray) -> np.ndarray:
@@ -101,9 +107,7 @@ def packed_from_sensor(kernels: np.ndarray) -> np.ndarray:
     box = 0.5 * p[:, :-2] + p[:, 1:-1] + 0.5 * p[:, 2:]
     box = 0.5 * box[:, :, :-2] + box[:, :, 1:-1] + 0.5 * box[:, :, 2:]
     c = k.shape[1] // 2
-    packed = box[:, c % 2::2, c % 2::2]
-    packed /= packed.sum(axis=(1, 2), keepdims=True)
-    return np.stack([packed[0], packed[1], packed[1], packed[2]]).astype(np.float32)
+    return rggb_stack(box[:, c % 2::2, c % 2::2])
 
 
 def known_kernels_rggb(pair: Pair, size_px: int | None = None, use_cache: bool = True,
