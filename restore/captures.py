@@ -1,7 +1,8 @@
 """A capture of its own for every crop of the online degradation (`udc-render train --degrade online
 --capture-draws default|FILE.toml`, restore.online): the crop's sensor and exposure drawn from the
 distributions' sensor.* and exposure.* (udc_render.dataset.randomize.draw_capture, the draws a randomized
-dataset's item makes), through the kernels of its panel. Without it a crop takes its panel's capture, so N panels
+dataset's item makes), through the kernels of its panel. `bank` takes the distributions a randomized bank was
+drawn from (its bank.json's "randomize"). Without it a crop takes its panel's capture, so N panels
 give N sensors and N brightness levels.
 
 A crop's capture replaces on its panel (captured_panel):
@@ -26,8 +27,10 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from udc_render.dataset.bank import Panel
-from udc_render.dataset.randomize import CaptureDraw, Distributions, draw_capture, load_distributions
+from udc_render.dataset.bank import Bank, Panel
+from udc_render.dataset.randomize import CaptureDraw, Distributions, RandomizeError, draw_capture, load_distributions, parse
+
+BANK = "bank"  # --capture-draws bank: the bank's own distributions
 
 CAPTURE_STREAM = zlib.crc32(b"online capture")
 CROP_KEYS = ("sensor.gain_scale", "sensor.read_noise_e", "sensor.prnu", "sensor.dsnu_e", "sensor.row_offset_e",
@@ -41,14 +44,23 @@ class CaptureDraws:
     dists: Distributions
 
     def describe(self) -> dict:
-        """What a training run records (train.json) and a resumed one must match."""
-        return {"spec": self.spec, "sha256": hashlib.sha256(json.dumps(self.dists.describe(), sort_keys=True)
-                                                            .encode()).hexdigest()[:16]}
+        """What a training run records (train.json) and a resumed one must match: the spec and the sha256 of the
+        distributions (not of where they came from)."""
+        parameters = self.dists.describe()["parameters"]
+        return {"spec": self.spec, "sha256": hashlib.sha256(json.dumps(parameters, sort_keys=True).encode())
+                .hexdigest()[:16]}
 
 
-def load_capture_draws(spec: str) -> CaptureDraws:
-    """'default' (the documented ranges) or a TOML file of distributions (udc_render.dataset.randomize)."""
-    return CaptureDraws(str(spec), load_distributions(spec))
+def load_capture_draws(spec: str, bank: Bank | None = None) -> CaptureDraws:
+    """'default' (the documented ranges), a TOML file of distributions (udc_render.dataset.randomize), or 'bank':
+    those `bank` was drawn from (`udc-render bank --randomize`)."""
+    if str(spec) != BANK:
+        return CaptureDraws(str(spec), load_distributions(spec))
+    drawn = (bank.settings.get("randomize") or {}).get("parameters") if bank is not None else None
+    if not drawn:
+        raise RandomizeError(f"--capture-draws {BANK}: the bank {bank.folder if bank else ''} was not drawn "
+                             "(`udc-render bank --randomize`): expected default or a .toml file of distributions")
+    return CaptureDraws(BANK, parse(drawn, f"{bank.folder}/bank.json: randomize"))
 
 
 def crop_capture(draws: CaptureDraws, seed: int, epoch: int, k: int) -> CaptureDraw:

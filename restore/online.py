@@ -314,17 +314,17 @@ def online_data(data: Path, bank_dir: Path, settings, device, workers: int | Non
                         f"({d['bank_fingerprint']})")
     degrader = Degrader(bank.panels, device, torch.float32)
     batches = OnlineBatches(clean_images(data, "train"), bank, degrader, settings.crop_px, settings.batch,
-                            settings.seed, settings.crops_per_pair, workers, run_captures(d))
+                            settings.seed, settings.crops_per_pair, workers, run_captures(d, bank))
     return batches, validation_pairs(clean_images(data, "val"), bank, degrader, settings.seed)
 
 
-def run_captures(degrade: dict) -> CaptureDraws | None:
-    """The capture draws a run's settings.degrade names ({"captures": CaptureDraws.describe()}), read again and
-    checked against what the run recorded; None without."""
+def run_captures(degrade: dict, bank: Bank | None = None) -> CaptureDraws | None:
+    """The capture draws a run's settings.degrade names ({"captures": CaptureDraws.describe()}), read again (from
+    `bank` for 'bank') and checked against what the run recorded; None without."""
     if "captures" not in degrade:
         return None
     recorded = degrade["captures"]
-    draws = load_capture_draws(recorded["spec"])
+    draws = load_capture_draws(recorded["spec"], bank)
     if draws.describe() != recorded:
         raise DataError(f"--capture-draws {recorded['spec']}: its distributions (sha {draws.describe()['sha256']}) "
                         f"are not the run's ({recorded['sha256']}): the file changed since the run began")

@@ -136,3 +136,25 @@ def test_a_run_with_capture_draws_records_them_resumes_identically_and_refuses_o
     dataset_run = ["train", "--data", str(data), "--model", "unet", "--display", "soft", "--out",
                    str(tmp_path / "c4"), "--capture-draws", "default"]
     assert main(dataset_run) == 2 and "goes with --degrade online" in capsys.readouterr().err
+
+
+def test_capture_draws_from_the_bank_are_those_it_was_drawn_from(tmp_path, bank, capsys):
+    """--capture-draws bank reads the distributions a randomized bank recorded (bank.json "randomize"): the same
+    crops' captures as the file they came from; a bank not drawn is refused in one line."""
+    from udc_render.dataset.randomize import load_distributions
+    ranges = tmp_path / "dim.toml"
+    ranges.write_text('[exposure]\nbrightness = {dist = "uniform", low = 0.1, high = 0.2}\n')
+    drawn = tmp_path / "drawn_bank"
+    records = [save_panel(drawn, 0, _panel("soft", 1.0, 0))]
+    write_bank_json(drawn, {"randomize": load_distributions(ranges).describe()}, records, 1)
+    from_bank = load_capture_draws("bank", read_bank(drawn))
+    from_file = load_capture_draws(str(ranges))
+    assert [crop_capture(from_bank, 0, 0, k) for k in range(5)] == [crop_capture(from_file, 0, 0, k) for k in range(5)]
+    assert from_bank.describe()["sha256"] == from_file.describe()["sha256"] and from_bank.spec == "bank"
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(48, 64))
+    base = ["train", "--data", str(data), "--model", "unet", "--epochs", "1", "--crop-px", "32", "--quiet",
+            "--degrade", "online", "--capture-draws", "bank"]
+    capsys.readouterr()
+    assert main(base + ["--bank", str(bank), "--out", str(tmp_path / "r1")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--capture-draws bank: the bank" in err and "was not drawn" in err, err

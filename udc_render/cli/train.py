@@ -32,10 +32,11 @@ def register(sub) -> None:
                    help="dataset: the dataset's captures; online: a fresh degradation of every crop of the clean "
                         "images, each through a panel drawn from --bank, on the training device [dataset]")
     p.add_argument("--bank", type=Path, help="with --degrade online: a kernel bank written by `udc-render bank`")
-    p.add_argument("--capture-draws", metavar="default|FILE.toml",
+    p.add_argument("--capture-draws", metavar="bank|default|FILE.toml",
                    help="with --degrade online: every crop draws its own sensor and exposure (gain, read noise, "
                         "FPN amplitudes, exposure scale, brightness) from these distributions' sensor.* and "
-                        "exposure.* (docs/guides/randomize.md) instead of taking its panel's [off: the panel's]")
+                        "exposure.* (docs/guides/randomize.md; bank: those a randomized --bank was drawn from) "
+                        "instead of taking its panel's [off: the panel's]")
     p.add_argument("--degrade-workers", type=int, default=None,
                    help="with --degrade online: on the CPU, processes that degrade the next crops while the model "
                         "trains (one thread each); on a GPU, 1: a thread on its own CUDA stream; the same numbers "
@@ -111,7 +112,7 @@ def _source(args) -> tuple[str, str, dict | None]:
         degrade = {"mode": "online", "bank_fingerprint": bank.fingerprint, "panels": names}
         if args.capture_draws is not None:
             from restore.captures import load_capture_draws
-            degrade["captures"] = load_capture_draws(args.capture_draws).describe()
+            degrade["captures"] = load_capture_draws(args.capture_draws, bank).describe()
         return ",".join(names), images_fingerprint(args.data), degrade
     if args.capture_draws is not None:
         raise UserError(f"--capture-draws {args.capture_draws}: goes with --degrade online (a dataset's captures "
