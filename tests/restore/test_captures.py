@@ -12,10 +12,8 @@ from restore.captures import CROP_KEYS, captured_panel, crop_capture, load_captu
 from restore.data import dihedral
 from restore.degrade import Degrader, normalised
 from restore.online import OnlineBatches, clean_images
-from restore.train import train
 from tests.conftest import write_pairs
-from tests.restore.test_online import _blur_panel, _settings
-from tests.restore.test_train import train_interrupted_at_epoch_2
+from tests.restore.test_online import _blur_panel, _settings, straight_and_resumed
 from udc_render.cli import main
 from udc_render.dataset.bank import read_bank, save_panel, write_bank_json
 from udc_render.sensor.defects import DefectConfig
@@ -97,14 +95,7 @@ def test_a_run_with_capture_draws_records_them_resumes_identically_and_refuses_o
     data = write_pairs(tmp_path / "pairs", splits=(("train", 3),), size_px=(48, 64))
     s = _settings(bank, epochs=4, batch=2, crop_px=32, lr=1e-3)
     s = replace(s, degrade={**s.degrade, "captures": load_capture_draws("default").describe()})
-    train(data, tmp_path / "straight", s, progress=False, bank=bank)
-    train_interrupted_at_epoch_2(monkeypatch, data, tmp_path / "resumed", s, bank=bank)
-    train(data, tmp_path / "resumed", s, progress=False, bank=bank)
-    a = torch.load(tmp_path / "straight" / "model.pt", weights_only=False)["state_dict"]
-    r = torch.load(tmp_path / "resumed" / "model.pt", weights_only=False)["state_dict"]
-    assert all(torch.equal(a[k], r[k]) for k in a)
-    log = (tmp_path / "straight" / "online.jsonl").read_text()
-    assert log == (tmp_path / "resumed" / "online.jsonl").read_text()
+    log = straight_and_resumed(tmp_path, monkeypatch, data, s, bank)
     crops = [c for line in log.splitlines() for c in json.loads(line)["crops"]]
     assert len(crops) == 4 * 3 and all(len(c) == 6 + len(CROP_KEYS) for c in crops)
     assert len({c[-1] for c in crops}) == len(crops)  # a brightness of its own per crop

@@ -86,17 +86,24 @@ def test_online_training_improves_over_its_input(tmp_path, bank):
     assert set(crops[:, 1]) == {0, 1} and (crops[:, 3] % 2 == 0).all() and (crops[:, 4] % 2 == 0).all()
 
 
-def test_resumed_online_training_continues_identically(tmp_path, bank, monkeypatch):
-    """Interrupted after two epochs and resumed: the same weights and the same recorded draws as a straight run."""
-    data = write_pairs(tmp_path / "pairs", splits=(("train", 3),), size_px=(48, 64))
-    s = _settings(bank, epochs=4, batch=2, crop_px=32, lr=1e-3)
+def straight_and_resumed(tmp_path, monkeypatch, data, s: TrainSettings, bank) -> str:
+    """Train s straight and interrupted after two epochs then resumed: assert the same weights and the same
+    online.jsonl; returns that log."""
     train(data, tmp_path / "straight", s, progress=False, bank=bank)
     train_interrupted_at_epoch_2(monkeypatch, data, tmp_path / "resumed", s, bank=bank)
     train(data, tmp_path / "resumed", s, progress=False, bank=bank)
     a = torch.load(tmp_path / "straight" / "model.pt", weights_only=False)["state_dict"]
     b = torch.load(tmp_path / "resumed" / "model.pt", weights_only=False)["state_dict"]
     assert all(torch.equal(a[k], b[k]) for k in a)
-    assert (tmp_path / "straight" / "online.jsonl").read_text() == (tmp_path / "resumed" / "online.jsonl").read_text()
+    log = (tmp_path / "straight" / "online.jsonl").read_text()
+    assert log == (tmp_path / "resumed" / "online.jsonl").read_text()
+    return log
+
+
+def test_resumed_online_training_continues_identically(tmp_path, bank, monkeypatch):
+    """Interrupted after two epochs and resumed: the same weights and the same recorded draws as a straight run."""
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 3),), size_px=(48, 64))
+    straight_and_resumed(tmp_path, monkeypatch, data, _settings(bank, epochs=4, batch=2, crop_px=32, lr=1e-3), bank)
 
 
 def test_crops_take_mirrored_scene_beyond_the_frame_a_fresh_draw_each_epoch_and_the_same_in_workers(tmp_path, bank):
