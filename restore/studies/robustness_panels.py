@@ -2,7 +2,7 @@
 (randomized) trained with the robustness study's recipe on the first N panels of its randomized bank, scored on
 the study's held-out draws, default P-OLED and T-OLED, beside the study's own models.
 
-    python -m restore.studies.robustness_panels OUT [--counts 4,8] [--quick]
+    python -m restore.studies.robustness_panels OUT [--counts 4,8] [--captures] [--quick]
 
 OUT is a `udc-render study robustness` folder of the same budget (finished first, or resumed: its banks, clean
 images, models and scores). Draws are independent per panel index (udc_render.dataset.randomize.draw_panel), so
@@ -10,19 +10,23 @@ the first N panels of the bank are a draw of N panels; the study's own randomize
 N trains in OUT/train/randomized_n<N> (the same seeds, steps and images; restore.train resumes it), its scores go
 to OUT/panels_scores.jsonl (a row per (N, set, panel), kept on a re-run) and the report to
 OUT/study_robustness_panels.{md,csv,png}. The validation pairs are the study's (panel_pairs, SCORE_SEED), so
-N = train_panels reads the study's own scores.
+N = train_panels reads the study's own scores. --captures also trains N = train_panels with a capture per crop
+(restore.captures: each crop's own sensor and exposure from randomize `default`, the distributions the bank was
+drawn from) in OUT/train/randomized_captures: what a bank's per-panel sensor and brightness cost.
 """
 from __future__ import annotations
 
 import json
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
+from restore.captures import load_capture_draws
 from restore.metrics import level_matched_psnr_db, paper_metrics
 from restore.online import clean_images
 from restore.studies.options import parse_options
@@ -39,7 +43,9 @@ from udc_render.studies.report import duration, md_table, write_tables
 COUNTS = (4, 8)  # with the study's own 16: a factor of two apart
 PANEL_SETS = ("heldout", "default", "toled")
 ROWS_FILE, STEM = "panels_scores.jsonl", "study_robustness_panels"
-COLUMNS = ["panels", "steps", "train_s", *(f"psnr_{s}{t}_db" for s in PANEL_SETS for t in ("", "_level"))]
+CAPTURES_RUN = "randomized_captures"
+CAPTURES = {False: "the panel's", True: "its own"}  # a crop's sensor and exposure
+COLUMNS = ["panels", "captures", "steps", "train_s", *(f"psnr_{s}{t}_db" for s in PANEL_SETS for t in ("", "_level"))]
 
 
 def first_panels(bank: Bank, n: int) -> Bank:
@@ -49,29 +55,41 @@ def first_panels(bank: Bank, n: int) -> Bank:
     return Bank(bank.folder, bank.settings, bank.panels[:n])
 
 
-def train_counts(out: Path, b: Budget, counts: list[int], data: Path, progress: bool) -> dict:
-    """{N: train summary} of the randomized UNet on the first N panels (restore.train resumes each)."""
+def run_name(n: int, captures: bool) -> str:
+    """The training folder of N panels (a capture per crop: CAPTURES_RUN, N = train_panels)."""
+    return CAPTURES_RUN if captures else f"randomized_n{n}"
+
+
+def train_runs(out: Path, b: Budget, runs: list[tuple[int, bool]], data: Path, progress: bool) -> dict:
+    """{(N, captures): train summary} of the randomized UNet on the first N panels, with a capture per crop where
+    captures (restore.train resumes each)."""
     bank = read_bank(out / "banks" / "random")
-    return {n: train(data, out / "train" / f"randomized_n{n}", train_settings(b, first_panels(bank, n), data),
-                     device="cpu", checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
-                     bank=bank.folder) for n in counts}
+    summaries = {}
+    for n, captures in runs:
+        s = train_settings(b, first_panels(bank, n), data)
+        if captures:
+            s = replace(s, degrade={**s.degrade, "captures": load_capture_draws("default").describe()})
+        summaries[(n, captures)] = train(data, out / "train" / run_name(n, captures), s, device="cpu",
+                                         checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
+                                         bank=bank.folder)
+    return summaries
 
 
-def score_counts(out: Path, counts: list[int], data: Path, progress: bool) -> list[dict]:
-    """Every (N, set, panel) row of panels_scores.jsonl (kept rows are not recomputed)."""
+def score_runs(out: Path, runs: list[tuple[int, bool]], data: Path, progress: bool) -> list[dict]:
+    """Every (N, captures, set, panel) row of panels_scores.jsonl (kept rows are not recomputed)."""
     path = out / ROWS_FILE
     rows = read_scores(path)
-    done = {(r["panels"], r["set"], r["panel"]) for r in rows}
+    done = {(r["panels"], r.get("captures", False), r["set"], r["panel"]) for r in rows}
     banks = {s: read_bank(out / "banks" / s) for s in PANEL_SETS}
     images = clean_images(data, "val")
-    todo = [(n, s, i) for n in counts for s in PANEL_SETS for i, p in enumerate(banks[s].panels)
-            if (n, s, p.name) not in done]
-    models = {n: load_model(out / "train" / f"randomized_n{n}" / "model.pt", "cpu")[0] for n in {t[0] for t in todo}}
-    for n, s, i in tqdm(todo, desc="score", unit="panel", disable=not progress):
+    todo = [(run, s, i) for run in runs for s in PANEL_SETS for i, p in enumerate(banks[s].panels)
+            if (*run, s, p.name) not in done]
+    models = {run: load_model(out / "train" / run_name(*run) / "model.pt", "cpu")[0] for run in {t[0] for t in todo}}
+    for run, s, i in tqdm(todo, desc="score", unit="panel", disable=not progress):
         t0 = time.perf_counter()
         panel = banks[s].panels[i]
-        scored = [(predict(models[n], x, torch.device("cpu")), gt) for x, gt in panel_pairs(banks[s], panel, images)]
-        rows.append({"panels": n, "set": s, "panel": panel.name,
+        scored = [(predict(models[run], x, torch.device("cpu")), gt) for x, gt in panel_pairs(banks[s], panel, images)]
+        rows.append({"panels": run[0], **({"captures": True} if run[1] else {}), "set": s, "panel": panel.name,
                      "psnr_db": float(np.mean([paper_metrics(y, gt)["psnr_db_paper"] for y, gt in scored])),
                      "psnr_level_db": float(np.mean([level_matched_psnr_db(y, gt) for y, gt in scored])),
                      "seconds": round(time.perf_counter() - t0, 2)})
@@ -86,14 +104,15 @@ def set_means(rows: list[dict], key: str) -> dict:
 
 
 def summary(rows: list[dict], study: list[dict], b: Budget, trained: dict, study_train: dict) -> list[dict]:
-    """One row per N (ascending): its steps and training seconds, and each set's paper and level-matched PSNR; the
-    study's own randomized model is N = b.train_panels."""
-    runs = {n: ([r for r in rows if r["panels"] == n], "psnr_db", "psnr_level_db", trained[n]) for n in trained}
-    runs[b.train_panels] = (study, "psnr_randomized_db", "psnr_randomized_level_db", study_train)
+    """One row per (N, captures) (N ascending): its steps and training seconds, and each set's paper and
+    level-matched PSNR; the study's own randomized model is (b.train_panels, the panel's captures)."""
+    runs = {run: ([r for r in rows if (r["panels"], r.get("captures", False)) == run], "psnr_db", "psnr_level_db",
+                  trained[run]) for run in trained}
+    runs[(b.train_panels, False)] = (study, "psnr_randomized_db", "psnr_randomized_level_db", study_train)
     out = []
-    for n in sorted(runs):
-        mine, key, level, t = runs[n]
-        row = {"panels": n, "steps": t.get("steps"), "train_s": t.get("seconds")}
+    for run in sorted(runs):
+        mine, key, level, t = runs[run]
+        row = {"panels": run[0], "captures": CAPTURES[run[1]], "steps": t.get("steps"), "train_s": t.get("seconds")}
         for tail, k in (("", key), ("_level", level)):
             row.update({f"psnr_{s}{tail}_db": v for s, v in set_means(mine, k).items()})
         out.append(row)
@@ -106,10 +125,11 @@ def references(study: list[dict]) -> dict:
 
 
 def markdown(table: list[dict], refs: dict, b: Budget) -> str:
-    cols = [("panels", "panels N"), ("steps", "steps"), ("train_s", "training")]
+    cols = [("panels", "panels N"), ("captures", "a crop's sensor and exposure"), ("steps", "steps"),
+            ("train_s", "training")]
     cols += [(f"psnr_{s}{t}_db", f"{SETS[s]}{' (level-matched)' if t else ''}") for t in ("", "_level")
              for s in PANEL_SETS]
-    fmt = {c: two for c, _ in cols[3:]}
+    fmt = {c: two for c, _ in cols[4:]}
     fmt["train_s"] = duration
     ref_rows = [{"name": name, **{f"psnr_{s}_db": v for s, v in r.items()}} for name, r in refs.items()]
     return "\n".join([
@@ -117,8 +137,9 @@ def markdown(table: list[dict], refs: dict, b: Budget) -> str:
         f"UNet (randomized) of the robustness study's `{b.name}` budget trained on the first N of its "
         f"{b.train_panels} randomized panels, with the same seeds, steps and images, and scored (paper protocol's "
         "PSNR, dB) on the study's test sets: the held-out draws within the ranges, the default P-OLED and the "
-        f"T-OLED. N = {b.train_panels} is the study's own model. "
-        "`python -m restore.studies.robustness_panels OUT`.", "",
+        f"T-OLED. N = {b.train_panels} with the panel's sensor and exposure is the study's own model; 'its own': "
+        "every crop draws its sensor and exposure (brightness included) from the ranges (`udc-render train "
+        "--capture-draws`). `python -m restore.studies.robustness_panels OUT [--captures]`.", "",
         *md_table(table, cols, fmt), "",
         "The study's references on the same images (not trained on randomized panels):", "",
         *md_table(ref_rows, [("name", "row"), *((f"psnr_{s}_db", SETS[s]) for s in PANEL_SETS)],
@@ -129,10 +150,15 @@ def plot(table: list[dict], refs: dict, path: Path) -> None:
     """PSNR per set against N (log axis), paper and level-matched, with DeP's held-out PSNR as a line."""
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    n = [r["panels"] for r in table]
+    panel = [r for r in table if r["captures"] == CAPTURES[False]]
+    own = [r for r in table if r["captures"] == CAPTURES[True]]
+    n = [r["panels"] for r in panel]
     for ax, tail, title in ((axes[0], "", "paper PSNR"), (axes[1], "_level", "level-matched PSNR")):
         for s in PANEL_SETS:
-            ax.plot(n, [r.get(f"psnr_{s}{tail}_db") for r in table], "o-", label=SETS[s])
+            line, = ax.plot(n, [r.get(f"psnr_{s}{tail}_db") for r in panel], "o-", label=SETS[s])
+            if own:
+                ax.plot([r["panels"] for r in own], [r.get(f"psnr_{s}{tail}_db") for r in own], "*",
+                        color=line.get_color(), ms=11, label=f"{SETS[s]}, a capture per crop")
         ax.axhline(refs[DEP]["heldout"], color="0.4", ls="--", lw=0.8, label=f"{DEP}, held-out draws")
         ax.set_xscale("log", base=2)
         ax.set_xticks(n, [str(v) for v in n])
@@ -147,8 +173,10 @@ def plot(table: list[dict], refs: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def run_panels(out: Path, counts: list[int], quick: bool = False, progress: bool = True) -> list[dict]:
-    """The robustness study in `out` (finished or resumed), then each N of `counts`: trained, scored, reported."""
+def run_panels(out: Path, counts: list[int], quick: bool = False, progress: bool = True,
+               captures: bool = False) -> list[dict]:
+    """The robustness study in `out` (finished or resumed), then each N of `counts` (and with captures N =
+    train_panels with a capture per crop): trained, scored, reported."""
     b = BUDGETS["quick" if quick else "full"]
     counts = sorted(set(counts) - {b.train_panels})
     for n in counts:
@@ -157,8 +185,9 @@ def run_panels(out: Path, counts: list[int], quick: bool = False, progress: bool
     result = run_study(out, quick, progress=progress)
     out = Path(out).resolve()
     data = out / "clean"
-    trained = train_counts(out, b, counts, data, progress)
-    rows = score_counts(out, counts, data, progress)
+    runs = [(n, False) for n in counts] + ([(b.train_panels, True)] if captures else [])
+    trained = train_runs(out, b, runs, data, progress)
+    rows = score_runs(out, runs, data, progress)
     study = [r for r in read_scores(out / SCORES_FILE) if r["set"] in PANEL_SETS]
     table = summary(rows, study, b, trained, result["train"]["randomized"])
     refs = references(study)
@@ -168,9 +197,9 @@ def run_panels(out: Path, counts: list[int], quick: bool = False, progress: bool
 
 
 def main(argv: list[str]) -> None:
-    usage = "python -m restore.studies.robustness_panels OUT [--counts 4,8] [--quick]"
-    quick = "--quick" in argv
-    pos, o = parse_options([a for a in argv if a != "--quick"], usage)
+    usage = "python -m restore.studies.robustness_panels OUT [--counts 4,8] [--captures] [--quick]"
+    quick, captures = "--quick" in argv, "--captures" in argv
+    pos, o = parse_options([a for a in argv if a not in ("--quick", "--captures")], usage)
     if len(pos) != 1:
         sys.exit(f"usage: {usage}")
     try:
@@ -178,7 +207,7 @@ def main(argv: list[str]) -> None:
     except ValueError:
         sys.exit(f"error: --counts = {o['counts']!r}: expected panel counts separated by commas, e.g. 4,8")
     try:
-        table = run_panels(Path(pos[0]), counts, quick)
+        table = run_panels(Path(pos[0]), counts, quick, captures=captures)
     except (UdcError, OSError) as exc:
         sys.exit(f"error: {exc}")
     print((Path(pos[0]) / f"{STEM}.md").read_text(), end="")

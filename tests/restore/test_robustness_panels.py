@@ -18,15 +18,22 @@ def _study_row(s, panel, rnd, fixed=10.0, dep=12.0):
 
 
 def test_the_summary_puts_the_studys_own_model_at_its_panel_count():
-    """N rows in ascending order, each set the mean over its panels; N = train_panels from the study's rows."""
+    """N rows in ascending order, each set the mean over its panels; N = train_panels from the study's rows; a
+    capture-per-crop run at N = train_panels after it, from its own rows."""
     b = BUDGETS["full"]
     rows = [{"panels": 4, "set": "heldout", "panel": "random_000", "psnr_db": 20.0, "psnr_level_db": 21.0},
             {"panels": 4, "set": "heldout", "panel": "random_001", "psnr_db": 22.0, "psnr_level_db": 23.0},
-            {"panels": 4, "set": "toled", "panel": "toled", "psnr_db": 18.0, "psnr_level_db": 19.0}]
+            {"panels": 4, "set": "toled", "panel": "toled", "psnr_db": 18.0, "psnr_level_db": 19.0},
+            {"panels": b.train_panels, "captures": True, "set": "heldout", "panel": "random_000", "psnr_db": 27.0,
+             "psnr_level_db": 28.0}]
     study = [_study_row("heldout", "random_000", 24.0), _study_row("heldout", "random_001", 26.0),
              _study_row("toled", "toled", 21.0)]
-    table = summary(rows, study, b, {4: {"steps": 100, "seconds": 5.0}}, {"steps": 100, "seconds": 6.0})
-    assert [r["panels"] for r in table] == [4, b.train_panels]
+    table = summary(rows, study, b, {(4, False): {"steps": 100, "seconds": 5.0},
+                                     (b.train_panels, True): {"steps": 100, "seconds": 7.0}},
+                    {"steps": 100, "seconds": 6.0})
+    assert [(r["panels"], r["captures"]) for r in table] == [(4, "the panel's"), (b.train_panels, "the panel's"),
+                                                             (b.train_panels, "its own")]
+    assert table[2]["psnr_heldout_db"] == 27.0 and table[2]["train_s"] == 7.0 and "psnr_toled_db" not in table[2]
     assert table[0]["psnr_heldout_db"] == 21.0 and table[0]["psnr_heldout_level_db"] == 22.0
     assert table[1]["psnr_heldout_db"] == 25.0 and table[1]["psnr_toled_level_db"] == 22.0
     assert "psnr_default_db" not in table[0]  # a set without rows has no mean
@@ -44,13 +51,15 @@ def test_a_panel_count_outside_the_bank_is_refused_in_one_line(tmp_path):
 
 @pytest.mark.slow
 def test_the_quick_study_trains_and_scores_a_smaller_panel_count(tmp_path):
-    """The quick robustness study, then N = 2 of its 4 panels: the same steps, every set scored and finite;
-    N = 4 is the study's own randomized model."""
+    """The quick robustness study, then N = 2 of its 4 panels and N = 4 with a capture per crop: the same steps,
+    every set scored and finite; N = 4 with the panel's captures is the study's own randomized model."""
     b = BUDGETS["quick"]
-    table = run_panels(tmp_path / "study", [2], quick=True, progress=False)
-    assert [r["panels"] for r in table] == [2, b.train_panels] and table[0]["steps"] == table[1]["steps"] == b.steps
+    table = run_panels(tmp_path / "study", [2], quick=True, progress=False, captures=True)
+    assert [r["panels"] for r in table] == [2, b.train_panels, b.train_panels]
+    assert [r["captures"] for r in table] == ["the panel's", "the panel's", "its own"]
+    assert all(r["steps"] == b.steps for r in table)
     with open(tmp_path / "study" / f"{STEM}.csv") as f:
         written = list(csv.DictReader(f))
-    assert list(written[0]) == COLUMNS and len(written) == 2
+    assert list(written[0]) == COLUMNS and len(written) == 3
     assert all(math.isfinite(float(r[f"psnr_{s}{t}_db"])) for r in written for s in PANEL_SETS for t in ("", "_level"))
     assert (tmp_path / "study" / f"{STEM}.png").stat().st_size > 1000
