@@ -1,5 +1,5 @@
 """A capture of its own for every crop of the online degradation (`udc-render train --degrade online
---capture-draws default|FILE.toml`, restore.online): the crop's sensor and exposure drawn from the
+--capture-draws bank|default|FILE.toml`, restore.online): the crop's sensor and exposure drawn from the
 distributions' sensor.* and exposure.* (udc_render.dataset.randomize.draw_capture, the draws a randomized
 dataset's item makes), through the kernels of its panel. `bank` takes the distributions a randomized bank was
 drawn from (its bank.json's "randomize"). Without it a crop takes its panel's capture, so N panels
@@ -13,7 +13,8 @@ A crop's capture replaces on its panel (captured_panel):
 It keeps the panel's defect map (its seed and fractions) and its FPN maps' seed: a map of the whole frame per
 crop would cost a frame's draws for each (restore.degrade_sensor.FrameMaps keeps them per panel), and the maps'
 pattern is not what a restorer must generalise over; their amplitudes are. The crop's drawn values
-(CROP_KEYS) go into online.jsonl.
+(CROP_KEYS) go into online.jsonl. Validation keeps each panel's own capture: a fixed set, comparable between
+epochs and runs.
 
 Streams: crop k of epoch e draws with draw_capture(…, seed = SeedSequence([seed, crc32('online capture'), e]),
 item = k): a crop's capture depends on (seed, epoch, k) alone, as its image and panel do.
@@ -56,10 +57,12 @@ def load_capture_draws(spec: str, bank: Bank | None = None) -> CaptureDraws:
     those `bank` was drawn from (`udc-render bank --randomize`)."""
     if str(spec) != BANK:
         return CaptureDraws(str(spec), load_distributions(spec))
-    drawn = (bank.settings.get("randomize") or {}).get("parameters") if bank is not None else None
+    if bank is None:
+        raise RandomizeError(f"--capture-draws {BANK}: needs the bank (--bank DIR) whose distributions to draw from")
+    drawn = (bank.settings.get("randomize") or {}).get("parameters")
     if not drawn:
-        raise RandomizeError(f"--capture-draws {BANK}: the bank {bank.folder if bank else ''} was not drawn "
-                             "(`udc-render bank --randomize`): expected default or a .toml file of distributions")
+        raise RandomizeError(f"--capture-draws {BANK}: the bank {bank.folder} was not drawn (`udc-render bank "
+                             "--randomize`): expected default or a .toml file of distributions")
     return CaptureDraws(BANK, parse(drawn, f"{bank.folder}/bank.json: randomize"))
 
 

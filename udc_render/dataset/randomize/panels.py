@@ -61,7 +61,7 @@ def panel_transmission(family: str, values: dict) -> Transmission:
     return poled_transmission(scale * s, edge, cathode, w)
 
 
-def disordered(base, values: dict, seed: int, what: str):
+def with_disorder(base, values: dict, seed: int, what: str):
     """`base`, or its disordered supercell (psf.layouts.disordered, its own `seed`) when either disorder σ is > 0."""
     if not (values["disorder_position_um"] > 0 or values["disorder_size_sd"] > 0):
         return base
@@ -78,7 +78,7 @@ def panel_layout(family: str, values: dict, seed: int):
         base = layouts.toled(values["pitch_um"], values["open_fraction"], values["slit_height_fraction"])
     else:
         base = layouts.poled(values["pitch_um"], values["open_fraction"], values["small_to_large"])
-    return disordered(base, values, seed, family)
+    return with_disorder(base, values, seed, family)
 
 
 def scaled_layout(layout, s: float):
@@ -117,7 +117,7 @@ def file_display(values: dict, distance_mm: float, seed: int, source: str) -> Di
     if top > 1.0 + 1e-12:
         raise RandomizeError(f"display.file.transmission_scale = {values['transmission_scale']:g}: puts the T(λ) of "
                              f"{path} at {top:.3g}: expected T ≤ 1 (at most {1.0 / (top / values['transmission_scale']):.3g})")
-    layout = disordered(scaled_layout(base.layout, values["length_scale"]), values, seed, path)
+    layout = with_disorder(scaled_layout(base.layout, values["length_scale"]), values, seed, path)
     return Display(PANEL_NAME, layout, t, base.gain, float(distance_mm), source=f"{source}; {base.name} from {path}")
 
 
