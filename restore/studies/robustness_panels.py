@@ -2,7 +2,7 @@
 (randomized) trained with the robustness study's recipe on the first N panels of its randomized bank, scored on
 the study's held-out draws, default P-OLED and T-OLED, beside the study's own models.
 
-    python -m restore.studies.robustness_panels OUT [--counts 4,8] [--captures] [--quick]
+    python -m restore.studies.robustness_panels OUT [--counts 4,8] [--captures] [--seeds 1] [--quick]
 
 OUT is a `udc-render study robustness` folder of the same budget (finished first, or resumed: its banks, clean
 images, models and scores). Draws are independent per panel index (udc_render.dataset.randomize.draw_panel), so
@@ -12,7 +12,9 @@ to OUT/panels_scores.jsonl (a row per (N, set, panel), kept on a re-run) and the
 OUT/study_robustness_panels.{md,csv,png}. The validation pairs are the study's (panel_pairs, SCORE_SEED), so
 N = train_panels reads the study's own scores. --captures also trains N = train_panels with a capture per crop
 (restore.captures: each crop's own sensor and exposure from randomize `default`, the distributions the bank was
-drawn from) in OUT/train/randomized_captures: what a bank's per-panel sensor and brightness cost.
+drawn from) in OUT/train/randomized_captures: what a bank's per-panel sensor and brightness cost. --seeds S,…
+trains N = train_panels again with training seed S (its initial weights, crops and noise; the same panels) in
+OUT/train/randomized_seed<S>: the spread between two trainings, against which the other differences are read.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ import sys
 import time
 from dataclasses import replace
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 import torch
@@ -30,8 +33,8 @@ from restore.captures import load_capture_draws
 from restore.metrics import level_matched_psnr_db, paper_metrics
 from restore.online import clean_images
 from restore.studies.options import parse_options
-from restore.studies.robustness import (BUDGETS, SCORES_FILE, Budget, panel_pairs, read_scores, run_study,
-                                        train_settings)
+from restore.studies.robustness import (BUDGETS, SCORES_FILE, TRAIN_SEED, Budget, panel_pairs, read_scores,
+                                        run_study, train_settings)
 from restore.studies.robustness_report import DEP, MODELS, SETS, two
 from restore.train import load_model, predict, train
 from udc_render.dataset.bank import Bank, read_bank
@@ -45,7 +48,7 @@ PANEL_SETS = ("heldout", "default", "toled")
 ROWS_FILE, STEM = "panels_scores.jsonl", "study_robustness_panels"
 CAPTURES_RUN = "randomized_captures"
 CAPTURES = {False: "the panel's", True: "its own"}  # a crop's sensor and exposure
-COLUMNS = ["panels", "captures", "steps", "train_s", *(f"psnr_{s}{t}_db" for s in PANEL_SETS for t in ("", "_level"))]
+COLUMNS = ["panels", "captures", "seed", "steps", "train_s", *(f"psnr_{s}{t}_db" for s in PANEL_SETS for t in ("", "_level"))]
 
 
 def first_panels(bank: Bank, n: int) -> Bank:
@@ -55,41 +58,55 @@ def first_panels(bank: Bank, n: int) -> Bank:
     return Bank(bank.folder, bank.settings, bank.panels[:n])
 
 
-def run_name(n: int, captures: bool) -> str:
-    """The training folder of N panels (a capture per crop: CAPTURES_RUN, N = train_panels)."""
-    return CAPTURES_RUN if captures else f"randomized_n{n}"
+class Run(NamedTuple):
+    """One training of the study: the first `panels` panels, a capture per crop or the panel's, a training seed."""
+    panels: int
+    captures: bool = False
+    seed: int = TRAIN_SEED
 
 
-def train_runs(out: Path, b: Budget, runs: list[tuple[int, bool]], data: Path, progress: bool) -> dict:
-    """{(N, captures): train summary} of the randomized UNet on the first N panels, with a capture per crop where
-    captures (restore.train resumes each)."""
+def run_of(row: dict) -> Run:
+    """The Run of a score row (rows of the panel's captures and the study's seed leave those keys out)."""
+    return Run(row["panels"], row.get("captures", False), row.get("seed", TRAIN_SEED))
+
+
+def run_name(run: Run) -> str:
+    """The training folder of a run: CAPTURES_RUN, randomized_seed<S> or randomized_n<N>."""
+    if run.captures:
+        return CAPTURES_RUN
+    return f"randomized_seed{run.seed}" if run.seed != TRAIN_SEED else f"randomized_n{run.panels}"
+
+
+def train_runs(out: Path, b: Budget, runs: list[Run], data: Path, progress: bool) -> dict:
+    """{run: train summary} of the randomized UNet on each run's first N panels, with its seed and, where it says
+    so, a capture per crop (restore.train resumes each)."""
     bank = read_bank(out / "banks" / "random")
     summaries = {}
-    for n, captures in runs:
-        s = train_settings(b, first_panels(bank, n), data)
-        if captures:
+    for run in runs:
+        s = replace(train_settings(b, first_panels(bank, run.panels), data), seed=run.seed)
+        if run.captures:
             s = replace(s, degrade={**s.degrade, "captures": load_capture_draws("default").describe()})
-        summaries[(n, captures)] = train(data, out / "train" / run_name(n, captures), s, device="cpu",
-                                         checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
-                                         bank=bank.folder)
+        summaries[run] = train(data, out / "train" / run_name(run), s, device="cpu", checkpoint_s=60.0,
+                               val_every=max(1, b.epochs // 5), progress=progress, bank=bank.folder)
     return summaries
 
 
-def score_runs(out: Path, runs: list[tuple[int, bool]], data: Path, progress: bool) -> list[dict]:
-    """Every (N, captures, set, panel) row of panels_scores.jsonl (kept rows are not recomputed)."""
+def score_runs(out: Path, runs: list[Run], data: Path, progress: bool) -> list[dict]:
+    """Every (run, set, panel) row of panels_scores.jsonl (kept rows are not recomputed)."""
     path = out / ROWS_FILE
     rows = read_scores(path)
-    done = {(r["panels"], r.get("captures", False), r["set"], r["panel"]) for r in rows}
+    done = {(run_of(r), r["set"], r["panel"]) for r in rows}
     banks = {s: read_bank(out / "banks" / s) for s in PANEL_SETS}
     images = clean_images(data, "val")
     todo = [(run, s, i) for run in runs for s in PANEL_SETS for i, p in enumerate(banks[s].panels)
-            if (*run, s, p.name) not in done]
-    models = {run: load_model(out / "train" / run_name(*run) / "model.pt", "cpu")[0] for run in {t[0] for t in todo}}
+            if (run, s, p.name) not in done]
+    models = {run: load_model(out / "train" / run_name(run) / "model.pt", "cpu")[0] for run in {t[0] for t in todo}}
     for run, s, i in tqdm(todo, desc="score", unit="panel", disable=not progress):
         t0 = time.perf_counter()
         panel = banks[s].panels[i]
         scored = [(predict(models[run], x, torch.device("cpu")), gt) for x, gt in panel_pairs(banks[s], panel, images)]
-        rows.append({"panels": run[0], **({"captures": True} if run[1] else {}), "set": s, "panel": panel.name,
+        rows.append({"panels": run.panels, **({"captures": True} if run.captures else {}),
+                     **({"seed": run.seed} if run.seed != TRAIN_SEED else {}), "set": s, "panel": panel.name,
                      "psnr_db": float(np.mean([paper_metrics(y, gt)["psnr_db_paper"] for y, gt in scored])),
                      "psnr_level_db": float(np.mean([level_matched_psnr_db(y, gt) for y, gt in scored])),
                      "seconds": round(time.perf_counter() - t0, 2)})
@@ -104,15 +121,15 @@ def set_means(rows: list[dict], key: str) -> dict:
 
 
 def summary(rows: list[dict], study: list[dict], b: Budget, trained: dict, study_train: dict) -> list[dict]:
-    """One row per (N, captures) (N ascending): its steps and training seconds, and each set's paper and
-    level-matched PSNR; the study's own randomized model is (b.train_panels, the panel's captures)."""
-    runs = {run: ([r for r in rows if (r["panels"], r.get("captures", False)) == run], "psnr_db", "psnr_level_db",
-                  trained[run]) for run in trained}
-    runs[(b.train_panels, False)] = (study, "psnr_randomized_db", "psnr_randomized_level_db", study_train)
+    """One row per run (N ascending, then captures and seed): its steps and training seconds, and each set's paper
+    and level-matched PSNR; the study's own randomized model is Run(b.train_panels)."""
+    runs = {run: ([r for r in rows if run_of(r) == run], "psnr_db", "psnr_level_db", trained[run]) for run in trained}
+    runs[Run(b.train_panels)] = (study, "psnr_randomized_db", "psnr_randomized_level_db", study_train)
     out = []
     for run in sorted(runs):
         mine, key, level, t = runs[run]
-        row = {"panels": run[0], "captures": CAPTURES[run[1]], "steps": t.get("steps"), "train_s": t.get("seconds")}
+        row = {"panels": run.panels, "captures": CAPTURES[run.captures], "seed": run.seed, "steps": t.get("steps"),
+               "train_s": t.get("seconds")}
         for tail, k in (("", key), ("_level", level)):
             row.update({f"psnr_{s}{tail}_db": v for s, v in set_means(mine, k).items()})
         out.append(row)
@@ -125,11 +142,11 @@ def references(study: list[dict]) -> dict:
 
 
 def markdown(table: list[dict], refs: dict, b: Budget) -> str:
-    cols = [("panels", "panels N"), ("captures", "a crop's sensor and exposure"), ("steps", "steps"),
-            ("train_s", "training")]
+    cols = [("panels", "panels N"), ("captures", "a crop's sensor and exposure"), ("seed", "training seed"),
+            ("steps", "steps"), ("train_s", "training")]
     cols += [(f"psnr_{s}{t}_db", f"{SETS[s]}{' (level-matched)' if t else ''}") for t in ("", "_level")
              for s in PANEL_SETS]
-    fmt = {c: two for c, _ in cols[4:]}
+    fmt = {c: two for c, _ in cols[5:]}
     fmt["train_s"] = duration
     ref_rows = [{"name": name, **{f"psnr_{s}_db": v for s, v in r.items()}} for name, r in refs.items()]
     return "\n".join([
@@ -139,7 +156,8 @@ def markdown(table: list[dict], refs: dict, b: Budget) -> str:
         "PSNR, dB) on the study's test sets: the held-out draws within the ranges, the default P-OLED and the "
         f"T-OLED. N = {b.train_panels} with the panel's sensor and exposure is the study's own model; 'its own': "
         "every crop draws its sensor and exposure (brightness included) from the ranges (`udc-render train "
-        "--capture-draws`). `python -m restore.studies.robustness_panels OUT [--captures]`.", "",
+        "--capture-draws`). Another training seed: the same panels, other initial weights, crops and noise. "
+        "`python -m restore.studies.robustness_panels OUT [--captures] [--seeds S]`.", "",
         *md_table(table, cols, fmt), "",
         "The study's references on the same images (not trained on randomized panels):", "",
         *md_table(ref_rows, [("name", "row"), *((f"psnr_{s}_db", SETS[s]) for s in PANEL_SETS)],
@@ -150,8 +168,9 @@ def plot(table: list[dict], refs: dict, path: Path) -> None:
     """PSNR per set against N (log axis), paper and level-matched, with DeP's held-out PSNR as a line."""
     plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    panel = [r for r in table if r["captures"] == CAPTURES[False]]
+    panel = [r for r in table if r["captures"] == CAPTURES[False] and r["seed"] == TRAIN_SEED]
     own = [r for r in table if r["captures"] == CAPTURES[True]]
+    reseeded = [r for r in table if r["seed"] != TRAIN_SEED]
     n = [r["panels"] for r in panel]
     for ax, tail, title in ((axes[0], "", "paper PSNR"), (axes[1], "_level", "level-matched PSNR")):
         for s in PANEL_SETS:
@@ -159,6 +178,9 @@ def plot(table: list[dict], refs: dict, path: Path) -> None:
             if own:
                 ax.plot([r["panels"] for r in own], [r.get(f"psnr_{s}{tail}_db") for r in own], "*",
                         color=line.get_color(), ms=11, label=f"{SETS[s]}, a capture per crop")
+            if reseeded:
+                ax.plot([r["panels"] for r in reseeded], [r.get(f"psnr_{s}{tail}_db") for r in reseeded], "x",
+                        color=line.get_color(), ms=9, label=f"{SETS[s]}, another training seed")
         ax.axhline(refs[DEP]["heldout"], color="0.4", ls="--", lw=0.8, label=f"{DEP}, held-out draws")
         ax.set_xscale("log", base=2)
         ax.set_xticks(n, [str(v) for v in n])
@@ -174,18 +196,22 @@ def plot(table: list[dict], refs: dict, path: Path) -> None:
 
 
 def run_panels(out: Path, counts: list[int], quick: bool = False, progress: bool = True,
-               captures: bool = False) -> list[dict]:
-    """The robustness study in `out` (finished or resumed), then each N of `counts` (and with captures N =
-    train_panels with a capture per crop): trained, scored, reported."""
+               captures: bool = False, seeds: tuple[int, ...] = ()) -> list[dict]:
+    """The robustness study in `out` (finished or resumed), then each N of `counts` (with captures N =
+    train_panels with a capture per crop; each seed of `seeds`, N = train_panels trained with it): trained, scored,
+    reported."""
     b = BUDGETS["quick" if quick else "full"]
     counts = sorted(set(counts) - {b.train_panels})
     for n in counts:
         if not 1 <= n < b.train_panels:
             raise UdcError(f"--counts: {n} panels: expected 1 to {b.train_panels} (the study's randomized panels)")
+    if TRAIN_SEED in seeds:
+        raise UdcError(f"--seeds: {TRAIN_SEED}: the study's own training seed: expected others")
     result = run_study(out, quick, progress=progress)
     out = Path(out).resolve()
     data = out / "clean"
-    runs = [(n, False) for n in counts] + ([(b.train_panels, True)] if captures else [])
+    runs = [Run(n) for n in counts] + ([Run(b.train_panels, True)] if captures else [])
+    runs += [Run(b.train_panels, seed=int(v)) for v in seeds]
     trained = train_runs(out, b, runs, data, progress)
     rows = score_runs(out, runs, data, progress)
     study = [r for r in read_scores(out / SCORES_FILE) if r["set"] in PANEL_SETS]
@@ -197,17 +223,19 @@ def run_panels(out: Path, counts: list[int], quick: bool = False, progress: bool
 
 
 def main(argv: list[str]) -> None:
-    usage = "python -m restore.studies.robustness_panels OUT [--counts 4,8] [--captures] [--quick]"
+    usage = "python -m restore.studies.robustness_panels OUT [--counts 4,8] [--captures] [--seeds 1] [--quick]"
     quick, captures = "--quick" in argv, "--captures" in argv
     pos, o = parse_options([a for a in argv if a not in ("--quick", "--captures")], usage)
     if len(pos) != 1:
         sys.exit(f"usage: {usage}")
     try:
         counts = [int(v) for v in o["counts"].split(",")] if "counts" in o else list(COUNTS)
+        seeds = tuple(int(v) for v in o["seeds"].split(",")) if "seeds" in o else ()
     except ValueError:
-        sys.exit(f"error: --counts = {o['counts']!r}: expected panel counts separated by commas, e.g. 4,8")
+        sys.exit(f"error: --counts = {o.get('counts')!r}, --seeds = {o.get('seeds')!r}: expected whole numbers "
+                 "separated by commas, e.g. 4,8")
     try:
-        table = run_panels(Path(pos[0]), counts, quick, captures=captures)
+        table = run_panels(Path(pos[0]), counts, quick, captures=captures, seeds=seeds)
     except (UdcError, OSError) as exc:
         sys.exit(f"error: {exc}")
     print((Path(pos[0]) / f"{STEM}.md").read_text(), end="")

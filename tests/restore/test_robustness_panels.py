@@ -7,7 +7,7 @@ import math
 import pytest
 
 from restore.studies.robustness import BUDGETS
-from restore.studies.robustness_panels import COLUMNS, PANEL_SETS, STEM, first_panels, run_panels, summary
+from restore.studies.robustness_panels import COLUMNS, PANEL_SETS, STEM, Run, first_panels, run_name, run_panels, summary
 from udc_render.dataset.bank import Bank
 from udc_render.errors import UdcError
 
@@ -25,15 +25,22 @@ def test_the_summary_puts_the_studys_own_model_at_its_panel_count():
             {"panels": 4, "set": "heldout", "panel": "random_001", "psnr_db": 22.0, "psnr_level_db": 23.0},
             {"panels": 4, "set": "toled", "panel": "toled", "psnr_db": 18.0, "psnr_level_db": 19.0},
             {"panels": b.train_panels, "captures": True, "set": "heldout", "panel": "random_000", "psnr_db": 27.0,
-             "psnr_level_db": 28.0}]
+             "psnr_level_db": 28.0},
+            {"panels": b.train_panels, "seed": 5, "set": "heldout", "panel": "random_000", "psnr_db": 23.0,
+             "psnr_level_db": 24.0}]
     study = [_study_row("heldout", "random_000", 24.0), _study_row("heldout", "random_001", 26.0),
              _study_row("toled", "toled", 21.0)]
-    table = summary(rows, study, b, {(4, False): {"steps": 100, "seconds": 5.0},
-                                     (b.train_panels, True): {"steps": 100, "seconds": 7.0}},
+    table = summary(rows, study, b, {Run(4): {"steps": 100, "seconds": 5.0},
+                                     Run(b.train_panels, True): {"steps": 100, "seconds": 7.0},
+                                     Run(b.train_panels, seed=5): {"steps": 100, "seconds": 8.0}},
                     {"steps": 100, "seconds": 6.0})
-    assert [(r["panels"], r["captures"]) for r in table] == [(4, "the panel's"), (b.train_panels, "the panel's"),
-                                                             (b.train_panels, "its own")]
-    assert table[2]["psnr_heldout_db"] == 27.0 and table[2]["train_s"] == 7.0 and "psnr_toled_db" not in table[2]
+    assert [(r["panels"], r["captures"], r["seed"]) for r in table] == [
+        (4, "the panel's", 0), (b.train_panels, "the panel's", 0), (b.train_panels, "the panel's", 5),
+        (b.train_panels, "its own", 0)]
+    assert table[3]["psnr_heldout_db"] == 27.0 and table[3]["train_s"] == 7.0 and "psnr_toled_db" not in table[3]
+    assert table[2]["psnr_heldout_level_db"] == 24.0 and table[2]["train_s"] == 8.0
+    assert [run_name(r) for r in (Run(4), Run(16, True), Run(16, seed=5))] == [
+        "randomized_n4", "randomized_captures", "randomized_seed5"]
     assert table[0]["psnr_heldout_db"] == 21.0 and table[0]["psnr_heldout_level_db"] == 22.0
     assert table[1]["psnr_heldout_db"] == 25.0 and table[1]["psnr_toled_level_db"] == 22.0
     assert "psnr_default_db" not in table[0]  # a set without rows has no mean
@@ -46,20 +53,24 @@ def test_a_panel_count_outside_the_bank_is_refused_in_one_line(tmp_path):
         first_panels(bank, 4)
     with pytest.raises(UdcError, match=r"--counts: 0 panels: expected 1 to 4"):  # refused before any computation
         run_panels(tmp_path / "study", [0], quick=True, progress=False)
+    with pytest.raises(UdcError, match=r"--seeds: 0: the study's own training seed"):
+        run_panels(tmp_path / "study", [2], quick=True, progress=False, seeds=(0,))
     assert not (tmp_path / "study").exists()
 
 
 @pytest.mark.slow
 def test_the_quick_study_trains_and_scores_a_smaller_panel_count(tmp_path):
-    """The quick robustness study, then N = 2 of its 4 panels and N = 4 with a capture per crop: the same steps,
-    every set scored and finite; N = 4 with the panel's captures is the study's own randomized model."""
+    """The quick robustness study, then N = 2 of its 4 panels, N = 4 with a capture per crop and N = 4 with
+    training seed 1: the same steps, every set scored and finite; N = 4 with the panel's captures and seed 0 is
+    the study's own randomized model."""
     b = BUDGETS["quick"]
-    table = run_panels(tmp_path / "study", [2], quick=True, progress=False, captures=True)
-    assert [r["panels"] for r in table] == [2, b.train_panels, b.train_panels]
-    assert [r["captures"] for r in table] == ["the panel's", "the panel's", "its own"]
+    table = run_panels(tmp_path / "study", [2], quick=True, progress=False, captures=True, seeds=(1,))
+    assert [(r["panels"], r["captures"], r["seed"]) for r in table] == [
+        (2, "the panel's", 0), (b.train_panels, "the panel's", 0), (b.train_panels, "the panel's", 1),
+        (b.train_panels, "its own", 0)]
     assert all(r["steps"] == b.steps for r in table)
     with open(tmp_path / "study" / f"{STEM}.csv") as f:
         written = list(csv.DictReader(f))
-    assert list(written[0]) == COLUMNS and len(written) == 3
+    assert list(written[0]) == COLUMNS and len(written) == 4
     assert all(math.isfinite(float(r[f"psnr_{s}{t}_db"])) for r in written for s in PANEL_SETS for t in ("", "_level"))
     assert (tmp_path / "study" / f"{STEM}.png").stat().st_size > 1000
