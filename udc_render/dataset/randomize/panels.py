@@ -14,6 +14,7 @@ size), its T(λ) × transmission_scale (refused where T would pass 1), its gain,
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -103,11 +104,17 @@ def scaled_transmission(t: Transmission, s: float) -> Transmission:
 T_CHECK_NM = np.arange(350.0, 801.0)  # where a scaled file T(λ) must stay ≤ 1
 
 
+@lru_cache(maxsize=8)
+def _loaded_display(path: str) -> Display:
+    """load_display once per path for a job's draws (a micrograph's image is decoded once, not once a panel)."""
+    return load_display(path)
+
+
 def file_display(values: dict, distance_mm: float, seed: int, source: str) -> Display:
     """The family 'file' at the drawn values (module doc)."""
     path = values["path"]
     try:
-        base = load_display(path)
+        base = _loaded_display(path)
     except ValueError as e:  # a DisplayError, or psf's LayoutError of a micrograph
         raise RandomizeError(f"display.file.path = {path!r}: {e}") from None
     if base.is_glass:
