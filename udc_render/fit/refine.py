@@ -179,17 +179,19 @@ def _solve(fam: Family, index, y, sig, a, kappa, delta, x0, loss: str = "linear"
     return res.x, _covariance(res.jac, res.fun, len(y) - len(x0)), chi2, res.fun
 
 
-def _weighted_log_residual(y: np.ndarray, lm: np.ndarray, s_abs: np.ndarray, floor: float = 1e-6) -> np.ndarray:
-    """r(ln M) = (y − ln M + s² / (2 M²)) M / s, continued linearly in ln M (value and slope) below
-    M = floor · s, where it diverges as s / (2 M): an order that a trial step predicts at ~0 still costs the
-    barrier's huge residual (~1 / (2 floor)), but a finite one (an infinite residual made a NaN Jacobian that
-    stopped least_squares); no row the fit uses (M ≥ MIN_SNR s) is changed."""
-    l0 = np.log(floor * s_abs)
-    at = np.maximum(lm, l0)
+def _weighted_log_residual(y: np.ndarray, lm: np.ndarray, s_abs: np.ndarray, floor: float = 1e-6,
+                           ceiling: float = 1e8) -> np.ndarray:
+    """r(ln M) = (y − ln M + s² / (2 M²)) M / s, continued linearly in ln M (value and slope) outside
+    floor · s ≤ M ≤ ceiling · s. Below, it diverges as s / (2 M): an order that a trial step predicts at ~0
+    still costs the barrier's huge residual (~1 / (2 floor)), but a finite one (an infinite residual made a NaN
+    Jacobian that stopped least_squares). Above, it grows as M / s: a start that overshoots by e¹³⁰ (a wrong
+    family's extrapolated field) made a Jacobian whose scaled singular values underflowed in least_squares'
+    trust region. No row the fit uses (MIN_SNR s ≤ M, a power's SNR ≪ 10⁸) is changed."""
+    at = np.clip(lm, np.log(floor * s_abs), np.log(ceiling * s_abs))
     m = np.exp(at)
     r = (y - at + s_abs ** 2 / (2 * m * m)) * m / s_abs
-    slope = ((y - at - 1.0) * m - s_abs ** 2 / (2 * m)) / s_abs  # dr / d ln M at the floor
-    return np.where(lm < l0, r + slope * (lm - l0), r)
+    slope = ((y - at - 1.0) * m - s_abs ** 2 / (2 * m)) / s_abs  # dr / d ln M at the clip
+    return r + slope * (lm - at)
 
 
 def _covariance(jac: np.ndarray, r: np.ndarray, dof: int) -> np.ndarray:
