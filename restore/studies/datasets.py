@@ -23,11 +23,15 @@ def dataset_job(profile: str, sensor_px: tuple[int, int], folder: Path, split: t
     return DatasetJob(scene, displays, cfg, out=folder, split=split, images_dir=images_dir)
 
 
-def make_datasets(out: Path, b: dict, progress: bool) -> dict[str, Path]:
-    """The budget's datasets, made or resumed: the built-in images and charts through glass, T-OLED and
-    P-OLED at the budget's framing, once per profile (physical: the tables' train and test pairs; paper:
-    the UNet (Syn) row's training pairs, the paper's own synthesis). {profile: folder}."""
-    folders = {p: out / f"dataset_{p}" for p in PROFILES}
-    for profile, folder in folders.items():
-        run_dataset(dataset_job(profile, b["sensor_px"], folder, tuple(b["items"])), progress=progress)
-    return folders
+def dataset_folders(out: Path) -> dict[str, Path]:
+    """{profile: the folder of its dataset in `out`}."""
+    return {p: out / f"dataset_{p}" for p in PROFILES}
+
+
+def make_dataset(out: Path, b: dict, profile: str, progress: bool) -> Path:
+    """The profile's dataset, made or resumed: the built-in images and charts through glass, T-OLED and P-OLED
+    at the budget's framing (physical: the tables' train and test pairs; paper: the UNet (Syn) row's training
+    pairs, the paper's own synthesis). Returns its folder."""
+    folder = dataset_folders(out)[profile]
+    run_dataset(dataset_job(profile, b["sensor_px"], folder, tuple(b["items"])), progress=progress)
+    return folder

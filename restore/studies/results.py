@@ -16,27 +16,31 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from restore.studies.budgets import BUDGETS, DISPLAYS, ROWS, run_dir
+from restore.studies.budgets import BUDGETS, DISPLAYS, TRAIN_ORDER, run_dir
 from restore.studies.orderings import ordering_checks
 from udc_render.io.files import save_text
 
 __all__ = ["BUDGETS", "ordering_checks", "run_results"]  # what `udc-render results` reads
 
 
-def train_models(datasets: dict[str, Path], out: Path, b: dict, progress: bool, times: dict,
-                 carry: Path | None = None) -> dict:
-    """Every row's model per display, trained or resumed in out/train/<row>_<display>: {(row, display):
+def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | None = None) -> dict:
+    """Every row's model per display, trained or resumed in out/train/<row>_<display> in TRAIN_ORDER, each
+    profile's dataset made or resumed when the first row that trains on it is reached: {(row, display):
     model.pt}. With `carry`, each finished model is kept in carry/<row>_<display> and brought back from
     there into a run folder that lacks it (restore.studies.carry)."""
     from restore.models import RESNET_CONFIG, UNET_CONFIG
     from restore.studies.carry import bring_back, keep
+    from restore.studies.datasets import make_dataset
     from restore.studies.random_row import online_settings, random_bank
     from restore.train import TrainSettings, data_fingerprint, train
     defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
-    models = {}
-    for row, kind, profile in ROWS:
+    models, datasets = {}, {}
+    for row, kind, profile in TRAIN_ORDER:
         cfg = dict(b["models"][kind] or defaults[kind])
-        data = datasets["physical" if profile == "random" else profile]  # random: the physical clean renders
+        source = "physical" if profile == "random" else profile  # random: the physical clean renders
+        if source not in datasets:
+            datasets[source] = make_dataset(out, b, source, progress)
+        data = datasets[source]
         for d in DISPLAYS:
             t = time.perf_counter()
             run = run_dir(out, row, d)
@@ -64,17 +68,16 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     """Run every stage into `out` and write `out`/RESULTS.md with its figures in `out`/figures; with
     `write`, the document there too, its figures in docs/figures/results beside it; with `carry`, the
     finished models kept there and brought back from there (train_models)."""
-    from restore.studies.datasets import make_datasets
+    from restore.studies.datasets import dataset_folders, make_dataset
     from restore.studies.faces import face_experiment
     from restore.studies.heldout import make_held_out_dataset
     from restore.studies.results_document import copy_figures, plot_training_curves, results_document
     from restore.studies.scoring import error_band_rows, evaluate_rows, training_levels
     b, out = BUDGETS[budget], Path(out)
     t0, times = time.perf_counter(), {}
-    datasets = make_datasets(out, b, progress)
+    models = train_models(out, b, progress, times, carry)
+    datasets = {p: make_dataset(out, b, p, progress) for p in dataset_folders(out)}  # made: a check
     data = datasets["physical"]  # every row is tested on the physical captures
-    times["dataset_s"] = time.perf_counter() - t0
-    models = train_models(datasets, out, b, progress, times, carry)
     t = time.perf_counter()
     results = evaluate_rows(data, models, out / "eval", progress)
     times["evaluate_s"] = time.perf_counter() - t

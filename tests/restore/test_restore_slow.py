@@ -47,6 +47,10 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     row_seconds = {ev: json.loads((tmp_path / "res" / ev / "row_seconds.json").read_text()) for ev in ("eval", "eval_heldout")}
     assert all(set(s) == set(methods) and min(s.values()) > 0 for s in row_seconds.values())
     assert "## Machine time" in doc and "| scoring, test split |" in doc
+    # the paper dataset is made after every row on the physical captures (budgets.TRAIN_ORDER)
+    paper_first = min(p.stat().st_mtime_ns for p in (tmp_path / "res" / "dataset_paper").rglob("*") if p.is_file())
+    assert all((tmp_path / "res" / "train" / f"{row}_{d}" / "loss.csv").stat().st_mtime_ns < paper_first
+               for row in ("unet", "unet_random", "resnet") for d in ("toled", "poled"))
 
     # a second run resumes every stage: nothing is rendered, trained or scored again (timing.jsonl, the loss
     # logs and the per-image scores untouched), and the manifests and models are the same bytes
