@@ -76,7 +76,7 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     b, out = BUDGETS[budget], Path(out)
     t0, times = time.perf_counter(), {}
     models = train_models(out, b, progress, times, carry)
-    datasets = {p: make_dataset(out, b, p, progress) for p in dataset_folders(out)}  # made: a check
+    datasets = {p: make_dataset(out, b, p, progress) for p in dataset_folders(out)}  # made already: checked
     data = datasets["physical"]  # every row is tested on the physical captures
     t = time.perf_counter()
     results = evaluate_rows(data, models, out / "eval", progress)
