@@ -34,7 +34,7 @@ PROFILES = ("physical", "paper")  # udc_render.profiles: the captures, and the p
 # (row, model kind, the profile whose pairs train it): the paper's rows; UNet (Syn) is trained on the paper's
 # own synthesis and tested on the physical captures, as the paper's synthetic-to-real row; UNet (randomized)
 # on the physical dataset's clean renders degraded on the fly through randomized panels (restore.studies.
-# random_row; 'random_panels' per display). Trained in this order: the ResNet, the slowest, last.
+# random_row; 'random_panels' per display). The document's order; TRAIN_ORDER is the training's.
 ROWS = (("unet", "unet", "physical"), ("unet_syn", "unet", "paper"), ("unet_random", "unet", "random"),
         ("resnet", "resnet", "physical"))
 # The order of training: the rows on the physical captures first, so that the paper dataset (0.5 h), which only

@@ -68,7 +68,7 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     """Run every stage into `out` and write `out`/RESULTS.md with its figures in `out`/figures; with
     `write`, the document there too, its figures in docs/figures/results beside it; with `carry`, the
     finished models kept there and brought back from there (train_models)."""
-    from restore.studies.datasets import dataset_folders, make_dataset
+    from restore.studies.datasets import dataset_folders
     from restore.studies.faces import face_experiment
     from restore.studies.heldout import make_held_out_dataset
     from restore.studies.results_document import copy_figures, plot_training_curves, results_document
@@ -76,7 +76,7 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     b, out = BUDGETS[budget], Path(out)
     t0, times = time.perf_counter(), {}
     models = train_models(out, b, progress, times, carry)
-    datasets = {p: make_dataset(out, b, p, progress) for p in dataset_folders(out)}  # made already: checked
+    datasets = dataset_folders(out)  # both made by train_models: every profile trains a row
     data = datasets["physical"]  # every row is tested on the physical captures
     t = time.perf_counter()
     results = evaluate_rows(data, models, out / "eval", progress)
