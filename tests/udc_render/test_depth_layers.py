@@ -245,8 +245,17 @@ def test_the_sun_in_frame_synthesises_at_the_default_precision(kernel_cache):
     split = electrons(cfg, bright)
     exact = electrons(replace(cfg, precision="float64"), bright)
     unsplit = electrons(cfg, None)
-    for name in ("gt", "toled", "poled"):
+    def error(c, name):
+        """max |c − exact| / noise beyond the float32 output's own rounding: the split output is rounded twice
+        (its FFT part, then its sum with the bright pixels' float64 blur), each time by at most ε32 · e / 2.
+        That rounding alone can exceed a tenth of the shot noise √e above e ≈ (0.1 / ε32)² ≈ 7e11 e⁻ (the sun's
+        pixels hold up to 8e12 e⁻, 5e8 full wells); whether it does shifts with the kernels' last bits (they
+        change with the BLAS thread count), so the bound leaves that rounding out rather than depend on them."""
         noise = np.sqrt(sensor.read_noise_e ** 2 + exact[name])  # the pixel's own noise (read and shot), e⁻
-        err = np.max(np.abs(split[name] - exact[name]) / noise)
+        beyond = np.abs(c[name] - exact[name]) - np.finfo(np.float32).eps * np.abs(exact[name])
+        return np.max(np.maximum(beyond, 0.0) / noise)
+
+    for name in ("gt", "toled", "poled"):
+        err = error(split, name)
         assert err < 0.1, (name, err)  # below a tenth of the noise floor (views.ROUNDOFF_TARGET)
-        assert np.max(np.abs(unsplit[name] - exact[name]) / noise) > 10 * err, name  # the split is what does it
+        assert error(unsplit, name) > 10 * max(err, 0.01), name  # the split is what does it
