@@ -245,6 +245,7 @@ def test_the_sun_in_frame_synthesises_at_the_default_precision(kernel_cache):
     split = electrons(cfg, bright)
     exact = electrons(replace(cfg, precision="float64"), bright)
     unsplit = electrons(cfg, None)
+
     def error(c, name):
         """max |c − exact| / noise beyond the float32 output's own rounding: the split output is rounded twice
         (its FFT part, then its sum with the bright pixels' float64 blur), each time by at most ε32 · e / 2.
