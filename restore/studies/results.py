@@ -23,11 +23,20 @@ from udc_render.io.files import save_text
 __all__ = ["BUDGETS", "ordering_checks", "run_results"]  # what `udc-render results` reads
 
 
+def carried_last(carry: Path | None) -> tuple:
+    """TRAIN_ORDER with the rows whose models `carry` holds for every display moved to the end (stable): a fresh
+    machine trains what is missing first and remakes the datasets and banks that only check a carried model
+    (hours) after it, so a session's training outlives it in the carry folder sooner."""
+    def done(row: str) -> bool:
+        return carry is not None and all((carry / f"{row}_{d}" / "model.pt").is_file() for d in DISPLAYS)
+    return tuple(sorted(TRAIN_ORDER, key=lambda r: done(r[0])))
+
+
 def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | None = None) -> dict:
-    """Every row's model per display, trained or resumed in out/train/<row>_<display> in TRAIN_ORDER, each
-    profile's dataset made or resumed when the first row that trains on it is reached: {(row, display):
-    model.pt}. With `carry`, each finished model is kept in carry/<row>_<display> and brought back from
-    there into a run folder that lacks it (restore.studies.carry)."""
+    """Every row's model per display, trained or resumed in out/train/<row>_<display> in TRAIN_ORDER (with
+    `carry`: carried_last), each profile's dataset made or resumed when the first row that trains on it is
+    reached: {(row, display): model.pt}. With `carry`, each finished model is kept in carry/<row>_<display> and
+    brought back from there into a run folder that lacks it (restore.studies.carry)."""
     from restore.models import RESNET_CONFIG, UNET_CONFIG
     from restore.studies.carry import bring_back, keep
     from restore.studies.datasets import make_dataset
@@ -35,7 +44,7 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
     from restore.train import TrainSettings, data_fingerprint, train
     defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
     models, datasets = {}, {}
-    for row, kind, profile in TRAIN_ORDER:
+    for row, kind, profile in carried_last(carry):
         cfg = dict(b["models"][kind] or defaults[kind])
         source = "physical" if profile == "random" else profile  # random: the physical clean renders
         if source not in datasets:
