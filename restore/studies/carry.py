@@ -55,10 +55,13 @@ def half_weights(path: Path) -> None:
     save_torch(path, state)
 
 
-def keep(run: Path, carried: Path) -> None:
-    """Round the finished run's weights to float16 (its own model.pt too) and copy its record into `carried`."""
+def keep(run: Path, carried: Path, extra: dict[str, Path] | None = None) -> None:
+    """Round the finished run's weights to float16 (its own model.pt too) and copy its record into `carried`,
+    with `extra` {name: file} beside it (the UNet (randomized) row: its bank's bank.json, which lets a fresh
+    machine check the model without making the bank; restore.studies.random_row.carried_bank)."""
     half_weights(run / "model.pt")
     carried.mkdir(parents=True, exist_ok=True)
-    for name in CARRIED:
-        if not (carried / name).is_file() or (carried / name).read_bytes() != (run / name).read_bytes():
-            _copy(run / name, carried / name)
+    files = {**{name: run / name for name in CARRIED[:-1]}, **(extra or {}), CARRIED[-1]: run / CARRIED[-1]}
+    for name, src in files.items():  # model.pt last: it marks a whole copy
+        if not (carried / name).is_file() or (carried / name).read_bytes() != src.read_bytes():
+            _copy(src, carried / name)

@@ -12,14 +12,16 @@ against the spectral captures it is scored on.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from restore.studies.stage_times import StageTimes
 from restore.train import TrainSettings
-from udc_render.dataset.bank import Bank, read_bank
-from udc_render.dataset.bank_make import bank_settings, make_bank, random_specs
+from udc_render.dataset.bank import BANK_FILE, Bank, read_bank
+from udc_render.dataset.bank_make import bank_settings, differing_settings, make_bank, random_specs
 from udc_render.dataset.randomize import default_distributions, parse
 from udc_render.pipeline import SynthConfig
 from udc_render.profiles import describe, resolve_profile
@@ -37,18 +39,50 @@ def family_distributions(display: str):
     return parse({"display": {"family": display}}, f"results: the {display} family", default_distributions())
 
 
-def random_bank(out: Path, b: dict, display: str, progress: bool) -> Bank:
-    """The row's bank for `display` (module doc), made or finished in out/banks/random_<display>."""
+def bank_plan(out: Path, b: dict, display: str) -> tuple[Path, list, dict, int]:
+    """The row's bank for `display` before any kernel is made: (its folder, the panel specs, bank.json's
+    settings, the kernel size). Cheap: draws and settings only."""
     scene = with_overrides(load_scene("monitor"), sensor_px=b["sensor_px"])  # the datasets' (restore.studies.datasets)
     cfg, _ = resolve_profile("physical", SynthConfig(), [])
     size = sensor_kernel_px(scene)
     specs = random_specs(family_distributions(display), b["random_panels"], RANDOMIZE_SEED, scene, cfg)
     extra = {"profile": describe(cfg.profile), "study": "results", "row": RANDOM_ROW, "family": display}
-    folder = out / "banks" / f"random_{display}"
+    return out / "banks" / f"random_{display}", specs, bank_settings(scene, cfg, size, specs, extra), size
+
+
+def random_bank(out: Path, b: dict, display: str, progress: bool) -> Bank:
+    """The row's bank for `display` (module doc), made or finished in out/banks/random_<display>."""
+    folder, specs, settings, size = bank_plan(out, b, display)
     t0 = time.perf_counter()
-    if make_bank(folder, specs, bank_settings(scene, cfg, size, specs, extra), size, progress=progress)["made"]:
+    if make_bank(folder, specs, settings, size, progress=progress)["made"]:
         StageTimes(out / "banks" / SECONDS_FILE).add(folder.name, time.perf_counter() - t0)
     return read_bank(folder)
+
+
+@dataclass(frozen=True)
+class BankRecord:
+    """What a training run records of its bank (restore.train's degrade settings): bank.json's fingerprint and
+    the panels' names, in order."""
+    fingerprint: str
+    panels: tuple[str, ...]
+
+    @classmethod
+    def of(cls, bank: Bank) -> BankRecord:
+        return cls(bank.fingerprint, tuple(p.name for p in bank.panels))
+
+
+def carried_bank(carried_run: Path, out: Path, b: dict, display: str) -> BankRecord | None:
+    """The record of the bank a carried finished run trained through, from its copy of bank.json
+    (restore.studies.carry.keep), when that bank is complete and its settings are today's plan (bank_plan;
+    the test make_bank itself applies before resuming a folder): a fresh machine then checks the carried
+    model without making the bank's kernels (a third of an hour per display). None otherwise: make the bank."""
+    path = Path(carried_run) / BANK_FILE
+    if not (Path(carried_run) / "model.pt").is_file() or not path.is_file():
+        return None
+    doc = json.loads(path.read_text())
+    if doc.get("complete") is not True or differing_settings(doc, bank_plan(out, b, display)[2]):
+        return None
+    return BankRecord(hashlib.sha256(path.read_bytes()).hexdigest()[:16], tuple(r["name"] for r in doc["panels"]))
 
 
 def bank_hours(out: Path) -> float:
@@ -56,8 +90,8 @@ def bank_hours(out: Path) -> float:
     return sum(StageTimes(out / "banks" / SECONDS_FILE).seconds.values()) / 3600
 
 
-def online_settings(settings: TrainSettings, bank: Bank) -> TrainSettings:
-    """`settings` (the UNet row's recipe) trained on the fly through `bank`'s panels."""
-    names = [p.name for p in bank.panels]
+def online_settings(settings: TrainSettings, bank: BankRecord) -> TrainSettings:
+    """`settings` (the UNet row's recipe) trained on the fly through the panels of `bank`."""
+    names = list(bank.panels)
     return replace(settings, display=",".join(names),
                    degrade={"mode": "online", "bank_fingerprint": bank.fingerprint, "panels": names})

@@ -6,7 +6,7 @@ DeP as the paper ran it, beside DeP with the exact kernel).
 Makes (or resumes) only the test items of `udc-render results --budget cpu`'s physical dataset (the same
 job: ids, images and seeds; restore.studies.datasets) under today's physical profile in OUT/dataset_physical,
 scores input, DeP (the paper's computed PSF), DeP (exact kernel) and the carried models of
-restore/trained/cpu (trained on the captures of their RESULTS.md run, not on these) into OUT/eval
+the shipped slot of restore/trained (trained on the captures of their RESULTS.md run, not on these) into OUT/eval
 (restore.studies.scoring.evaluate_rows, which resumes), and writes OUT/rescore.md: the paper-protocol
 table with a header that says what changed (--no-networks: input and the two DeP rows only; the networks
 are retrained when RESULTS.md is regenerated). With --write, that section replaces the one between
@@ -19,15 +19,15 @@ import json
 import sys
 from pathlib import Path
 
-from restore.studies.budgets import BUDGETS, DISPLAYS, ROWS
+from restore.studies.budgets import BUDGETS, DISPLAYS, ROWS, shipped_folder
 from udc_render.io.files import save_text
 
 RESCORE_BEGIN, RESCORE_END = "<!-- rescore: begin -->", "<!-- rescore: end -->"
-CARRY = Path(BUDGETS["cpu"]["carry"])
 
 
-def shipped_models(carry: Path = CARRY) -> dict:
-    """{(row, display): model.pt} of every carried model that exists."""
+def shipped_models(carry: Path | None = None) -> dict:
+    """{(row, display): model.pt} of every carried model that exists in `carry` (the shipped slot unless given)."""
+    carry = carry or shipped_folder()
     return {(row, d): carry / f"{row}_{d}" / "model.pt" for row, _, _ in ROWS for d in DISPLAYS
             if (carry / f"{row}_{d}" / "model.pt").is_file()}
 

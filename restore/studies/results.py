@@ -16,8 +16,9 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from restore.studies.budgets import BUDGETS, DISPLAYS, TRAIN_ORDER, run_dir
+from restore.studies.budgets import BUDGETS, DISPLAYS, TRAIN_ORDER, run_dir, ship
 from restore.studies.orderings import ordering_checks
+from udc_render.dataset.bank import BANK_FILE
 from udc_render.io.files import save_text
 
 __all__ = ["BUDGETS", "ordering_checks", "run_results"]  # what `udc-render results` reads
@@ -40,7 +41,7 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
     from restore.models import RESNET_CONFIG, UNET_CONFIG
     from restore.studies.carry import bring_back, keep
     from restore.studies.datasets import make_dataset
-    from restore.studies.random_row import online_settings, random_bank
+    from restore.studies.random_row import BankRecord, carried_bank, online_settings, random_bank
     from restore.train import TrainSettings, data_fingerprint, train
     defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
     models, datasets = {}, {}
@@ -58,15 +59,19 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
                                      data_fingerprint=data_fingerprint(data), plateau_db=b.get("plateau_db"),
                                      val_crop_px=b.get("val_crop_px"), clip_grad_norm=b.get("clip_grad_norm"),
                                      autocast=b.get("autocast"))
-            bank = random_bank(out, b, d, progress) if profile == "random" else None
-            if bank is not None:
-                settings = online_settings(settings, bank)
+            bank = None
+            if profile == "random":  # a carried model is checked against its bank's record; else make the bank
+                record = carry and carried_bank(carry / run.name, out, b, d)
+                if not record:
+                    bank = random_bank(out, b, d, progress)
+                    record = BankRecord.of(bank)
+                settings = online_settings(settings, record)
             if carry:
                 bring_back(carry / run.name, run, settings)
             train(data, run, settings, val_every=b.get("val_every", 10), progress=progress,
                   bank=None if bank is None else bank.folder)
             if carry:
-                keep(run, carry / run.name)
+                keep(run, carry / run.name, {} if bank is None else {BANK_FILE: bank.folder / BANK_FILE})
             models[(row, d)] = run / "model.pt"
             times[f"train_{row}_{d}_s"] = time.perf_counter() - t
     return models
@@ -76,7 +81,8 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
                 carry: Path | None = None) -> dict:
     """Run every stage into `out` and write `out`/RESULTS.md with its figures in `out`/figures; with
     `write`, the document there too, its figures in docs/figures/results beside it; with `carry`, the
-    finished models kept there and brought back from there (train_models)."""
+    finished models kept there and brought back from there (train_models); with both, a `carry` that is a slot of
+    restore/trained becomes the shipped one (budgets.ship; 'stale_slot' in the result names the other)."""
     from restore.studies.datasets import dataset_folders
     from restore.studies.faces import face_experiment
     from restore.studies.heldout import make_held_out_dataset
@@ -110,7 +116,9 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
         figures = copy_figures(out, fig_dir)
         save_text(doc, results_document(results, heldout_results, bands, faces, b, budget, datasets, out, times, figures,
                                         doc.parent, carry))
-    return {"results": results, "heldout": heldout_results, "error_bands": bands, "faces": faces, "times": times}
+    stale = ship(carry, sorted({row for row, _ in models})) if write and carry else None
+    return {"results": results, "heldout": heldout_results, "error_bands": bands, "faces": faces, "times": times,
+            "stale_slot": stale}
 
 
 

@@ -57,3 +57,15 @@ def test_a_carried_run_of_other_settings_is_a_one_line_error_naming_the_carry(tm
     with pytest.raises(TrainError, match=r"carry/unet_blur/train.json: lr = 0.001 differs .* delete .*carry/unet_blur"):
         bring_back(tmp_path / "carry" / "unet_blur", tmp_path / "fresh", other)
     assert not (tmp_path / "fresh").exists()
+
+
+def test_extra_records_are_kept_beside_the_model(tmp_path):
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
+    train(data, tmp_path / "run", TrainSettings(model=TINY_UNET, display="blur", epochs=1, batch=2, crop_px=14),
+          progress=False)
+    (tmp_path / "bank.json").write_text('{"complete": true}')
+    keep(tmp_path / "run", tmp_path / "carry" / "unet_random_blur", {"bank.json": tmp_path / "bank.json"})
+    carried = tmp_path / "carry" / "unet_random_blur"
+    assert sorted(p.name for p in carried.iterdir()) == sorted((*CARRIED, "bank.json"))
+    assert (carried / "bank.json").read_text() == '{"complete": true}'
+    assert max(carried.iterdir(), key=lambda p: p.stat().st_mtime_ns).name == "model.pt"  # last: a whole copy

@@ -1,10 +1,13 @@
 """restore.studies.random_row: the UNet (randomized) row's draws keep the display's family and the documented
 ranges, and its training settings point at the bank."""
+import hashlib
+import json
 from types import SimpleNamespace
 
 import pytest
 
-from restore.studies.random_row import family_distributions, online_settings
+from restore.studies.budgets import BUDGETS
+from restore.studies.random_row import BankRecord, bank_plan, carried_bank, family_distributions, online_settings
 from restore.train import TrainSettings
 from udc_render.dataset.randomize import default_distributions, draw_panels
 
@@ -24,6 +27,40 @@ def test_the_family_is_fixed_and_the_other_ranges_kept(family):
 def test_online_settings_name_the_banks_panels():
     bank = SimpleNamespace(panels=[SimpleNamespace(name="random_000"), SimpleNamespace(name="random_001")],
                            fingerprint="abc123")
-    s = online_settings(TrainSettings(model={"type": "unet", "width": 8}, display="poled", epochs=3), bank)
+    s = online_settings(TrainSettings(model={"type": "unet", "width": 8}, display="poled", epochs=3),
+                        BankRecord.of(bank))
     assert s.display == "random_000,random_001" and s.epochs == 3
     assert s.degrade == {"mode": "online", "bank_fingerprint": "abc123", "panels": ["random_000", "random_001"]}
+
+
+def _carried_run(folder, settings, complete=True):
+    """A carried run folder with a model and its bank's bank.json made with `settings`."""
+    folder.mkdir(parents=True)
+    (folder / "model.pt").write_bytes(b"weights")
+    doc = {**settings, "format": "udc-render kernel bank 1", "count": 2, "complete": complete,
+           "panels": [{"name": "random_000"}, {"name": "random_001"}][:2 if complete else 1]}
+    (folder / "bank.json").write_text(json.dumps(doc))
+    return folder
+
+
+def test_a_carried_bank_of_todays_plan_is_taken_without_its_kernels(tmp_path):
+    b = BUDGETS["quick"]
+    folder, specs, settings, _ = bank_plan(tmp_path / "out", b, "poled")
+    assert folder == tmp_path / "out" / "banks" / "random_poled" and len(specs) == b["random_panels"]
+    run = _carried_run(tmp_path / "carry" / "unet_random_poled", settings)
+    record = carried_bank(run, tmp_path / "out", b, "poled")
+    assert record == BankRecord(hashlib.sha256((run / "bank.json").read_bytes()).hexdigest()[:16],
+                                ("random_000", "random_001"))
+    assert not folder.exists()  # nothing made
+    assert carried_bank(run, tmp_path / "out", b, "toled") is None  # another family's plan: make the bank
+
+
+def test_a_carried_bank_that_is_not_todays_is_not_taken(tmp_path):
+    b = BUDGETS["quick"]
+    settings = bank_plan(tmp_path / "out", b, "poled")[2]
+    other = _carried_run(tmp_path / "other", {**settings, "kernel_px": settings["kernel_px"] + 2})
+    partial = _carried_run(tmp_path / "partial", settings, complete=False)
+    no_model = _carried_run(tmp_path / "no_model", settings)
+    (no_model / "model.pt").unlink()
+    assert all(carried_bank(r, tmp_path / "out", b, "poled") is None for r in (other, partial, no_model))
+    assert carried_bank(tmp_path / "missing", tmp_path / "out", b, "poled") is None

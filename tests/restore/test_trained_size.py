@@ -1,12 +1,16 @@
 """The shipped weights (restore/trained) stay bounded: each retrain adds its float16 model.pt files to the
 git history (the cpu run's eight, with the two UNet (randomized): 113 MB, about 104 MB packed), so they are replaced
-only when RESULTS.md is regenerated, and the folder holds the models and their small records only. A run under way
-carries its finished models into cpu_next (committed model by model, so that they outlive a session's machine),
-beside cpu, whose models RESULTS.md describes until the run's --write replaces them: each folder is capped."""
+only when RESULTS.md is regenerated, and the folder holds the models and their small records only. The two slots
+(restore.studies.budgets.SLOTS) hold the models RESULTS.md describes (named by shipped.json) and those of a run
+under way (committed model by model, so that they outlive a session's machine): each slot is capped, and the
+shipped one holds a model per row it names and display."""
 import subprocess
 from pathlib import Path
 
 import pytest
+
+from restore.studies.budgets import DISPLAYS, ROWS, SHIPPED_FILE, SLOTS, TRAINED_DIR, shipped, shipped_folder
+from restore.studies.rescore import shipped_models
 
 ROOT = Path(__file__).resolve().parents[2]
 # 6 UNets of 17.9 MB (unet, unet_syn, unet_random × 2 displays) and 2 ResNets of 2.8 MB: 113 MB (float16 state
@@ -23,17 +27,23 @@ def tracked() -> list[Path]:
     return [ROOT / line for line in out.stdout.splitlines() if (ROOT / line).is_file()]
 
 
-FOLDERS = {"cpu", "cpu_next"}  # the models of RESULTS.md, and those of a run under way (docs/guides/results.md)
-
-
 def test_shipped_weights_are_bounded():
     sizes: dict[str, int] = {}
     for p in tracked():
-        folder = p.relative_to(ROOT / "restore" / "trained").parts[0]
-        sizes[folder] = sizes.get(folder, 0) + p.stat().st_size
-    assert set(sizes) <= FOLDERS, f"restore/trained holds {sorted(set(sizes) - FOLDERS)}; allowed: {sorted(FOLDERS)}"
+        rel = p.relative_to(TRAINED_DIR)
+        if rel.parts == (SHIPPED_FILE,):
+            continue
+        sizes[rel.parts[0]] = sizes.get(rel.parts[0], 0) + p.stat().st_size
+    assert set(sizes) <= set(SLOTS), f"restore/trained holds {sorted(set(sizes) - set(SLOTS))}; allowed: {sorted(SLOTS)}"
     for folder, total in sizes.items():
         assert total <= MAX_TOTAL_MB * 1e6, f"restore/trained/{folder} holds {total / 1e6:.1f} MB > {MAX_TOTAL_MB} MB"
+
+
+def test_the_shipped_slot_holds_a_model_per_row_and_display():
+    doc = shipped()
+    assert doc["slot"] in SLOTS and set(doc["rows"]) <= {row for row, _, _ in ROWS}
+    assert {r for r, _ in shipped_models()} == set(doc["rows"])
+    assert all((shipped_folder() / f"{row}_{d}" / "model.pt") in tracked() for row in doc["rows"] for d in DISPLAYS)
 
 
 def test_only_models_and_small_records_are_shipped():

@@ -209,6 +209,13 @@ def make_bank(out: Path, specs: list[PanelSpec], settings: dict, kernel_px: int,
             "field_panels": [r["name"] for r in records if r["field"] is not None]}
 
 
+def differing_settings(doc: dict, settings: dict) -> list[str]:
+    """The keys in which bank.json's `doc` and `settings` (bank_settings) differ, less its own bookkeeping (format,
+    count, complete, panels): none when the bank was made, or begun, with these settings."""
+    return sorted(k for k in settings.keys() | doc.keys()
+                  if k not in ("format", "count", "complete", "panels") and doc.get(k) != settings.get(k))
+
+
 def _resumable_records(out: Path, settings: dict) -> list[dict]:
     """The panels already made in `out` for these settings (none in a new folder); other settings: refused."""
     path = out / BANK_FILE
@@ -218,9 +225,7 @@ def _resumable_records(out: Path, settings: dict) -> list[dict]:
         old = json.loads(path.read_text())
     except (OSError, ValueError):
         raise BankError(f"{path}: unreadable; use another --out or delete the folder") from None
-    keys = sorted(k for k in settings.keys() | old.keys()
-                  if k not in ("format", "count", "complete", "panels") and old.get(k) != settings.get(k))
-    if keys:
+    if keys := differing_settings(old, settings):
         raise BankError(f"--out {out} holds a different bank (differs in {', '.join(keys)}); use another --out or "
                         "delete the folder")
     done = []
