@@ -24,6 +24,7 @@ from udc_render.dataset.bank import BANK_FILE, Bank, read_bank
 from udc_render.dataset.bank_make import bank_settings, differing_settings, make_bank, random_specs
 from udc_render.dataset.randomize import default_distributions, parse
 from udc_render.pipeline import SynthConfig
+from udc_render.io.files import save_json
 from udc_render.profiles import describe, resolve_profile
 from udc_render.scene import load_scene
 from udc_render.scene.geometry import sensor_kernel_px
@@ -32,6 +33,7 @@ from udc_render.scene.overrides import with_overrides
 RANDOM_ROW = "unet_random"
 RANDOMIZE_SEED = 0
 SECONDS_FILE = "seconds.json"  # out/banks/seconds.json: {bank: seconds spent making it, summed over invocations}
+BANK_SECONDS_FILE = "bank_seconds.json"  # in a bank's folder and beside its carried model: {bank: its seconds}
 
 
 def family_distributions(display: str):
@@ -54,9 +56,21 @@ def random_bank(out: Path, b: dict, display: str, progress: bool) -> Bank:
     """The row's bank for `display` (module doc), made or finished in out/banks/random_<display>."""
     folder, specs, settings, size = bank_plan(out, b, display)
     t0 = time.perf_counter()
+    times = StageTimes(out / "banks" / SECONDS_FILE)
     if make_bank(folder, specs, settings, size, progress=progress)["made"]:
-        StageTimes(out / "banks" / SECONDS_FILE).add(folder.name, time.perf_counter() - t0)
+        times.add(folder.name, time.perf_counter() - t0)
+    save_json(folder / BANK_SECONDS_FILE, {folder.name: times.seconds.get(folder.name, 0.0)})  # what a carry keeps
     return read_bank(folder)
+
+
+def restore_bank_seconds(carried_run: Path, out: Path) -> None:
+    """Count a carried bank's making time in out/banks/seconds.json (once) when the bank is not made here, so
+    that the document's machine time still holds it."""
+    path = Path(carried_run) / BANK_SECONDS_FILE
+    times = StageTimes(out / "banks" / SECONDS_FILE)
+    for bank, seconds in (json.loads(path.read_text()) if path.is_file() else {}).items():
+        if bank not in times.seconds:
+            times.add(bank, seconds)
 
 
 @dataclass(frozen=True)

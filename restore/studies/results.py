@@ -41,7 +41,8 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
     from restore.models import RESNET_CONFIG, UNET_CONFIG
     from restore.studies.carry import bring_back, keep
     from restore.studies.datasets import make_dataset
-    from restore.studies.random_row import BankRecord, carried_bank, online_settings, random_bank
+    from restore.studies.random_row import (BANK_SECONDS_FILE, BankRecord, carried_bank, online_settings, random_bank,
+                                            restore_bank_seconds)
     from restore.train import TrainSettings, data_fingerprint, train
     defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
     models, datasets = {}, {}
@@ -62,7 +63,9 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
             bank = None
             if profile == "random":  # a carried model is checked against its bank's record; else make the bank
                 record = carry and carried_bank(carry / run.name, out, b, d)
-                if not record:
+                if record:
+                    restore_bank_seconds(carry / run.name, out)
+                else:
                     bank = random_bank(out, b, d, progress)
                     record = BankRecord.of(bank)
                 settings = online_settings(settings, record)
@@ -71,7 +74,8 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
             train(data, run, settings, val_every=b.get("val_every", 10), progress=progress,
                   bank=None if bank is None else bank.folder)
             if carry:
-                keep(run, carry / run.name, {} if bank is None else {BANK_FILE: bank.folder / BANK_FILE})
+                keep(run, carry / run.name, {} if bank is None else
+                     {f: bank.folder / f for f in (BANK_FILE, BANK_SECONDS_FILE)})
             models[(row, d)] = run / "model.pt"
             times[f"train_{row}_{d}_s"] = time.perf_counter() - t
     return models

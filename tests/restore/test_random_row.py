@@ -7,7 +7,8 @@ from types import SimpleNamespace
 import pytest
 
 from restore.studies.budgets import BUDGETS
-from restore.studies.random_row import BankRecord, bank_plan, carried_bank, family_distributions, online_settings
+from restore.studies.random_row import (BANK_SECONDS_FILE, SECONDS_FILE, BankRecord, bank_hours, bank_plan, carried_bank,
+                                       family_distributions, online_settings, restore_bank_seconds)
 from restore.train import TrainSettings
 from udc_render.dataset.randomize import default_distributions, draw_panels
 
@@ -64,3 +65,15 @@ def test_a_carried_bank_that_is_not_todays_is_not_taken(tmp_path):
     (no_model / "model.pt").unlink()
     assert all(carried_bank(r, tmp_path / "out", b, "poled") is None for r in (other, partial, no_model))
     assert carried_bank(tmp_path / "missing", tmp_path / "out", b, "poled") is None
+
+
+def test_a_carried_banks_time_is_counted_once(tmp_path):
+    out = tmp_path / "out"
+    run = tmp_path / "carry" / "unet_random_poled"
+    run.mkdir(parents=True)
+    (run / BANK_SECONDS_FILE).write_text(json.dumps({"random_poled": 1800.0}))
+    restore_bank_seconds(run, out)
+    restore_bank_seconds(run, out)  # a second invocation of the run
+    restore_bank_seconds(tmp_path / "nothing", out)
+    assert json.loads((out / "banks" / SECONDS_FILE).read_text()) == {"random_poled": 1800.0}
+    assert bank_hours(out) == 0.5
