@@ -26,7 +26,7 @@ from tqdm import tqdm
 
 from restore.data import DataError, Pair, dataset_displays, list_pairs, load_pair
 from restore.dep import dep_restore
-from restore.metrics import image_metrics
+from restore.metrics import LEVEL_KEYS, image_metrics
 from udc_render.io.files import csv_text, save_figure, save_json, save_text
 from udc_render.io.plots import pyplot
 from udc_render.io.previews import daylight_balance
@@ -232,7 +232,7 @@ def _score_display(restorer, display: str, pairs: list[Pair], lp, folder: Path, 
                            ("ground truth", gt)], balance, folder / "previews" / f"{display}_{p.name}.png",
                           f"{DISPLAY_TITLES.get(display, display)} · {p.image} · PSNR {m['psnr_db_paper']:.2f} dB "
                           f"(paper), {m['psnr_db_srgb']:.2f} dB (srgb), LPIPS {m['lpips_srgb']:.4f}")
-    keys = [k for ks in METRICS.values() for k in ks]
+    keys = [k for ks in METRICS.values() for k in ks] + list(LEVEL_KEYS)
     save_text(folder / f"metrics_{display}.csv", csv_text(rows, ["item", "image", *keys, "ms_per_mp"]))
     return {"images": len(rows), **{k: float(np.mean([r[k] for r in rows])) for k in keys},
             "ms_per_mp": float(np.median([r["ms_per_mp"] for r in rows])), **notes}
@@ -296,5 +296,27 @@ def results_csv(results: dict) -> str:
             if d in m["displays"]:
                 rows.append({"method": n, "display": d, "params": m.get("params"), "macs_g": m.get("macs_g"),
                              **m["displays"][d]})
-    keys = [k for ks in METRICS.values() for k in ks]
+    keys = [k for ks in METRICS.values() for k in ks] + list(LEVEL_KEYS)
     return csv_text(rows, ["method", "display", "params", "macs_g", "images", *keys, "ms_per_mp"])
+
+
+def level_table(results: dict) -> str:
+    """Per row and display, under the paper protocol: PSNR, the level-matched PSNR (each channel's gain solved
+    with the truth, an oracle), what the level costs (their difference) and the output's mean level R/G/B
+    (restore.metrics.level_scores; 1 = the truth's). Rows scored before these columns existed show —."""
+    names, displays = _ordered(results)
+    head = ["Method"] + [f"{DISPLAY_TITLES.get(d, d)} {c}" for d in displays
+                         for c in ("PSNR", "matched", "level costs", "level R/G/B")]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for n in names:
+        row = [n]
+        for d in displays:
+            r = results["methods"][n]["displays"].get(d, {})
+            if "psnr_db_paper_matched" not in r:
+                row += ["—"] * 4
+                continue
+            row += [f"{r['psnr_db_paper']:.2f}", f"{r['psnr_db_paper_matched']:.2f}",
+                    f"{r['psnr_db_paper_matched'] - r['psnr_db_paper']:.2f}",
+                    "/".join(f"{r[k]:.2f}" for k in ("level_r", "level_g", "level_b"))]
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines)

@@ -52,23 +52,46 @@ def paper_metrics(restored: np.ndarray | None, gt: np.ndarray, packed: np.ndarra
     return {"psnr_db_paper": psnr_db(a, b), "ssim_paper": ssim(a, b)}
 
 
+def _gains(a: np.ndarray, b: np.ndarray, onto_a: bool) -> np.ndarray:
+    """[C] each channel's least-squares gain: onto_a, g_c = Σ a_c b_c / Σ a_c² (a·g ≈ b); else the level
+    k_c = Σ a_c b_c / Σ b_c² (a ≈ k·b). 1 where the divisor is 0."""
+    flat_a, flat_b = a.reshape(a.shape[0], -1).astype(np.float64), b.reshape(b.shape[0], -1).astype(np.float64)
+    ref = flat_a if onto_a else flat_b
+    cross, power = np.einsum("cn,cn->c", flat_a, flat_b), np.einsum("cn,cn->c", ref, ref)
+    return np.where(power > 0, cross / np.where(power > 0, power, 1.0), 1.0)
+
+
+def _matched_psnr_db(a: np.ndarray, b: np.ndarray) -> float:
+    return psnr_db(np.clip(a * _gains(a, b, onto_a=True)[:, None, None], 0.0, 1.0).astype(a.dtype), b)
+
+
 def level_matched_psnr_db(restored: np.ndarray | None, gt: np.ndarray, packed: np.ndarray | None = None) -> float:
     """The paper protocol's PSNR after each channel of the restored image (or of `packed`) is scaled by its
     least-squares gain onto the truth, g_c = Σ a_c b_c / Σ a_c² on the protocol's pair, and clipped again: the
     level and colour balance solved per image with the truth (an oracle). What it leaves is the error in the
     image's structure; the plain PSNR less this one is what the level and balance cost."""
+    return _matched_psnr_db(*_paper_pair(restored, gt, packed))
+
+
+LEVEL_KEYS = ("psnr_db_paper_matched", "level_r", "level_g", "level_b")  # level_scores' keys
+
+
+def level_scores(restored: np.ndarray | None, gt: np.ndarray, packed: np.ndarray | None = None) -> dict:
+    """On the paper protocol's pair: the level-matched PSNR (level_matched_psnr_db) and the output's level per
+    channel, k_c = Σ a_c b_c / Σ b_c² (a ≈ k·b: 1 is the truth's level; the packed RAW's two greens averaged).
+    An output at k × the truth loses 10·log10(mean(b²)·(1 − k)²)⁻¹ of PSNR to the level alone."""
     a, b = _paper_pair(restored, gt, packed)
-    flat_a, flat_b = a.reshape(a.shape[0], -1).astype(np.float64), b.reshape(b.shape[0], -1).astype(np.float64)
-    power = np.einsum("cn,cn->c", flat_a, flat_a)
-    gain = np.where(power > 0, np.einsum("cn,cn->c", flat_a, flat_b) / np.where(power > 0, power, 1.0), 1.0)
-    return psnr_db(np.clip(a * gain[:, None, None], 0.0, 1.0).astype(a.dtype), b)
+    k = _gains(a, b, onto_a=False)
+    green = k[1:3].mean() if len(k) == 4 else k[1]
+    return dict(zip(LEVEL_KEYS, (_matched_psnr_db(a, b), float(k[0]), float(green), float(k[-1]))))
 
 
 def image_metrics(restored: np.ndarray, gt: np.ndarray, balance: np.ndarray, lpips_model,
                   packed: np.ndarray | None = None) -> dict:
     """The scores of a restored [3, H, W] image against its ground truth under both protocols
     (udc_render.metrics): PSNR and SSIM under 'paper' (on `packed`, the RAW, when given: the input
-    row), PSNR, SSIM and LPIPS (restore.lpips.LPIPS `lpips_model`) under 'srgb'."""
+    row), PSNR, SSIM and LPIPS (restore.lpips.LPIPS `lpips_model`) under 'srgb'; beside them the level-matched PSNR
+    and the output's level per channel (level_scores)."""
     c, d = display_referred(restored, balance), display_referred(gt, balance)  # clipped to [0, 1] there
-    return {**paper_metrics(restored, gt, packed),
+    return {**paper_metrics(restored, gt, packed), **level_scores(restored, gt, packed),
             "psnr_db_srgb": psnr_db(c, d), "ssim_srgb": ssim(c, d), "lpips_srgb": lpips_distance(c, d, lpips_model)}

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import torch
 
-from restore.evaluate import protocol_table, results_markdown
+from restore.evaluate import level_table, protocol_table, results_markdown
 from restore.studies.budgets import DISPLAY_NAMES, DISPLAYS, ROWS, run_dir
 from restore.studies.random_row import bank_hours
 from restore.studies.error_bands import markdown, weakest_band_text
@@ -260,6 +260,19 @@ def ordering_table(results: dict) -> list[str]:
             *(f"| {c} | {'yes' if ok else '**no**'} | {v} |" for c, ok, v in ordering_checks(results))]
 
 
+def level_section(results: dict) -> list[str]:
+    """Level and structure: each row's PSNR beside its level-matched PSNR and output level (restore.evaluate.
+    level_table), the split between an error of level (a restorer that cannot tell a dim panel from a dim scene)
+    and one of structure."""
+    return ["## Level and structure (test split, paper protocol)", "",
+            "Each row's PSNR beside its level-matched PSNR: each channel of each output scaled by its least-squares "
+            "gain onto the truth before the PSNR (an oracle, `restore.metrics.level_scores`). Their difference is "
+            "what the output's level and colour balance cost; the matched PSNR is the error of its structure. "
+            "Level: the output's least-squares level against the truth per channel (1 = the truth's; the input "
+            "row: its RAW, the display's transmission γ at the captures' exposure), the mean over images.", "",
+            level_table(results)]
+
+
 def heldout_section(heldout: dict, out: Path, fig: dict[str, str]) -> list[str]:
     """The held-out photographs' paper-protocol table, the orderings computed from it, and the UNet
     previews in `fig` (figure links by name)."""
@@ -322,6 +335,7 @@ def results_document(results: dict, heldout: dict, bands: dict, faces: dict, b: 
         "## The paper's ordering", "",
         "Computed from the paper-protocol table above (`restore.studies.results.ordering_checks`).", "",
         *ordering_table(results), "",
+        *level_section(results), "",
         *heldout_section(heldout, out, fig), "",
         *error_bands_section(bands, fig),
         "## Face detection (MTCNN recall)", "",

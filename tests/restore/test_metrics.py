@@ -9,7 +9,7 @@ import torch
 from torch import nn
 
 from restore.lpips import LPIPS
-from restore.metrics import image_metrics, lpips_distance, ssim
+from restore.metrics import image_metrics, level_scores, lpips_distance, paper_metrics, ssim
 from udc_render.metrics import BORDER_PX, border_px, display_referred
 from udc_render.io.previews import daylight_balance
 from udc_render.metrics import psnr_db
@@ -55,7 +55,8 @@ def test_image_metrics_use_the_one_psnr_under_both_protocols():
     c, d = np.clip(restored.astype(np.float64), 0, 1), np.clip(gt.astype(np.float64), 0, 1)  # paper: linear
     assert image_metrics(restored, gt, bal, lp) == {"psnr_db_srgb": psnr_db(a, b), "ssim_srgb": ssim(a, b),
                                                     "lpips_srgb": lpips_distance(a, b, lp),
-                                                    "psnr_db_paper": psnr_db(c, d), "ssim_paper": ssim(c, d)}
+                                                    "psnr_db_paper": psnr_db(c, d), "ssim_paper": ssim(c, d),
+                                                    **level_scores(restored, gt)}
     assert lpips_distance(a, a, lp) == 0.0
 
 
@@ -122,3 +123,24 @@ def test_level_matched_psnr_solves_each_channels_gain():
     from udc_render.sensor import mosaic_of, pack_rggb
     packed = 0.3 * pack_rggb(mosaic_of(gt))
     assert level_matched_psnr_db(None, gt, packed=packed) > 150  # an exact gain: no error left but rounding
+
+
+def test_an_output_at_k_times_the_truth_has_level_k_and_loses_exactly_that_to_it():
+    """Oracle: y = k_c · b (below the clip) has level k_c per channel; its PSNR is 10·log10(1 / mean(((1 − k)·b)²))
+    on the protocol's crop, all of it level: matched, only float64 rounding is left. A structural error survives
+    the match."""
+    from udc_render.sensor import mosaic_of, pack_rggb
+    rng = np.random.default_rng(1)
+    gt = rng.uniform(0.05, 0.5, (3, 96, 128))
+    k = np.array([0.85, 0.54, 1.2])
+    m = {**paper_metrics(k[:, None, None] * gt, gt), **level_scores(k[:, None, None] * gt, gt)}
+    assert (m["level_r"], m["level_g"], m["level_b"]) == pytest.approx(tuple(k), rel=1e-12)
+    crop = gt[:, 16:-16, 16:-16]
+    loss = 10 * math.log10(1 / np.mean(((1 - k[:, None, None]) * crop) ** 2))
+    assert m["psnr_db_paper"] == pytest.approx(loss, rel=1e-9) and m["psnr_db_paper_matched"] > 250
+    noisy = level_scores(0.5 * (gt + rng.normal(0, 0.01, gt.shape)), gt)
+    assert 35 < noisy["psnr_db_paper_matched"] < 45 and noisy["level_g"] == pytest.approx(0.5, abs=0.01)
+    packed = level_scores(None, gt, packed=0.3 * pack_rggb(mosaic_of(gt)))  # the input row: its two greens averaged
+    assert (packed["level_r"], packed["level_g"], packed["level_b"]) == pytest.approx((0.3, 0.3, 0.3), rel=1e-12)
+    dark = level_scores(np.zeros_like(gt), np.zeros_like(gt))  # no light in the truth: level 1 by definition
+    assert dark["level_g"] == 1.0

@@ -36,8 +36,10 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     assert "## Training (quick budget)" in doc and "![training curves](figures/training_curves.png)" in doc
     assert (tmp_path / "res" / "figures" / "training_curves.png").is_file()
     assert "| test | " in doc  # the content table per split
-    # two training lines, a row in each protocol's table, one held out, one per display in the error bands
-    assert doc.count("| unet_syn |") == 7 and doc.count("| unet_random |") == 7 and "## Where the error lies (spatial frequency)" in doc
+    # two training lines, a row in each protocol's table, one in the level table, one held out, one per display in
+    # the error bands
+    assert doc.count("| unet_syn |") == 8 and doc.count("| unet_random |") == 8 and "## Where the error lies (spatial frequency)" in doc
+    assert "## Level and structure (test split, paper protocol)" in doc and "| input | " in doc.split("## Level")[1]
     assert (tmp_path / "res" / "figures" / "error_bands_poled.png").is_file()
     assert set(r["heldout"]["methods"]) == set(methods) and "## Held-out photographs (a content check)" in doc
     assert r["heldout"]["methods"]["input"]["displays"]["toled"]["images"] == 2

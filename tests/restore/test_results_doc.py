@@ -123,3 +123,14 @@ def test_active_time_leaves_out_a_pause_and_keeps_the_validated_epochs():
     assert active_seconds(log) == 666.0 - 36.0 + 54.0
     assert active_seconds(log[:0]) == 0.0
     assert active_seconds([{"seconds": 30.0}] * 1) == 30.0
+
+
+def test_the_level_table_splits_level_from_structure_and_marks_rows_scored_before_it():
+    from restore.evaluate import level_table
+    scored = {"psnr_db_paper": 21.43, "psnr_db_paper_matched": 25.20, "level_r": 0.6, "level_g": 0.546, "level_b": 0.5}
+    results = {"methods": {"unet_random": {"displays": {"poled": scored}},
+                           "unet": {"displays": {"poled": {"psnr_db_paper": 26.35}}}}}
+    lines = level_table(results).splitlines()
+    assert lines[0] == "| Method | P-OLED PSNR | P-OLED matched | P-OLED level costs | P-OLED level R/G/B |"
+    assert lines[2] == "| unet | — | — | — | — |"  # the paper's order: UNet, then UNet (randomized)
+    assert lines[3] == "| unet_random | 21.43 | 25.20 | 3.77 | 0.60/0.55/0.50 |"
