@@ -23,8 +23,8 @@ from restore.train import TrainSettings
 from udc_render.dataset.bank import BANK_FILE, Bank, read_bank
 from udc_render.dataset.bank_make import bank_settings, differing_settings, make_bank, random_specs
 from udc_render.dataset.randomize import default_distributions, parse
-from udc_render.pipeline import SynthConfig
 from udc_render.io.files import save_json
+from udc_render.pipeline import SynthConfig
 from udc_render.profiles import describe, resolve_profile
 from udc_render.scene import load_scene
 from udc_render.scene.geometry import sensor_kernel_px

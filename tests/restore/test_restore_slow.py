@@ -22,7 +22,7 @@ def test_face_study_recalls_the_clean_chart_and_loses_faces_behind_the_displays(
 
 def test_results_quick_budget_runs_every_stage(tmp_path):
     from restore.studies.results import run_results
-    r = run_results(tmp_path / "res", "quick", progress=False)
+    r = run_results(tmp_path / "res", "quick", progress=False, carry=tmp_path / "carry")
     methods = r["results"]["methods"]
     assert set(methods) == {"input", "dep", "dep_exact", "unet", "resnet", "unet_syn", "unet_random"}
     for d in ("toled", "poled"):
@@ -60,7 +60,7 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     scores = {p: p.stat().st_mtime_ns for p in res.rglob("metrics_*.csv")}
     untouched = {p: p.stat().st_mtime_ns for p in res.rglob("*") if p.name in ("timing.jsonl", "loss.csv")}
     same = {p: p.read_bytes() for p in res.rglob("*") if p.name in ("model.pt", "manifest.jsonl")}
-    again = run_results(res, "quick", progress=False)
+    again = run_results(res, "quick", progress=False, carry=tmp_path / "carry")
     assert len(untouched) == 3 + 4 * 2 and all(p.stat().st_mtime_ns == t for p, t in untouched.items())
     assert len(same) == 3 + 4 * 2 and all(p.read_bytes() == b for p, b in same.items())
     assert len(scores) == 2 * 7 * 2 and all(p.stat().st_mtime_ns == t for p, t in scores.items())
@@ -68,3 +68,16 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     for d in ("toled", "poled"):  # the same weights on the same pairs
         assert (again["results"]["methods"]["unet"]["displays"][d]["psnr_db_paper"] ==
                 methods["unet"]["displays"][d]["psnr_db_paper"])
+
+    # a fresh machine (a new out, the carry only): the rows come back from the carry without training, and the
+    # UNet (randomized) row is checked against its carried bank.json without making the bank; its time is kept
+    fresh = run_results(tmp_path / "fresh", "quick", progress=False, carry=tmp_path / "carry")
+    assert not (tmp_path / "fresh" / "banks" / "random_toled").exists()
+    assert not any((tmp_path / "fresh" / "train").rglob("checkpoint.pt"))
+    for d in ("toled", "poled"):
+        assert (tmp_path / "fresh" / "train" / f"unet_random_{d}" / "loss.csv").read_bytes() == \
+            (res / "train" / f"unet_random_{d}" / "loss.csv").read_bytes()
+        assert fresh["results"]["methods"]["unet_random"]["displays"][d]["psnr_db_paper"] == \
+            methods["unet_random"]["displays"][d]["psnr_db_paper"]
+    assert json.loads((tmp_path / "fresh" / "banks" / "seconds.json").read_text()) == \
+        json.loads((res / "banks" / "seconds.json").read_text())
