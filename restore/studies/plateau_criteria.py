@@ -8,15 +8,17 @@ criterion stops it (— if never), the last validation, and today's trend at the
 steps. On the carried cpu models the old criterion stopped three UNets that then gained 0.6–1.5 dB
 (restore/trained/cpu; docs/figures/restore_studies/plateau_criteria.md).
 
-    python -m restore.studies.plateau_criteria FOLDER [--threshold-db 0.1]
+    python -m restore.studies.plateau_criteria [FOLDER] [--threshold-db 0.1]
 
-FOLDER holds run folders (restore/trained/cpu, out/results/train); prints a Markdown table.
+FOLDER holds run folders (out/results/train, a slot of restore/trained; the shipped slot when not given,
+restore.studies.budgets.shipped_folder); prints a Markdown table.
 """
 from __future__ import annotations
 
 import sys
 from pathlib import Path
 
+from restore.studies.budgets import shipped_folder
 from restore.studies.options import parse_options
 
 CRITERIA = {"last fifth, ≥ 4 (until 2026-11-25)": (0.2, 4), "last two fifths, ≥ 6 (today)": (0.4, 6)}
@@ -53,12 +55,12 @@ def markdown(folder: Path, threshold_db: float = 0.1) -> str:
 
 
 def main(argv: list[str]) -> None:
-    usage = "python -m restore.studies.plateau_criteria FOLDER [--threshold-db 0.1]"
+    usage = "python -m restore.studies.plateau_criteria [FOLDER] [--threshold-db 0.1]"
     pos, o = parse_options(argv, usage)
-    if len(pos) != 1:
+    if len(pos) > 1:
         sys.exit(f"usage: {usage}")
     try:
-        print(markdown(Path(pos[0]), float(o.get("threshold_db", 0.1))))
+        print(markdown(Path(pos[0]) if pos else shipped_folder(), float(o.get("threshold_db", 0.1))))
     except (OSError, ValueError) as exc:
         sys.exit(f"error: {exc}")
 
