@@ -12,7 +12,6 @@ against the spectral captures it is scored on.
 """
 from __future__ import annotations
 
-import hashlib
 import json
 import time
 from dataclasses import dataclass, replace
@@ -20,7 +19,7 @@ from pathlib import Path
 
 from restore.studies.stage_times import StageTimes
 from restore.train import TrainSettings
-from udc_render.dataset.bank import BANK_FILE, Bank, read_bank
+from udc_render.dataset.bank import BANK_FILE, Bank, bank_json_fingerprint, read_bank
 from udc_render.dataset.bank_make import bank_settings, differing_settings, make_bank, random_specs
 from udc_render.dataset.randomize import default_distributions, parse
 from udc_render.io.files import save_json
@@ -96,7 +95,7 @@ def carried_bank(carried_run: Path, out: Path, b: dict, display: str) -> BankRec
     doc = json.loads(path.read_text())
     if doc.get("complete") is not True or differing_settings(doc, bank_plan(out, b, display)[2]):
         return None
-    return BankRecord(hashlib.sha256(path.read_bytes()).hexdigest()[:16], tuple(r["name"] for r in doc["panels"]))
+    return BankRecord(bank_json_fingerprint(path), tuple(r["name"] for r in doc["panels"]))
 
 
 def bank_hours(out: Path) -> float:

@@ -62,7 +62,7 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
                                      autocast=b.get("autocast"))
             bank = None
             if profile == "random":  # a carried model is checked against its bank's record; else make the bank
-                record = carry and carried_bank(carry / run.name, out, b, d)
+                record = carried_bank(carry / run.name, out, b, d) if carry else None
                 if record:
                     restore_bank_seconds(carry / run.name, out)
                 else:

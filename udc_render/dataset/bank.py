@@ -96,11 +96,16 @@ class Bank:
     @property
     def fingerprint(self) -> str:
         """sha256 of bank.json (which names every panel file's sha256): what a training run records."""
-        return hashlib.sha256((self.folder / BANK_FILE).read_bytes()).hexdigest()[:16]
+        return bank_json_fingerprint(self.folder / BANK_FILE)
 
     @property
     def margin_px(self) -> int:
         return max(p.margin_px for p in self.panels)
+
+
+def bank_json_fingerprint(path: Path) -> str:
+    """The first 16 hex digits of a bank.json's sha256 (Bank.fingerprint; a carried copy's too)."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
 
 
 def panel_file(index: int, name: str) -> str:
