@@ -16,6 +16,7 @@ import json
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import NamedTuple
 
 from restore.studies.stage_times import StageTimes
 from restore.train import TrainSettings
@@ -40,26 +41,35 @@ def family_distributions(display: str):
     return parse({"display": {"family": display}}, f"results: the {display} family", default_distributions())
 
 
-def bank_plan(out: Path, b: dict, display: str) -> tuple[Path, list, dict, int]:
-    """The row's bank for `display` before any kernel is made: (its folder, the panel specs, bank.json's
-    settings, the kernel size). Cheap: draws and settings only."""
+class BankPlan(NamedTuple):
+    """The row's bank for one display before any kernel is made: made once (bank_plan) and read both by
+    carried_bank (is a carried bank today's?) and by random_bank (make or finish it)."""
+    folder: Path
+    specs: list
+    settings: dict  # bank.json's settings (udc_render.dataset.bank_make.bank_settings)
+    kernel_px: int
+
+
+def bank_plan(out: Path, b: dict, display: str) -> BankPlan:
+    """The row's bank for `display` in out/banks/random_<display>. Cheap: draws and settings only."""
     scene = with_overrides(load_scene("monitor"), sensor_px=b["sensor_px"])  # the datasets' (restore.studies.datasets)
     cfg, _ = resolve_profile("physical", SynthConfig(), [])
     size = sensor_kernel_px(scene)
     specs = random_specs(family_distributions(display), b["random_panels"], RANDOMIZE_SEED, scene, cfg)
     extra = {"profile": describe(cfg.profile), "study": "results", "row": RANDOM_ROW, "family": display}
-    return out / "banks" / f"random_{display}", specs, bank_settings(scene, cfg, size, specs, extra), size
+    return BankPlan(out / "banks" / f"random_{display}", specs, bank_settings(scene, cfg, size, specs, extra), size)
 
 
-def random_bank(out: Path, b: dict, display: str, progress: bool) -> Bank:
-    """The row's bank for `display` (module doc), made or finished in out/banks/random_<display>."""
-    folder, specs, settings, size = bank_plan(out, b, display)
+def random_bank(out: Path, plan: BankPlan, progress: bool) -> Bank:
+    """The row's bank of `plan` (module doc), made or finished in plan.folder; its time counted in
+    out/banks/seconds.json."""
     t0 = time.perf_counter()
     times = StageTimes(out / "banks" / SECONDS_FILE)
-    if make_bank(folder, specs, settings, size, progress=progress)["made"]:
-        times.add(folder.name, time.perf_counter() - t0)
-    save_json(folder / BANK_SECONDS_FILE, {folder.name: times.seconds.get(folder.name, 0.0)})  # what a carry keeps
-    return read_bank(folder)
+    if make_bank(plan.folder, plan.specs, plan.settings, plan.kernel_px, progress=progress)["made"]:
+        times.add(plan.folder.name, time.perf_counter() - t0)
+    seconds = {plan.folder.name: times.seconds.get(plan.folder.name, 0.0)}
+    save_json(plan.folder / BANK_SECONDS_FILE, seconds)  # what a carry keeps
+    return read_bank(plan.folder)
 
 
 def restore_bank_seconds(carried_run: Path, out: Path) -> None:
@@ -84,16 +94,16 @@ class BankRecord:
         return cls(bank.fingerprint, tuple(p.name for p in bank.panels))
 
 
-def carried_bank(carried_run: Path, out: Path, b: dict, display: str) -> BankRecord | None:
+def carried_bank(carried_run: Path, plan: BankPlan) -> BankRecord | None:
     """The record of the bank a carried finished run trained through, from its copy of bank.json
-    (restore.studies.carry.keep), when that bank is complete and its settings are today's plan (bank_plan;
-    the test make_bank itself applies before resuming a folder): a fresh machine then checks the carried
+    (restore.studies.carry.keep), when that bank is complete and its settings are `plan`'s (the test
+    make_bank itself applies before resuming a folder): a fresh machine then checks the carried
     model without making the bank's kernels (a third of an hour per display). None otherwise: make the bank."""
     path = Path(carried_run) / BANK_FILE
     if not (Path(carried_run) / "model.pt").is_file() or not path.is_file():
         return None
     doc = json.loads(path.read_text())
-    if doc.get("complete") is not True or differing_settings(doc, bank_plan(out, b, display)[2]):
+    if doc.get("complete") is not True or differing_settings(doc, plan.settings):
         return None
     return BankRecord(bank_json_fingerprint(path), tuple(r["name"] for r in doc["panels"]))
 

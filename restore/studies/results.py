@@ -41,8 +41,8 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
     from restore.models import RESNET_CONFIG, UNET_CONFIG
     from restore.studies.carry import bring_back, keep
     from restore.studies.datasets import make_dataset
-    from restore.studies.random_row import (BANK_SECONDS_FILE, BankRecord, carried_bank, online_settings, random_bank,
-                                            restore_bank_seconds)
+    from restore.studies.random_row import (BANK_SECONDS_FILE, BankRecord, bank_plan, carried_bank, online_settings,
+                                            random_bank, restore_bank_seconds)
     from restore.train import TrainSettings, data_fingerprint, train
     defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
     models, datasets = {}, {}
@@ -62,11 +62,12 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
                                      autocast=b.get("autocast"))
             bank = None
             if profile == "random":  # a carried model is checked against its bank's record; else make the bank
-                record = carried_bank(carry / run.name, out, b, d) if carry else None
+                plan = bank_plan(out, b, d)
+                record = carried_bank(carry / run.name, plan) if carry else None
                 if record:
                     restore_bank_seconds(carry / run.name, out)
                 else:
-                    bank = random_bank(out, b, d, progress)
+                    bank = random_bank(out, plan, progress)
                     record = BankRecord.of(bank)
                 settings = online_settings(settings, record)
             if carry:

@@ -46,25 +46,26 @@ def _carried_run(folder, settings, complete=True):
 
 def test_a_carried_bank_of_todays_plan_is_taken_without_its_kernels(tmp_path):
     b = BUDGETS["quick"]
-    folder, specs, settings, _ = bank_plan(tmp_path / "out", b, "poled")
-    assert folder == tmp_path / "out" / "banks" / "random_poled" and len(specs) == b["random_panels"]
-    run = _carried_run(tmp_path / "carry" / "unet_random_poled", settings)
-    record = carried_bank(run, tmp_path / "out", b, "poled")
+    plan = bank_plan(tmp_path / "out", b, "poled")
+    assert plan.folder == tmp_path / "out" / "banks" / "random_poled" and len(plan.specs) == b["random_panels"]
+    run = _carried_run(tmp_path / "carry" / "unet_random_poled", plan.settings)
+    record = carried_bank(run, plan)
     assert record == BankRecord(hashlib.sha256((run / "bank.json").read_bytes()).hexdigest()[:16],
                                 ("random_000", "random_001"))
-    assert not folder.exists()  # nothing made
-    assert carried_bank(run, tmp_path / "out", b, "toled") is None  # another family's plan: make the bank
+    assert not plan.folder.exists()  # nothing made
+    assert carried_bank(run, bank_plan(tmp_path / "out", b, "toled")) is None  # another family's plan: make the bank
 
 
 def test_a_carried_bank_that_is_not_todays_is_not_taken(tmp_path):
     b = BUDGETS["quick"]
-    settings = bank_plan(tmp_path / "out", b, "poled")[2]
+    plan = bank_plan(tmp_path / "out", b, "poled")
+    settings = plan.settings
     other = _carried_run(tmp_path / "other", {**settings, "kernel_px": settings["kernel_px"] + 2})
     partial = _carried_run(tmp_path / "partial", settings, complete=False)
     no_model = _carried_run(tmp_path / "no_model", settings)
     (no_model / "model.pt").unlink()
-    assert all(carried_bank(r, tmp_path / "out", b, "poled") is None for r in (other, partial, no_model))
-    assert carried_bank(tmp_path / "missing", tmp_path / "out", b, "poled") is None
+    assert all(carried_bank(r, plan) is None for r in (other, partial, no_model))
+    assert carried_bank(tmp_path / "missing", plan) is None
 
 
 def test_a_carried_banks_time_is_counted_once(tmp_path):
