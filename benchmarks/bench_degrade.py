@@ -26,6 +26,10 @@ workers 1 in which every crop draws its own sensor and exposure (restore.capture
 Without --bank the panels are synthetic with the shapes of the default bank (kernels of --kernel-px, a T-OLED
 series of 453 × 200 orders, 4 × 4 phases, Poisson noise, defects, FPN): the cost depends on the shapes, not on
 the values. With --bank DIR its first d = 0 and first d > 0 panel are timed.
+
+--regions 1,2,3,4: what sharing one degraded region between t × t crops would save (a design not built: the
+10 % bound's candidate). Per panel, one region of t·crop px with its margins degraded as one crop on one thread,
+alternating t repeat by repeat; the table gives the median time per crop of --crop-px and its ratio to t = 1.
 """
 from __future__ import annotations
 
@@ -91,9 +95,12 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3, help="--train: rounds of the three runs [3]")
     ap.add_argument("--autocast", choices=("bf16", "fp32"), default="bf16", help="--train: the step's precision [bf16]")
     ap.add_argument("--capture-draws", action="store_true", help="--train: add a run with a capture per crop")
+    ap.add_argument("--regions", help="t values, comma-separated: time t × t crops sharing one region (module doc)")
     a = ap.parse_args()
     if a.train:
         return train_runs(a)
+    if a.regions:
+        return region_runs(a)
     if a.threads:
         torch.set_num_threads(a.threads)
     dev = torch.device(a.device)
@@ -161,6 +168,38 @@ def main() -> None:
         ratios = " | ".join(f"{v / med[s]:.3f} ({min(times[k]) / min(times[s]):.3f})" if k.startswith("degrade") else ""
                             for s in steps)
         print(f"| {k} | {v:.3f} | {min(times[k]):.3f} | {max(times[k]):.3f} | {ratios} |")
+
+
+def region_runs(a) -> None:
+    """--regions: the degradation's time per crop when t × t crops share one degraded region (module doc)."""
+    if a.threads:
+        torch.set_num_threads(a.threads)
+    dev = torch.device(a.device)
+    w, h = (int(v) for v in a.frame.split(","))
+    panels = bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
+    deg = Degrader(panels, dev, threads=1)
+    for i in range(len(panels)):
+        deg.power_frame(i, (h, w))
+    m, c, tiles = deg.margin_px, a.crop_px, [int(t) for t in a.regions.split(",")]
+    regions = {t: torch.rand(1, 3, t * c + 2 * m, t * c + 2 * m, device=dev) for t in tiles}
+    times = {(i, t): [] for i in range(len(panels)) for t in tiles}
+    for r in range(a.repeats + 1):  # the first repeat makes each shape's spectra: left out
+        for i in range(len(panels)):
+            for t in tiles:
+                t0 = time.perf_counter()
+                deg.degrade_batch(regions[t], [i], [((h, w), (0, 0))], [torch.Generator(dev).manual_seed(r)])
+                if dev.type == "cuda":
+                    torch.cuda.synchronize()
+                if r:
+                    times[(i, t)].append(time.perf_counter() - t0)
+    print(f"| panel | crops per region | region px | median ms per region | ms per {c}-px crop | / t = {tiles[0]} |")
+    print("|---|---|---|---|---|---|")
+    for i, p in enumerate(panels):
+        base = statistics.median(times[(i, tiles[0])]) / tiles[0] ** 2
+        for t in tiles:
+            med = statistics.median(times[(i, t)])
+            print(f"| {p.name} | {t} × {t} | {t * c} | {med * 1e3:.0f} | {med / t / t * 1e3:.1f} | "
+                  f"{med / t / t / base:.2f} |")
 
 
 def train_runs(a) -> None:
