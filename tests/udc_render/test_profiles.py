@@ -166,6 +166,21 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
     assert params["paper"]["synth"]["channel_kernels"] == "paper"
 
 
+def test_demo_asks_for_the_default_profile(tmp_path, monkeypatch):
+    """`udc-render demo` hands the synthesis the default profile: the fast suite's check of its wiring (the
+    synthesis itself, 100 s of d > 0 kernels even on a tiny scene: test_demo_uses_the_default_profile, slow)."""
+    import udc_render.cli.synth as cli_synth
+    seen = {}
+    monkeypatch.setattr(cli_synth, "synth_and_write",
+                        lambda scene, displays, cfg, out, quiet: seen.update(displays=displays, cfg=cfg))
+    assert main(["demo", "--out", str(tmp_path), "--quiet"]) == 0
+    cfg = seen["cfg"]
+    assert cfg.profile["name"] == DEFAULT_PROFILE and cfg.defects == DefectConfig()
+    assert {d.name: d.distance_mm for d in seen["displays"]} == {
+        "glass": 0.0, "toled": PHYSICAL_DISTANCE_MM, "poled": PHYSICAL_DISTANCE_MM}
+
+
+@pytest.mark.slow
 def test_demo_uses_the_default_profile(scene, tmp_path, monkeypatch):
     """`udc-render demo` (here on the tiny scene in place of the built-in monitor) runs the default profile."""
     import udc_render.scene
