@@ -170,13 +170,17 @@ def main() -> None:
         print(f"| {k} | {v:.3f} | {min(times[k]):.3f} | {max(times[k]):.3f} | {ratios} |")
 
 
-def region_runs(a) -> None:
-    """--regions: the degradation's time per crop when t × t crops share one degraded region (module doc)."""
+def _setup(a) -> tuple[torch.device, tuple[int, int], list[Panel]]:
+    """(device, (W, H) of the clean images, the panels) of --train and --regions, torch's threads set."""
     if a.threads:
         torch.set_num_threads(a.threads)
-    dev = torch.device(a.device)
     w, h = (int(v) for v in a.frame.split(","))
-    panels = bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
+    return torch.device(a.device), (w, h), bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
+
+
+def region_runs(a) -> None:
+    """--regions: the degradation's time per crop when t × t crops share one degraded region (module doc)."""
+    dev, (w, h), panels = _setup(a)
     deg = Degrader(panels, dev, threads=1)
     for i in range(len(panels)):
         deg.power_frame(i, (h, w))
@@ -204,11 +208,7 @@ def region_runs(a) -> None:
 
 def train_runs(a) -> None:
     """--train (module doc)."""
-    if a.threads:
-        torch.set_num_threads(a.threads)
-    dev = torch.device(a.device)
-    w, h = (int(v) for v in a.frame.split(","))
-    panels = bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
+    dev, (w, h), panels = _setup(a)
     bank = Bank(Path("."), {}, panels)
     rng = np.random.default_rng(0)
     images = [CleanImage(f"noise {i}", rng.random((3, h, w), dtype=np.float32)) for i in range(2)]
