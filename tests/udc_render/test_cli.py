@@ -124,6 +124,7 @@ def test_band_weight_spectrum_from_illuminant_changes_kernels(tmp_path):
         assert json.loads(str(a["params_json"]))["weight"] == "A"
 
 
+@pytest.mark.slow
 def test_study_quick_writes_table_csv_and_plot(tmp_path):
     from udc_render.studies.psf_knobs import run_study
     rows = run_study(tmp_path, quick=True, progress=False)

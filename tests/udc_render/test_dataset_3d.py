@@ -191,6 +191,7 @@ def near_focus_runs(scene, tmp_path, monkeypatch, runs) -> dict:
     return outs
 
 
+@pytest.mark.slow
 def test_off_focus_layers_give_the_same_bytes_on_any_worker_count(scene, tmp_path, monkeypatch):
     """A 1-worker and a 2-worker run, each on an empty kernel cache, and a re-run on a warm cache give the
     same bytes (the off-focus kernels computed in the workers with the parent's BLAS threads)."""

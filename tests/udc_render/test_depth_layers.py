@@ -162,6 +162,7 @@ def test_a_defocused_monitor_edge_spreads_like_the_thin_lens_disc(kernel_cache):
 # ---------------------------------------------------------------- layers against the per-pixel reference
 
 
+@pytest.mark.slow
 def test_layers_match_the_per_pixel_reference_at_the_edge(kernel_cache):
     s = load_scene("room")
     s = with_focus(replace(s, sensor=replace(s.sensor, width_px=64, height_px=48),

@@ -194,12 +194,14 @@ def test_demo_uses_the_default_profile(scene, tmp_path, monkeypatch):
         assert record["display"]["distance_mm"] == PHYSICAL_DISTANCE_MM and record["defects"] is not None
 
 
-def test_demo_takes_the_paper_profile(scene, tmp_path, monkeypatch):
-    """`udc-render demo --profile paper`: the per-channel form at d = 0 without defects."""
-    import udc_render.scene
-    tiny = udc_render.scene.load_scene(scene)
-    monkeypatch.setattr(udc_render.scene, "load_scene", lambda name: tiny)
+def test_demo_takes_the_paper_profile(tmp_path, monkeypatch):
+    """`udc-render demo --profile paper` asks the synthesis for the per-channel form at d = 0 without defects
+    (the synthesis itself runs in test_demo_uses_the_default_profile, slow, and the synth tests)."""
+    import udc_render.cli.synth as cli_synth
+    seen = {}
+    monkeypatch.setattr(cli_synth, "synth_and_write",
+                        lambda scene, displays, cfg, out, quiet: seen.update(displays=displays, cfg=cfg))
     assert main(["demo", "--out", str(tmp_path), "--quiet", "--profile", "paper"]) == 0
-    synth = json.loads((tmp_path / "synth.json").read_text())
-    assert synth["profile"]["name"] == "paper" and synth["defects"] is None
-    assert json.loads((tmp_path / "toled" / "capture.json").read_text())["display"]["distance_mm"] == 0.0
+    cfg = seen["cfg"]
+    assert cfg.profile["name"] == "paper" and cfg.defects is None
+    assert {d.name: d.distance_mm for d in seen["displays"]} == {"glass": 0.0, "toled": 0.0, "poled": 0.0}

@@ -56,6 +56,7 @@ def test_poled_preset_has_no_mtf_null_below_nyquist():
     assert realism.min_relative_mtf(obs, glass) > realism.NULL_LEVEL
 
 
+@pytest.mark.slow
 def test_quick_study_writes_rows_with_the_papers_values(tmp_path):
     """The whole quick study (PSF and capture rows; ~1.5 min with a warm kernel cache, ~5 min cold)."""
     assert main(["study", "realism", "--quick", "--out", str(tmp_path)]) == 0

@@ -31,6 +31,7 @@ def _num(v: str) -> float:
     return float(v) if v not in ("", None) else math.nan
 
 
+@pytest.mark.slow
 def test_quick_study_writes_its_files(quick):
     out, rows = quick
     for name in ("study_banding.csv", "study_banding.md", "study_banding.png"):
@@ -45,6 +46,7 @@ def _toled_rows(rows):
     return [r for r in rows if r["display"] == "toled" and r["regime"] == "bands"]
 
 
+@pytest.mark.slow
 def test_flat_field_period_is_zi_p_over_d(quick):
     """T-OLED bands on the flat field, along x and along y, every phase count and power: the fitted period
     (found without the formula) times its harmonic order within 1 % of z_i · p / d, z_i from the quick
@@ -95,6 +97,7 @@ def test_toled_along_y_the_frame_sees_the_second_harmonic():
     assert h1 > 2 * h2
 
 
+@pytest.mark.slow
 def test_first_harmonic_against_the_exact_series(quick):
     """T-OLED, the blend's power from the exact series (optics.field_power), quick rig: along x with 4 phases,
     at the default field rank and with every phase kernel (rank 'all'), the measured harmonic is within 5 % of
