@@ -6,7 +6,7 @@ criteria compared are the one restore.train used until 2026-11-25 (the last fift
 two fifths, ≥ 6). For every run folder (a loss.csv) the table gives the epoch and validation PSNR at which each
 criterion stops it (— if never), the last validation, and today's trend at the end in dB per fifth of the
 steps. On the carried cpu models the old criterion stopped three UNets that then gained 0.6–1.5 dB
-(restore/trained/cpu; docs/figures/restore_studies/plateau_criteria.md).
+(the third run's slot; docs/results_history.md, docs/figures/restore_studies/plateau_criteria.md).
 
     python -m restore.studies.plateau_criteria [FOLDER] [--threshold-db 0.1]
 
