@@ -166,18 +166,22 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
     assert params["paper"]["synth"]["channel_kernels"] == "paper"
 
 
-def test_demo_asks_for_the_default_profile(tmp_path, monkeypatch):
-    """`udc-render demo` hands the synthesis the default profile: the fast suite's check of its wiring (the
-    synthesis itself, 100 s of d > 0 kernels even on a tiny scene: test_demo_uses_the_default_profile, slow)."""
+def _demo_request(tmp_path, monkeypatch, *args) -> tuple:
+    """(cfg, {display: distance_mm}) that `udc-render demo ARGS` hands the synthesis, which is not run."""
     import udc_render.cli.synth as cli_synth
     seen = {}
     monkeypatch.setattr(cli_synth, "synth_and_write",
                         lambda scene, displays, cfg, out, quiet: seen.update(displays=displays, cfg=cfg))
-    assert main(["demo", "--out", str(tmp_path), "--quiet"]) == 0
-    cfg = seen["cfg"]
+    assert main(["demo", "--out", str(tmp_path), "--quiet", *args]) == 0
+    return seen["cfg"], {d.name: d.distance_mm for d in seen["displays"]}
+
+
+def test_demo_asks_for_the_default_profile(tmp_path, monkeypatch):
+    """`udc-render demo` hands the synthesis the default profile: the fast suite's check of its wiring (the
+    synthesis itself, 100 s of d > 0 kernels even on a tiny scene: test_demo_uses_the_default_profile, slow)."""
+    cfg, distances_mm = _demo_request(tmp_path, monkeypatch)
     assert cfg.profile["name"] == DEFAULT_PROFILE and cfg.defects == DefectConfig()
-    assert {d.name: d.distance_mm for d in seen["displays"]} == {
-        "glass": 0.0, "toled": PHYSICAL_DISTANCE_MM, "poled": PHYSICAL_DISTANCE_MM}
+    assert distances_mm == {"glass": 0.0, "toled": PHYSICAL_DISTANCE_MM, "poled": PHYSICAL_DISTANCE_MM}
 
 
 @pytest.mark.slow
@@ -197,11 +201,6 @@ def test_demo_uses_the_default_profile(scene, tmp_path, monkeypatch):
 def test_demo_takes_the_paper_profile(tmp_path, monkeypatch):
     """`udc-render demo --profile paper` asks the synthesis for the per-channel form at d = 0 without defects
     (the synthesis itself runs in test_demo_uses_the_default_profile, slow, and the synth tests)."""
-    import udc_render.cli.synth as cli_synth
-    seen = {}
-    monkeypatch.setattr(cli_synth, "synth_and_write",
-                        lambda scene, displays, cfg, out, quiet: seen.update(displays=displays, cfg=cfg))
-    assert main(["demo", "--out", str(tmp_path), "--quiet", "--profile", "paper"]) == 0
-    cfg = seen["cfg"]
+    cfg, distances_mm = _demo_request(tmp_path, monkeypatch, "--profile", "paper")
     assert cfg.profile["name"] == "paper" and cfg.defects is None
-    assert {d.name: d.distance_mm for d in seen["displays"]} == {"glass": 0.0, "toled": 0.0, "poled": 0.0}
+    assert distances_mm == {"glass": 0.0, "toled": 0.0, "poled": 0.0}
