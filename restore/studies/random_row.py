@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import time
 from dataclasses import dataclass, replace
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 from typing import NamedTuple
 
 from restore.studies.stage_times import StageTimes
@@ -26,7 +26,7 @@ from udc_render.dataset.randomize import default_distributions, parse
 from udc_render.io.files import save_json
 from udc_render.pipeline import SynthConfig
 from udc_render.profiles import describe, resolve_profile
-from udc_render.scene import load_scene
+from udc_render.scene import load_scene, scenes_dir
 from udc_render.scene.geometry import sensor_kernel_px
 from udc_render.scene.overrides import with_overrides
 
@@ -103,9 +103,20 @@ def carried_bank(carried_run: Path, plan: BankPlan) -> BankRecord | None:
     if not (Path(carried_run) / "model.pt").is_file() or not path.is_file():
         return None
     doc = json.loads(path.read_text())
-    if doc.get("complete") is not True or differing_settings(doc, plan.settings):
+    if doc.get("complete") is not True or differing_settings(scene_here(doc, plan.settings), plan.settings):
         return None
     return BankRecord(bank_json_fingerprint(path), tuple(r["name"] for r in doc["panels"]))
+
+
+def scene_here(doc: dict, settings: dict) -> dict:
+    """bank.json's `doc` with its scene read as this checkout's when both name the same built-in scene file
+    (scenes/NAME.toml) of two checkouts: bank.json records the scene by its absolute path, and a carried bank made
+    in /work/main is today's in a clone elsewhere. What the kernels depend on (frame, pixel pitch, lens, bands,
+    synthesis, displays) is compared key by key all the same."""
+    theirs, ours = PurePosixPath(str(doc.get("scene", ""))), Path(str(settings.get("scene", "")))
+    if ours.parent == scenes_dir() and (theirs.parent.name, theirs.name) == (ours.parent.name, ours.name):
+        return {**doc, "scene": settings["scene"]}
+    return doc
 
 
 def bank_hours(out: Path) -> float:

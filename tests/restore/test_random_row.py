@@ -11,6 +11,7 @@ from restore.studies.random_row import (BANK_SECONDS_FILE, SECONDS_FILE, BankRec
                                        family_distributions, online_settings, restore_bank_seconds)
 from restore.train import TrainSettings
 from udc_render.dataset.randomize import default_distributions, draw_panels
+from udc_render.scene import scenes_dir
 
 
 @pytest.mark.parametrize("family", ["toled", "poled"])
@@ -54,6 +55,17 @@ def test_a_carried_bank_of_todays_plan_is_taken_without_its_kernels(tmp_path):
                                 ("random_000", "random_001"))
     assert not plan.folder.exists()  # nothing made
     assert carried_bank(run, bank_plan(tmp_path / "out", b, "toled")) is None  # another family's plan: make the bank
+
+
+def test_a_carried_bank_made_in_another_checkout_is_taken(tmp_path):
+    b = BUDGETS["quick"]
+    plan = bank_plan(tmp_path / "out", b, "poled")
+    assert plan.settings["scene"] == str(scenes_dir() / "monitor.toml")
+    elsewhere = _carried_run(tmp_path / "elsewhere", {**plan.settings, "scene": "/another/clone/scenes/monitor.toml"})
+    assert carried_bank(elsewhere, plan) is not None  # the built-in scene, recorded by another clone's path
+    for scene in ("/another/clone/scenes/office.toml", "/another/clone/mine/monitor.toml", "monitor.toml"):
+        run = _carried_run(tmp_path / scene.replace("/", "_"), {**plan.settings, "scene": scene})
+        assert carried_bank(run, plan) is None, scene  # another scene, or a user's file of the same name
 
 
 def test_a_carried_bank_that_is_not_todays_is_not_taken(tmp_path):
