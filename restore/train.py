@@ -103,6 +103,24 @@ def pick_device(name: str = "auto") -> torch.device:
     return torch.device(name)
 
 
+def bf16_native(device: torch.device) -> bool:
+    """Whether bfloat16 convolutions run natively on `device`: a CUDA GPU that supports them, or a CPU on which
+    oneDNN has bf16 kernels (AVX-512 core or AMX). On an AVX2-only CPU they are emulated: a UNet step in bf16 took
+    13× float32's at the cpu budget's batch (15.4 s against 1.19 s; 22-30× on 128-px crops; 2026-11-28, AMD EPYC
+    with AVX2, 2 threads; benchmarks/README.md, 'bfloat16 where it is emulated')."""
+    if device.type == "cuda":
+        return torch.cuda.is_bf16_supported()
+    return device.type == "cpu" and bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+
+
+def check_autocast(settings: TrainSettings, device: torch.device) -> None:
+    """Refuse autocast 'bf16' at once where it is emulated (bf16_native): days instead of hours."""
+    if settings.autocast == "bf16" and not bf16_native(device):
+        what = f"this CPU ({torch.backends.cpu.get_cpu_capability()})" if device.type == "cpu" else f"{device}"
+        raise TrainError(f"autocast = 'bf16': {what} has no native bfloat16, so a step would run 13-30× slower than "
+                         "in float32; train in float32 (leave --autocast out) or on a CPU with AVX-512 or a GPU")
+
+
 def learning_rate(settings: TrainSettings, epoch: int) -> float:
     """lr, halved from epoch ⌊epochs / 2⌋ on."""
     return settings.lr * (0.5 if epoch >= settings.epochs // 2 else 1.0)
@@ -324,6 +342,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     if (done := finished_summary(out, settings)) is not None:
         return done
     dev = pick_device(device)
+    check_autocast(settings, dev)
     data, val_pairs = _training_data(data_dir, settings, dev, bank, degrade_workers)
     torch.manual_seed(settings.seed)
     model = build_model(settings.model).to(dev, memory_format=torch.channels_last)  # 1.07× (bench_train)

@@ -61,7 +61,7 @@ def register(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="initialisation, crops and order [0]")
     p.add_argument("--autocast", choices=("bf16",),
                    help="bf16: the forward pass in bfloat16 (weights and Adam in float32), 2× faster on a CPU "
-                        "with AVX512-BF16 [off: float32]")
+                        "with AVX512-BF16; refused where bf16 is emulated (AVX2 only: 13-30× slower) [off: float32]")
     p.add_argument("--device", default="auto", help="auto (a GPU when present), cpu, cuda, cuda:N [auto]")
     p.add_argument("--threads", type=positive("--threads", int), help="CPU threads for torch [torch's default]")
     p.add_argument("--checkpoint-s", type=positive("--checkpoint-s"), default=60.0,
