@@ -33,6 +33,26 @@ def carried_last(carry: Path | None) -> tuple:
     return tuple(sorted(TRAIN_ORDER, key=lambda r: done(r[0])))
 
 
+def models_to_train(out: Path, carry: Path | None) -> list[str]:
+    """The runs (<row>_<display>) whose model.pt is neither in out/train nor in `carry`."""
+    def has_model(row: str, d: str) -> bool:
+        folders = [run_dir(out, row, d)] + ([carry / f"{row}_{d}"] if carry else [])
+        return any((f / "model.pt").is_file() for f in folders)
+    return [f"{row}_{d}" for row, _, _ in TRAIN_ORDER for d in DISPLAYS if not has_model(row, d)]
+
+
+def check_precision(out: Path, budget: str, carry: Path | None) -> None:
+    """Refuse at once, before any dataset is made, a budget that trains in bfloat16 where bfloat16 is emulated
+    (restore.train.bf16_native) while a model is still to train."""
+    from restore.train import TrainError, bf16_native, pick_device
+    todo = models_to_train(out, carry)
+    if BUDGETS[budget].get("autocast") == "bf16" and todo and not bf16_native(pick_device("auto")):
+        names = ", ".join(todo[:3]) + (", ..." if len(todo) > 3 else "")
+        raise TrainError(f"--budget {budget}: {len(todo)} models to train ({names}) in bfloat16, which this CPU "
+                         "emulates (13-30× slower than float32): run it on a CPU with AVX-512 or a GPU, or --carry "
+                         "their finished models")
+
+
 def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | None = None) -> dict:
     """Every row's model per display, trained or resumed in out/train/<row>_<display> in TRAIN_ORDER (with
     `carry`: carried_last), each profile's dataset made or resumed when the first row that trains on it is
@@ -94,6 +114,7 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     from restore.studies.results_document import copy_figures, plot_training_curves, results_document
     from restore.studies.scoring import error_band_rows, evaluate_rows, training_levels
     b, out = BUDGETS[budget], Path(out)
+    check_precision(out, budget, carry)
     t0, times = time.perf_counter(), {}
     models = train_models(out, b, progress, times, carry)
     datasets = dataset_folders(out)  # both made by train_models: every profile trains a row

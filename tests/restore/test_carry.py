@@ -69,3 +69,18 @@ def test_extra_records_are_kept_beside_the_model(tmp_path):
     assert sorted(p.name for p in carried.iterdir()) == sorted((*CARRIED, "bank.json"))
     assert (carried / "bank.json").read_text() == '{"complete": true}'
     assert max(carried.iterdir(), key=lambda p: p.stat().st_mtime_ns).name == "model.pt"  # last: a whole copy
+
+
+def test_a_bf16_budget_with_models_to_train_is_refused_before_any_dataset(tmp_path, monkeypatch):
+    """Where bfloat16 is emulated (restore.train.bf16_native) the cpu budget (autocast bf16) is refused at once
+    while a model is still to train; the shipped slot holds every model, so scoring it is not refused."""
+    import restore.train
+    from restore.studies.budgets import shipped_folder
+    from restore.studies.results import check_precision, models_to_train, run_results
+    monkeypatch.setattr(restore.train, "bf16_native", lambda device: False)
+    with pytest.raises(TrainError, match=r"--budget cpu: 8 models to train \(unet_toled, unet_poled, .+\) in bfloat16"):
+        run_results(tmp_path / "out", "cpu", carry=None, progress=False)
+    assert not (tmp_path / "out").exists()
+    assert models_to_train(tmp_path / "out", shipped_folder()) == []
+    check_precision(tmp_path / "out", "cpu", shipped_folder())  # nothing to train: allowed
+    check_precision(tmp_path / "out", "quick", None)  # float32 budget: allowed
