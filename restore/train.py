@@ -37,6 +37,7 @@ from tqdm import tqdm
 
 from restore.data import PairBatches, PairDataset, largest_crop_px, list_pairs, load_pair, read_manifest
 from restore.online import DrawLog, online_data
+from restore.precision import check_autocast
 from restore.losses import loss_fn
 from restore.models import build_model, model_config
 from udc_render.errors import UdcError
@@ -101,24 +102,6 @@ def pick_device(name: str = "auto") -> torch.device:
     if name.startswith("cuda") and not torch.cuda.is_available():
         raise TrainError(f"--device = {name!r}: no CUDA GPU here (use auto or cpu)")
     return torch.device(name)
-
-
-def bf16_native(device: torch.device) -> bool:
-    """Whether bfloat16 convolutions run natively on `device`: a CUDA GPU that supports them, or a CPU on which
-    oneDNN has bf16 kernels (AVX-512 core or AMX). On an AVX2-only CPU they are emulated: a UNet step in bf16 took
-    13× float32's at the cpu budget's batch (15.4 s against 1.19 s; 22-30× on 128-px crops; 2026-11-28, AMD EPYC
-    with AVX2, 2 threads; benchmarks/README.md, 'bfloat16 where it is emulated')."""
-    if device.type == "cuda":
-        return torch.cuda.is_bf16_supported()
-    return device.type == "cpu" and bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
-
-
-def check_autocast(settings: TrainSettings, device: torch.device) -> None:
-    """Refuse autocast 'bf16' at once where it is emulated (bf16_native): days instead of hours."""
-    if settings.autocast == "bf16" and not bf16_native(device):
-        what = f"this CPU ({torch.backends.cpu.get_cpu_capability()})" if device.type == "cpu" else f"{device}"
-        raise TrainError(f"autocast = 'bf16': {what} has no native bfloat16, so a step would run 13-30× slower than "
-                         "in float32; train in float32 (leave --autocast out) or on a CPU with AVX-512 or a GPU")
 
 
 def learning_rate(settings: TrainSettings, epoch: int) -> float:
@@ -342,7 +325,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     if (done := finished_summary(out, settings)) is not None:
         return done
     dev = pick_device(device)
-    check_autocast(settings, dev)
+    check_autocast(settings.autocast, dev)
     data, val_pairs = _training_data(data_dir, settings, dev, bank, degrade_workers)
     torch.manual_seed(settings.seed)
     model = build_model(settings.model).to(dev, memory_format=torch.channels_last)  # 1.07× (bench_train)

@@ -55,11 +55,12 @@ def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop
     from restore.data import PairDataset, list_pairs, load_pair
     from restore.losses import loss_fn
     from restore.models import build_model
-    from restore.train import TrainSettings, centre_crop, check_autocast, train_step, validation_psnr
+    from restore.precision import check_autocast
+    from restore.train import TrainSettings, centre_crop, train_step, validation_psnr
     settings = TrainSettings(model=variant["model"], display=display, batch=BATCH, crop_px=variant["crop_px"],
                              crops_per_pair=CROPS_PER_PAIR, lr=variant["lr"], seed=SEED,
                              clip_grad_norm=CLIP_GRAD_NORM, autocast=autocast)
-    check_autocast(settings, torch.device("cpu"))  # bf16 where it is emulated: refused at once
+    check_autocast(autocast, torch.device("cpu"))  # bf16 where it is emulated: refused at once
     torch.manual_seed(SEED)
     data = PairDataset(list_pairs(data_dir, "train", [display]), settings.crop_px, augment=True, seed=SEED,
                        crops_per_pair=CROPS_PER_PAIR)

@@ -44,11 +44,12 @@ def models_to_train(out: Path, carry: Path | None) -> list[str]:
 def check_precision(out: Path, budget: str, carry: Path | None) -> None:
     """Refuse at once, before any dataset is made, a budget that trains in bfloat16 where bfloat16 is emulated
     (restore.train.bf16_native) while a model is still to train."""
-    from restore.train import TrainError, bf16_native, pick_device
+    from restore.precision import PrecisionError, bf16_native
+    from restore.train import pick_device
     todo = models_to_train(out, carry)
     if BUDGETS[budget].get("autocast") == "bf16" and todo and not bf16_native(pick_device("auto")):
         names = ", ".join(todo[:3]) + (", ..." if len(todo) > 3 else "")
-        raise TrainError(f"--budget {budget}: {len(todo)} models to train ({names}) in bfloat16, which this CPU "
+        raise PrecisionError(f"--budget {budget}: {len(todo)} models to train ({names}) in bfloat16, which this CPU "
                          "emulates (13-30× slower than float32): run it on a CPU with AVX-512 or a GPU, or --carry "
                          "their finished models")
 

@@ -74,11 +74,12 @@ def test_extra_records_are_kept_beside_the_model(tmp_path):
 def test_a_bf16_budget_with_models_to_train_is_refused_before_any_dataset(tmp_path, monkeypatch):
     """Where bfloat16 is emulated (restore.train.bf16_native) the cpu budget (autocast bf16) is refused at once
     while a model is still to train; the shipped slot holds every model, so scoring it is not refused."""
-    import restore.train
+    import restore.precision
+    from restore.precision import PrecisionError
     from restore.studies.budgets import shipped_folder
     from restore.studies.results import check_precision, models_to_train, run_results
-    monkeypatch.setattr(restore.train, "bf16_native", lambda device: False)
-    with pytest.raises(TrainError, match=r"--budget cpu: 8 models to train \(unet_toled, unet_poled, .+\) in bfloat16"):
+    monkeypatch.setattr(restore.precision, "bf16_native", lambda device: False)
+    with pytest.raises(PrecisionError, match=r"--budget cpu: 8 models to train \(unet_toled, unet_poled, .+\) in bfloat16"):
         run_results(tmp_path / "out", "cpu", carry=None, progress=False)
     assert not (tmp_path / "out").exists()
     assert models_to_train(tmp_path / "out", shipped_folder()) == []

@@ -9,7 +9,8 @@ import torch
 
 from tests.conftest import write_pairs
 from restore.data import list_pairs, load_pair
-import restore.train as train_module
+import restore.precision
+from restore.precision import PrecisionError
 from restore.train import TrainError, TrainSettings, load_model, predict, train
 from udc_render.sensor import demosaic_bilinear
 from udc_render.cli import main
@@ -351,7 +352,7 @@ def test_bf16_autocast_step_matches_float32_and_keeps_float32_weights():
 def test_tiny_unet_trained_in_bf16_beats_the_identity(tmp_path, monkeypatch):
     """The first test's recipe with the forward in bfloat16: still > 2 dB above the identity (bf16 allowed on any
     CPU here: a tiny model is quick even where it is emulated)."""
-    monkeypatch.setattr(train_module, "bf16_native", lambda device: True)
+    monkeypatch.setattr(restore.precision, "bf16_native", lambda device: True)
     data = write_pairs(tmp_path / "pairs", splits=(("train", 8), ("test", 2)), blur_px=3, noise=0.1)
     s = TrainSettings(model=TINY_UNET, display="blur", epochs=30, batch=4, crop_px=48, crops_per_pair=2, lr=3e-3,
                       autocast="bf16")
@@ -364,10 +365,10 @@ def test_tiny_unet_trained_in_bf16_beats_the_identity(tmp_path, monkeypatch):
 
 
 def test_bf16_where_it_is_emulated_is_refused_at_once(tmp_path, monkeypatch):
-    monkeypatch.setattr(train_module, "bf16_native", lambda device: False)
+    monkeypatch.setattr(restore.precision, "bf16_native", lambda device: False)
     data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(16, 16))
     s = TrainSettings(model=TINY_RESNET, display="blur", epochs=1, batch=2, crop_px=14, autocast="bf16")
-    with pytest.raises(TrainError, match=r"autocast = 'bf16': this CPU \(.+\) has no native bfloat16.+float32"):
+    with pytest.raises(PrecisionError, match=r"autocast = 'bf16': this CPU \(.+\) has no native bfloat16.+float32"):
         train(data, tmp_path / "run", s, progress=False)
     assert not (tmp_path / "run").exists()
     train(data, tmp_path / "run", replace(s, autocast=None), progress=False)  # float32 runs
