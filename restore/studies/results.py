@@ -24,34 +24,36 @@ from udc_render.io.files import save_text
 __all__ = ["BUDGETS", "ordering_checks", "run_results"]  # what `udc-render results` reads
 
 
+def carried(carry: Path | None, row: str, display: str) -> bool:
+    """Whether `carry` holds the finished model of `row` for `display` (restore.studies.carry.keep)."""
+    return carry is not None and (carry / f"{row}_{display}" / "model.pt").is_file()
+
+
 def carried_last(carry: Path | None) -> tuple:
     """TRAIN_ORDER with the rows whose models `carry` holds for every display moved to the end (stable): a fresh
     machine trains what is missing first and remakes the datasets and banks that only check a carried model
     (hours) after it, so a session's training outlives it in the carry folder sooner."""
-    def done(row: str) -> bool:
-        return carry is not None and all((carry / f"{row}_{d}" / "model.pt").is_file() for d in DISPLAYS)
-    return tuple(sorted(TRAIN_ORDER, key=lambda r: done(r[0])))
+    return tuple(sorted(TRAIN_ORDER, key=lambda r: all(carried(carry, r[0], d) for d in DISPLAYS)))
 
 
 def models_to_train(out: Path, carry: Path | None) -> list[str]:
     """The runs (<row>_<display>) whose model.pt is neither in out/train nor in `carry`."""
-    def has_model(row: str, d: str) -> bool:
-        folders = [run_dir(out, row, d)] + ([carry / f"{row}_{d}"] if carry else [])
-        return any((f / "model.pt").is_file() for f in folders)
-    return [f"{row}_{d}" for row, _, _ in TRAIN_ORDER for d in DISPLAYS if not has_model(row, d)]
+    return [f"{row}_{d}" for row, _, _ in TRAIN_ORDER for d in DISPLAYS
+            if not ((run_dir(out, row, d) / "model.pt").is_file() or carried(carry, row, d))]
 
 
 def check_precision(out: Path, budget: str, carry: Path | None) -> None:
     """Refuse at once, before any dataset is made, a budget that trains in bfloat16 where bfloat16 is emulated
-    (restore.train.bf16_native) while a model is still to train."""
+    (restore.precision.bf16_native) while a model is still to train."""
     from restore.precision import PrecisionError, bf16_native
     from restore.train import pick_device
-    todo = models_to_train(out, carry)
-    if BUDGETS[budget].get("autocast") == "bf16" and todo and not bf16_native(pick_device("auto")):
+    if BUDGETS[budget].get("autocast") != "bf16" or bf16_native(pick_device("auto")):
+        return
+    if todo := models_to_train(out, carry):
         names = ", ".join(todo[:3]) + (", ..." if len(todo) > 3 else "")
         raise PrecisionError(f"--budget {budget}: {len(todo)} models to train ({names}) in bfloat16, which this CPU "
-                         "emulates (13-30× slower than float32): run it on a CPU with AVX-512 or a GPU, or --carry "
-                         "their finished models")
+                             "emulates (13-30× slower than float32): run it on a CPU with AVX-512 or a GPU, or "
+                             "--carry their finished models")
 
 
 def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | None = None) -> dict:

@@ -72,7 +72,7 @@ def test_extra_records_are_kept_beside_the_model(tmp_path):
 
 
 def test_a_bf16_budget_with_models_to_train_is_refused_before_any_dataset(tmp_path, monkeypatch):
-    """Where bfloat16 is emulated (restore.train.bf16_native) the cpu budget (autocast bf16) is refused at once
+    """Where bfloat16 is emulated (restore.precision.bf16_native) the cpu budget (autocast bf16) is refused at once
     while a model is still to train; the shipped slot holds every model, so scoring it is not refused."""
     import restore.precision
     from restore.precision import PrecisionError
