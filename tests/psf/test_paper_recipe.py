@@ -26,15 +26,29 @@ def _points(layout, lam_nm: float, pixel_um: float) -> np.ndarray:
 
 
 def test_r_is_the_printed_one_on_the_papers_rig():
-    np.testing.assert_allclose([paper_ratio_r(l, LENS, 3.1) for l in WAVELENGTHS_NM], [2.41, 2.98, 3.44], rtol=1e-12)
-    # the formula's r is 2.69, 3.31, 3.83 (docs/PHYSICS.md §2): printed / formula = 0.896, 0.900, 0.899
-    np.testing.assert_allclose([formula_ratio_r(l, LENS, 3.1) for l in WAVELENGTHS_NM], [2.69, 3.31, 3.83],
-                               atol=0.006)
-    assert sorted(PRINTED_R) == [450.0, 520.0, 640.0]
+    # The formula's r = D ρ / (λ f) from the rig's numbers written out (D 3333 µm, f 6000 µm, ρ 3.1 µm):
+    # 2.69, 3.31, 3.83 (docs/PHYSICS.md §2).
+    formula = [3333.0 * 3.1 / (lam * 1e-3 * 6000.0) for lam in WAVELENGTHS_NM]
+    np.testing.assert_allclose([formula_ratio_r(l, LENS, 3.1) for l in WAVELENGTHS_NM], formula, rtol=1e-12)
+    np.testing.assert_allclose(formula, [2.69, 3.31, 3.83], atol=0.006)
+    # The printed r are one window of ≈ 3.0 mm, not the aperture's 3333 µm: r λ f / ρ = 2985, 2999, 2996 µm
+    # (the module's "as if the sampled window were ≈ 3.0 mm"; printed / formula = 0.896, 0.900, 0.899).
+    printed = [2.41, 2.98, 3.44]
+    assert sorted(PRINTED_R.items()) == [(450.0, 3.44), (520.0, 2.98), (640.0, 2.41)]
+    window_um = [r * lam * 1e-3 * 6000.0 / 3.1 for r, lam in zip(printed, WAVELENGTHS_NM)]
+    np.testing.assert_allclose(window_um, 3000.0, rtol=5e-3)
     ks = compute_kernels(None, LENS, WAVELENGTHS_NM, method="paper", size_px=15, pupil_samples=64)
-    np.testing.assert_allclose(ks.ratio_r, [2.41, 2.98, 3.44], rtol=1e-12)
-    # halving the pixel halves r (the formula's scaling, at the printed ratio)
-    assert paper_ratio_r(640.0, LENS, 1.55) == pytest.approx(1.205, rel=1e-12)
+    np.testing.assert_allclose(ks.ratio_r, printed, rtol=1e-12)
+    # Between the printed wavelengths the ratio printed / formula is linear in λ: at 580 nm, midway between
+    # 520 and 640, r = (2.98 · 520 + 2.41 · 640) / (2 · 580) = 2.66552; beyond them the nearest ratio is kept,
+    # r ∝ 1/λ: 3.44 · 450 / 400 = 3.87 and 2.41 · 640 / 700 = 2.20343.
+    assert paper_ratio_r(580.0, LENS, 3.1) == pytest.approx((2.98 * 520 + 2.41 * 640) / (2 * 580), rel=1e-12)
+    assert paper_ratio_r(400.0, LENS, 3.1) == pytest.approx(3.44 * 450 / 400, rel=1e-12)
+    assert paper_ratio_r(700.0, LENS, 3.1) == pytest.approx(2.41 * 640 / 700, rel=1e-12)
+    # Another rig keeps the ratio: r scales as D ρ / f (here 2000 µm, 1.55 µm, 4000 µm: × 0.45005)
+    other = Lens(focal_length_um=4000.0, aperture_um=2000.0)
+    want = (2.98 * 520 + 2.41 * 640) / (2 * 580) * (2000.0 / 3333.0) * (1.55 / 3.1) * (6000.0 / 4000.0)
+    assert paper_ratio_r(580.0, other, 1.55) == pytest.approx(want, rel=1e-12)
 
 
 @pytest.mark.parametrize("layout,tol,off", [(None, 2.5e-3, None), (layouts.toled(), 1.5e-2, 0.3)],

@@ -58,36 +58,38 @@ def _total(band_image, ks, far) -> np.ndarray:
 @pytest.mark.parametrize("kind", ["patch", "flat"])
 def test_total_light_does_not_depend_on_the_kernel_window(cores, kind):
     """P-OLED, d = 0: the frame's light per band through the 129-px and the 513-px core windows differs by
-    less than 1 % with the far field (measured patch 0.06–0.25 %, flat 0.01–0.07 %), and by more than 1 %
-    without it (measured patch 9.7–11.3 %, flat 12.7–13.4 %: the light the 129-px window loses beyond the
-    513-px one's)."""
+    less than 0.5 % with the far field (measured patch 0.06–0.25 %, flat 0.01–0.07 %: 2× the largest), and by
+    more than 5 % without it (measured patch 9.7–11.3 %, flat 12.7–13.4 %: the light the 129-px window loses
+    beyond the 513-px one's)."""
     b = _scene(kind)
     (small, far_small), (large, far_large) = cores[129], cores[513]
     on = _total(b, small, far_small) / _total(b, large, far_large) - 1
     off = _total(b, small, None) / _total(b, large, None) - 1
-    assert np.all(np.abs(on) < 0.01), on
-    assert np.all(np.abs(off) > 0.01), off
+    assert np.all(np.abs(on) < 0.005), on
+    assert np.all(np.abs(off) > 0.05), off
 
 
 @pytest.mark.parametrize("size, distance_mm", [(129, 0.0), (513, 0.0), (129, 2.0)])
 def test_far_field_sums_to_the_lost_share(size, distance_mm):
-    """Σ f = o − o_acc (the core's lost share less what lies beyond the acceptance) within 2 % of o (measured
-    0.01–0.4 %), non-negative and finite; at d > 0 the d = 0 far field against the field kernels' mean."""
+    """Σ f = o − o_acc (the core's lost share less what lies beyond the acceptance) within 1 % of it (measured
+    0.001–0.51 %, the largest at 513 px, 400–500 nm: 2×), non-negative and finite; at d > 0 the d = 0 far field
+    against the field kernels' mean. What falls past the frame is below 2e-4 of o (measured 8.1e-5–9.8e-5)."""
     ks = _core(size, distance_mm)
     f = far_field(layouts.poled(), LENS, GRID, ks, FRAME_UM, ON)
     assert np.all(np.isfinite(f.kernels)) and f.kernels.min() >= 0 and np.all(f.used)
     assert np.all(f.added <= f.lost) and np.all(f.beyond > 0)
-    np.testing.assert_allclose(f.added, f.lost - f.beyond, rtol=0.02)
-    assert f.clipped < 1e-3 * f.lost.min()  # measured 1e-4
+    np.testing.assert_allclose(f.added, f.lost - f.beyond, rtol=0.01)
+    assert f.clipped < 2e-4 * f.lost.min()
 
 
 def test_far_field_float32_against_float64():
-    """Kernels in float32 give the far share of float64 within 1e-5 and its kernels within 1e-4 of their peak."""
+    """Kernels in float32 give the far share of float64 within 3e-7 (measured 7.6e-8) and its kernels within
+    1.5e-5 of their peak (measured 4.0e-6): ~4×, float32 rounding that another machine's SIMD sums may change."""
     f32 = far_field(layouts.poled(), LENS, GRID, _core(129), FRAME_UM, ON)
     f64 = far_field(layouts.poled(), LENS, GRID, _core(129, precision="float64"),
                     FRAME_UM, replace(ON, kernel_precision="float64"))
-    np.testing.assert_allclose(f32.added, f64.added, rtol=1e-5)
-    np.testing.assert_allclose(f32.kernels, f64.kernels, atol=1e-4 * f64.kernels.max())  # measured 2e-5
+    np.testing.assert_allclose(f32.added, f64.added, rtol=3e-7)
+    np.testing.assert_allclose(f32.kernels, f64.kernels, atol=1.5e-5 * f64.kernels.max())
 
 
 def _synthetic_far(size=21, coarse=5, hole=2) -> FarField:

@@ -185,17 +185,50 @@ def test_display_light_reaches_the_displays_not_the_glass(rig):
 # ---------------------------------------------------------------- the spreads
 
 
+def _tail_share_closed_form(inner_deg: float, hi_rad: float) -> float:
+    """∫ sinθ / θ² dθ = Ci(θ) − sinθ / θ: the share of I = c θ⁻² within θ₁ ≤ θ ≤ hi, c from θ₁ to 90°."""
+    from scipy.special import sici
+
+    def antiderivative(t: float) -> float:
+        return sici(t)[1] - math.sin(t) / t
+    lo = math.radians(inner_deg)
+    return (antiderivative(hi_rad) - antiderivative(lo)) / (antiderivative(math.pi / 2) - antiderivative(lo))
+
+
+@pytest.mark.parametrize("inner_deg", [1.0, 2.5])
+def test_tail_share_is_the_sine_integrals_and_its_density_fills_the_plane(inner_deg):
+    """share_within against Ci(θ) − sinθ/θ, and c against its closed form 1 / (2π [·] from θ₁ to 90°) (measured
+    ≤ 9e-11 relative at 1° and 2.5°: the trapezoid's error; asserted 3e-10); the density ρ(r) per µm², integrated
+    over the sensor plane in r (Gauss-Legendre in ln r, not the θ grid), holds the whole hemisphere's light
+    (measured 1 − 9e-11)."""
+    from scipy.special import sici
+    tail = Spread("tail", 6000.0, inner_deg=inner_deg)
+    lo = math.radians(inner_deg)
+    norm = 2 * math.pi * (sici(math.pi / 2)[1] - 2 / math.pi - sici(lo)[1] + math.sin(lo) / lo)
+    assert S.tail_constant(inner_deg) == pytest.approx(1 / norm, rel=3e-10)
+    for radius_um in (300.0, 3000.0, 30000.0):
+        exact = _tail_share_closed_form(inner_deg, max(lo, math.atan(radius_um / 6000.0)))
+        assert tail.share_within(radius_um) == pytest.approx(exact, rel=3e-10, abs=1e-15), radius_um
+    nodes, weights = np.polynomial.legendre.leggauss(48)  # on 40 unit steps of s = ln r from r₁ (e⁴⁰ r₁: θ → 90°)
+    s = (math.log(tail.inner_radius_um()) + np.arange(40.0)[:, None] + (nodes[None, :] + 1) / 2).ravel()
+    plane = float((np.tile(weights / 2, 40) * tail.density(np.exp(s)) * 2 * math.pi * np.exp(2 * s)).sum())
+    assert plane == pytest.approx(1.0, abs=3e-10)
+
+
 def test_spread_kernel_holds_the_tails_norm():
-    """The discrete tail kernel within a radius sums to the analytic share within it (1e-3), and the share
-    over the whole hemisphere is 1."""
+    """The discrete tail kernel within a radius sums to the closed-form share within it (measured 4.9e-5,
+    asserted 1.5e-4). The disc's cells, before the kernel rescales them to a sum of 1, hold its light to the
+    sampling of its rim (measured 1 + 2.1e-4, asserted 6e-4), and a cell wholly inside holds its area / πR²."""
     tail = Spread("tail", 6000.0, inner_deg=2.5)
     k = S.kernel(tail, (300, 300), 12.4)
     y = np.arange(-299, 300) * 12.4
     r = np.hypot(y[:, None], y[None, :])
-    assert k[r <= 3000].sum() == pytest.approx(tail.share_within(3000.0), abs=1e-3)
-    assert tail.share_within(1e12) == pytest.approx(1.0, abs=1e-6)
+    assert k[r <= 3000].sum() == pytest.approx(_tail_share_closed_form(2.5, math.atan(3000 / 6000)), abs=1.5e-4)
     disc = Spread("disc", 6000.0, radius_um=500.0)
-    assert S.kernel(disc, (100, 100), 24.8).sum() == pytest.approx(1.0, abs=2e-3)
+    assert S._cell_shares(disc, (100, 100), 24.8).sum() == pytest.approx(1.0, abs=6e-4)
+    kd = S.kernel(disc, (100, 100), 24.8)
+    assert kd.sum() == pytest.approx(1.0, rel=1e-12)
+    assert kd[99, 99] == pytest.approx(24.8 ** 2 / (math.pi * 500.0 ** 2), rel=6e-4)
 
 
 def test_coarse_grid_matches_the_full_resolution_veil(monkeypatch):
