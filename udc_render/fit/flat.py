@@ -60,11 +60,13 @@ class FlatFit:
 
 def relative_image(frame: Frame) -> tuple[np.ndarray, np.ndarray]:
     """(the flat field with each CFA site class or colour channel divided by its median, the usable pixels)."""
-    planes = [frame.dn[..., c] for c in range(frame.dn.shape[-1])] if frame.kind == "rgb" else [frame.dn]
+    above = frame.above_black()
+    planes = [(frame.dn[..., c], above[..., c]) for c in range(frame.dn.shape[-1])] if frame.kind == "rgb" else \
+        [(frame.dn, above)]
     out, usable = np.zeros(frame.shape), np.ones(frame.shape, bool)
-    for raw in planes:
+    for raw, d in planes:
         usable &= ~saturated(frame, raw)
-        d = raw - frame.black_dn
+        d = d.copy()
         sites = frame.site_map()
         for s in np.unique(sites):
             sel = sites == s

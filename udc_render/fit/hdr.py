@@ -80,15 +80,17 @@ def colour_gains(wavelength_nm: float, camera: str) -> np.ndarray:
 def _channel(frames: list[Frame]) -> int:
     """The colour channel with the most signal above black (colour images)."""
     f = frames[0]
-    return int(np.argmax(np.sum(f.dn - f.black_dn, axis=(0, 1))))
+    return int(np.argmax(np.sum(f.above_black(), axis=(0, 1))))
 
 
 def _prepare(frame: Frame, channel: int, gains: np.ndarray) -> dict:
     """d (balanced, offset removed), the read σ map, the masks and the colour gain map of one frame."""
-    raw = frame.dn[..., channel] if frame.kind == "rgb" else frame.dn
+    raw, above = frame.dn, frame.above_black()
+    if frame.kind == "rgb":
+        raw, above = raw[..., channel], above[..., channel]
     sat = saturated(frame, raw)
     gain = gains[frame.colour_map()] if frame.kind == "cfa" else np.ones(raw.shape)
-    d = (raw - frame.black_dn) / gain
+    d = above / gain
     edge = border(raw.shape) & ~sat
     sites = frame.site_map()
     sigma = np.zeros(raw.shape)
@@ -100,7 +102,7 @@ def _prepare(frame: Frame, channel: int, gains: np.ndarray) -> dict:
         sigma[sites == s] = max(robust_sigma(d[sel]), 0.5 / gain[sites == s].max())
     usable = ~sat & ~hot_pixels(d, sigma)
     return {"path": frame.path, "d": d, "sigma": sigma, "usable": usable, "sat": sat, "gain": gain,
-            "top": (frame.saturation_dn - frame.black_dn) * NEAR_CLIP}
+            "top": (frame.saturation_dn - (raw - above)) * NEAR_CLIP}
 
 
 def _overlap(dim: dict, bright: dict) -> np.ndarray:

@@ -1,24 +1,23 @@
-"""Reading a user's measurement files: PNG or TIFF at 8 or 16 bits (grey or colour) and DNG (its CFA
-mosaic, read with tifffile; the black and white levels from its BlackLevel and WhiteLevel tags).
+"""Reading a user's measurement files: PNG (pypng) or TIFF (tifffile) at 8 or 16 bits, grey or colour, every
+bit kept; and DNG (fit.dng: decoded by LibRaw, any compression it knows; the ActiveArea, the LinearizationTable,
+the black level per CFA site and per row and column, the WhiteLevel and the CFA pattern from the tags).
 
-Options win over the file: --black-level (else the DNG's tag, else 0, noted), --saturation (else the DNG's
-WhiteLevel, else the integer type's largest value). A pixel at or above the saturation level is clipped: it
-is masked, with its 8 neighbours (charge that spills over), never fitted.
+Options win over the file: --black-level (one level for every pixel; else the DNG's, per pixel; else 0,
+noted), --saturation (else the DNG's WhiteLevel, else the integer type's largest value). A pixel at or above
+the saturation level is clipped: it is masked, with its 8 neighbours (charge that spills over), never fitted.
+What cannot be read is refused in one line naming the file and what is expected.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
 
-import imageio.v3 as iio
 import numpy as np
 import tifffile
 
 from udc_render.errors import UdcError
 
 SUFFIXES = (".png", ".tif", ".tiff", ".dng")
-CFA_PHOTOMETRIC, LINEAR_RAW_PHOTOMETRIC = 32803, 34892
-TAG_CFA_PATTERN, TAG_BLACK, TAG_WHITE = 33422, 50714, 50717
 COLOURS = "RGB"
 
 
@@ -28,9 +27,11 @@ class FitError(UdcError):
 
 @dataclass(frozen=True)
 class Frame:
-    """One measured image, as stored: dn [H, W] (grey or a CFA mosaic) or [H, W, C] (colour), float64 DN.
-    kind 'mono', 'cfa' or 'rgb'; sites [2, 2]: the colour (0 R, 1 G, 2 B) of a CFA's 2 × 2 sites;
-    black_dn, saturation_dn: the levels; bits: the integer depth; notes: what was assumed."""
+    """One measured image, as stored (a DNG's linearized): dn [H, W] (grey or a CFA mosaic) or [H, W, C]
+    (colour), float64 DN. kind 'mono', 'cfa' or 'rgb'; sites [2, 2]: the colour (0 R, 1 G, 2 B) of a CFA's
+    2 × 2 sites; black_dn: the black level (the mean of black_map where the file gives one per pixel);
+    saturation_dn: the clip; bits: the integer depth; notes: what was assumed; black_map: the black level of
+    every pixel (dn's shape: a DNG's per-site pattern and row and column deltas), None where it is black_dn."""
     path: str
     dn: np.ndarray
     kind: str
@@ -39,10 +40,19 @@ class Frame:
     saturation_dn: float
     bits: int
     notes: tuple = ()
+    black_map: np.ndarray | None = None
 
     @property
     def shape(self) -> tuple[int, int]:
         return self.dn.shape[:2]
+
+    def black(self) -> np.ndarray | float:
+        """The black level of every pixel (black_map), or the one level."""
+        return self.black_dn if self.black_map is None else self.black_map
+
+    def above_black(self) -> np.ndarray:
+        """dn − the black level, per pixel."""
+        return self.dn - self.black()
 
     def colour_map(self) -> np.ndarray:
         """[H, W] colour index of every pixel: the CFA's site colours, 0 for grey images."""
@@ -59,81 +69,35 @@ class Frame:
         return np.tile(np.array([[0, 1], [2, 3]], np.int8), (h // 2 + 1, w // 2 + 1))[:h, :w]
 
 
-def _pages(tif):
-    for page in tif.pages:
-        yield page
-        yield from (getattr(page, "pages", None) or ())
+def _png(path: Path) -> np.ndarray:
+    """A PNG's pixels at their own depth (pypng: 16 bits stay 16; palette expanded; sBIT honoured)."""
+    import png
+    w, h, rows, info = png.Reader(filename=str(path)).asDirect()
+    dtype = np.uint16 if info["bitdepth"] > 8 else np.uint8
+    data = np.vstack([np.asarray(r, dtype) for r in rows]).reshape(h, w, info["planes"])
+    return data[..., 0] if info["planes"] == 1 else data
 
 
-def _tag(pages, code):
-    for p in pages:
-        tag = p.tags.get(code)
-        if tag is not None:
-            return tag
-    return None
+def _tiff(path: Path) -> np.ndarray:
+    """A TIFF's first image, samples last."""
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages[0]
+        data = page.asarray()
+        if data.ndim == 3 and page.planarconfig == 2:
+            data = np.moveaxis(data, 0, -1)
+    return data
 
 
-def _level(tag) -> float | None:
-    """A level tag's mean value (one per site, or per channel): RATIONAL (5) and SRATIONAL (10) tags come as
-    (numerator, denominator) pairs."""
-    if tag is None:
-        return None
-    a = np.asarray(tag.value, dtype=np.float64).ravel()
-    if int(tag.dtype) in (5, 10):
-        a = a[0::2] / np.where(a[1::2] == 0, 1.0, a[1::2])
-    return float(np.mean(a)) if a.size else None
-
-
-def _read_dng(path: Path) -> tuple[np.ndarray, str, np.ndarray | None, float | None, float | None]:
+def _read_image(path: Path) -> np.ndarray:
     try:
-        with tifffile.TiffFile(path) as tif:
-            pages = list(_pages(tif))
-            raw = next((p for p in pages if int(p.photometric) in (CFA_PHOTOMETRIC, LINEAR_RAW_PHOTOMETRIC)), None)
-            if raw is None:
-                raise FitError(f"{path}: no CFA or linear raw image in the DNG: expected a raw DNG")
-            data = raw.asarray()
-            order = [raw] + pages
-            black, white = _level(_tag(order, TAG_BLACK)), _level(_tag(order, TAG_WHITE))
-            if int(raw.photometric) == LINEAR_RAW_PHOTOMETRIC:
-                return data, "rgb", None, black, white
-            tag = _tag(order, TAG_CFA_PATTERN)
-            pattern = None if tag is None else tag.value
-    except tifffile.TiffFileError as exc:
-        raise FitError(f"{path}: not a TIFF/DNG file ({exc})") from None
-    except (ValueError, NotImplementedError, KeyError, RuntimeError) as exc:  # undecodable compression
-        raise FitError(f"{path}: the DNG's raw image cannot be decoded ({type(exc).__name__}: {exc}): expected an "
-                       "uncompressed or deflate DNG (convert it with Adobe DNG Converter, uncompressed)") from None
-    codes = list(bytes(pattern)) if isinstance(pattern, (bytes, bytearray)) else list(np.ravel(pattern or ()))
-    if len(codes) != 4 or any(c not in (0, 1, 2) for c in codes):
-        raise FitError(f"{path}: CFAPattern {codes}: expected a 2 × 2 pattern of R, G and B (codes 0, 1, 2)")
-    return data, "cfa", np.array(codes, np.int8).reshape(2, 2), black, white
+        return _png(path) if path.suffix.lower() == ".png" else _tiff(path)
+    except Exception as exc:  # noqa: BLE001  any decoder failure is one line
+        kind = "PNG" if path.suffix.lower() == ".png" else "TIFF"
+        raise FitError(f"{path}: cannot be read as a {kind} image ({type(exc).__name__}: {exc}): expected an 8- or "
+                       f"16-bit grey or colour {kind}") from None
 
 
-def read_frame(path, black_dn: float | None = None, saturation_dn: float | None = None) -> Frame:
-    """One measurement file as a Frame (module doc)."""
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in SUFFIXES:
-        raise FitError(f"{path}: unsupported file type {suffix!r}: expected {', '.join(SUFFIXES)}")
-    if not path.is_file():
-        raise FitError(f"{path}: no such file")
-    tag_black = tag_white = sites = None
-    if suffix == ".dng":
-        data, kind, sites, tag_black, tag_white = _read_dng(path)
-    else:
-        try:
-            data = iio.imread(path, plugin="pillow" if suffix == ".png" else "tifffile")
-        except Exception as exc:  # any decoder failure is a one-line 'cannot read'
-            raise FitError(f"{path}: cannot be read as an image ({type(exc).__name__})") from None
-        kind = "rgb" if data.ndim == 3 else "mono"
-    if data.dtype not in (np.uint8, np.uint16):
-        raise FitError(f"{path}: pixel type {data.dtype}: expected 8- or 16-bit integers")
-    if data.ndim == 3:
-        data = data[..., :3] if data.shape[-1] >= 3 else data[..., 0]
-        kind = "rgb" if data.ndim == 3 else "mono"
-    if data.ndim != 2 and not (data.ndim == 3 and kind == "rgb") or min(data.shape[:2]) < 16:
-        raise FitError(f"{path}: image shape {data.shape}: expected a 2-D image of at least 16 × 16 pixels")
-    bits = 8 * data.dtype.itemsize
+def _levels(path: Path, black_dn, saturation_dn, tag_black, tag_white, bits) -> tuple[float, float, list]:
     notes = []
     black = black_dn if black_dn is not None else tag_black
     if black is None:
@@ -142,7 +106,45 @@ def read_frame(path, black_dn: float | None = None, saturation_dn: float | None 
     sat = saturation_dn if saturation_dn is not None else (tag_white if tag_white is not None else 2 ** bits - 1)
     if not 0 <= black < sat:
         raise FitError(f"{path}: black level {black:g} and saturation {sat:g} DN: expected 0 ≤ black < saturation")
-    return Frame(str(path), data.astype(np.float64), kind, sites, float(black), float(sat), bits, tuple(notes))
+    return float(black), float(sat), notes
+
+
+def read_frame(path, black_dn: float | None = None, saturation_dn: float | None = None) -> Frame:
+    """One measurement file as a Frame (module doc)."""
+    from udc_render.fit.dng import read_dng
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in SUFFIXES:
+        raise FitError(f"{path}: unsupported file type {suffix!r}: expected {', '.join(SUFFIXES)}")
+    if not path.is_file():
+        raise FitError(f"{path}: no such file")
+    sites = black_map = raw = None
+    if suffix == ".dng":
+        raw = read_dng(path)
+        data, sites, bits = raw.dn, raw.sites, raw.bits
+        kind = "cfa" if sites is not None else "rgb"
+    else:
+        data = _read_image(path)
+        if data.dtype not in (np.uint8, np.uint16):
+            raise FitError(f"{path}: pixel type {data.dtype}: expected 8- or 16-bit integers")
+        bits = 8 * data.dtype.itemsize
+        if data.ndim == 3:
+            data = data[..., :3] if data.shape[-1] >= 3 else data[..., 0]
+        kind = "rgb" if data.ndim == 3 else "mono"
+    if data.ndim != 2 and not (data.ndim == 3 and kind == "rgb") or min(data.shape[:2]) < 16:
+        raise FitError(f"{path}: image shape {data.shape}: expected a 2-D image of at least 16 × 16 pixels")
+    tag_black = None if raw is None else float(np.mean(raw.black_dn))
+    black, sat, notes = _levels(path, black_dn, saturation_dn, tag_black, None if raw is None else raw.white_dn, bits)
+    if raw is not None:
+        notes = list(raw.notes) + notes
+        if black_dn is None and np.ptp(raw.black_dn) > 0:
+            black_map = raw.black_dn
+            notes.append(f"{path.name}: black level per pixel from the DNG (sites, rows, columns): "
+                         f"{np.min(black_map):.6g}–{np.max(black_map):.6g} DN")
+            if np.max(black_map) >= sat:
+                raise FitError(f"{path}: black level up to {np.max(black_map):g} DN and saturation {sat:g} DN: "
+                               "expected every pixel's black level below the saturation")
+    return Frame(str(path), data.astype(np.float64), kind, sites, black, sat, bits, tuple(notes), black_map)
 
 
 def read_frames(paths, black_dn=None, saturation_dn=None, what: str = "--psf") -> list[Frame]:

@@ -57,9 +57,10 @@ def channels(frame: Frame) -> list[np.ndarray]:
 
 def _planes(frame: Frame) -> list[np.ndarray]:
     """The frame's value above black per channel (R, Gr, Gb, B) and the saturated pixels."""
+    above = frame.above_black()
     if frame.kind == "rgb":
-        return [frame.dn[..., c] - frame.black_dn for c in (0, 1, 1, 2)]
-    return [frame.dn - frame.black_dn] * 4
+        return [above[..., c] for c in (0, 1, 1, 2)]
+    return [above] * 4
 
 
 @dataclass(frozen=True)
