@@ -16,24 +16,23 @@ pattern is not what a restorer must generalise over; their amplitudes are. The c
 (CROP_KEYS) go into online.jsonl. Validation keeps each panel's own capture: a fixed set, comparable between
 epochs and runs.
 
-Streams: crop k of epoch e draws with draw_capture(…, seed = SeedSequence([seed, crc32('online capture'), e]),
-item = k): a crop's capture depends on (seed, epoch, k) alone, as its image and panel do.
+Streams: crop k of epoch e draws with draw_capture(…, seed = stream_seed(seed, 'online capture', e), item = k)
+(restore.tensors.stream_seed: the named stream of udc_render.streams): a crop's capture depends on (seed, epoch, k)
+alone, as its image and panel do.
 """
 from __future__ import annotations
 
 import hashlib
 import json
-import zlib
 from dataclasses import dataclass, replace
 
-import numpy as np
-
+from restore.tensors import stream_seed
 from udc_render.dataset.bank import Bank, Panel
-from udc_render.dataset.randomize import CaptureDraw, Distributions, RandomizeError, draw_capture, load_distributions, parse
+from udc_render.dataset.randomize import (CaptureDraw, Distributions, RandomizeError, draw_capture, load_distributions,
+                                         parse)
 
 BANK = "bank"  # --capture-draws bank: the bank's own distributions
 
-CAPTURE_STREAM = zlib.crc32(b"online capture")
 CROP_KEYS = ("sensor.gain_scale", "sensor.read_noise_e", "sensor.prnu", "sensor.dsnu_e", "sensor.row_offset_e",
              "sensor.column_offset_e", "sensor.dark_current_e_per_s", "exposure.scale", "exposure.brightness")
 
@@ -68,9 +67,7 @@ def load_capture_draws(spec: str, bank: Bank | None = None) -> CaptureDraws:
 
 def crop_capture(draws: CaptureDraws, seed: int, epoch: int, k: int) -> CaptureDraw:
     """Crop k of epoch `epoch`'s capture (module doc: its streams)."""
-    epoch_seed = int(np.random.SeedSequence([int(seed), CAPTURE_STREAM, int(epoch)]).generate_state(1, np.uint64)[0]
-                     >> 1)
-    return draw_capture(draws.dists, 1, epoch_seed, int(k))
+    return draw_capture(draws.dists, 1, stream_seed(seed, "online capture", int(epoch)), int(k))
 
 
 def captured_panel(panel: Panel, cap: CaptureDraw) -> Panel:

@@ -23,9 +23,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from restore.tensors import stream_seed
 from udc_render.io import capture as capture_files
 from udc_render.sensor import pack_rggb, unpack_rggb
 from udc_render.errors import UdcError
+from udc_render.streams import stream
 
 SPLITS = ("train", "val", "test")
 
@@ -157,9 +159,9 @@ def augment_crop(packed: np.ndarray, gt: np.ndarray, mode: int, crop_px: int | N
 class PairDataset(torch.utils.data.Dataset):
     """Random square crops (crop_px full-resolution pixels, 256 by default) of the pairs, `crops_per_pair`
     per pair and epoch, with Bayer-preserving augmentation. Deterministic: the crop and transform
-    of index i in epoch e come from SeedSequence([seed, e, i]) (set_epoch), so resumed training
-    sees the same samples. Every pair is read (and checked, load_pair) when the dataset is made, and kept
-    in memory."""
+    of index i in epoch e come from the named stream (seed, 'pair crop', e, i) (udc_render.streams; set_epoch),
+    so resumed training sees the same samples. Every pair is read (and checked, load_pair) when the dataset is
+    made, and kept in memory."""
 
     def __init__(self, pairs: list[Pair], crop_px: int | None = 256, augment: bool = True, seed: int = 0,
                  crops_per_pair: int = 1):
@@ -179,16 +181,16 @@ class PairDataset(torch.utils.data.Dataset):
 
     def __getitem__(self, i: int):
         packed, gt = self.arrays[i % len(self.pairs)]
-        rng = np.random.default_rng([self.seed, self.epoch, i])
+        rng = stream(self.seed, "pair crop", self.epoch, i)
         mode = int(rng.integers(0, 8)) if self.augment else 0
         x, y = augment_crop(packed, gt, mode, self.crop_px, rng)
         return torch.from_numpy(x), torch.from_numpy(y)
 
 
 class PairBatches:
-    """The training batches of a PairDataset: per epoch, its crops (set_epoch) in the order of a generator seeded
-    by seed · 1000003 + epoch, `batch` at a time (what restore.train iterates; restore.online.OnlineBatches is the
-    online degradation's)."""
+    """The training batches of a PairDataset: per epoch, its crops (set_epoch) in the order of a torch generator
+    seeded from the named stream (seed, 'pair order', epoch), `batch` at a time (what restore.train iterates;
+    restore.online.OnlineBatches is the online degradation's)."""
 
     def __init__(self, data: PairDataset, batch: int, seed: int):
         self.data, self.batch, self.seed = data, batch, seed
@@ -200,5 +202,5 @@ class PairBatches:
     def epoch(self, epoch: int):
         """(None: no draws to record, the epoch's batches (x, y))."""
         self.data.set_epoch(epoch)
-        order = torch.Generator().manual_seed(self.seed * 1_000_003 + epoch)
+        order = torch.Generator().manual_seed(stream_seed(self.seed, "pair order", epoch))
         return None, torch.utils.data.DataLoader(self.data, batch_size=self.batch, shuffle=True, generator=order)

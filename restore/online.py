@@ -6,10 +6,12 @@ Clean images (--data): a dataset folder's gt.exr files by split (the manifest's 
 folder of linear RGB .exr files (searched recursively, sorted; all train, no validation), in units of the white
 level at gain 1 (1.0 = full well), as gt.exr.
 
-Crop k of epoch e (k in the epoch's order: default_rng([seed, e]).permutation of images × crops_per_image), from
-default_rng([seed, e, k]): the image, the panel (uniform over the bank's), the Bayer-safe transform (one of the 8
-flips and transposes, applied to the clean crop: a scene seen as transformed by the same sensor), the crop's
-place (even rows and columns: it starts on an R site) and the noise seed of a torch generator on the device.
+Streams (udc_render.streams: named, so no two share a generator, crop 0 included): the epoch's order is
+stream(seed, 'online order', e).permutation of images × crops_per_image; crop k of epoch e (k in that order)
+draws from stream(seed, 'online crop', e, k) the image, the panel (uniform over the bank's), the Bayer-safe
+transform (one of the 8 flips and transposes, applied to the clean crop: a scene seen as transformed by the same
+sensor), the crop's place (even rows and columns: it starts on an R site) and the noise seed of a torch
+generator on the device.
 The crop takes the panel's margin of scene around it; beyond the frame (gt.exr holds no more scene) the image is
 mirrored. Input: the degraded crop's (DN − black) / (white − black) [4, c/2, c/2]; target: the clean crop × the
 panel's brightness [3, c, c] (a drawn panel's exposure.brightness; 1 for a preset), the input made from the same
@@ -17,7 +19,8 @@ scaled crop. With capture draws (--capture-draws, restore.captures) the crop als
 exposure, brightness included, instead of its panel's. A resumed run sees the same crops, panels, captures and
 noise (they depend on (seed, epoch, k) alone); each epoch's draws are recorded in online.jsonl.
 
-Validation: each val image whole, through panel j mod N, the noise seeded by (seed, 'val', j), made once.
+Validation: each val image whole, through panel j mod N, its noise from the stream (seed, 'online val', j),
+made once.
 
 With workers > 0 on the CPU the crops are degraded in DataLoader worker processes, one CPU thread each, while the
 training step runs: the same numbers (the draws fix every crop; a Degrader runs on one thread either way), the
@@ -31,7 +34,6 @@ import hashlib
 import json
 import queue
 import threading
-import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -41,13 +43,13 @@ import torch
 from restore.captures import CaptureDraws, captured_panel, crop_capture, crop_values, load_capture_draws
 from restore.data import DataError, dihedral, load_gt, read_manifest
 from restore.degrade import Degrader, normalised
-from restore.tensors import per_crop
+from restore.tensors import per_crop, stream_seed
 from udc_render.optics import fft_shape
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.io.exr import read_exr
 from udc_render.io.files import save_text
+from udc_render.streams import stream
 
-VAL_STREAM = zlib.crc32(b"val")
 
 
 @dataclass(frozen=True)
@@ -177,7 +179,7 @@ class OnlineBatches:
     def draw(self, epoch: int, k: int) -> dict:
         """Crop k of the epoch (module doc): image, panel, transform, origin (even), noise seed; with capture
         draws, its capture (restore.captures.crop_capture)."""
-        rng = np.random.default_rng([self.seed, epoch, k])
+        rng = stream(self.seed, "online crop", epoch, k)
         image = int(rng.integers(len(self.images)))
         h, w = self.images[image].pixels.shape[1:]
         c = self.crop_px
@@ -211,7 +213,7 @@ class OnlineBatches:
 
     def epoch(self, epoch: int):
         """(the epoch's draws in order, an iterator of batches (x [B, 4, c/2, c/2], y [B, 3, c, c]) on the device)."""
-        order = np.random.default_rng([self.seed, epoch]).permutation(self.crops)
+        order = stream(self.seed, "online order", epoch).permutation(self.crops)
         draws = [self.draw(epoch, int(k)) for k in order]
 
         def batches():
@@ -293,8 +295,7 @@ def validation_pairs(images: list[CleanImage], bank: Bank, degrader: Degrader, s
         b = panel_brightness(bank.panels[p])
         h, w = im.pixels.shape[1:]
         x = region(torch.from_numpy(im.pixels), -m, -m, h + 2 * m, w + 2 * m) * b
-        gen = torch.Generator(degrader.device).manual_seed(int(np.random.SeedSequence([seed, VAL_STREAM, j])
-                                                               .generate_state(1, np.uint64)[0] >> 1))
+        gen = torch.Generator(degrader.device).manual_seed(stream_seed(seed, "online val", j))
         dn = degrader.degrade(x, p, (h, w), (0, 0), gen)
         out.append((normalised(dn, bank.panels[p]).float().cpu().numpy(), (im.pixels * b).astype(np.float32)))
     return out

@@ -1,8 +1,18 @@
 """Tensors the online degradation moves to its device (restore.degrade, restore.degrade_sensor, restore.online):
-per-crop numbers as one column for the whole batch, and host copies that do not make the device wait."""
+per-crop numbers as one column for the whole batch, host copies that do not make the device wait, and integer
+seeds (a torch generator's) from named streams."""
 from __future__ import annotations
 
+import numpy as np
 import torch
+
+from udc_render.streams import seed_sequence
+
+
+def stream_seed(seed: int, *keys: int | str) -> int:
+    """A 63-bit integer seed (a torch generator's, a draw's) from the named stream (seed, *keys)
+    (udc_render.streams.seed_sequence)."""
+    return int(seed_sequence(seed, *keys).generate_state(1, np.uint64)[0] >> 1)
 
 
 def per_crop(values, like: torch.Tensor) -> torch.Tensor:

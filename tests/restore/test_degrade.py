@@ -22,7 +22,7 @@ from udc_render.optics import convolve_field, displays as D, field_basis, field_
 from udc_render.pipeline import SynthConfig, noise_seed, plan_kernels, sensor_for_scene, synthesize
 from udc_render.render import render_scene
 from udc_render.scene.geometry import psf_lens
-from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig, electrons_rgb, pack_rggb
+from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig, electrons_rgb, pack_rggb, readout
 from udc_render.sensor.defects import defect_map
 from udc_render.sensor.fpn import fpn_maps, mean_charge_e
 
@@ -69,7 +69,7 @@ def _replayed_draw(cap, cfg, sensor: SensorConfig, name: str) -> NoiseDraw:
     if sensor.noise != "poisson":
         return NoiseDraw(None, torch.from_numpy(pack_rggb(rng.standard_normal(e.shape))))
     q = mean_charge_e(e, fpn_maps(*e.shape, cfg.fpn), cfg.fpn, sensor.exposure_s)
-    shot = rng.poisson(np.minimum(q, 2 * sensor.full_well_e + 100 + 40 * sensor.read_noise_e)).astype(float)
+    shot = rng.poisson(np.minimum(q, readout.poisson_cap_e(sensor.full_well_e, sensor.read_noise_e))).astype(float)
     return NoiseDraw(torch.from_numpy(pack_rggb(shot)), torch.from_numpy(pack_rggb(rng.normal(0.0, 1.0, e.shape))))
 
 

@@ -20,6 +20,7 @@ from tests.restore.test_train import train_interrupted_at_epoch_2
 from udc_render.cli import main
 from udc_render.dataset.bank import Panel, read_bank, save_panel, write_bank_json
 from udc_render.sensor import SensorConfig, demosaic_bilinear, unpack_rggb
+from udc_render.streams import stream
 
 TINY_UNET = {"type": "unet", "width": 8, "depth": 3}
 GAMMA, GAIN, READ_NOISE_E = 0.5, 8.0, 400.0  # read noise σ 0.4 of the white level after /γ: a very noisy capture
@@ -132,6 +133,18 @@ def test_crops_take_mirrored_scene_beyond_the_frame_a_fresh_draw_each_epoch_and_
     in_workers = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels), 32, 2, seed=0, workers=1)
     xw, yw = next(in_workers.epoch(0)[1])
     assert torch.equal(x, xw) and torch.equal(y, yw)  # a worker process, crop by crop, degrades the same numbers
+
+
+def test_crops_and_their_order_come_from_named_streams(tmp_path, bank):
+    """The epoch's order is the permutation of stream (seed, 'online order', e) and crop k draws from stream (seed,
+    'online crop', e, k), crop 0 included (default_rng([seed, e, 0]) was default_rng([seed, e]), the order's)."""
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 3),), size_px=(48, 64))
+    b = read_bank(bank)
+    batches = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels), 32, 2, seed=5, workers=0)
+    draws, _ = batches.epoch(4)
+    assert draws == [batches.draw(4, int(k)) for k in stream(5, "online order", 4).permutation(3)]
+    rng, first = stream(5, "online crop", 4, 0), batches.draw(4, 0)
+    assert [first[k] for k in ("image", "panel", "mode")] == [int(rng.integers(n)) for n in (3, 2, 8)]
 
 
 def test_online_command_and_its_one_line_refusals(tmp_path, bank, capsys):

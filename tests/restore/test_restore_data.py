@@ -10,6 +10,7 @@ from restore.losses import loss_fn, ssim
 from udc_render.io.exr import read_exr, save_exr
 from udc_render.sensor import mosaic_of
 from udc_render.sensor import pack_rggb
+from udc_render.streams import stream
 
 
 def test_pairs_are_read_in_the_dataset_layout(pairs_dir):
@@ -52,6 +53,16 @@ def test_crops_are_deterministic_per_epoch_and_index(pairs_dir):
     ds.set_epoch(1)
     assert not torch.equal(a[1], ds[2][1])
     assert len(ds) == 6
+
+
+def test_a_crop_draws_from_its_own_named_stream(pairs_dir):
+    """Crop i of epoch e draws its transform and place from stream (seed, 'pair crop', e, i), crop 0 included (a
+    default_rng([seed, e, 0]) was default_rng([seed, e]))."""
+    ds = PairDataset(list_pairs(pairs_dir, "train", ["blur"]), crop_px=16, seed=3)
+    ds.set_epoch(2)
+    rng = stream(3, "pair crop", 2, 0)
+    x, y = augment_crop(*ds.arrays[0], int(rng.integers(0, 8)), 16, rng)
+    assert all(torch.equal(a, torch.from_numpy(b)) for a, b in zip(ds[0], (x, y)))
 
 
 def test_bad_data_gives_one_line_errors(tmp_path, pairs_dir):

@@ -65,7 +65,9 @@ class Panel:
     """One panel of a bank: its name, per-channel kernels [3, S, S] at the sensor pitch pitch_um, γ (R, G, B)
     relative to glass at gain 1, the sensor behind it (gain = the display's, gamma_rggb = γ / gain, its noise
     model, exposure and levels), its defect pixels and fixed-pattern noise (None: none), the field (d > 0) and
-    its record in bank.json."""
+    its record in bank.json. maps: 'frame', the defect and FPN maps of the whole frame drawn from their seeds (a
+    crop takes its region, as the numpy synthesis's frame); 'crop', maps of a crop's own size from the seeds (a
+    capture drawn per crop: restore.captures)."""
     name: str
     kernels: np.ndarray
     pitch_um: float
@@ -75,6 +77,7 @@ class Panel:
     fpn: FpnConfig | None
     field: PanelField | None
     record: dict
+    maps: str = "frame"
 
     @property
     def kernel_px(self) -> int:

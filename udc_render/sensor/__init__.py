@@ -20,21 +20,24 @@ Conventions
 
 Modules: config (SensorConfig), bayer (the RGGB convention, packing, bilinear demosaic), radiometry
 (radiance ──► electrons), noise (electrons ──► DN), fpn (FpnConfig: fixed-pattern noise), defects
-(DefectConfig: dead and hot pixels), capture (the whole chain), frames (the mean of N frames: the
-averaged ground truth).
+(DefectConfig: dead and hot pixels), readout (the arithmetic of noise, fpn and defects on any array namespace:
+the one definition the numpy synthesis and the online degradation in torch, restore.degrade_sensor, share),
+capture (the whole chain), frames (the mean of N frames: the averaged ground truth).
 """
 from udc_render.sensor.bayer import (CHANNELS, SITE_COLOUR, SITES, demosaic_bilinear, mosaic_of, pack_rggb, rgb_to_rggb,
                                      site_colour, unpack_rggb)
 from udc_render.sensor.capture import Capture, capture, capture_electrons
 from udc_render.sensor.config import SensorConfig, SensorError
-from udc_render.sensor.defects import DefectConfig, DefectError, apply_defects, defect_map
-from udc_render.sensor.fpn import FpnConfig, FpnError, FpnMaps, fpn_maps
+from udc_render.sensor import readout
+from udc_render.sensor.defects import DefectConfig, DefectError, apply_defects, defect_levels, defect_map
+from udc_render.sensor.fpn import FpnConfig, FpnError, FpnMaps, fpn_maps, fpn_normals
 from udc_render.sensor.noise import expose, noise_lambdas, sample_brooks, sensor_lambdas
 from udc_render.sensor.radiometry import (band_electron_weights, cos4_map, electrons_per_channel, electrons_rgb,
                                           electrons_spectral, photon_weights)
 
 __all__ = ["CHANNELS", "SITES", "SITE_COLOUR", "Capture", "DefectConfig", "DefectError", "FpnConfig", "FpnError",
            "FpnMaps", "SensorConfig", "SensorError", "apply_defects", "band_electron_weights", "capture",
-           "capture_electrons", "cos4_map", "defect_map", "demosaic_bilinear", "electrons_per_channel", "electrons_rgb",
-           "electrons_spectral", "expose", "fpn_maps", "mosaic_of", "noise_lambdas", "pack_rggb", "photon_weights",
-           "rgb_to_rggb", "sample_brooks", "sensor_lambdas", "site_colour", "unpack_rggb"]
+           "capture_electrons", "cos4_map", "defect_levels", "defect_map", "demosaic_bilinear", "electrons_per_channel",
+           "electrons_rgb", "electrons_spectral", "expose", "fpn_maps", "fpn_normals", "mosaic_of", "noise_lambdas",
+           "pack_rggb", "photon_weights", "readout", "rgb_to_rggb", "sample_brooks", "sensor_lambdas", "site_colour",
+           "unpack_rggb"]

@@ -64,15 +64,15 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from udc_render.sensor import readout
 from udc_render.sensor.bayer import check_even
 from udc_render.sensor.config import SensorConfig, SensorError
+from udc_render.sensor.readout import DEAD, HOT
 
 DEAD_FRACTION = 1e-5
 HOT_FRACTION = 1e-4
 HOT_DARK_E_PER_S = 3.0e4
 DEFECT_SEED = 0
-
-DEAD, HOT = 1, 2  # defect_map codes (0: a good pixel)
 
 
 class DefectError(SensorError):
@@ -110,33 +110,34 @@ class DefectConfig:
 
 
 def defect_map(height_px: int, width_px: int, defects: DefectConfig) -> np.ndarray:
-    """[H, W] int8: 0 good, 1 (DEAD) dead, 2 (HOT) hot; a function of (shape, defects) alone (module doc)."""
+    """[H, W] int8: 0 good, 1 (DEAD) dead, 2 (HOT) hot; a function of (shape, defects) alone (module doc;
+    sensor.readout.defect_classes of default_rng(seed).random((H, W)))."""
     u = np.random.default_rng(defects.seed).random((int(height_px), int(width_px)))
-    out = np.zeros(u.shape, np.int8)
-    out[u < defects.dead_fraction] = DEAD
-    out[(u >= defects.dead_fraction) & (u < defects.dead_fraction + defects.hot_fraction)] = HOT
-    return out
+    return readout.defect_classes(u, defects.dead_fraction, defects.hot_fraction)
+
+
+def defect_levels(sensor: SensorConfig, defects: DefectConfig) -> tuple[float, float]:
+    """(hot_dn, top_dn): what a hot pixel adds, g · hot_dark_e_per_s · t, and its cap, min(white, black + g FW)."""
+    g = sensor.dn_per_electron
+    return (g * defects.hot_charge_e(sensor.exposure_s),
+            min(float(sensor.white_level_dn), sensor.black_level_dn + g * sensor.full_well_e))
 
 
 def apply_defects(mosaic_dn: np.ndarray, sensor: SensorConfig, defects: DefectConfig) -> tuple[np.ndarray, dict]:
     """(a copy of the uint16 RGGB mosaic [H, W] with dead and hot pixels, their record for the
     capture's params). The sensor gives the black and white levels, the full well, the gain and
-    the exposure (module doc)."""
+    the exposure (module doc; the arithmetic: sensor.readout.with_defects)."""
     mosaic = np.asarray(mosaic_dn)
     if mosaic.ndim != 2 or mosaic.dtype != np.uint16:
         raise SensorError(f"mosaic: {mosaic.dtype} array of shape {mosaic.shape}: expected a uint16 [H, W] mosaic")
     check_even(mosaic.shape, "mosaic")
     kind = defect_map(*mosaic.shape, defects)
-    out = mosaic.copy()
-    out[kind == DEAD] = sensor.black_level_dn
-    g = sensor.dn_per_electron
-    charge = defects.hot_charge_e(sensor.exposure_s)
+    hot_dn, top = defect_levels(sensor, defects)
+    out = readout.with_defects(mosaic.astype(np.float64), kind, sensor.black_level_dn, hot_dn, top,
+                               sensor.white_level_dn).astype(np.uint16)
     hot = kind == HOT
-    top = min(float(sensor.white_level_dn), sensor.black_level_dn + g * sensor.full_well_e)
-    level = np.minimum(out[hot].astype(np.float64) + g * charge, top)
-    out[hot] = np.clip(np.rint(level), 0, sensor.white_level_dn).astype(np.uint16)
     info = {**asdict(defects), "dead_pixels": int((kind == DEAD).sum()), "hot_pixels": int(hot.sum()),
-            "hot_charge_e": charge, "hot_dn_added": g * charge,
+            "hot_charge_e": defects.hot_charge_e(sensor.exposure_s), "hot_dn_added": hot_dn,
             "hot_saturated": int((out[hot] >= sensor.white_level_dn).sum()),
             "model": "dead: black level; hot: + gain x conversion gain x hot_dark_e_per_s x exposure_s, "
                      "capped at black + g FW and the white level; after noise and quantisation"}

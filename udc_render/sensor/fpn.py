@@ -1,7 +1,7 @@
 """Fixed-pattern noise (FPN): the sensor's per-pixel gain and offset maps, and its dark current.
 
-EMVA 1288 (Release 3.1, 2016, §4 "Spatial Nonuniformity and Defect Pixels") separates what stays the same from frame to frame
-from the temporal noise: the photo-response nonuniformity PRNU (the spatial σ of the pixels' gains,
+EMVA 1288 (Release 3.1, 2016, §4 "Spatial Nonuniformity and Defect Pixels") separates what stays the same from
+frame to frame from the temporal noise: the photo-response nonuniformity PRNU (the spatial σ of the pixels' gains,
 relative to the mean signal) and the dark-signal nonuniformity DSNU (the spatial σ of the dark signal,
 in e⁻), with their row and column parts; and the mean dark current (e⁻/s). Here, per pixel (i, j) in
 the sensor's electron stage (sensor.noise.expose):
@@ -64,6 +64,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from udc_render.sensor import readout
 from udc_render.sensor.config import SensorConfig, SensorError
 
 PRNU = 0.007
@@ -72,9 +73,6 @@ ROW_OFFSET_E = 0.3
 COLUMN_OFFSET_E = 0.5
 DARK_CURRENT_E_PER_S = 5.0
 FPN_SEED = 0
-# A mean charge beyond this is saturated whatever the gain map (FW ≤ 1e9): capped first so that a huge
-# but finite input never overflows to inf (and inf × a zero gain to NaN).
-CHARGE_CAP_E = 1e30
 
 
 class FpnError(SensorError):
@@ -129,19 +127,25 @@ class FpnMaps:
         return self.dsnu_e + self.row_e[:, None] + self.column_e[None, :]
 
 
-def fpn_maps(height_px: int, width_px: int, fpn: FpnConfig) -> FpnMaps:
-    """The maps of an H × W sensor: a function of (shape, fpn) alone (module doc)."""
+def fpn_normals(height_px: int, width_px: int, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(z [H, W], u [H, W], r [H], c [W]): the standard normals of the PRNU, DSNU, row and column maps, drawn from
+    SeedSequence(seed).spawn(4) in that order (module doc); the maps scale them (fpn_maps)."""
     h, w = int(height_px), int(width_px)
-    prnu_rng, dsnu_rng, row_rng, col_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(fpn.seed).spawn(4))
-    gain = 1.0 + fpn.prnu * prnu_rng.standard_normal((h, w))
-    np.maximum(gain, 0.0, out=gain)
-    return FpnMaps(gain, fpn.dsnu_e * dsnu_rng.standard_normal((h, w)), fpn.row_offset_e * row_rng.standard_normal(h),
-                   fpn.column_offset_e * col_rng.standard_normal(w))
+    prnu_rng, dsnu_rng, row_rng, col_rng = (np.random.default_rng(s) for s in np.random.SeedSequence(seed).spawn(4))
+    return (prnu_rng.standard_normal((h, w)), dsnu_rng.standard_normal((h, w)), row_rng.standard_normal(h),
+            col_rng.standard_normal(w))
+
+
+def fpn_maps(height_px: int, width_px: int, fpn: FpnConfig) -> FpnMaps:
+    """The maps of an H × W sensor: a function of (shape, fpn) alone (module doc; sensor.readout.fpn_gain)."""
+    z, u, r, c = fpn_normals(height_px, width_px, fpn.seed)
+    return FpnMaps(readout.fpn_gain(z, fpn.prnu), fpn.dsnu_e * u, fpn.row_offset_e * r, fpn.column_offset_e * c)
 
 
 def mean_charge_e(electrons: np.ndarray, maps: FpnMaps, fpn: FpnConfig, exposure_s: float) -> np.ndarray:
-    """q = e · (1 + PRNU · z) + D · t: the mean charge the shot noise is drawn around (e⁻, float64)."""
-    return np.minimum(np.asarray(electrons, np.float64), CHARGE_CAP_E) * maps.gain + fpn.dark_charge_e(exposure_s)
+    """q = e · (1 + PRNU · z) + D · t: the mean charge the shot noise is drawn around (e⁻, float64;
+    sensor.readout.mean_charge_e)."""
+    return readout.mean_charge_e(np.asarray(electrons, np.float64), maps.gain, fpn.dark_charge_e(exposure_s))
 
 
 def fpn_record(fpn: FpnConfig, maps: FpnMaps, sensor: SensorConfig) -> dict:

@@ -69,7 +69,8 @@ def mean_of_frames(electrons: np.ndarray, sensor: SensorConfig, frames: int, rng
         return expose(e, sensor, rng)[0].astype(np.float64), 0
     mean_dn, sigma_dn, var_read_dn2, shot = _moments(e, sensor)
     g, fw = sensor.dn_per_electron, sensor.full_well_e
-    safe = ((mean_dn - CLIP_SIGMAS * sigma_dn >= -0.5) & (mean_dn + CLIP_SIGMAS * sigma_dn <= sensor.white_level_dn - 0.5)
+    safe = ((mean_dn - CLIP_SIGMAS * sigma_dn >= -0.5)
+            & (mean_dn + CLIP_SIGMAS * sigma_dn <= sensor.white_level_dn - 0.5)
             & (mean_dn + CLIP_SIGMAS * sigma_dn <= sensor.black_level_dn + g * fw))
     if math.sqrt(var_read_dn2) < DITHER_DN:
         safe[:] = False

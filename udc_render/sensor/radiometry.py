@@ -133,7 +133,8 @@ def electrons_spectral(radiance_bands: np.ndarray, edges_nm, sensor: SensorConfi
     L = np.asarray(radiance_bands)
     edges = np.asarray(edges_nm, float)
     if L.ndim != 3 or edges.ndim != 1 or edges.size != L.shape[0] + 1:
-        raise SensorError(f"radiance_bands: shape {L.shape} with {edges.size} edges: expected [K, H, W] and K + 1 edges")
+        raise SensorError(f"radiance_bands: shape {L.shape} with {edges.size} edges: expected [K, H, W] and K + 1 "
+                          "edges")
     if not (np.all(np.isfinite(edges)) and np.all(edges > 0) and np.all(np.diff(edges) > 0)):
         raise SensorError(f"edges_nm = {edges.tolist()}: expected increasing positive finite wavelengths")
     L, _ = checked_nonnegative(L, "radiance_bands")
