@@ -44,7 +44,7 @@ def test_distance_zero_is_the_principal_plane_model():
 def test_distance_far_beyond_talbot_length(psfkit):
     # d = 1 m ≫ Talbot length 2p²/λ = 14 mm (T-OLED, 520 nm). The window holds whole periods, so the
     # FFT propagation stays exact for the infinite periodic display: finite, unit sum, banding equal
-    # to the series and small (bounded by the aperture transform at k/p: measured 2.1e-4).
+    # to the series and small (bounded by the aperture transform at k/p: measured 4.7e-5, asserted 1.5e-4).
     lay = layouts.toled(pitch_um=60.0)
     ks = compute_kernels(lay, LENS, [520.0], size_px=63, distance_mm=1000.0, field_phases=2, pupil_samples=256,
                          precision="float64")
@@ -54,12 +54,12 @@ def test_distance_far_beyond_talbot_length(psfkit):
     assert 0 < ks.energy_outside[0] < 1
     series = psfkit.series_power(lay, LENS, 0.52, 1e6, ks.field_shifts_um).real
     np.testing.assert_allclose(ks.field_power[0], series / series.mean(), rtol=0, atol=1e-10)
-    assert np.max(np.abs(ks.field_power - 1)) < 1e-3
+    assert np.max(np.abs(ks.field_power - 1)) < 1.5e-4
     # With D/p = 55 the diffraction orders hardly overlap on the sensor, and propagation only
-    # re-phases them (|H_m| = 1): the far-field intensity barely changes (measured L1 4.0e-3 from d = 0),
+    # re-phases them (|H_m| = 1): the far-field intensity barely changes (measured L1 4.0e-3 from d = 0, < 1.2e-2),
     # but it does change (order-overlap interference and the aperture's cut of the propagated field).
     d0 = compute_kernels(lay, LENS, [520.0], size_px=63, pupil_samples=256, precision="float64")
-    assert 1e-5 < np.abs(ks.field_kernels[0, 0, 0] - d0.kernels[0]).sum() < 2e-2
+    assert 1e-5 < np.abs(ks.field_kernels[0, 0, 0] - d0.kernels[0]).sum() < 1.2e-2
 
 
 def test_aperiodic_display_far_away_is_a_clear_error(tmp_path):
@@ -97,7 +97,8 @@ def test_aperture_smaller_than_one_pitch(case):
     # the axis, so the openings straddle x = ±30 µm: a 56 µm aperture sees only slivers of them
     # (geometric overlap 6.4 %, open fraction 21 %). A layout with the opening centred on the axis
     # and a 40 µm aperture sees 36.7 %. The engine's power is the exact series over propagating
-    # orders; geometric optics agrees within the evanescent loss: measured −0.2 % (D40), −1.2 % (D56).
+    # orders; geometric optics agrees within the evanescent loss: measured |T / geometric − 1| 0.51 % (D40),
+    # 1.19 % (D56), asserted 2 %.
     if case == "centred-slit-D40":
         lay = PeriodicLayout("centred", 60.0, 60.0, (Rect(0.0, 30.0, 14.0, 54.0),))
         lens, geometric = Lens(aperture_um=40.0), _disc_band_area(20.0, 0.0, 7.0, 3.0, 57.0)
@@ -114,11 +115,11 @@ def test_aperture_smaller_than_one_pitch(case):
 
 def test_aperture_between_openings_transmits_nothing_measurable():
     # D = 40 µm on the T-OLED sees only the opaque area between the openings at |x| ≥ 23 µm:
-    # geometric transmittance 0; the propagating-order series gives ~1e-6 (measured 8.8e-7).
+    # geometric transmittance 0; the propagating-order series gives ~1e-6 (measured 8.8e-7, asserted 3e-6).
     ks = compute_kernels(layouts.toled(pitch_um=60.0), Lens(aperture_um=40.0), [520.0], size_px=63, pupil_samples=256,
                          precision="float64")
     assert np.all(np.isfinite(ks.kernels))
-    assert ks.transmittance[0] < 1e-5
+    assert ks.transmittance[0] < 3e-6
 
 
 # ---------------------------------------------------------------------------------------------
@@ -138,7 +139,7 @@ def test_paper_recipe_warns_when_r_below_one():
 @pytest.mark.parametrize("integrate", [False, True], ids=["point", "pixel"])
 def test_mft_is_exact_below_r_one(psfkit, integrate):
     # 0.5 µm pixels (r = 0.505): the MFT samples any output pitch. Point samples vs ρ² I(u) measured
-    # 1.6e-8 of peak; pixel-integrated vs Gauss-Legendre measured 1.2e-7.
+    # 1.6e-8 of peak; pixel-integrated vs Gauss-Legendre measured 1.2e-7 (asserted 5e-8 and 4e-7).
     lam, rho, size = 0.55, 0.5, 101
     with warnings.catch_warnings():
         warnings.simplefilter("error")
@@ -148,11 +149,11 @@ def test_mft_is_exact_below_r_one(psfkit, integrate):
     u = (np.arange(size) - size // 2) * rho
     if integrate:
         ref = psfkit.airy_pixel_energy(u, rho, LENS, lam, nodes=16)
-        tol = 1e-6
+        tol = 4e-7
     else:
         r = np.hypot(u[None, :], u[:, None])
         ref = rho ** 2 * psfkit.airy_peak(LENS, lam) * psfkit.airy_norm(r, LENS, lam) / AREA
-        tol = 1e-7
+        tol = 5e-8
     assert np.max(np.abs(got - ref)) < tol * ref.max()
 
 
@@ -186,14 +187,15 @@ def test_bare_lens_alias_warning():
 
 @pytest.mark.parametrize("layout", [None, layouts.toled(pitch_um=60.0), layouts.poled()], ids=["bare", "toled", "poled"])
 def test_float32_matches_float64(layout):
-    # complex64 FFTs and products: measured max difference 5.6e-7 (bare), 3.7e-7 (T-OLED),
-    # 5.0e-7 (P-OLED) of the peak at N = 1024; energy_outside within 6e-7.
+    # complex64 FFTs and products: measured max difference 5.6e-7 (bare), 3.7e-7 (T-OLED), 5.0e-7 (P-OLED) of
+    # the peak at N = 1024, energy_outside within 6e-7 (when written); 2.9e-7, 1.6e-7, 1.3e-7 and 3.2e-7 on the
+    # 2-core dev machine now: float32 rounding moves by 2× between machines, so 2e-6 (3.5× the larger).
     kw = dict(wavelengths_nm=[450.0, 640.0], size_px=127, pupil_samples=1024)
     a = compute_kernels(layout, LENS, precision="float32", **kw)
     b = compute_kernels(layout, LENS, precision="float64", **kw)
     assert a.kernels.dtype == np.float32 and b.kernels.dtype == np.float64
-    assert np.max(np.abs(a.kernels - b.kernels)) < 1e-5 * b.kernels.max()
-    np.testing.assert_allclose(a.energy_outside, b.energy_outside, rtol=0, atol=1e-5)
+    assert np.max(np.abs(a.kernels - b.kernels)) < 2e-6 * b.kernels.max()
+    np.testing.assert_allclose(a.energy_outside, b.energy_outside, rtol=0, atol=2e-6)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -261,9 +263,10 @@ def test_defocus_on_axis_intensity():
     # Uniform disc with pupil phase a r² (a = π c / λ): U(0) = (1/λz) ∫ e^{i a r²} dA, so
     # I(0) = (A/λz)² [sin(a R²/2) / (a R²/2)]². Point sample at the centre, absolute. The raster
     # samples the phase at cell centres (midpoint rule), so the error is ∝ δ²: measured relative
-    # errors 1.5e-4 → 3.9e-5 (2 m) and 2.3e-3 → 6.1e-4 (0.5 m, I(0) near a zero) from N = 512 to 1024.
+    # errors 1.5e-4 → 3.9e-5 (2 m) and 2.3e-3 → 6.1e-4 (0.5 m, I(0) near a zero) from N = 512 to 1024;
+    # asserted at N = 1024: 1.2e-4 and 1e-3.
     lam = 0.55
-    for od in (2000.0, 500.0):
+    for od, tol in ((2000.0, 1.2e-4), (500.0, 1e-3)):
         lens = Lens(object_distance_mm=od)
         x = (math.pi * lens.defocus_curvature_per_um / lam) * (D / 2) ** 2 / 2
         expected = (AREA / (lam * Z)) ** 2 * (math.sin(x) / x) ** 2
@@ -273,7 +276,7 @@ def test_defocus_on_axis_intensity():
                                  precision="float64", pixel_integration=False)
             got = ks.kernels[0, 7, 7] * (1 - ks.energy_outside[0]) * AREA / 3.1 ** 2
             errs.append(abs(got / expected - 1))
-        assert errs[1] < 1e-3
+        assert errs[1] < tol
         assert 3.5 < errs[0] / errs[1] < 4.5  # second-order convergence to the analytic value
 
 

@@ -12,6 +12,7 @@ import warnings
 import numpy as np
 import pytest
 from scipy.optimize import brentq, minimize_scalar
+from scipy.special import j1
 
 from psf import AliasingWarning, Lens, compute_kernels, fourier, layouts
 from psf.layouts import PeriodicLayout, Rect
@@ -58,10 +59,11 @@ def _ring_errors(psfkit, n, lam_um):
 
 @pytest.mark.parametrize("lam_nm", [450.0, 550.0, 640.0])
 def test_airy_dark_rings_at_j1_zeros(psfkit, lam_nm):
-    # 1.21967, 2.23313, 3.23832 λf/D (j_{1,k}/π); measured |rel err| ≤ 7.2e-8 at N = 1024.
+    # 1.21967, 2.23313, 3.23832 λf/D (j_{1,k}/π); measured |rel err| ≤ 7.2e-8 at N = 1024 (every λ: the error
+    # scales with the ring, not λ), asserted 2e-7 (§6's 1e-6 would let a 10× worse raster through).
     np.testing.assert_allclose(psfkit.j1_zeros / math.pi, [1.21967, 2.23313, 3.23832], atol=5e-6)
     errs = _ring_errors(psfkit, 1024, lam_nm * 1e-3)
-    assert np.max(np.abs(errs)) < 1e-6, errs
+    assert np.max(np.abs(errs)) < 2e-7, errs
 
 
 @pytest.mark.slow
@@ -77,7 +79,7 @@ def test_airy_dark_rings_fine_pupil(psfkit):
 
 def test_airy_intensity_point_field(psfkit):
     # |U|² from point_field on the N = 1024 raster vs I0 (2J1(v)/v)², absolute (I0 = (A/λz)²),
-    # on an off-grid 129² patch out to ~80 µm. §6: 2e-6 of peak at N = 1024; measured 2.2e-7.
+    # on an off-grid 129² patch out to ~80 µm. §6: 2e-6 of peak at N = 1024; measured 2.2e-7, asserted 5e-7.
     lam = 0.55
     pg, g = psfkit.bare_pupil(LENS, 1024)
     u = (np.arange(129) - 64) * 1.147 + 0.123
@@ -85,7 +87,7 @@ def test_airy_intensity_point_field(psfkit):
     U = fourier.point_field(g, pg.x_um, pg.y_um, pg.dx_um, pg.dy_um, lam, Z, u, v)
     i0 = psfkit.airy_peak(LENS, lam)
     ref = i0 * psfkit.airy_norm(np.hypot(u[None, :], v[:, None]), LENS, lam)
-    assert np.max(np.abs(np.abs(U) ** 2 - ref)) < 2e-6 * i0
+    assert np.max(np.abs(np.abs(U) ** 2 - ref)) < 5e-7 * i0
 
 
 def _engine_point_error(psfkit, n):
@@ -100,8 +102,8 @@ def _engine_point_error(psfkit, n):
 
 def test_airy_intensity_engine_point_samples(psfkit):
     # Engine MFT, ρ² I(u_j) on the 255² grid of 3.1 µm, absolute. Measured 3.6e-9 at N = 1024
-    # (the de-apodisation of the bare raster removes the grey-edge error seen by point_field).
-    assert _engine_point_error(psfkit, 1024) < 2e-8
+    # (the de-apodisation of the bare raster removes the grey-edge error seen by point_field); asserted 1e-8.
+    assert _engine_point_error(psfkit, 1024) < 1e-8
 
 
 @pytest.mark.slow
@@ -117,7 +119,7 @@ def test_airy_intensity_engine_point_samples_fine(psfkit):
 def test_encircled_energy_at_dark_rings(psfkit):
     # 1 − J0² − J1² at the first three rings: 0.83778, 0.90993, 0.93765. Pixel-integrated kernel
     # on 0.1 λf/D pixels, absolute energy = kernel × (1 − energy_outside), summed over the pixels
-    # whose centres lie within the ring. §6: 1e-4; measured ≤ 6.7e-6.
+    # whose centres lie within the ring. §6: 1e-4; measured ≤ 6.7e-6, asserted 2e-5.
     lam = 0.55
     unit = lam * Z / D
     rho, size = 0.1 * unit, 85
@@ -129,7 +131,7 @@ def test_encircled_energy_at_dark_rings(psfkit):
     expected = psfkit.encircled_energy(zeros)
     np.testing.assert_allclose(expected, [0.83778, 0.90993, 0.93765], atol=5e-6)
     got = np.array([absolute[r <= z / math.pi * unit].sum() for z in zeros])
-    np.testing.assert_allclose(got, expected, rtol=0, atol=1e-4)
+    np.testing.assert_allclose(got, expected, rtol=0, atol=2e-5)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -159,11 +161,12 @@ def test_pixel_integrated_airy_fine_pupil(psfkit):
 
 
 def test_pixel_integration_matters_at_the_papers_pixel():
-    # PHYSICS §3: point sampling vs pixel integration differ by ~0.23 in L1 at 3.1 µm.
+    # PHYSICS §3: point sampling vs pixel integration differ by 0.23 in L1 at 3.1 µm (measured 0.2253: the
+    # two digits PHYSICS prints).
     kw = dict(wavelengths_nm=[550.0], pixel_um=3.1, size_px=127, pupil_samples=512, precision="float64")
     a = compute_kernels(None, LENS, pixel_integration=True, **kw).kernels[0]
     b = compute_kernels(None, LENS, pixel_integration=False, **kw).kernels[0]
-    assert 0.15 < np.abs(a - b).sum() < 0.35
+    assert 0.225 <= np.abs(a - b).sum() < 0.235
 
 
 # ---------------------------------------------------------------------------------------------
@@ -174,7 +177,7 @@ def test_pixel_integration_matters_at_the_papers_pixel():
 def test_slit_grating_orders(psfkit, pitch, opening):
     # Orders at m λ z / p with P_m / P_0 = sinc²(m a / p). |U|² maximised near each order along the
     # x axis (y-projection of the raster, exact on v = 0). §6: positions 1e-3 of the spacing,
-    # ratios 0.5 %; measured ≤ 3.3e-5 of the spacing and ≤ 6.3e-4 relative (m ≤ 3).
+    # ratios 0.5 %; measured ≤ 3.3e-5 of the spacing and ≤ 6.3e-4 relative (m ≤ 3), asserted 1e-4 and 1.5e-3.
     lam = 0.55
     lay = layouts.slit_grating(pitch, opening)
     pg, g, _ = psfkit.display_pupil(lay, LENS, 1024)
@@ -193,8 +196,8 @@ def test_slit_grating_orders(psfkit, pitch, opening):
         pos.append(res.x)
         peak.append(-res.fun)
     pos, peak = np.array(pos), np.array(peak)
-    assert np.max(np.abs(pos - orders * spacing)) < 1e-3 * spacing
-    np.testing.assert_allclose(peak / peak[0], np.sinc(orders * opening / pitch) ** 2, rtol=5e-3)
+    assert np.max(np.abs(pos - orders * spacing)) < 1e-4 * spacing
+    np.testing.assert_allclose(peak / peak[0], np.sinc(orders * opening / pitch) ** 2, rtol=1.5e-3)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -398,13 +401,17 @@ def test_field_phase_is_the_mask_shifted_by_plus_s():
 
 
 def test_banding_amplitude_small_for_fine_display(psfkit):
-    # PHYSICS §4: first harmonic ≈ 2|c1/c0| |2J1(πD/p)/(πD/p)|, of order 1e-3 for D/p ≈ 55.
+    # PHYSICS §4: first harmonic ≈ 2|c1/c0| |2J1(πD/p)/(πD/p)|, of order 1e-3 for D/p ≈ 55: 1.02e-3 for the
+    # 14-µm slit (c1/c0 = sinc(14/60)); the largest excursion of the 4 × 4 phases is measured 8.2e-4, asserted
+    # within a factor 2 of the estimate either way.
     ks = compute_kernels(layouts.toled(pitch_um=60.0), LENS, [520.0], size_px=15, distance_mm=1.0, field_phases=4,
                          pupil_samples=128, precision="float64")
     fp = ks.field_power[0]
     series = psfkit.series_power(layouts.toled(pitch_um=60.0), LENS, 0.52, 1000.0, ks.field_shifts_um).real
     np.testing.assert_allclose(fp, series / series.mean(), rtol=0, atol=1e-10)
-    assert 1e-5 < np.max(np.abs(fp - 1)) < 5e-3
+    x = math.pi * D / 60.0
+    estimate = 2 * np.sinc(14.0 / 60.0) * abs(2 * j1(x) / x)
+    assert 0.5 * estimate < np.max(np.abs(fp - 1)) < 2 * estimate
 
 
 # ---------------------------------------------------------------------------------------------

@@ -173,19 +173,21 @@ def test_only_default_or_a_toml_file(tmp_path):
 @pytest.mark.slow
 def test_table_refits_and_gives_the_papers_gamma_between_its_rows():
     """On the default rig's gains (optics.fit_gains, as study realism; minutes without the kernel cache):
-    two rows re-fitted to 1e-4, and γ within 0.3 % of the paper's at every 0.5 nm from 8 to 30 nm (the table every 1 nm)."""
+    two rows re-fitted to 3e-5 (measured 5.8e-6 and 1.5e-6: 5×, an optimiser's stop), and γ within 0.1 % of the
+    paper's at every 0.5 nm from 8 to 30 nm, the table every 1 nm (randomize.md: "within 0.08 %"; measured
+    8.1e-4 at 29.5 nm, the largest: a linear interpolation's error between rows, deterministic, 1.2×)."""
     from udc_render.optics import gamma as G
     from udc_render.calibration.fit_gains import FIT_EDGES_NM as edges, fit_gains
     gains = {name: fit_gains(lay) for name, lay in (("glass", None), ("poled", layouts.poled()))}
     for w in (8.0, 26.0):
         fit = D.fit_poled_transmission(gains["poled"], gains["glass"], edges, urbach_width_nm=w)
-        assert fit == pytest.approx(R.POLED_T_TABLE[w], rel=1e-4)
+        assert fit == pytest.approx(R.POLED_T_TABLE[w], rel=3e-5)
     white = G.white_weights(edges, "Nikon 5100 (NPL)")
     for w in np.arange(8.0, 30.01, 0.5):
         d = D.Display("p", layouts.poled(), R.panels.panel_transmission(
             "poled", {"transmission_scale": 1.0, "urbach_width_nm": float(w)}), D.PAPER_GAIN["poled"])
         g = G.channel_gamma(white, d, gains["poled"], gains["glass"], edges)
-        assert np.abs(g / np.array(D.PAPER_GAMMA["poled"]) - 1).max() < 3e-3, (w, g)
+        assert np.abs(g / np.array(D.PAPER_GAMMA["poled"]) - 1).max() < 1e-3, (w, g)
 
 
 def test_capture_config_sets_the_sensor_and_the_panels_haze(dists):
