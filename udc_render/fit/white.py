@@ -3,9 +3,12 @@
 
 The paper calibrates γ with a white square on the monitor, captured through a glass panel and through
 the display (l.210): γ_c = (display level) / (glass level) per channel, the display capture at its own
-gain. Here: the square is where the glass capture exceeds half its 99.5th percentile; its central half
-(each side) is the region; per channel (a CFA's sites named by the pattern, Gr the green on the red rows; a
-colour image's R, G, G, B; a grey image's one value four times) γ_c = mean(display) / mean(glass) above
+gain. Here: the square is the largest connected component (scipy.ndimage.label) of the glass capture's level
+above half its 99.5th percentile, the level a 3 × 3 median of the channels' mean (of each 2 × 2 CFA cell), so
+that a hot pixel, a reflection or a ghost elsewhere in the frame is another component, or none; the component
+must fill at least MIN_FILL of its bounding box (a square, not a blob); its central half (each side) is the
+region; per channel (a CFA's sites named by the pattern, Gr the green on the red rows; a colour image's R, G,
+G, B; a grey image's one value four times) γ_c = mean(display) / mean(glass) above
 black, σ_γ = std(display − γ glass) / (√n mean(glass)).
 T(λ) (optics.gamma): γ_c = G Σ_k W_ck T_k g_k / Σ_k W_ck g⁰_k, W the camera's electrons per band from the
 monitor's white, G the display capture's gain over the glass capture's (--white-gain), and g the share of the
@@ -35,6 +38,7 @@ from udc_render.optics.displays import Display, Transmission, fit_poled_transmis
 from udc_render.optics.gamma import channel_gamma, white_weights
 
 CHANNEL_NAMES = ("R", "Gr", "Gb", "B")
+MIN_FILL = 0.9  # the square's component fills at least this share of its bounding box
 KERNEL_PX = 511
 SENSOR_UM = (2048 * 1.55, 1024 * 1.55)  # the paper's frame: band_gains' default when no capture gives one
 
@@ -86,17 +90,32 @@ class WhiteFit:
     gain: float
 
 
+def find_square(frame: Frame, level: np.ndarray) -> tuple[int, int, int, int]:
+    """(first row, last row, first column, last column) of the white square (module doc) in `level` [H, W]."""
+    from scipy import ndimage
+    if frame.kind == "cfa":
+        level = ndimage.uniform_filter(level, 2, mode="nearest")
+    level = ndimage.median_filter(level, 3, mode="nearest")
+    labels, n = ndimage.label(level > 0.5 * np.percentile(level, 99.5))
+    sizes = np.bincount(labels.ravel())[1:]
+    if n == 0 or sizes.max() < 64:
+        raise FitError(f"--white {frame.path}: no white square found (no 64 connected pixels above half the "
+                       "brightest): expected a white square on black")
+    k = int(np.argmax(sizes))
+    rows, cols = ndimage.find_objects(labels)[k]
+    fill = sizes[k] / ((rows.stop - rows.start) * (cols.stop - cols.start))
+    if fill < MIN_FILL:
+        raise FitError(f"--white {frame.path}: the largest bright region fills {fill:.0%} of its bounding box: "
+                       f"expected a white square (≥ {MIN_FILL:.0%}) on black")
+    return rows.start, rows.stop - 1, cols.start, cols.stop - 1
+
+
 def measure_gamma(glass: Frame, display: Frame) -> WhiteSquare:
     """γ and σ per channel, and the square and region they come from (module doc)."""
     if glass.shape != display.shape:
         raise FitError(f"--white: {glass.path} and {display.path} differ in size: expected one camera and framing")
     gp, dp = _planes(glass), _planes(display)
-    level = np.mean(gp, axis=0)
-    square = level > 0.5 * np.percentile(level, 99.5)
-    rows, cols = np.nonzero(square)
-    if rows.size < 64:
-        raise FitError(f"--white {glass.path}: no white square found (fewer than 64 pixels above half the brightest)")
-    r0, r1, c0, c1 = rows.min(), rows.max(), cols.min(), cols.max()
+    r0, r1, c0, c1 = find_square(glass, np.mean(gp, axis=0))
     region = np.zeros(glass.shape, bool)
     rows_r = slice(r0 + (r1 - r0) // 4, r1 - (r1 - r0) // 4 + 1)
     cols_r = slice(c0 + (c1 - c0) // 4, c1 - (c1 - c0) // 4 + 1)
@@ -145,8 +164,8 @@ def fit_transmission(square: WhiteSquare, layout, lens: Lens, edges_nm, pixel_um
     st = math.sqrt(max(1.0, chi2) / np.sum(inv * a * a))
     if chi2 <= 4 or np.max(np.abs(gamma / (t * a) - 1)) <= 0.02:
         if not 0 < t <= 1:
-            raise FitError(f"--white: the flat transmission fitted to γ is {t:.3g}: expected 0 < T ≤ 1 (is --white-gain "
-                           "the display capture's gain over the glass capture's?)")
+            raise FitError(f"--white: the flat transmission fitted to γ is {t:.3g}: expected 0 < T ≤ 1 (is "
+                           "--white-gain the display capture's gain over the glass capture's?)")
         return Transmission("flat", t), {"value": (t, st)}, t * a
     p = fit_poled_transmission(d_gain, g_gain, edges_nm, camera, target=tuple(_rgb(gamma)), gain=gain, layout=layout)
 
@@ -158,8 +177,8 @@ def fit_transmission(square: WhiteSquare, layout, lens: Lens, edges_nm, pixel_um
     cov = np.linalg.pinv(jac) @ np.diag(s_rgb ** 2) @ np.linalg.pinv(jac).T
     g = model(p)
     names = ("scale", "edge_nm", "cathode_nm")
-    return poled_transmission(*p), {n: (float(v), float(math.sqrt(cov[i, i]))) for i, (n, v) in enumerate(zip(names, p))}, \
-        np.array([g[0], g[1], g[1], g[2]])
+    params = {n: (float(v), float(math.sqrt(cov[i, i]))) for i, (n, v) in enumerate(zip(names, p))}
+    return poled_transmission(*p), params, np.array([g[0], g[1], g[1], g[2]])
 
 
 def fit_white(glass: Frame, display: Frame, layout, lens: Lens, edges_nm, pixel_um: float, camera: str,
