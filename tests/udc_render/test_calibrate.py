@@ -49,34 +49,37 @@ def test_cli_prints_the_table_writes_the_files_and_exits_0(toled_run):
     assert {c["quantity"] for c in result["checks"]} >= {"gamma R", "lambda_read B", "lambda_shot Gr"}
 
 
-def test_gamma_within_2_percent_toled(toled_run):
+# The command's own tolerances (exit 1 beyond them) are 2 % in γ and 10 % in λ; on the quick rig the tests hold
+# each figure to about 2.5× what it measures (2-core dev machine): γ T-OLED 0.058 %, P-OLED 0.43 %; λ
+# (Poisson) ≤ 2.0 %; λ (Gaussian) read 3.5 %, shot 0.71 %; the black-clip fit read 0.63 %, shot 0.29 %.
+def test_gamma_toled(toled_run):
     g = toled_run[3]["gamma"]
     err = np.abs(np.array(g["gamma"]) / np.array(g["truth"]) - 1)
-    assert err.max() < 0.02, err
+    assert err.max() < 2e-3, err
     # the measured region sits a kernel half-width inside the square (no spill is lost)
     assert g["square_px"] >= g["region_px"] + g["kernel_px"] - 1
 
 
-def test_gamma_within_2_percent_poled_and_blue_absorbed(poled):
+def test_gamma_poled_and_blue_absorbed(poled):
     g = poled["gamma"]
     err = np.abs(g["gamma"] / g["truth"] - 1)
-    assert err.max() < 0.02, err
+    assert err.max() < 0.01, err
     assert g["gamma"][3] < 0.7 * g["gamma"][0]  # the yellow substrate eats the blue
 
 
-def test_noise_lambdas_within_10_percent_poisson(toled_run, poled):
+def test_noise_lambdas_poisson(toled_run, poled):
     for res in (toled_run[3]["noise"], poled["noise"]):
         assert res["model"] == "poisson"
         for c in res["checks"]:
-            assert c["error"] < 0.10, c
+            assert c["error"] < 0.05, c
 
 
-def test_noise_lambdas_within_10_percent_gaussian(tmp_path):
+def test_noise_lambdas_gaussian(tmp_path):
     cfg = SynthConfig(sensor=replace(SynthConfig().sensor, noise="gaussian"))  # λ_read 1e-6, λ_shot 1e-3
     res = cal_noise.calibrate_noise(Rig(load_display("poled"), True, cfg, tmp_path))
     assert np.allclose(res["truth_read"], 1e-6) and np.allclose(res["truth_shot"], 1e-3)
     for f in res["fits"]:
-        assert abs(f["lambda_read"] / 1e-6 - 1) < 0.10 and abs(f["lambda_shot"] / 1e-3 - 1) < 0.10, f
+        assert abs(f["lambda_read"] / 1e-6 - 1) < 0.08 and abs(f["lambda_shot"] / 1e-3 - 1) < 0.02, f
 
 
 def test_noise_fit_handles_the_black_clip():
@@ -84,7 +87,7 @@ def test_noise_fit_handles_the_black_clip():
     w = rng.uniform(0, 0.5, 200_000) ** 2
     y = np.clip(np.rint((w + rng.standard_normal(w.size) * np.sqrt(2e-6 + 1e-3 * w)) * 65535), 0, 65535) / 65535
     f = cal_noise.noise_fit(w, y - w)
-    assert abs(f["lambda_read"] / 2e-6 - 1) < 0.1 and abs(f["lambda_shot"] / 1e-3 - 1) < 0.02
+    assert abs(f["lambda_read"] / 2e-6 - 1) < 0.02 and abs(f["lambda_shot"] / 1e-3 - 1) < 0.008
 
 
 def test_psf_recovered_matches_configured_kernel(toled_run, poled):

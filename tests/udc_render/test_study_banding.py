@@ -195,4 +195,4 @@ def test_sinc2_is_the_linear_interpolation_factor():
         u = np.arange(4096) / 4096
         interp = np.interp(u, np.arange(P + 1) / P, np.cos(2 * np.pi * np.arange(P + 1) / P))
         a1 = 2 * abs(np.fft.rfft(interp)[1]) / u.size
-        assert abs(a1 - F.sinc2(1, P)) < 1e-4
+        assert abs(a1 - F.sinc2(1, P)) < 5e-7  # measured ≤ 1.6e-7: the 4096-point grid
