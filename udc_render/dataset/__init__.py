@@ -157,7 +157,8 @@ def _shared(job: DatasetJob, out: Path) -> Shared:
         cfg = replace(cfg, kernel_cache=str(cache_dir().resolve()))
     if job.is_monitor:
         scene = replace(job.scene, content=replace(job.scene.content, image="(per item)"))
-        return Shared(scene, job.displays, cfg, out, job.side_by_side, job.previews, randomize=job.randomize)
+        return Shared(scene, job.displays, cfg, out, job.side_by_side, job.previews, parent_blas_threads(),
+                      job.randomize)
     scene = resolve_xml_camera(job.scene)
     g = camera_geometry(scene)
     scene = replace(scene, camera=replace(scene.camera, origin_m=g.origin_m, target_m=g.target_m, up=g.up),

@@ -34,14 +34,14 @@ class Shared:
     distance fixed (a 3D scene: every item uses the same in-focus kernels), the displays, the synthesis
     knobs (with the kernel cache folder the parent filled: workers load those kernels and never recompute
     them, so every worker uses the same bits), the output folder (absolute), whether to plot, whether to
-    write the sRGB previews, and the parent's BLAS thread count (a 3D scene: cache_layer_kernels)."""
+    write the sRGB previews, and the parent's BLAS thread count (worker_kernels, cache_layer_kernels)."""
     scene: Scene
     displays: list[Display]
     cfg: SynthConfig
     out: Path
     side_by_side: bool
     previews: bool
-    blas_threads: int | None = None  # the parent's BLAS threads: a 3D item's off-focus kernels are computed with them
+    blas_threads: int | None = None  # the parent's BLAS threads: kernels a worker computes are computed with them
     randomize: Randomization | None = None  # --randomize: the panels drawn once (dataset.randomized)
 
 
@@ -53,7 +53,10 @@ def worker_kernels(shared: Shared, panel: int | None = None) -> Kernels:
     """The job's kernels (with --randomize, panel `panel`'s: randomized.panel_setup), loaded from the cache
     on a worker's first item and kept for the next ones (KEEP_PANELS panels, the first loaded dropped first), the
     d > 0 phase kernels reduced to their rank-r bases (pipeline.compact_kernels: same numbers, 1/8 the memory)
-    and their exact-power maps made once (pipeline.store_power_maps: same numbers, not remade per item)."""
+    and their exact-power maps made once (pipeline.store_power_maps: same numbers, not remade per item).
+    Planned with the parent's BLAS thread count (Shared.blas_threads): without the kernel cache (--no-cache)
+    each worker computes its kernels, whose bits change with the BLAS thread count (threads.py), and a
+    pool worker has only a share of the cores' threads (raw.dng differed between 1 and 2 workers)."""
     from udc_render.pipeline import compact_kernels, plan_kernels, store_power_maps
     key = (str(shared.out), panel)
     if key not in _WORKER_KERNELS:
@@ -63,7 +66,9 @@ def worker_kernels(shared: Shared, panel: int | None = None) -> Kernels:
             del _WORKER_KERNELS[next(iter(_WORKER_KERNELS))]  # the first loaded
         scene, displays = (shared.scene, shared.displays) if panel is None else \
             panel_setup(shared.scene, shared.displays[0], shared.randomize.panels[panel])
-        kernels = compact_kernels(plan_kernels(scene, displays, shared.cfg), scene, shared.cfg)
+        with blas_threads(shared.blas_threads):
+            planned = plan_kernels(scene, displays, shared.cfg)
+        kernels = compact_kernels(planned, scene, shared.cfg)
         _WORKER_KERNELS[key] = store_power_maps(kernels, scene)
     return _WORKER_KERNELS[key]
 
@@ -159,9 +164,10 @@ def executor(workers: int, scheduler: str | None, shared: Shared):
         yield lambda tasks: (make_item(shared, t) for t in tasks)
         return
     threads = threads_per_worker(workers)
-    # BLAS threads change the kernels' bits (psf's matrix products): a monitor's kernels all come from this
-    # process, so its workers get a share of the cores; a 3D scene's workers compute their off-focus layers'
-    # kernels, so they get this process's BLAS threads (the same bits as a 1-worker run; threads.py)
+    # BLAS threads change the kernels' bits (psf's matrix products): a monitor's kernels come from this
+    # process (or, with --no-cache, from worker_kernels at this process's count), so its workers get a share of
+    # the cores; a 3D scene's workers compute their off-focus layers' kernels, so they get this process's BLAS
+    # threads (the same bits as a 1-worker run; threads.py)
     blas = threads if isinstance(shared.scene.content, Monitor) else shared.blas_threads
     with blas_threads_env(blas) if blas else contextlib.nullcontext():  # spawn: Dr.Jit threads and fork do not mix
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
