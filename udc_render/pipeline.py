@@ -143,7 +143,10 @@ def auto_exposure_s(band_image: BandImage, sensor: SensorConfig) -> tuple[float,
 
 def noise_seed(seed: int, item: int, display_name: str) -> np.random.SeedSequence:
     """Noise stream of one capture: SeedSequence([seed, item, crc32(display name)]) (adding a display
-    to a job does not change the others' noise)."""
+    to a job does not change the others' noise). Kept, not a streams.stream: numpy pads the entropy with
+    zeros, but the last word is a CRC-32, zero for one name in 2³² and for none in use (glass, toled,
+    poled, random, 'gt frames': tests/udc_render/test_dataset_streams.py), so no capture's stream is
+    SeedSequence([seed, item]); changing it would change every dataset's noise."""
     return np.random.SeedSequence([int(seed), int(item), zlib.crc32(display_name.encode())])
 
 

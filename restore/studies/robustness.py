@@ -125,6 +125,7 @@ def write_clean_images(folder: Path, b: Budget) -> Path:
     lines = []
     for i in range(b.train_images + b.val_images):
         split = "train" if i < b.train_images else "val"
+        # [IMAGES_SEED, 0] is default_rng(IMAGES_SEED) (zero padding), which nothing else draws from
         palette = np.random.default_rng([IMAGES_SEED, i]).uniform(0.0, WHITE_FILL, (16, 3))
         rgb = dead_leaves_colour(w, h, IMAGES_SEED * 1000 + i, palette).astype(np.float32)
         item = Path(split) / f"item_{i:04d}"
@@ -220,7 +221,9 @@ def read_scores(path: Path) -> list[dict]:
 
 def dep_outputs(panel, pairs: list) -> list[np.ndarray]:
     """DeP (restore.dep) of each packed input with the panel's own kernels (restore.known.packed_from_sensor) and γ:
-    the reference that knows the panel exactly (module doc); the Wiener sampler of image j seeded (SCORE_SEED, j)."""
+    the reference that knows the panel exactly (module doc); the Wiener sampler of image j seeded (SCORE_SEED, j)
+    (j = 0: default_rng(SCORE_SEED), zero padding; the validation noise draws from named streams of SCORE_SEED,
+    restore.online.validation_pairs, not from that root stream)."""
     kernels = packed_from_sensor(panel.kernels)
     return [dep_restore(x, panel.gamma_rgb, kernels, rng=[SCORE_SEED, j]).rgb for j, (x, _) in enumerate(pairs)]
 

@@ -36,8 +36,31 @@ def toled_run(tmp_path_factory, render_cache):
 
 
 @pytest.fixture(scope="module")
-def poled(tmp_path_factory, render_cache):
-    return cal.calibrate(load_display("poled"), tmp_path_factory.mktemp("cal_poled"), quick=True)
+def poled_run(tmp_path_factory, render_cache):
+    """The P-OLED's quick calibration and the random streams it drew from (Rig.rng's keys, in order)."""
+    streams, rng = [], Rig.rng
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(Rig, "rng", lambda rig, stream: streams.append(stream) or rng(rig, stream))
+        result = cal.calibrate(load_display("poled"), tmp_path_factory.mktemp("cal_poled"), quick=True)
+    return result, streams
+
+
+@pytest.fixture(scope="module")
+def poled(poled_run):
+    return poled_run[0]
+
+
+def test_every_capture_draws_from_its_own_stream(poled_run):
+    """default_rng([seed, k]) is default_rng([seed]) at k = 0 (numpy pads with zeros): the rig's keys are
+    nonzero and no two draws share one. One per capture: γ 2 views × 26 levels, noise 1 preview + 16
+    frames, PSF 1 preview + 16 frames, MTF 2 axes × 4 frequencies × 2 views, and the noise pattern."""
+    from udc_render.calibration.gamma import GAMMA_LEVELS
+    from udc_render.calibration.psf import LASER_FRAMES
+    from udc_render.calibration.rig import RIGS
+    q = RIGS["quick"]
+    streams = poled_run[1]
+    assert len(streams) == 2 * len(GAMMA_LEVELS) + 1 + q.noise_frames + 1 + LASER_FRAMES + 4 * len(q.frequencies) + 1
+    assert len(set(streams)) == len(streams) and min(streams) > 0
 
 
 def test_cli_prints_the_table_writes_the_files_and_exits_0(toled_run):

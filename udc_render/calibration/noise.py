@@ -83,8 +83,7 @@ def calibrate_noise(rig: Rig) -> dict:
     """(λ_read, λ_shot) per RGGB channel of the display capture (module doc)."""
     if rig.cfg.sensor.noise == "none":
         return {"skipped": "noise model 'none': no noise to calibrate", "checks": []}
-    rng = np.random.default_rng([rig.cfg.seed, 7])
-    code = np.kron(rng.integers(0, 256, (9, 16)), np.ones((30, 30)))
+    code = np.kron(rig.rng(7).integers(0, 256, (9, 16)), np.ones((30, 30)))
     b = rig.render(rig.pattern_file("noise_blocks.png", code))
     s = rig.sensors[rig.display.name]
     img = rig.optics(b, rig.display)

@@ -93,10 +93,17 @@ class Rig:
         self.seconds["optics"] = self.seconds.get("optics", 0.0) + time.perf_counter() - t0
         return img
 
+    def rng(self, stream: int) -> np.random.Generator:
+        """Random stream `stream` of the rig's seed: default_rng([seed, stream]). The protocols' streams are
+        nonzero and distinct (7: the noise pattern; gamma 1000 + 2·level + view; noise 1999, 2000 + frame; PSF
+        3000, 3001 + frame; MTF 4000 + 100·(y axis) + 2·frequency + view; tests/udc_render/test_calibrate.py),
+        so numpy's zero padding (default_rng([seed, 0]) is default_rng(seed)) makes no two of them one stream.
+        Kept, not a streams.stream: the calibrations' noise, and their recorded figures, stay."""
+        return np.random.default_rng([self.cfg.seed, stream])
+
     def capture(self, images, band_image, d, stream: int):
-        """The sensor capture of irradiance `images` behind `d`, noise from random stream (seed, stream)."""
-        rng = np.random.default_rng([self.cfg.seed, stream])
-        return sensor_capture(images, band_image.edges_nm, self.sensors[d.name], rng)
+        """The sensor capture of irradiance `images` behind `d`, noise from random stream `stream` (rng)."""
+        return sensor_capture(images, band_image.edges_nm, self.sensors[d.name], self.rng(stream))
 
     def monitor_px(self) -> tuple[float, float]:
         """The panel's width and height on the sensor in pixels (thin lens, magnification v/u)."""

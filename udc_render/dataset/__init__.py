@@ -11,7 +11,7 @@ item i sees the scene from its own camera pose (plan.Views): item 0 from the sce
 scene's: its sensor's, render.resolve_xml_camera), item i > 0 with the camera origin moved by
 u[0:3] · origin_jitter_m and the target by u[3:6] · target_jitter_m per world axis (metres; defaults
 plan.DEFAULT_ORIGIN_JITTER_M = ±(0.15, 0.1, 0.15), DEFAULT_TARGET_JITTER_M = ±(0.3, 0.2, 0)), u =
-default_rng(SeedSequence([render seed, i])).uniform(−1, 1, 6); the up vector is kept. The focus distance
+streams.stream(render seed, 'pose', i).uniform(−1, 1, 6); the up vector is kept. The focus distance
 is the base pose's for every item (lens.focus_distance_m set to it once), so the lens-to-sensor distance,
 the field of view and the in-focus kernels are the same for all items. Every item is rendered with seed
 SeedSequence([render seed, i]).generate_state(1)[0] and has sensor noise SeedSequence([noise seed, i,

@@ -9,6 +9,7 @@ import numpy as np
 
 from udc_render.content.monitor_image import BUILTIN_IMAGES
 from udc_render.errors import UdcError
+from udc_render.streams import stream
 
 SPLITS = ("train", "val", "test")
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".webp")
@@ -48,7 +49,8 @@ class Task:
 class Views:
     """A 3D scene's items: item 0 sees the scene from its own pose (origin, target, up); item i > 0 moves
     the origin by u[0:3] · origin_jitter_m and the target by u[3:6] · target_jitter_m (per world axis),
-    u = default_rng(SeedSequence([base seed, i])).uniform(−1, 1, 6); the up vector is kept. The focus
+    u = streams.stream(base seed, 'pose', i).uniform(−1, 1, 6) (not SeedSequence([base seed, i]), which
+    render_seed turns into the item's Mitsuba seed: one stream for two draws); the up vector is kept. The focus
     distance is not part of a pose: the job fixes it at the base pose's (same kernels for every item)."""
     origin_m: tuple[float, float, float]
     target_m: tuple[float, float, float]
@@ -59,7 +61,7 @@ class Views:
     def pose(self, base_seed: int, item: int) -> Pose:
         if item == 0:
             return self.origin_m, self.target_m, self.up
-        u = np.random.default_rng(np.random.SeedSequence([base_seed, item])).uniform(-1.0, 1.0, 6)
+        u = stream(base_seed, "pose", item).uniform(-1.0, 1.0, 6)
         origin = tuple(float(v) for v in np.add(self.origin_m, u[:3] * np.asarray(self.origin_jitter_m, float)))
         target = tuple(float(v) for v in np.add(self.target_m, u[3:] * np.asarray(self.target_jitter_m, float)))
         axis = np.subtract(target, origin)
@@ -74,7 +76,8 @@ class Views:
         return {"base": {"origin_m": list(self.origin_m), "target_m": list(self.target_m), "up": list(self.up)},
                 "origin_jitter_m": list(self.origin_jitter_m), "target_jitter_m": list(self.target_jitter_m),
                 "draw": "item 0: the base pose; item i: origin += u[0:3]·origin_jitter_m, target += "
-                        "u[3:6]·target_jitter_m, u = default_rng(SeedSequence([render_seed, i])).uniform(-1, 1, 6)"}
+                        "u[3:6]·target_jitter_m, u = udc_render.streams.stream(render_seed, 'pose', i)"
+                        ".uniform(-1, 1, 6)"}
 
 
 def _fmt(v) -> str:
@@ -112,7 +115,9 @@ def image_of(images: list[tuple[str, str]], builtin: bool, i: int) -> tuple[str,
 
 
 def render_seed(base: int, item: int) -> int:
-    """Mitsuba's uint32 base seed of item `item`."""
+    """Mitsuba's uint32 base seed of item `item`: SeedSequence([base, item]).generate_state(1)[0]. Item 0's is
+    SeedSequence(base)'s (numpy pads the entropy with zeros), which no other draw of a job uses: the passes
+    draw from SeedSequence([this seed, group, pass]) (render.job.pass_seed), a pose from stream(base, 'pose', i)."""
     return int(np.random.SeedSequence([base, item]).generate_state(1)[0])
 
 

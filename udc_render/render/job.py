@@ -69,7 +69,10 @@ def choose_path(scene: Scene) -> str:
 
 
 def pass_seed(seed: int, group: int, pass_index: int, pilot: bool = False) -> int:
-    """Mitsuba's uint32 seed of one pass: SeedSequence([seed, group, pass(, 1 for pilots)])."""
+    """Mitsuba's uint32 seed of one pass: SeedSequence([seed, group, pass(, 1 for pilots)]). numpy pads the
+    entropy with zeros to 4 words, so pass 0 ends the key in a zero that is not there: (seed, g, 0, 0) is also
+    [seed, g] and [seed] (g = 0), which no other pass or pilot is ((seed, g, p, 0) against (seed, g, p, 1)):
+    every pass has its own seed (tests/udc_render/test_dataset_streams.py); the bytes of every render stay."""
     key = [seed, group, pass_index] + ([1] if pilot else [])
     return int(np.random.SeedSequence(key).generate_state(1)[0])
 

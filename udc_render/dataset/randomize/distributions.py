@@ -283,6 +283,9 @@ def _with_display_files(dists: Distributions, toml: Path) -> Distributions:
 
 def stream(seed: int, *keys) -> np.random.Generator:
     """A generator of its own for (seed, keys…): integers as they are, strings by crc32, so that each
-    parameter's draw depends on its name and not on the other parameters."""
+    parameter's draw depends on its name and not on the other parameters. Every caller's key is (what, index,
+    name) with a CRC-32 last, nonzero and distinct for every name drawn (tests/udc_render/test_dataset_streams.py),
+    so numpy's zero padding of the entropy makes no two draws one stream. Kept as it is, not moved to
+    udc_render.streams: the draws, and so the shipped banks' fingerprints, would change."""
     parts = [int(seed)] + [k if isinstance(k, int) else zlib.crc32(str(k).encode()) for k in keys]
     return np.random.default_rng(np.random.SeedSequence(parts))
