@@ -30,15 +30,20 @@ Content at the paper's level of detail: its DIV2K test photographs were 2K image
 at about one image pixel per sensor pixel (l.231). Rows are scored on colour dead leaves
 (pattern:dead_leaves_colour, the test content of `udc-render results`) and on `--images` (for users with
 DIV2K); the built-in photographs (300–640 px, enlarged 4–7× on the monitor: far smoother) are reported
-apart. ``quick``: one dead-leaves image and one photograph at 512 × 256 px. The study resumes: each finished
-image's rows go to rows_full.jsonl (rows_quick.jsonl) in the output folder, and a new run skips those images
-(delete the file after changing an effect).
+apart. ``quick``: one dead-leaves image and one photograph at 512 × 256 px.
+
+An image's noise (the synthesis's item, pipeline.noise_seed) and DeP's sampler come from its identity (a file's
+bytes, a spec as written: image_identity, image_item), not its place in --images. The study resumes: each
+finished image's rows go to rows_full.jsonl (rows_quick.jsonl) in the output folder with the fingerprint of the
+settings that made them (every setup, effect and DeP candidate, the image's identity: entry_fingerprint), and a
+new run reuses an image's rows only under the same fingerprint; the others are recomputed, and the run says so
+(studies.fingerprint). The code is not in the fingerprint: delete the file after changing the code.
 """
 from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -50,7 +55,10 @@ from udc_render.metrics import psnr_db
 from udc_render.optics.gamma import display_gamma
 from udc_render.scene.geometry import psf_lens
 from udc_render.scene.overrides import with_overrides
+from udc_render.io.files import save_text
 from udc_render.sensor import pack_rggb, rgb_to_rggb
+from udc_render.streams import seed_sequence, stream
+from udc_render.studies.fingerprint import FIELD, digest, file_digest, stale_note
 from udc_render.studies.gap_effects import DEP_VARIANTS, EFFECTS
 from udc_render.studies.gap_report import PAPER_DEP_DB, write_report
 
@@ -59,6 +67,8 @@ PHOTOGRAPHS = ("builtin:astronaut",)
 FULL = {"sensor_px": (2048, 1024), "content": DEAD_LEAVES, "photographs": PHOTOGRAPHS}
 QUICK = {"sensor_px": (512, 256), "content": DEAD_LEAVES[:1], "photographs": PHOTOGRAPHS[:1]}
 DISPLAYS = ("toled", "poled")
+GAP_SEED = 0  # the seed of every image's noise and DeP streams (image_item)
+LOG_VERSION = 2  # 2: a log entry has the image's identity and a fingerprint (entries without one are recomputed)
 
 
 @dataclass(frozen=True)
@@ -83,7 +93,8 @@ def packed_unit(capture, clean: bool = False) -> np.ndarray:
     """A capture's packed RAW (or its noise-free mosaic, packed) in [0, 1] of the white level."""
     s = capture.params["sensor"]
     dn = pack_rggb(capture.clean_dn) if clean else capture.packed_dn
-    return ((dn.astype(np.float32) - s["black_level_dn"]) / (s["white_level_dn"] - s["black_level_dn"])).astype(np.float32)
+    black, white = s["black_level_dn"], s["white_level_dn"]
+    return ((dn.astype(np.float32) - black) / (white - black)).astype(np.float32)
 
 
 _RENDERS: dict = {}
@@ -134,7 +145,7 @@ def score(shot: Shot, kernels: np.ndarray, item: int, denoiser: str = "nlm", gam
     """Level, input PSNR and DeP PSNR of one shot (module doc)."""
     t0 = time.perf_counter()
     dep = dep_restore(shot.packed, shot.gamma_rggb * gamma_scale, kernels, denoiser=denoiser,
-                      rng=np.random.default_rng(item))
+                      rng=stream(GAP_SEED, "gap dep", item))
     return {"level": float(shot.gt.mean()), "input_db": paper_metrics(None, shot.gt, shot.packed)["psnr_db_paper"],
             "dep_db": paper_metrics(dep.rgb, shot.gt)["psnr_db_paper"], "dep_s": time.perf_counter() - t0,
             "synth_s": shot.synth_s}
@@ -171,8 +182,49 @@ def with_image(setup: Setup, image: str) -> Setup:
     return replace(setup, scene=with_overrides(setup.scene, image=image))
 
 
+def image_identity(image: str) -> str:
+    """What an image is, wherever it stands in --images or on disk: a file by the sha256 of its bytes, a spec
+    (pattern:…, builtin:…) as written."""
+    return f"sha256:{file_digest(image)}" if Path(image).is_file() else image
+
+
+def image_item(identity: str) -> int:
+    """The item that seeds an image's capture noise (pipeline.noise_seed) and its DeP sampler (score): the first
+    word of the named stream (GAP_SEED, 'gap', identity). It was the image's position: reordering --images
+    changed every image's noise."""
+    return int(seed_sequence(GAP_SEED, "gap", identity).generate_state(1)[0])
+
+
+def dep_variants(content: str, rank: int) -> list:
+    """The DeP candidates run on an image of `content` at place `rank` in its content group."""
+    return [v for v in DEP_VARIANTS if v.available() and (v.images is None or rank < v.images)
+            and (v.content is None or v.content == content)]
+
+
+def describe_setup(setup: Setup) -> dict:
+    """What a setup synthesises with, as JSON values (the checkout's path and the kernel cache left out)."""
+    cfg = {k: v for k, v in asdict(setup.cfg).items() if k not in ("use_cache", "kernel_cache")}
+    scene = {k: v for k, v in asdict(setup.scene).items() if k != "source"}
+    return {"cfg": cfg, "displays": [d.describe() for d in setup.displays], "scene": scene}
+
+
+def settings_fingerprint(setups: dict) -> str:
+    """digest of every setup the rows synthesise with: the profiles, the bare base and each effect on."""
+    described = {k: describe_setup(s) for k, s in setups.items()}
+    effects = {e.name: [e.compare, describe_setup(e.switch(setups["bare"], True))] for e in EFFECTS}
+    return digest({"version": LOG_VERSION, "displays": DISPLAYS, "setups": described, "effects": effects})
+
+
+def entry_fingerprint(settings: str, identity: str, content: str, rank: int) -> str:
+    """The fingerprint of one image's rows: the settings', the image's identity, its content group and item,
+    and the DeP candidates it runs."""
+    return digest({"settings": settings, "image": identity, "content": content, "item": image_item(identity),
+                   "dep": [asdict(v) for v in dep_variants(content, rank)]})
+
+
 def rows_for_image(image: str, content: str, item: int, setups: dict, progress_bar=None, rank: int = 0) -> list[dict]:
-    """Every row (module doc) for one image, both displays; `rank`: the image's place in its content group."""
+    """Every row (module doc) for one image, both displays; `item` seeds its noise (image_item); `rank`: the
+    image's place in its content group."""
     rows = []
     for di, name in enumerate(DISPLAYS):
         def at(setup):
@@ -193,12 +245,10 @@ def rows_for_image(image: str, content: str, item: int, setups: dict, progress_b
                          **score(shot, kern, item), **versus(shot, shots["bare"], e.compare)})
             if progress_bar is not None:
                 progress_bar.update()
-        rows.append({**common, "row": "physical (every default)", "kind": "profile", **score(shots["physical"], kern, item),
+        rows.append({**common, "row": "physical (every default)", "kind": "profile",
+                     **score(shots["physical"], kern, item),
                      **versus(shots["physical"], shots["bare"])})
-        for v in DEP_VARIANTS:
-            if (not v.available() or (v.images is not None and rank >= v.images)
-                    or (v.content is not None and v.content != content)):
-                continue
+        for v in dep_variants(content, rank):
             k = kern if v.kernels == "paper" else dep_kernels(setups["physical"].displays[di], setups["physical"].scene,
                                                                setups["physical"].cfg, v.kernels)
             rows.append({**common, "row": f"DeP: {v.name}", "kind": "dep", "effect": v.name,
@@ -206,23 +256,34 @@ def rows_for_image(image: str, content: str, item: int, setups: dict, progress_b
     return rows
 
 
-def read_log(log: Path) -> dict[str, dict]:
-    """{image: its entry (rows, seconds)} from an earlier run's log (one JSON line per finished image; a torn
-    last line is ignored): the study resumes image by image."""
-    done = {}
+def read_log(log: Path) -> list[dict]:
+    """The entries of an earlier run's log (one JSON line per finished image: its rows, seconds, identity and
+    fingerprint; a torn last line is ignored): the study resumes image by image."""
+    entries = []
     if log.is_file():
         for line in log.read_text().splitlines():
             try:
-                entry = json.loads(line)
+                entries.append(json.loads(line))
             except json.JSONDecodeError:
                 continue
-            done[entry["image"]] = entry
-    return done
+    return entries
 
 
 def read_rows(log: Path) -> dict[str, list[dict]]:
-    """{image: its rows} of read_log."""
-    return {image: entry["rows"] for image, entry in read_log(log).items()}
+    """{image: its rows} of read_log (an image's last entry)."""
+    return {entry["image"]: entry["rows"] for entry in read_log(log)}
+
+
+def logged(log: Path, plan: list[tuple]) -> tuple[dict, int]:
+    """({fingerprint: entry} of the log's entries that `plan`'s images can reuse, the number of logged rows of
+    plan's images made under another fingerprint or none). Those stale entries leave the log."""
+    entries = read_log(log)
+    wanted = {fp for *_, fp in plan}
+    images = {image for image, *_ in plan} | {identity for _, _, identity, *_ in plan}
+    stale = [e for e in entries if e.get(FIELD) not in wanted and (e.get("identity") or e["image"]) in images]
+    if stale:
+        save_text(log, "".join(json.dumps(e) + "\n" for e in entries if not any(e is x for x in stale)))
+    return {e[FIELD]: e for e in entries if e.get(FIELD) in wanted}, sum(len(e["rows"]) for e in stale)
 
 
 def run_study(out_dir, quick: bool = False, images: tuple[str, ...] = (), progress: bool = True) -> list[dict]:
@@ -231,22 +292,28 @@ def run_study(out_dir, quick: bool = False, images: tuple[str, ...] = (), progre
     setups = base_setups(c["sensor_px"])
     content = ([(i, "dead leaves") for i in c["content"]] + [(i, "--images") for i in images]
                + [(i, "built-in photographs (enlarged)") for i in c["photographs"]])
-    bar = tqdm(total=len(content) * len(DISPLAYS) * len(EFFECTS), desc="study gap", unit="row", disable=not progress)
+    settings, plan = settings_fingerprint(setups), []
+    for n, (image, kind) in enumerate(content):
+        identity, rank = image_identity(image), sum(1 for _, k in content[:n] if k == kind)
+        plan.append((image, kind, identity, rank, entry_fingerprint(settings, identity, kind, rank)))
+    Path(out_dir).mkdir(parents=True, exist_ok=True)
     log = Path(out_dir) / f"rows_{'quick' if quick else 'full'}.jsonl"
-    done = read_log(log)
+    done, stale = logged(log, plan)
+    if note := stale_note("study gap", stale, log):
+        print(note)
+    bar = tqdm(total=len(content) * len(DISPLAYS) * len(EFFECTS), desc="study gap", unit="row", disable=not progress)
     rows, seconds = [], 0.0
-    for item, (image, kind) in enumerate(content):
-        if image in done:  # scored by an earlier, interrupted run of the same grid
-            rows += done[image]["rows"]
-            seconds += done[image].get("seconds", 0.0)
+    for image, kind, identity, rank, fp in plan:
+        if fp in done:  # scored by an earlier run with the same settings
+            rows += [{**r, "image": image} for r in done[fp]["rows"]]
+            seconds += done[fp].get("seconds", 0.0)
             bar.update(len(DISPLAYS) * len(EFFECTS))
             continue
         t0 = time.perf_counter()
-        rank = sum(1 for _, k in content[:item] if k == kind)
-        new = rows_for_image(image, kind, item, setups, bar, rank)
+        new = rows_for_image(image, kind, image_item(identity), setups, bar, rank)
         took = time.perf_counter() - t0
         with open(log, "a") as f:
-            f.write(json.dumps({"image": image, "rows": new, "seconds": took}) + "\n")
+            f.write(json.dumps({"image": image, "identity": identity, FIELD: fp, "rows": new, "seconds": took}) + "\n")
         rows += new
         seconds += took
     bar.close()
