@@ -211,9 +211,10 @@ def run_fit(spec: FitSpec, out: Path, progress=None) -> dict:
                            "parameters": {k: pm(*v) for k, v in white.params.items()},
                            "gamma_model": list(white.gamma_model)}
     if noise:
-        result["noise"] = {"frames": noise.frames, "series": noise.series,
+        result["noise"] = {"frames": noise.frames, "series": noise.series, "pixels": list(noise.pixels),
                            "lambda_read": [pm(v, s) for v, s in zip(noise.lambda_read, noise.lambda_read_sigma)],
-                           "lambda_shot": [pm(v, s) for v, s in zip(noise.lambda_shot, noise.lambda_shot_sigma)]}
+                           "lambda_shot": [pm(v, s) for v, s in zip(noise.lambda_shot, noise.lambda_shot_sigma)],
+                           "notes": list(noise.notes)}
     say("report")
     w = psf.window
     figure = {"measured": w.crop(plane.value), "synthesised": synthesised, "var": w.crop(plane.var),
