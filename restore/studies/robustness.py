@@ -27,8 +27,11 @@ The clean images are colour dead leaves (udc_render.content.charts, image i's pa
 units of the white level, at most WHITE_FILL: a dataset folder's layout (manifest.jsonl, gt.exr) under out/clean.
 
 Resumable: each bank through make_bank, each training run through restore.train's checkpoint, each score row
-(model, set, panel) appended to scores.jsonl and skipped on a re-run; stage seconds are summed over re-runs
-(times.json). The report: robustness_report (study_robustness.md / .csv / .png).
+(set, panel) appended to scores.jsonl with the fingerprint of what made it (score_fingerprints: its bank, the
+validation images, the score seed, the rows, and the sha256 of both models' files) and kept on a re-run only
+under the same fingerprint (a retrained model, another bank or an older row without one: recomputed, and said
+in one line); stage seconds are summed over re-runs (times.json). The report: robustness_report
+(study_robustness.md / .csv / .png).
 """
 from __future__ import annotations
 
@@ -64,6 +67,7 @@ from udc_render.profiles import describe, resolve_profile
 from udc_render.scene import load_scene
 from udc_render.scene.geometry import sensor_kernel_px
 from udc_render.scene.overrides import with_overrides
+from udc_render.studies.fingerprint import FIELD, digest, file_digest, stale_note
 
 TRAIN_SEED, RANDOMIZE_SEED, HELDOUT_SEED, SCORE_SEED, IMAGES_SEED = 0, 0, 1, 2026, 31
 WHITE_FILL = 0.8  # the clean images' brightest value: the rig's white at 0.8 of the full well (pipeline.py)
@@ -71,6 +75,7 @@ FAR_DISTANCE_MM = 8.0  # beyond the default ranges' 0.5-5 mm
 DISORDER = {"cells": 2, "position_sd_um": 2.5, "size_sd": 0.15, "seed": 0}
 TILE = {"period_px": 64, "pixel_um": 1.0, "large_half_diagonal_px": 13, "small_half_diagonal_px": 9}
 SCORES_FILE, TIMES_FILE = "scores.jsonl", "times.json"
+SCORES_VERSION = 2  # 2: a score row has a fingerprint (score_fingerprints); rows without one are recomputed
 
 
 @dataclass(frozen=True)
@@ -205,7 +210,8 @@ def train_settings(b: Budget, bank: Bank, data: Path) -> TrainSettings:
 
 
 def train_models(out: Path, b: Budget, banks: dict, data: Path, progress: bool) -> dict:
-    """{model key: train summary} of both models ('fixed': a, on the default panel; 'randomized': b) (restore.train: resumed from a checkpoint, a finished run kept)."""
+    """{model key: train summary} of both models ('fixed': a, on the default panel; 'randomized': b)
+    (restore.train: resumed from a checkpoint, a finished run kept)."""
     summaries = {}
     for key, bank_name in (("fixed", "default"), ("randomized", "random")):
         bank = banks[bank_name]
@@ -253,11 +259,23 @@ def score_panel(models: dict, bank: Bank, index: int, images: list) -> dict[str,
     return per_image
 
 
+def score_fingerprints(out: Path, banks: dict, data: Path) -> dict[str, str]:
+    """{set: the fingerprint of its score rows}: the set's bank (bank.json's fingerprint), the validation images,
+    the score seed, the rows scored and both models' files (sha256 of model.pt: a retrained model is another)."""
+    models = {key: file_digest(out / "train" / key / "model.pt") for key in MODELS}
+    common = {"version": SCORES_VERSION, "images": images_fingerprint(data), "score_seed": SCORE_SEED,
+              "rows": list(ROWS), "models": models}
+    return {s: digest({**common, "bank": banks[s].fingerprint}) for s in SETS}
+
+
 def score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
     """Every (set, panel) row of scores.jsonl: the paper PSNR of the input, DeP and both models, per image and
-    mean; rows already there with every row's score are kept."""
+    mean; logged rows are kept under their set's fingerprint only (score_fingerprints), the others recomputed."""
     path = out / SCORES_FILE
-    rows = [r for r in read_scores(path) if all(f"psnr_{k}_db" in r for k in ROWS)]  # older rows lack a row: redone
+    fingerprints, logged = score_fingerprints(out, banks, data), read_scores(path)
+    rows = [r for r in logged if r.get(FIELD) == fingerprints.get(r["set"])]
+    if note := stale_note("study robustness", len(logged) - len(rows), path):
+        print(note)
     done = {(r["set"], r["panel"]) for r in rows}
     models = {key: load_model(out / "train" / key / "model.pt", "cpu")[0] for key in MODELS}
     images = clean_images(data, "val")
@@ -270,7 +288,7 @@ def score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
                      "family": panel.record.get("panel_draw", {}).get("family", panel.record["display"]["name"]),
                      "images": len(images), "score_seed": SCORE_SEED,
                      **{f"psnr_{k}_db": float(np.mean(v)) for k, v in per_image.items()},
-                     "per_image_db": per_image, "seconds": round(time.perf_counter() - t0, 2)})
+                     "per_image_db": per_image, "seconds": round(time.perf_counter() - t0, 2), FIELD: fingerprints[s]})
         save_text(path, "".join(json.dumps(r) + "\n" for r in rows))
     return rows
 

@@ -8,7 +8,8 @@ OUT is a `udc-render study robustness` folder of the same budget (finished first
 images, models and scores). Draws are independent per panel index (udc_render.dataset.randomize.draw_panel), so
 the first N panels of the bank are a draw of N panels; the study's own randomized model is N = train_panels. Each
 N trains in OUT/train/randomized_n<N> (the same seeds, steps and images; restore.train resumes it), its scores go
-to OUT/panels_scores.jsonl (a row per (N, set, panel), kept on a re-run) and the report to
+to OUT/panels_scores.jsonl (a row per (N, set, panel), kept on a re-run under the same fingerprint: run_fingerprint,
+of the run's model file, the set's bank, the validation images and the score seed) and the report to
 OUT/study_robustness_panels.{md,csv,png}. The validation pairs are the study's (panel_pairs, SCORE_SEED), so
 N = train_panels reads the study's own scores. --captures also trains N = train_panels with a capture per crop
 (restore.captures: each crop's own sensor and exposure from randomize `default`, the distributions the bank was
@@ -31,9 +32,9 @@ from tqdm import tqdm
 
 from restore.captures import load_capture_draws
 from restore.metrics import level_matched_psnr_db, paper_metrics
-from restore.online import clean_images
+from restore.online import clean_images, images_fingerprint
 from restore.studies.options import parse_options
-from restore.studies.robustness import (BUDGETS, SCORES_FILE, TRAIN_SEED, Budget, panel_pairs, read_scores,
+from restore.studies.robustness import (BUDGETS, SCORE_SEED, SCORES_FILE, TRAIN_SEED, Budget, panel_pairs, read_scores,
                                         run_study, train_settings)
 from restore.studies.robustness_report import DEP, MODELS, SETS, two
 from restore.train import load_model, predict, train
@@ -41,6 +42,7 @@ from udc_render.dataset.bank import Bank, read_bank
 from udc_render.errors import UdcError
 from udc_render.io.files import save_figure, save_text
 from udc_render.io.plots import pyplot
+from udc_render.studies.fingerprint import FIELD, digest, file_digest, stale_note
 from udc_render.studies.report import duration, md_table, write_tables
 
 COUNTS = (4, 8)  # with the study's own 16: a factor of two apart
@@ -48,7 +50,8 @@ PANEL_SETS = ("heldout", "default", "toled")
 ROWS_FILE, STEM = "panels_scores.jsonl", "study_robustness_panels"
 CAPTURES_RUN = "randomized_captures"
 CAPTURES = {False: "the panel's", True: "its own"}  # a crop's sensor and exposure
-COLUMNS = ["panels", "captures", "seed", "steps", "train_s", *(f"psnr_{s}{t}_db" for s in PANEL_SETS for t in ("", "_level"))]
+COLUMNS = ["panels", "captures", "seed", "steps", "train_s",
+           *(f"psnr_{s}{t}_db" for s in PANEL_SETS for t in ("", "_level"))]
 
 
 def first_panels(bank: Bank, n: int) -> Bank:
@@ -91,13 +94,26 @@ def train_runs(out: Path, b: Budget, runs: list[Run], data: Path, progress: bool
     return summaries
 
 
+def run_fingerprint(out: Path, run: Run, bank: Bank, images: str) -> str:
+    """The fingerprint of a run's rows on one set: the sha256 of its model.pt (retrained, it is another model),
+    the set's bank (bank.json's fingerprint), the validation images and the score seed."""
+    return digest({"model": file_digest(out / "train" / run_name(run) / "model.pt"), "bank": bank.fingerprint,
+                   "images": images, "score_seed": SCORE_SEED})
+
+
 def score_runs(out: Path, runs: list[Run], data: Path, progress: bool) -> list[dict]:
-    """Every (run, set, panel) row of panels_scores.jsonl (kept rows are not recomputed)."""
+    """Every (run, set, panel) row of panels_scores.jsonl (logged rows are kept under their run_fingerprint only,
+    the others recomputed)."""
     path = out / ROWS_FILE
-    rows = read_scores(path)
-    done = {(run_of(r), r["set"], r["panel"]) for r in rows}
     banks = {s: read_bank(out / "banks" / s) for s in PANEL_SETS}
-    images = clean_images(data, "val")
+    images, seen = clean_images(data, "val"), images_fingerprint(data)
+    fingerprints = {(run, s): run_fingerprint(out, run, banks[s], seen) for run in runs for s in PANEL_SETS}
+    logged = read_scores(path)
+    rows = [r for r in logged if run_of(r) not in runs  # another invocation's run: not this one's to judge
+            or r.get(FIELD) == fingerprints.get((run_of(r), r["set"]))]
+    if note := stale_note("robustness panels", len(logged) - len(rows), path):
+        print(note)
+    done = {(run_of(r), r["set"], r["panel"]) for r in rows}
     todo = [(run, s, i) for run in runs for s in PANEL_SETS for i, p in enumerate(banks[s].panels)
             if (run, s, p.name) not in done]
     models = {run: load_model(out / "train" / run_name(run) / "model.pt", "cpu")[0] for run in {t[0] for t in todo}}
@@ -109,7 +125,7 @@ def score_runs(out: Path, runs: list[Run], data: Path, progress: bool) -> list[d
                      **({"seed": run.seed} if run.seed != TRAIN_SEED else {}), "set": s, "panel": panel.name,
                      "psnr_db": float(np.mean([paper_metrics(y, gt)["psnr_db_paper"] for y, gt in scored])),
                      "psnr_level_db": float(np.mean([level_matched_psnr_db(y, gt) for y, gt in scored])),
-                     "seconds": round(time.perf_counter() - t0, 2)})
+                     "seconds": round(time.perf_counter() - t0, 2), FIELD: fingerprints[(run, s)]})
         save_text(path, "".join(json.dumps(r) + "\n" for r in rows))
     return rows
 

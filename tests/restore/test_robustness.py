@@ -95,3 +95,56 @@ def test_the_quick_study_scores_every_set_and_resumes(tmp_path):
     assert (redone["set"], redone["panel"]) == (last["set"], last["panel"])
     assert np.allclose(redone["per_image_db"]["fixed"], last["per_image_db"]["fixed"], atol=1e-6)
     assert again["rows"][:-1] == result["rows"][:-1]
+
+
+@pytest.fixture
+def fake_scoring(monkeypatch, tmp_path):
+    """restore.studies.robustness.score with one panel per set, models that are their files' bytes and a
+    score_panel that scores each model by its length; returns (the study module, out, banks, the calls)."""
+    from types import SimpleNamespace
+
+    import restore.studies.robustness as R
+    from restore.studies.robustness_report import MODELS, ROWS
+    calls = []
+
+    def score_panel(models, bank, index, images):
+        calls.append(bank.panels[index].name)
+        scores = {k: [float(len(models[k])) if k in MODELS else 10.0] for k in ROWS}
+        return {**scores, **{f"{k}_level": v for k, v in scores.items()}}
+    monkeypatch.setattr(R, "load_model", lambda path, device: (path.read_bytes(), {}))
+    monkeypatch.setattr(R, "clean_images", lambda data, split: [])
+    monkeypatch.setattr(R, "images_fingerprint", lambda data: "the validation images")
+    monkeypatch.setattr(R, "score_panel", score_panel)
+    out = tmp_path / "study"
+    for key in MODELS:
+        (out / "train" / key).mkdir(parents=True)
+        (out / "train" / key / "model.pt").write_bytes(b"weights")
+    record = {"display": {"distance_mm": 2.0, "name": "poled"}}
+    banks = {s: SimpleNamespace(fingerprint=f"bank {s}", panels=[SimpleNamespace(name=f"{s} panel", record=record)])
+             for s in SETS}
+    return R, out, banks, calls
+
+
+def test_a_retrained_model_or_another_bank_recomputes_its_scores(fake_scoring, capsys):
+    R, out, banks, calls = fake_scoring
+    first = R.score(out, banks, out / "clean", progress=False)
+    assert len(calls) == len(SETS) and {r["psnr_fixed_db"] for r in first} == {7.0}
+    assert R.score(out, banks, out / "clean", progress=False) == first and len(calls) == len(SETS)
+    (out / "train" / "fixed" / "model.pt").write_bytes(b"retrained weights")
+    again = R.score(out, banks, out / "clean", progress=False)
+    assert len(calls) == 2 * len(SETS) and {r["psnr_fixed_db"] for r in again} == {17.0}
+    assert f"study robustness: {len(SETS)} logged rows in" in capsys.readouterr().out
+    banks["heldout"].fingerprint = "another bank"
+    R.score(out, banks, out / "clean", progress=False)
+    assert calls[2 * len(SETS):] == ["heldout panel"]
+
+
+def test_score_rows_without_a_fingerprint_are_recomputed(fake_scoring, capsys):
+    R, out, banks, calls = fake_scoring
+    rows = R.score(out, banks, out / "clean", progress=False)
+    old = [{k: v for k, v in r.items() if k != "fingerprint"} for r in rows]  # a log from before the fingerprints
+    (out / R.SCORES_FILE).write_text("".join(json.dumps(r) + "\n" for r in old))
+    again = R.score(out, banks, out / "clean", progress=False)
+    assert len(calls) == 2 * len(SETS)
+    assert [{**r, "seconds": 0} for r in again] == [{**r, "seconds": 0} for r in rows]
+    assert f"study robustness: {len(SETS)} logged rows in" in capsys.readouterr().out

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import csv
+import json
 import math
 
 import pytest
@@ -74,3 +75,49 @@ def test_the_quick_study_trains_and_scores_a_smaller_panel_count(tmp_path):
     assert list(written[0]) == COLUMNS and len(written) == 4
     assert all(math.isfinite(float(r[f"psnr_{s}{t}_db"])) for r in written for s in PANEL_SETS for t in ("", "_level"))
     assert (tmp_path / "study" / f"{STEM}.png").stat().st_size > 1000
+
+
+@pytest.fixture
+def fake_runs(monkeypatch, tmp_path):
+    """score_runs with one panel per set, models that are their files' bytes, each scored by its length;
+    returns (the module, out, the banks, the predictions made)."""
+    from types import SimpleNamespace
+
+    import restore.studies.robustness_panels as P
+    predictions = []
+
+    def predict(model, x, device):
+        predictions.append(model)
+        return model
+    banks = {s: SimpleNamespace(fingerprint=f"bank {s}", panels=[SimpleNamespace(name=f"{s} panel")])
+             for s in PANEL_SETS}
+    monkeypatch.setattr(P, "read_bank", lambda folder: banks[folder.name])
+    monkeypatch.setattr(P, "clean_images", lambda data, split: [])
+    monkeypatch.setattr(P, "images_fingerprint", lambda data: "the validation images")
+    monkeypatch.setattr(P, "load_model", lambda path, device: (path.read_bytes(), {}))
+    monkeypatch.setattr(P, "panel_pairs", lambda bank, panel, images: [(None, None)])
+    monkeypatch.setattr(P, "predict", predict)
+    monkeypatch.setattr(P, "paper_metrics", lambda y, gt: {"psnr_db_paper": float(len(y))})
+    monkeypatch.setattr(P, "level_matched_psnr_db", lambda y, gt: float(len(y)))
+    out = tmp_path / "study"
+    (out / "train" / run_name(Run(2))).mkdir(parents=True)
+    (out / "train" / run_name(Run(2)) / "model.pt").write_bytes(b"weights")
+    return P, out, banks, predictions
+
+
+def test_a_retrained_run_is_scored_again_and_another_runs_rows_are_kept(fake_runs, capsys):
+    P, out, banks, predictions = fake_runs
+    other = {"panels": 3, "set": "heldout", "panel": "heldout panel", "psnr_db": 1.0}  # logged by another call
+    (out / P.ROWS_FILE).write_text(json.dumps(other) + "\n")
+    rows = P.score_runs(out, [Run(2)], out / "clean", progress=False)
+    assert len(predictions) == len(PANEL_SETS) and rows[0] == other
+    assert {r["psnr_db"] for r in rows[1:]} == {7.0}
+    assert P.score_runs(out, [Run(2)], out / "clean", progress=False) == rows and len(predictions) == len(PANEL_SETS)
+    (out / "train" / run_name(Run(2)) / "model.pt").write_bytes(b"retrained weights")
+    again = P.score_runs(out, [Run(2)], out / "clean", progress=False)
+    assert len(predictions) == 2 * len(PANEL_SETS) and again[0] == other
+    assert {r["psnr_db"] for r in again[1:]} == {17.0}
+    assert f"robustness panels: {len(PANEL_SETS)} logged rows in" in capsys.readouterr().out
+    banks["toled"].fingerprint = "another bank"
+    P.score_runs(out, [Run(2)], out / "clean", progress=False)
+    assert len(predictions) == 2 * len(PANEL_SETS) + 1
