@@ -222,3 +222,52 @@ def test_profiles_page_states_what_each_profile_sets():
     printed_r = re.search(r"printed r = ([\d.]+), ([\d.]+), ([\d.]+)", (CONCEPTS / "profiles.md").read_text())
     from psf.paper import PRINTED_R
     assert [float(v) for v in printed_r.groups()] == [PRINTED_R[640.0], PRINTED_R[520.0], PRINTED_R[450.0]]
+
+
+def test_psf_guide_states_the_commands_defaults_and_limits():
+    """guides/psf.md's synopsis defaults (--wavelengths-nm 450,520,640, --pitch-um 3.1, --kernel-px 255), its lens
+    (f = 6000 µm, aperture 3333 µm) and what it refuses at once (200–2000 nm, beyond f/0.5, pupil windows over
+    8192² samples at d > 0 and 16384² at d = 0) against the parser and psf.plan."""
+    from psf import Lens, LensError, plan
+    from udc_render.cli import build_parser
+    text = (ROOT / "docs" / "guides" / "psf.md").read_text(encoding="utf-8")
+    _says(text, "--wavelengths-nm 450,520,640", "[--pitch-um 3.1] [--kernel-px 255]",
+          "f = 6000 µm, aperture 3333 µm", "wavelengths outside 200–2000 nm, apertures beyond f/0.5",
+          "pupil windows over 8192² samples at d > 0 (16384² at d = 0)")
+    args = build_parser().parse_args(["psf", "--out", "x"])
+    assert (args.wavelengths_nm, args.pitch_um, args.kernel_px) == ([450.0, 520.0, 640.0], 3.1, 255)
+    assert (args.focal_length_um, args.aperture_um) == (6000.0, 3333.0) == (Lens().focal_length_um,
+                                                                             Lens().aperture_um)
+    assert plan.WAVELENGTH_RANGE_NM == (200.0, 2000.0)
+    assert (plan.MAX_PUPIL_WINDOW_SAMPLES, plan.MAX_PUPIL_WINDOW_SAMPLES_D0) == (8192 ** 2, 16384 ** 2)
+    Lens(aperture_um=2 * 6000.0)  # f/0.5 itself is allowed, a hair beyond it is not
+    with pytest.raises(LensError):
+        Lens(aperture_um=2 * 6000.0 * (1 + 1e-9))
+
+
+def test_readme_states_the_demos_bands_and_sensor():
+    """README.md: the demo renders '30 bands at the paper's 2048 × 1024 sensor' (pixels of 1.55 µm, rig.md)."""
+    from udc_render.scene import load_scene
+    _says((ROOT / "README.md").read_text(encoding="utf-8"), "rendered to 30\nbands at the paper's 2048 × 1024 sensor")
+    scene = load_scene("monitor")
+    assert scene.bands.count == 30 and (scene.sensor.width_px, scene.sensor.height_px) == (2048, 1024)
+    assert scene.sensor.pitch_um == 1.55
+
+
+def test_synth_guide_states_the_sensor_and_the_field_convolution():
+    """guides/synth.md: 'Nikon 5100 sensitivities × QE 0.6', 'Poisson + 4.87 e⁻ read noise with a 15,506 e⁻ full
+    well', '16-bit quantisation', 'a rank-4 basis of each band's 16 phase kernels (--field-rank, default 4',
+    '--defocus-tolerance-px, default 1 px' and the kernels' '2·margin + 1 = 513 px at 1.55 µm'."""
+    from psf.plan import DEFAULT_FIELD_PHASES
+    from udc_render.pipeline import SynthConfig
+    from udc_render.scene.model import DEFAULT_MARGIN_UM
+    from udc_render.sensor import SensorConfig
+    text = " ".join((ROOT / "docs" / "guides" / "synth.md").read_text(encoding="utf-8").split())
+    _says(text, "Nikon 5100 sensitivities × QE 0.6", "Poisson + 4.87 e⁻ read noise with a 15,506 e⁻ full well",
+          "16-bit quantisation", "a rank-4 basis of each band's 16 phase kernels (`--field-rank`, default 4",
+          "(`--defocus-tolerance-px`, default 1 px", "2·margin + 1 = 513 px at 1.55 µm")
+    s, cfg = SensorConfig(), SynthConfig()
+    assert (s.camera, s.peak_qe, s.noise, s.read_noise_e, s.full_well_e, s.bit_depth) == (
+        "Nikon 5100 (NPL)", 0.6, "poisson", 4.87, 15506.0, 16)
+    assert cfg.field_rank == 4 and DEFAULT_FIELD_PHASES ** 2 == 16 and cfg.defocus_tolerance_px == 1.0
+    assert 2 * math.ceil(DEFAULT_MARGIN_UM / 1.55) + 1 == 513

@@ -327,8 +327,9 @@ def test_gradient_clipping_bounds_the_update(tmp_path):
 
 def test_bf16_autocast_step_matches_float32_and_keeps_float32_weights():
     """One train_step from the same weights and batch: the bfloat16 forward's loss agrees with float32's to
-    bfloat16's precision (8 significant bits; measured 0.007 %, asserted 2 %), the weights and Adam's
-    state stay float32, and the updates point the same way (cosine 0.996 measured, 0.9 asserted)."""
+    bfloat16's unit roundoff 2⁻⁹ = 0.2 % (measured 0.008 %: the mean over the pixels averages the roundings;
+    it was asserted at 2 %), the weights and Adam's state stay float32, and the updates point the same way
+    (cosine 0.996 measured, 0.98 asserted: oneDNN's bf16 kernels differ between CPUs)."""
     from restore.models import build_model
     from restore.train import train_step
     torch.manual_seed(0)
@@ -345,8 +346,8 @@ def test_bf16_autocast_step_matches_float32_and_keeps_float32_weights():
         assert all(v.dtype == torch.float32 for st in opt.state.values() for v in st.values() if v.is_floating_point())
         results[autocast] = loss, torch.cat([(p.detach() - b).flatten() for p, b in zip(model.parameters(), before)])
     (l32, d32), (l16, d16) = results[None], results["bf16"]
-    assert math.isfinite(l16) and abs(l16 - l32) < 0.02 * l32
-    assert torch.nn.functional.cosine_similarity(d32, d16, dim=0) > 0.9
+    assert math.isfinite(l16) and abs(l16 - l32) < 2.0 ** -9 * l32
+    assert torch.nn.functional.cosine_similarity(d32, d16, dim=0) > 0.98
 
 
 def test_tiny_unet_trained_in_bf16_beats_the_identity(tmp_path, monkeypatch):
