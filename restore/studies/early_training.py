@@ -12,8 +12,10 @@ forward passes in bfloat16 (restore.train.train_step), to compare a budget's pre
     python -m restore.studies.early_training DATA --display toled --steps 300 \\
         --variant unet:256:2e-4 --variant unet:128:1e-3 --variant 'unet:128:2e-4:{"width": 64}'
 
-Rows are appended to <out>/results.jsonl (a variant already there is not run again) and the table of all
-rows is printed.
+Rows are appended to <out>/results.jsonl with the fingerprint of what made them (row_fingerprint: the dataset's
+manifest, the variant, display, steps, precision and recipe); a variant already there under the same fingerprint is
+not run again, one under another (another DATA, say, or a row logged before the fingerprints) is run again and
+replaced, and the run says so. The table of all rows is printed.
 """
 from __future__ import annotations
 
@@ -27,8 +29,10 @@ import numpy as np
 from restore.studies.options import parse_options
 from udc_render.errors import UdcError
 from udc_render.io.files import save_text
+from udc_render.studies.fingerprint import FIELD, digest, stale_note
 
 BATCH, CROPS_PER_PAIR, CLIP_GRAD_NORM, SEED = 4, 2, 0.5, 0  # restore.studies.results.BUDGETS["cpu"]
+VAL_CROP_PX = 768  # the central crop of every val frame validated on
 
 
 def parse_variant(text: str) -> dict:
@@ -46,7 +50,35 @@ def parse_variant(text: str) -> dict:
     return {"model": dict(defaults[kind], **extra), "crop_px": crop, "lr": lr, "variant": text}
 
 
-def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop_px: int = 768,
+def row_fingerprint(data_dir: Path, display: str, variant: dict, steps: int, autocast: str | None) -> str:
+    """What decides a row: the dataset (restore.train.data_fingerprint: its manifest), the variant's model, crop
+    and rate, the display, the steps, the forward precision and the recipe's constants."""
+    from restore.train import data_fingerprint
+    return digest({"data": data_fingerprint(data_dir), "display": display, "steps": steps, "autocast": autocast,
+                   **{k: variant[k] for k in ("model", "crop_px", "lr")},
+                   "recipe": [BATCH, CROPS_PER_PAIR, CLIP_GRAD_NORM, SEED, VAL_CROP_PX]})
+
+
+def early_rows(data: Path, display: str, variants: list[dict], steps: int, autocast: str | None, path: Path) -> list:
+    """The rows of `path` with each variant's row made now unless logged under the same fingerprint (a variant's
+    row under another fingerprint is made again and replaces it)."""
+    rows = [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
+    fingerprints = {v["variant"]: row_fingerprint(data, display, v, steps, autocast) for v in variants}
+
+    def stale(r):
+        return (r["variant"] in fingerprints and r["display"] == display and r["steps"] == steps
+                and r.get("autocast") == autocast and r.get(FIELD) != fingerprints[r["variant"]])
+    kept = [r for r in rows if not stale(r)]
+    if note := stale_note("early_training", len(rows) - len(kept), path):
+        print(note)
+    for v in variants:
+        if not any(r["variant"] == v["variant"] and r.get(FIELD) == fingerprints[v["variant"]] for r in kept):
+            kept.append({**early_psnr(data, display, v, steps, autocast=autocast), FIELD: fingerprints[v["variant"]]})
+            save_text(path, "".join(json.dumps(r) + "\n" for r in kept))
+    return kept
+
+
+def early_psnr(data_dir: Path, display: str, variant: dict, steps: int, val_crop_px: int = VAL_CROP_PX,
                autocast: str | None = None) -> dict:
     """Train `variant` for `steps` steps from seed 0 (restore.train.train_step; `autocast`: its forward
     precision); its validation PSNR, mean loss of the last 75 steps and seconds."""
@@ -88,7 +120,8 @@ def main(argv: list[str]) -> None:
     pos, o = parse_options(argv, usage, repeated=("variant",))
     if len(pos) != 1 or "display" not in o or not o["variant"]:
         sys.exit(f"usage: {usage}")
-    data, display, steps, out = Path(pos[0]), o["display"], int(o.get("steps", 300)), Path(o.get("out", "out/early_training"))
+    data, display, steps = Path(pos[0]), o["display"], int(o.get("steps", 300))
+    out = Path(o.get("out", "out/early_training"))
     autocast = o.get("autocast")
     if autocast not in (None, "bf16"):
         sys.exit(f"error: --autocast = {autocast!r}: expected bf16 (or leave it out for float32)")
@@ -96,15 +129,11 @@ def main(argv: list[str]) -> None:
     try:
         variants = [parse_variant(v) for v in o["variant"]]
         out.mkdir(parents=True, exist_ok=True)
-        rows = [json.loads(line) for line in path.read_text().splitlines()] if path.is_file() else []
-        for v in variants:
-            if not any(r["variant"] == v["variant"] and r["display"] == display and r["steps"] == steps
-                       and r.get("autocast") == autocast for r in rows):
-                rows.append(early_psnr(data, display, v, steps, autocast=autocast))
-                save_text(path, "".join(json.dumps(r) + "\n" for r in rows))
+        rows = early_rows(data, display, variants, steps, autocast, path)
     except (UdcError, OSError) as exc:
         sys.exit(f"error: {exc}")
-    print("| variant | forward | display | steps | val PSNR (dB) | loss, last 75 steps | s |\n|---|---|---|---|---|---|---|")
+    print("| variant | forward | display | steps | val PSNR (dB) | loss, last 75 steps | s |\n"
+          "|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| `{r['variant']}` | {r.get('autocast') or 'float32'} | {r['display']} | {r['steps']} | "
               f"{r['val_psnr_db']:.2f} | {r['loss_last75']:.4f} | "
