@@ -8,13 +8,15 @@ give N sensors and N brightness levels.
 A crop's capture replaces on its panel (captured_panel):
 - the gain: the panel's family gain (its gain ÷ its own gain_scale) × the crop's gain_scale;
 - the exposure: the panel's exposure rule (its exposure ÷ its own exposure.scale) × the crop's exposure.scale;
-- the read noise and the fixed-pattern noise's amplitudes (PRNU, DSNU, row and column offsets, dark current);
+- the read noise and the fixed-pattern noise (PRNU, DSNU, row and column offsets, dark current, and the maps'
+  seed);
+- the defect pixels (dead and hot fractions, the hot pixels' dark current, and the map's seed);
 - the brightness of the clean scene (exposure.brightness).
-It keeps the panel's defect map (its seed and fractions) and its FPN maps' seed: a map of the whole frame per
-crop would cost a frame's draws for each (restore.degrade_sensor.FrameMaps keeps them per panel), and the maps'
-pattern is not what a restorer must generalise over; their amplitudes are. The crop's drawn values
-(CROP_KEYS) go into online.jsonl. Validation keeps each panel's own capture: a fixed set, comparable between
-epochs and runs.
+Its defect map and FPN maps are its own: maps of the crop's size drawn from its seeds (Panel.maps 'crop':
+sensor.defects.defect_map and sensor.fpn.fpn_normals of a crop-sized sensor, restore.degrade_sensor.FrameMaps),
+a crop's own pixels' draws, where the frame's would cost a frame's for each crop. A panel without defects or FPN
+keeps none. The crop's drawn values (CROP_KEYS, then the two maps' seeds) go into online.jsonl. Validation keeps
+each panel's own capture: a fixed set, comparable between epochs and runs.
 
 Streams: crop k of epoch e draws with draw_capture(…, seed = stream_seed(seed, 'online capture', e), item = k)
 (restore.tensors.stream_seed: the named stream of udc_render.streams): a crop's capture depends on (seed, epoch, k)
@@ -34,7 +36,8 @@ from udc_render.dataset.randomize import (CaptureDraw, Distributions, RandomizeE
 BANK = "bank"  # --capture-draws bank: the bank's own distributions
 
 CROP_KEYS = ("sensor.gain_scale", "sensor.read_noise_e", "sensor.prnu", "sensor.dsnu_e", "sensor.row_offset_e",
-             "sensor.column_offset_e", "sensor.dark_current_e_per_s", "exposure.scale", "exposure.brightness")
+             "sensor.column_offset_e", "sensor.dark_current_e_per_s", "sensor.dead_fraction", "sensor.hot_fraction",
+             "sensor.hot_dark_e_per_s", "exposure.scale", "exposure.brightness")
 
 
 @dataclass(frozen=True)
@@ -71,16 +74,17 @@ def crop_capture(draws: CaptureDraws, seed: int, epoch: int, k: int) -> CaptureD
 
 
 def captured_panel(panel: Panel, cap: CaptureDraw) -> Panel:
-    """The panel as capture `cap` sees it (module doc): its kernels and defect map, the capture's gain, exposure,
-    read noise and FPN amplitudes (on the panel's FPN seed; a panel without FPN keeps none)."""
+    """The panel as capture `cap` sees it (module doc): its kernels, far field and haze; the capture's gain,
+    exposure, read noise, FPN and defect pixels, their maps drawn per crop (a panel without FPN or defects keeps
+    none)."""
     own = panel.record.get("capture_draw", {})
     sensor = replace(panel.sensor, gain=panel.sensor.gain / own.get("gain_scale", 1.0) * cap.gain_scale,
                      exposure_s=panel.sensor.exposure_s / own.get("exposure_scale", 1.0) * cap.exposure_scale,
                      read_noise_e=float(cap.read_noise_e))
-    fpn = None if panel.fpn is None else replace(cap.fpn, seed=panel.fpn.seed)
-    return replace(panel, sensor=sensor, fpn=fpn)
+    return replace(panel, sensor=sensor, fpn=None if panel.fpn is None else cap.fpn,
+                   defects=None if panel.defects is None else cap.defects, maps="crop")
 
 
-def crop_values(cap: CaptureDraw) -> list[float]:
-    """The crop's drawn values in CROP_KEYS order (online.jsonl)."""
-    return [float(cap.values[k]) for k in CROP_KEYS]
+def crop_values(cap: CaptureDraw) -> list:
+    """The crop's drawn values in CROP_KEYS order, then its defect map's and FPN maps' seeds (online.jsonl)."""
+    return [float(cap.values[k]) for k in CROP_KEYS] + [int(cap.defects.seed), int(cap.fpn.seed)]

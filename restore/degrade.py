@@ -6,8 +6,13 @@ and the crop's place in its frame (the optical axis at the frame's centre):
 
     blur        y_c = (x_c ⊗ k_c)[m:−m, m:−m]                              d = 0 (optics.convolution)
                 y_c = Σ_r B_cr ⊗ (W_cr x_c),  W_cr = Σ_q c_qr w_q(x) m_c(s(x))  d > 0 (optics.field, field_power)
+    far field   y_c += x̄_c ⊗ F_c                      where the panel has one (optics.far_field; degrade_wide)
     electrons   e = γ_c / gain · y_c / (g / (gain R)) [· cos⁴]           per RGGB site (sensor.radiometry)
+    haze        e ← (1 − h) e + h (e_frame ⊗ ρ)        where the panel has one (optics.stray; degrade_wide)
     sensor      FPN, Poisson–Gaussian noise, full well, quantisation, levels, defect pixels (restore.degrade_sensor)
+
+The far field and the haze reach past a crop's margin: a panel that has them needs each crop's whole clean
+frame (restore.degrade_wide.WideSource); restore.online gives it.
 
 The convolution is linear with the numpy path's boundary handling: the FFT size per axis is fft_shape's
 next_fast_len(max(n, n − m + S//2, S)) with the kernel wrapped around index 0, so wrap-around reaches only
@@ -28,12 +33,13 @@ import numpy as np
 import torch
 
 from restore.degrade_sensor import FrameMaps, NoiseDraw, expose_batch, packed_sites
+from restore.degrade_wide import WideLight, WideSource, wide_panel
 from restore.tensors import host_to, per_crop
 from udc_render.dataset.bank import Panel
 from psf.banding import power_lattice
 from udc_render.optics import fft_shape, phase_weights
 
-__all__ = ["Degrader", "NoiseDraw", "TorchPanel", "blur", "blur_batch", "normalised"]
+__all__ = ["Degrader", "NoiseDraw", "TorchPanel", "WideSource", "blur", "blur_batch", "normalised"]
 
 # The d > 0 panels' power maps a Degrader keeps (float32 at 2048 × 1024 with 256-px margins: 47 MB per panel).
 POWER_BUDGET_BYTES = 1.0e9
@@ -209,6 +215,7 @@ class Degrader:
         self.threads = threads if self.device.type == "cpu" else None
         self.batched = self.device.type != "cpu" if batched is None else batched  # degrade_batch's doc
         self.maps = FrameMaps(self.device, dtype)
+        self.wide = WideLight(panels, self.margin_px, self.device, dtype) if any(map(wide_panel, panels)) else None
         self.power_budget_bytes = power_budget_bytes
         self._power: OrderedDict = OrderedDict()
 
@@ -231,17 +238,21 @@ class Degrader:
         return power
 
     def degrade(self, x: torch.Tensor, index: int, frame_hw: tuple[int, int], origin_yx: tuple[int, int],
-                generator: torch.Generator | None = None, draw: NoiseDraw | None = None) -> torch.Tensor:
+                generator: torch.Generator | None = None, draw: NoiseDraw | None = None,
+                source: WideSource | None = None) -> torch.Tensor:
         """Packed DN [4, h/2, w/2] (R, Gr, Gb, B; whole numbers) of crop x [3, h + 2m, w + 2m] whose output starts
         at frame pixel origin_yx (even: an R site) of a frame_hw sensor, through panel `index`; the noise from
-        `generator` (on this device), or the explicit `draw`: degrade_batch of one crop."""
-        return self.degrade_batch(x[None], [index], [(frame_hw, origin_yx)], [generator], [draw])[0]
+        `generator` (on this device), or the explicit `draw`; the crop's whole clean frame `source` where the panel
+        has a far field or a haze: degrade_batch of one crop."""
+        return self.degrade_batch(x[None], [index], [(frame_hw, origin_yx)], [generator], [draw], sources=[source])[0]
 
     def degrade_batch(self, x: torch.Tensor, indices: list[int], crops: list, generators: list | None = None,
-                      draws: list | None = None, captures: list[Panel] | None = None) -> torch.Tensor:
+                      draws: list | None = None, captures: list[Panel] | None = None,
+                      sources: list | None = None) -> torch.Tensor:
         """Packed DN [B, 4, h/2, w/2] of crops x [B, 3, h + 2m, w + 2m], crop b through panel indices[b] at crops[b]
         = (frame_hw, origin_yx) (as degrade), its noise from generators[b] or draws[b], behind the sensor, FPN and
-        defects of captures[b] (restore.captures.captured_panel; default: its panel's); on the CPU with
+        defects of captures[b] (restore.captures.captured_panel; default: its panel's), its far field and haze from
+        sources[b] (restore.degrade_wide.WideSource: needed where the panel has them); on the CPU with
         self.threads threads. With self.batched (by default on a GPU) the batch's operations run as one where
         the crops allow it (their FFTs, the sensor of crops alike), in a fraction of the launches of one call per
         crop: the GPU's cost (half the time on an H100). Else crop by crop: on one CPU thread a batch's weighted
@@ -252,6 +263,7 @@ class Degrader:
             raise ValueError(f"degrade_batch: {x.shape[0]} crops, {len(indices)} panel indices and {len(crops)} "
                              "places: expected one of each per crop, at least one crop")
         generators, draws = generators or [None] * len(indices), draws or [None] * len(indices)
+        sources = sources or [None] * len(indices)
         captures = captures or [self.panels[i].panel for i in indices]
         if len(captures) != len(indices):
             raise ValueError(f"degrade_batch: {len(captures)} captures for {len(indices)} crops")
@@ -263,15 +275,17 @@ class Degrader:
                 order = sorted(range(len(indices)), key=lambda b: (self.panels[indices[b]].panel.field is not None,
                                                                    indices[b]))
                 if order == list(range(len(order))):
-                    return self._degrade(x, indices, crops, generators, draws, captures)
+                    return self._degrade(x, indices, crops, generators, draws, captures, sources)
                 x = x.to(self.device)[host_to(torch.tensor(order), self.device)]
                 pick = lambda seq: [seq[b] for b in order]  # noqa: E731
-                dn = self._degrade(x, pick(indices), pick(crops), pick(generators), pick(draws), pick(captures))
+                dn = self._degrade(x, pick(indices), pick(crops), pick(generators), pick(draws), pick(captures),
+                                   pick(sources))
                 return dn[host_to(torch.from_numpy(np.argsort(order)), self.device)]
             return torch.cat([self._degrade(x[b:b + 1], indices[b:b + 1], crops[b:b + 1], generators[b:b + 1],
-                                            draws[b:b + 1], captures[b:b + 1]) for b in range(len(indices))])
+                                            draws[b:b + 1], captures[b:b + 1], sources[b:b + 1])
+                              for b in range(len(indices))])
 
-    def _degrade(self, x, indices, crops, generators, draws, captures) -> torch.Tensor:
+    def _degrade(self, x, indices, crops, generators, draws, captures, sources) -> torch.Tensor:
         tps = [self.panels[i] for i in indices]
         m = tps[0].margin_px
         h, w = x.shape[-2] - 2 * m, x.shape[-1] - 2 * m
@@ -280,10 +294,14 @@ class Degrader:
                 raise ValueError(f"crop {tuple(x.shape[1:])} at {(y0, x0)}: expected [3, h + {2 * m}, w + {2 * m}] "
                                  "with h, w and the origin even (whole RGGB cells)")
             if y0 < 0 or x0 < 0 or y0 + h > frame_hw[0] or x0 + w > frame_hw[1]:
-                raise ValueError(f"crop of {h} × {w} px at {(y0, x0)} leaves the {frame_hw[0]} × {frame_hw[1]} px frame")
+                raise ValueError(f"crop of {h} × {w} px at {(y0, x0)} leaves the {frame_hw[0]} × {frame_hw[1]} px "
+                                 "frame")
         powers = [self.power_frame(i, frame) if tp.panel.field is not None else None
                   for i, tp, (frame, _) in zip(indices, tps, crops)]
         y = blur_batch(x.to(self.device, self.dtype), tps, crops, powers).clamp_min(0)
+        far, veil = self._wide(indices, crops, sources, (h, w))
+        if far is not None:
+            y = y + far
         sensors = [c.sensor for c in captures]
         gamma = per_crop([s.gamma_rggb for s in sensors], y)
         per_e = per_crop([s.dn_per_electron / s.gain / s.range_dn for s in sensors], y)  # normalised units per e⁻
@@ -292,10 +310,34 @@ class Degrader:
             cos4 = torch.stack([self._cos4(h, w, frame, origin, s) if s.cos4_falloff else torch.ones_like(y[0, 0])
                                 for s, (frame, origin) in zip(sensors, crops)])
             e = e * packed_sites(cos4[:, None])
+        if veil is not None:  # the veil holds its cos⁴ (degrade_wide)
+            h_share = per_crop([0.0 if tp.panel.haze is None else tp.panel.haze.share for tp in tps], e)
+            e = (1 - h_share) * e + h_share * (gamma * packed_sites(veil) / per_e)
         return expose_batch(e, captures, self.maps, crops, generators, draws)
+
+    def _wide(self, indices, crops, sources, size_hw) -> tuple:
+        """(far [B, 3, h, w] or None, veil [B, 3, h, w] or None) of the crops (degrade_wide; zero where a crop's
+        panel has none)."""
+        wide = [b for b, i in enumerate(indices) if wide_panel(self.panels[i].panel)]
+        if not wide:
+            return None, None
+        far, veil = self.wide.crops([indices[b] for b in wide], [crops[b] for b in wide], [sources[b] for b in wide],
+                                    size_hw)
+        out = []
+        for maps in (far, veil):
+            if all(m is None for m in maps):
+                out.append(None)
+                continue
+            full = torch.zeros((len(indices), 3) + tuple(size_hw), device=self.device, dtype=self.dtype)
+            for b, m in zip(wide, maps):
+                if m is not None:
+                    full[b] = m
+            out.append(full)
+        return tuple(out)
 
     def _cos4(self, h: int, w: int, frame_hw, origin_yx, s) -> torch.Tensor:
         """cos⁴θ [h, w] of the crop's pixels, r from the frame's centre (sensor.radiometry.cos4_map)."""
-        yy = (torch.arange(h, device=self.device, dtype=torch.float64) + origin_yx[0] + 0.5 - frame_hw[0] / 2) * s.pitch_um
-        xx = (torch.arange(w, device=self.device, dtype=torch.float64) + origin_yx[1] + 0.5 - frame_hw[1] / 2) * s.pitch_um
+        at = lambda n, start, size: (torch.arange(n, device=self.device, dtype=torch.float64)  # noqa: E731
+                                     + start + 0.5 - size / 2) * s.pitch_um
+        yy, xx = at(h, origin_yx[0], frame_hw[0]), at(w, origin_yx[1], frame_hw[1])
         return (1.0 / (1.0 + (yy[:, None] ** 2 + xx[None, :] ** 2) / s.focal_length_um ** 2) ** 2).to(self.dtype)

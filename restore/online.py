@@ -15,9 +15,12 @@ generator on the device.
 The crop takes the panel's margin of scene around it; beyond the frame (gt.exr holds no more scene) the image is
 mirrored. Input: the degraded crop's (DN − black) / (white − black) [4, c/2, c/2]; target: the clean crop × the
 panel's brightness [3, c, c] (a drawn panel's exposure.brightness; 1 for a preset), the input made from the same
-scaled crop. With capture draws (--capture-draws, restore.captures) the crop also draws its own sensor and
-exposure, brightness included, instead of its panel's. A resumed run sees the same crops, panels, captures and
-noise (they depend on (seed, epoch, k) alone); each epoch's draws are recorded in online.jsonl.
+scaled crop. A panel's far field and haze come from the crop's whole clean frame (restore.degrade_wide.
+WideSource: the image, its brightness and the crop's transform). With capture draws (--capture-draws,
+restore.captures) the crop also draws its own sensor and exposure, brightness included, and its own defect
+pixels and fixed-pattern noise (maps of the crop's size from its own seeds), instead of its panel's. A resumed
+run sees the same crops, panels, captures and noise (they depend on (seed, epoch, k) alone); each epoch's draws
+are recorded in online.jsonl.
 
 Validation: each val image whole, through panel j mod N, its noise from the stream (seed, 'online val', j),
 made once.
@@ -42,8 +45,8 @@ import torch
 
 from restore.captures import CaptureDraws, captured_panel, crop_capture, crop_values, load_capture_draws
 from restore.data import DataError, dihedral, load_gt, read_manifest
-from restore.degrade import Degrader, normalised
-from restore.tensors import per_crop, stream_seed
+from restore.degrade import Degrader, WideSource, normalised
+from restore.tensors import per_crop, region, stream_seed
 from udc_render.optics import fft_shape
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.io.exr import read_exr
@@ -104,30 +107,6 @@ def images_fingerprint(data: Path) -> str:
             h.update(str(p.relative_to(data)).encode())
             h.update(hashlib.sha256(p.read_bytes()).digest())
     return h.hexdigest()[:16]
-
-
-def region(img: torch.Tensor, y0: int, x0: int, rows: int, cols: int) -> torch.Tensor:
-    """img[:, y0:y0 + rows, x0:x0 + cols] of a tensor [C, H, W] (on its own device) with the image mirrored beyond
-    its edges (edge pixels not repeated: numpy's 'reflect'). Axis by axis: inside the image a slice; a mirror
-    within one reflection, flipped slices joined; else a gather (a 768² crop of a 2048 × 1024 tensor mirrored on
-    one side: 0.6 ms, where one 2-D fancy index took 7 ms)."""
-    def axis(a: torch.Tensor, dim: int, start: int, n: int) -> torch.Tensor:
-        size = a.shape[dim]
-        if 0 <= start and start + n <= size:
-            return a.narrow(dim, start, n)
-        lo, hi = max(start, 0), min(start + n, size)
-        if hi > lo and -start < size and start + n - size < size:
-            parts = [a.narrow(dim, 1, -start).flip(dim)] if start < 0 else []
-            parts.append(a.narrow(dim, lo, hi - lo))
-            if start + n > size:
-                parts.append(a.narrow(dim, 2 * size - 1 - start - n, start + n - size).flip(dim))
-            return torch.cat(parts, dim)
-        i = np.abs(np.arange(start, start + n))
-        period = 2 * (size - 1)
-        i %= max(period, 1)
-        i = np.where(i >= size, period - i, i)
-        return a.index_select(dim, torch.as_tensor(i, device=a.device))
-    return axis(axis(img, 1, y0, rows), 2, x0, cols)
 
 
 def panel_brightness(panel) -> float:
@@ -208,7 +187,8 @@ class OnlineBatches:
         x = clean * per_crop(brightness, clean)
         gens = [torch.Generator(self.degrader.device).manual_seed(d["noise_seed"]) for d in draws]
         crops = [(self.pixels[d["image"]].shape[1:], (d["y0"], d["x0"])) for d in draws]
-        dn = self.degrader.degrade_batch(x, [d["panel"] for d in draws], crops, gens, captures=panels)
+        sources = [WideSource(d["image"], self.pixels[d["image"]], b, d["mode"]) for d, b in zip(draws, brightness)]
+        dn = self.degrader.degrade_batch(x, [d["panel"] for d in draws], crops, gens, captures=panels, sources=sources)
         return normalised(dn, panels).float(), x[:, :, m:m + c, m:m + c].float().contiguous()
 
     def epoch(self, epoch: int):
@@ -296,7 +276,8 @@ def validation_pairs(images: list[CleanImage], bank: Bank, degrader: Degrader, s
         h, w = im.pixels.shape[1:]
         x = region(torch.from_numpy(im.pixels), -m, -m, h + 2 * m, w + 2 * m) * b
         gen = torch.Generator(degrader.device).manual_seed(stream_seed(seed, "online val", j))
-        dn = degrader.degrade(x, p, (h, w), (0, 0), gen)
+        source = WideSource(("val", j), torch.from_numpy(im.pixels).to(degrader.device), b)
+        dn = degrader.degrade(x, p, (h, w), (0, 0), gen, source=source)
         out.append((normalised(dn, bank.panels[p]).float().cpu().numpy(), (im.pixels * b).astype(np.float32)))
     return out
 
@@ -334,7 +315,8 @@ def run_captures(degrade: dict, bank: Bank | None = None) -> CaptureDraws | None
 
 class DrawLog:
     """online.jsonl in a run folder: one line per epoch, its crops' [image, panel, transform, y0, x0, noise seed]
-    in the order trained, followed with capture draws by the crop's drawn values (restore.captures.CROP_KEYS)
+    in the order trained, followed with capture draws by the crop's drawn values (restore.captures.CROP_KEYS) and
+    its defect map's and FPN maps' seeds
     (written with each checkpoint; a resumed run keeps the epochs its checkpoint holds)."""
     FILE = "online.jsonl"
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from restore.captures import CROP_KEYS, captured_panel, crop_capture, load_capture_draws
+from restore.captures import CROP_KEYS, captured_panel, crop_capture, crop_values, load_capture_draws
 from restore.data import dihedral
 from restore.degrade import Degrader, normalised
 from restore.online import OnlineBatches, clean_images
@@ -16,8 +16,7 @@ from tests.conftest import write_pairs
 from tests.restore.test_online import _blur_panel, _settings, straight_and_resumed
 from udc_render.cli import main
 from udc_render.dataset.bank import read_bank, save_panel, write_bank_json
-from udc_render.sensor.defects import DefectConfig
-from udc_render.sensor.fpn import FpnConfig
+from udc_render.sensor import DefectConfig, FpnConfig, defect_map, fpn_maps, pack_rggb
 from udc_render.streams import stream
 
 OWN_GAIN_SCALE, OWN_EXPOSURE_SCALE = 2.0, 0.5  # the panel's own capture draw, divided out by captured_panel
@@ -39,7 +38,7 @@ def bank(tmp_path):
     return out
 
 
-def test_a_crops_capture_is_drawn_within_the_ranges_and_replaces_its_panels_sensor_not_its_maps():
+def test_a_crops_capture_is_drawn_within_the_ranges_and_replaces_its_panels_sensor_and_maps():
     draws = load_capture_draws("default")
     caps = [crop_capture(draws, 0, e, k) for e in range(3) for k in range(40)]
     for key in CROP_KEYS:
@@ -57,9 +56,10 @@ def test_a_crops_capture_is_drawn_within_the_ranges_and_replaces_its_panels_sens
         assert own.sensor.exposure_s == pytest.approx(panel.sensor.exposure_s / OWN_EXPOSURE_SCALE
                                                       * cap.exposure_scale, rel=1e-15)
         assert own.sensor.read_noise_e == cap.read_noise_e and own.sensor.gamma_rggb == panel.sensor.gamma_rggb
-        assert own.fpn == replace(cap.fpn, seed=panel.fpn.seed) and own.defects == panel.defects
+        assert own.fpn == cap.fpn and own.defects == cap.defects and own.maps == "crop"  # maps of its own
         assert own.kernels is panel.kernels
     assert captured_panel(replace(panel, fpn=None), caps[0]).fpn is None  # FPN off stays off
+    assert captured_panel(replace(panel, defects=None), caps[0]).defects is None  # and defects
 
 
 def test_a_crop_degraded_with_its_capture_equals_its_panel_given_that_sensor(tmp_path, bank):
@@ -91,6 +91,32 @@ def test_a_crop_degraded_with_its_capture_equals_its_panel_given_that_sensor(tmp
     assert torch.equal(x, xw) and torch.equal(y, yw)
 
 
+def test_two_crops_of_one_panel_get_maps_of_their_own_recorded_and_drawn_again(tmp_path, bank):
+    """With capture draws each crop has its own defect map and FPN maps: those of a crop-sized sensor with its
+    capture's settings and seeds (sensor.defects.defect_map, sensor.fpn.fpn_maps), two crops of one panel
+    different ones, and the seeds recorded in online.jsonl's entry (crop_values) draw them again."""
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 4),), size_px=(48, 64))
+    b = read_bank(bank)
+    batches = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels), 32, 2, seed=0, workers=0,
+                            captures=load_capture_draws("default"))
+    draws = batches.epoch(0)[0]
+    d1, d2 = [d for d in draws if d["panel"] == draws[0]["panel"]][:2]
+    maps = batches.degrader.maps
+    kinds, gains = [], []
+    for d in (d1, d2):
+        own = captured_panel(b.panels[d["panel"]], d["capture"])
+        crop = [((48, 64), (d["y0"], d["x0"]))]
+        kinds.append(maps.defect_classes(crop, (32, 32), [own.defects], [True])[0].numpy())
+        gains.append(maps.fpn(crop, (32, 32), [own.fpn], [True])[0][0].numpy())
+        seeds = crop_values(d["capture"])[-2:]
+        assert seeds == [own.defects.seed, own.fpn.seed]
+        np.testing.assert_array_equal(kinds[-1], pack_rggb(defect_map(32, 32, replace(own.defects, seed=seeds[0]))))
+        np.testing.assert_allclose(gains[-1], pack_rggb(fpn_maps(32, 32, replace(own.fpn, seed=seeds[1])).gain),
+                                   rtol=1e-6)
+    assert d1["capture"].defects.seed != d2["capture"].defects.seed and d1["capture"].fpn.seed != d2["capture"].fpn.seed
+    assert not np.array_equal(gains[0], gains[1])
+
+
 def test_a_run_with_capture_draws_records_them_resumes_identically_and_refuses_other_ones(tmp_path, bank,
                                                                                           monkeypatch, capsys):
     data = write_pairs(tmp_path / "pairs", splits=(("train", 3),), size_px=(48, 64))
@@ -98,8 +124,9 @@ def test_a_run_with_capture_draws_records_them_resumes_identically_and_refuses_o
     s = replace(s, degrade={**s.degrade, "captures": load_capture_draws("default").describe()})
     log = straight_and_resumed(tmp_path, monkeypatch, data, s, bank)
     crops = [c for line in log.splitlines() for c in json.loads(line)["crops"]]
-    assert len(crops) == 4 * 3 and all(len(c) == 6 + len(CROP_KEYS) for c in crops)
-    assert len({c[-1] for c in crops}) == len(crops)  # a brightness of its own per crop
+    assert len(crops) == 4 * 3 and all(len(c) == 6 + len(CROP_KEYS) + 2 for c in crops)
+    brightness = 6 + CROP_KEYS.index("exposure.brightness")
+    assert len({c[brightness] for c in crops}) == len({c[-2] for c in crops}) == len(crops)  # its own, per crop
 
     cfg = tmp_path / "tiny.toml"
     cfg.write_text('type = "unet"\nwidth = 4\ndepth = 2\n')

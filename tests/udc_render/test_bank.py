@@ -7,14 +7,21 @@ import numpy as np
 import pytest
 import torch
 
-from restore.degrade import Degrader
+from restore.degrade import Degrader, WideSource
+from restore.degrade_wide import WideLight
+from restore.tensors import region
 from udc_render.cli import main
 from udc_render.dataset.bank import BANK_FILE, read_bank
 from udc_render.dataset.randomize import draw_capture, draw_panels, load_distributions
+from udc_render.dataset.bank_make import monitor_white_bands
+from udc_render.optics.apply import far_field_images
 from udc_render.optics.displays import PAPER_GAIN, PAPER_GAMMA, preset
+from udc_render.pipeline import SynthConfig, plan_kernels, sensor_for_scene
+from udc_render.profiles import resolve_profile
 from udc_render.scene import load_scene
 from udc_render.scene.geometry import psf_lens
 from udc_render.scene.overrides import with_overrides
+from udc_render.sensor import band_electron_weights
 from udc_render.synth_kernels import paper_channel_kernels
 
 TINY = ["--sensor-px", "64,32", "--pitch-um", "24.8", "--bands-nm", "400:700:100", "--quiet"]
@@ -50,8 +57,10 @@ def test_a_paper_bank_is_the_per_channel_synthesis_and_resumes(tmp_path, cache, 
         np.testing.assert_array_equal(p.kernels, ref.kernels)
         assert p.gamma_rgb == PAPER_GAMMA[p.name] and p.sensor.gain == PAPER_GAIN[p.name]
         assert p.sensor.gamma_rggb[3] == pytest.approx(PAPER_GAMMA[p.name][2] / PAPER_GAIN[p.name])
-        assert (p.sensor.noise, p.sensor.lambda_source, p.defects, p.fpn, p.field) == ("gaussian", "sensor", None, None, None)
-        assert p.record["brightness"] == 1.0
+        assert (p.sensor.noise, p.sensor.lambda_source, p.defects, p.fpn, p.field) == ("gaussian", "sensor", None, None,
+                                                                                     None)
+        assert p.record["brightness"] == 1.0 and (p.far, p.haze) == (None, None)  # the paper's form has neither
+        assert "per-channel form" in p.record["effects"]["not_applied"]["far field"]
     capsys.readouterr()
     assert _bank(out, cache, "--display", "glass,toled", "--profile", "paper") == 0
     assert "0 made now" in capsys.readouterr().out
@@ -66,10 +75,14 @@ def test_a_paper_bank_is_the_per_channel_synthesis_and_resumes(tmp_path, cache, 
 
 def test_a_physical_bank_has_field_bases_that_degrade(tmp_path, cache):
     """--profile physical: the T-OLED at d = 2 mm gets rank-4 field bases (the camera's channel kernels at the scene's
-    band step, 2 × 2 phases here), Poisson noise, defect pixels and FPN; the Degrader takes it."""
+    band step, 2 × 2 phases here), Poisson noise, defect pixels, FPN and a far field, no haze (the profile's T-OLED
+    has none), as its record's effects say; the Degrader takes it with the crop's frame."""
     out = tmp_path / "bank"
     assert _bank(out, cache, "--display", "toled", "--field-phases", "2") == 0
     (p,) = read_bank(out).panels
+    assert p.far is not None and p.haze is None and p.record["far_field"]["share_rgb"] == p.far.share_rgb
+    effects = p.record["effects"]
+    assert any(e.startswith("far field") for e in effects["applied"]) and "haze is 0" in effects["not_applied"]["haze"]
     f = p.field
     assert f.distance_mm == 2.0 and f.rank == 4 and len(f.live) == 4 and f.series is not None
     assert f.bases.shape == (3, 4, 33, 33)
@@ -77,8 +90,36 @@ def test_a_physical_bank_has_field_bases_that_degrade(tmp_path, cache):
     assert np.allclose(sums, 1.0, atol=1e-5)  # each phase kernel's basis form keeps its unit sum (phase_basis)
     assert p.sensor.noise == "poisson" and p.defects is not None and p.fpn is not None
     assert p.record["kernel_params"]["distance_mm"] == 2.0
-    dn = Degrader([p]).degrade(torch.rand(3, 32 + 32, 64 + 32), 0, (32, 64), (0, 0), torch.Generator().manual_seed(0))
+    frame = torch.rand(3, 32, 64)
+    dn = Degrader([p]).degrade(region(frame, -16, -16, 64, 96), 0, (32, 64), (0, 0), torch.Generator().manual_seed(0),
+                               source=WideSource("frame", frame))
     assert dn.shape == (4, 16, 32) and dn.max() > 0
+
+
+def test_the_far_field_is_the_spectral_synthesiss(tmp_path, cache):
+    """The bank's far field through the torch path equals the spectral synthesis's (pipeline.plan_kernels' far field
+    through optics.apply.far_field_images with the camera's band weights) for a scene of the monitor's white
+    spectrum, relative to each channel's core light Σ_k w_ck g_k white_k (float64, 1e-9: the same light); the
+    P-OLED's share is 6–8 %, the T-OLED's 1 % (what the synthesis's far field brings, psf.far)."""
+    out = tmp_path / "bank"
+    assert _bank(out, cache, "--display", "toled,poled", "--field-phases", "2") == 0
+    scene = with_overrides(load_scene("monitor"), bands_nm="400:700:100", sensor_px=(64, 32), pitch_um=24.8)
+    cfg, displays = resolve_profile("physical", SynthConfig(field_phases=2, kernel_cache=cache), [preset("toled"),
+                                                                                                    preset("poled")])
+    kernels = plan_kernels(scene, displays, cfg)
+    edges = np.asarray(scene.bands.edges_nm, float)
+    w, white = band_electron_weights(edges, sensor_for_scene(cfg.sensor, scene)), monitor_white_bands(scene)
+    frame = torch.from_numpy(np.random.default_rng(0).random((32, 64))).expand(3, -1, -1)  # the white's spectrum
+    s = region(frame, -16, -16, 64, 96)[0].numpy()  # with the margin a crop takes (mirrored)
+    for p, d in zip(read_bank(out).panels, displays):
+        ks, t = kernels.band[d.name], d.transmission.band_means(edges)
+        far = far_field_images(white[:, None, None] * s, kernels.far[d.name], 16, t * ks.transmittance, w)
+        core = w @ (white * t * ks.transmittance * (1 - ks.energy_outside))
+        ours = WideLight([p], 16, torch.device("cpu"), torch.float64).crops([0], [((32, 64), (0, 0))],
+                                                                           [WideSource("s", frame)], (32, 64))[0][0]
+        np.testing.assert_allclose(ours.numpy(), far / core[:, None, None], rtol=1e-9)
+    shares = [p.far.share_rgb for p in read_bank(out).panels]
+    assert all(0.008 < v < 0.013 for v in shares[0]) and all(0.05 < v < 0.09 for v in shares[1]), shares
 
 
 @pytest.mark.slow

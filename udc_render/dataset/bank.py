@@ -4,7 +4,7 @@
     DIR/panel_<i>.npz        its arrays: kernels [3, S, S] (R, G, B at the sensor pitch, unit sum), and when
                              d > 0 the field: bases [3, r, S, S], coeffs [3, n, r], live [n, 2] (phase (j, i)),
                              shifts_x_um [Px], shifts_y_um [Py], field_power [3, Py, Px], series [3, 2a+1, b+1]
-                             (complex; absent for an aperiodic display)
+                             (complex; absent for an aperiodic display); with a far field far_kernels [3, Sf, Sf]
 
 A panel is the per-channel form of the numpy synthesis (udc_render.pipeline, form 'per_channel'):
 
@@ -14,7 +14,16 @@ with the display's γ (T and gain per channel, optics.gamma), its sensor (gain, 
 sensor's defect pixels and fixed-pattern noise; where d > 0 the blur is the field blend of optics.field
 (source blend, the exact power m(s(x)) of optics.field_power) of each channel's rank-r basis of phase
 kernels: y_c = Σ_r B_cr ⊗ (W_cr · x_c), W_cr = Σ_q c_qr w_q(x) m_c(s(x)) (an exact blend is the rank of
-all live phases with c = I). Written by udc_render.dataset.bank_make; read here, without torch.
+all live phases with c = I). Where the synthesis it stands for (the physical profile's spectral form) has
+them, a panel also carries the light past the kernel window (PanelFar: optics.far_field per channel) and its
+display's haze (PanelHaze: optics.stray), applied by restore.degrade_wide; each record's "effects" lists what
+the panel applies and what it does not, and why. Written by udc_render.dataset.bank_make; read here, without
+torch.
+
+Formats: 2 (today's), and 1, still read: a format-1 bank (made before panels carried the far field and the
+haze) has neither, whatever its records say was drawn (FORMAT_1_EFFECTS); the shipped randomized models of
+restore/trained were trained through such banks, their bank.json kept byte for byte (its sha256 is the
+fingerprint their train.json names).
 """
 from __future__ import annotations
 
@@ -29,9 +38,17 @@ from udc_render.dataset.plan import DatasetError
 from udc_render.io.files import save_json, save_npz
 from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig
 
-BANK_FORMAT = "udc-render kernel bank 1"
+__all__ = ["BANK_FILE", "BANK_FORMAT", "FORMAT_1", "FORMAT_1_EFFECTS", "Bank", "BankError", "Panel", "PanelFar",
+           "PanelField", "PanelHaze", "bank_json_fingerprint", "file_sha256", "panel_effects", "read_bank",
+           "save_panel", "write_bank_json"]
+
+BANK_FORMAT = "udc-render kernel bank 2"
+FORMAT_1 = "udc-render kernel bank 1"
 BANK_FILE = "bank.json"
 FIELD_ARRAYS = ("bases", "coeffs", "live", "shifts_x_um", "shifts_y_um", "field_power")
+# what a format-1 panel does not apply (its records may name a drawn haze: it was recorded, never applied)
+FORMAT_1_EFFECTS = {"far field": "not applied: a format-1 bank has none (the light past the kernel window is lost)",
+                    "haze": "not applied: a format-1 bank has none (a drawn haze was recorded, not applied)"}
 
 
 class BankError(DatasetError):
@@ -61,11 +78,38 @@ class PanelField:
 
 
 @dataclass(frozen=True, eq=False)
+class PanelFar:
+    """The light past the kernel window in the per-channel form: y_c += x̄_c ⊗ F_c, x̄ the coarse_px × coarse_px
+    block means of the clean image (its frame with the kernel's margin, continued as its edge beyond: optics.
+    far_field.far_light), F_c = Σ_k W_ck T_k τ_k f_k / Σ_k W_ck T_k τ_k (1 − o_k) [3, Sf, Sf] per coarse pixel: the
+    band far fields f_k of the spectral synthesis weighted as γ weights the bands (W the camera's electrons of the
+    monitor's white, T τ the display's transmission and its kernels' transmittance, o their energy outside the
+    window), relative to the core's light (γ scales both)."""
+    kernels: np.ndarray  # [3, Sf, Sf] float64
+    coarse_px: int
+
+    @property
+    def share_rgb(self) -> list[float]:
+        """The far field's light per channel, a share of the core's (what the window loses, within the lens's
+        acceptance)."""
+        return [float(v) for v in self.kernels.sum(axis=(-2, -1))]
+
+
+@dataclass(frozen=True)
+class PanelHaze:
+    """The display stack's haze (optics.stray, effect d): e ← (1 − share) e + share (e ⊗ ρ_tail(θ ≥ inner_deg)) on
+    the frame's electrons, after the blur and the far field."""
+    share: float
+    inner_deg: float
+
+
+@dataclass(frozen=True, eq=False)
 class Panel:
     """One panel of a bank: its name, per-channel kernels [3, S, S] at the sensor pitch pitch_um, γ (R, G, B)
     relative to glass at gain 1, the sensor behind it (gain = the display's, gamma_rggb = γ / gain, its noise
     model, exposure and levels), its defect pixels and fixed-pattern noise (None: none), the field (d > 0) and
-    its record in bank.json. maps: 'frame', the defect and FPN maps of the whole frame drawn from their seeds (a
+    its record in bank.json (its "effects": what it applies; panel_effects), the far field and the haze (None:
+    none). maps: 'frame', the defect and FPN maps of the whole frame drawn from their seeds (a
     crop takes its region, as the numpy synthesis's frame); 'crop', maps of a crop's own size from the seeds (a
     capture drawn per crop: restore.captures)."""
     name: str
@@ -78,6 +122,8 @@ class Panel:
     field: PanelField | None
     record: dict
     maps: str = "frame"
+    far: PanelFar | None = None
+    haze: PanelHaze | None = None
 
     @property
     def kernel_px(self) -> int:
@@ -125,15 +171,36 @@ def panel_record(panel: Panel, file: str, sha256: str, extra: dict) -> dict:
     field = None if f is None else {
         "rank": f.rank, "live_phases": len(f.live), "periodic": list(f.periodic), "period_um": list(f.period_um),
         "distance_mm": f.distance_mm, "image_distance_um": f.image_distance_um, "series": f.series is not None}
+    far = None if panel.far is None else {"coarse_px": panel.far.coarse_px, "share_rgb": panel.far.share_rgb,
+                                          "far_kernel_px": int(panel.far.kernels.shape[-1])}
     return {"name": panel.name, "file": file, "sha256": sha256, "pitch_um": panel.pitch_um,
             "kernel_px": panel.kernel_px, "gamma_rgb": list(panel.gamma_rgb), "sensor": asdict(panel.sensor),
             "defects": None if panel.defects is None else asdict(panel.defects),
-            "fpn": None if panel.fpn is None else asdict(panel.fpn), "field": field, **extra}
+            "fpn": None if panel.fpn is None else asdict(panel.fpn), "field": field, **extra, "far_field": far,
+            "haze": None if panel.haze is None else asdict(panel.haze)}
+
+
+def panel_effects(panel: Panel, not_applied: dict) -> dict:
+    """What a panel applies to a clean crop, in order, and what it does not (not_applied: {effect: why}): the
+    "effects" of its record."""
+    s = panel.sensor
+    applied = ["blur: the per-channel kernels (γ x ⊗ k)" + ("; d > 0: the field blend" if panel.field else ""),
+               "γ (R, G, B) and the display's gain"]
+    if panel.far is not None:
+        applied.append(f"far field: {', '.join(f'{v:.4g}' for v in panel.far.share_rgb)} of the core's light (R, G, "
+                       f"B), at {panel.far.coarse_px}-px coarse pixels")
+    if panel.haze is not None:
+        applied.append(f"haze: {panel.haze.share:g} of the light into a θ⁻² veil from {panel.haze.inner_deg:g}°")
+    applied += ["cos⁴ fall-off"] * s.cos4_falloff + [f"noise: {s.noise}"]
+    applied += ["fixed-pattern noise"] * (panel.fpn is not None) + ["dead and hot pixels"] * (panel.defects is not None)
+    return {"applied": applied + ["full well, quantisation, black and white levels"], "not_applied": not_applied}
 
 
 def panel_arrays(panel: Panel) -> dict:
     """The npz arrays of a panel (module doc)."""
     out = {"kernels": np.asarray(panel.kernels, np.float32)}
+    if panel.far is not None:
+        out["far_kernels"] = np.asarray(panel.far.kernels, np.float64)
     f = panel.field
     if f is not None:
         out.update(bases=np.asarray(f.bases, np.float32), coeffs=np.asarray(f.coeffs, np.float64),
@@ -148,8 +215,8 @@ def _fail(folder: Path, what: str):
     raise BankError(f"--bank {folder}: {what}")
 
 
-def read_panel(folder: Path, record: dict) -> Panel:
-    """The panel of one bank.json record, its file checked against the recorded sha256."""
+def read_panel(folder: Path, record: dict, fmt: str = BANK_FORMAT) -> Panel:
+    """The panel of one bank.json record of format `fmt`, its file checked against the recorded sha256."""
     path = folder / record["file"]
     if not path.is_file():
         _fail(folder, f"{record['file']} is missing (re-run `udc-render bank` on this folder to finish it)")
@@ -173,8 +240,18 @@ def read_panel(folder: Path, record: dict) -> Panel:
     sensor = SensorConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in record["sensor"].items()})
     defects = None if record["defects"] is None else DefectConfig(**record["defects"])
     fpn = None if record["fpn"] is None else FpnConfig(**record["fpn"])
+    if fmt == FORMAT_1:
+        return Panel(record["name"], kernels, float(record["pitch_um"]), tuple(record["gamma_rgb"]), sensor, defects,
+                     fpn, field, {**record, "effects": {"format": FORMAT_1, "not_applied": FORMAT_1_EFFECTS}})
+    far = None
+    if record["far_field"] is not None:
+        if "far_kernels" not in a:
+            _fail(folder, f"{record['file']}: no far_kernels array for its far field")
+        far = PanelFar(a["far_kernels"], int(record["far_field"]["coarse_px"]))
+    haze = None if record["haze"] is None else PanelHaze(float(record["haze"]["share"]),
+                                                         float(record["haze"]["inner_deg"]))
     return Panel(record["name"], kernels, float(record["pitch_um"]), tuple(record["gamma_rgb"]), sensor, defects, fpn,
-                 field, record)
+                 field, record, far=far, haze=haze)
 
 
 def read_bank(folder: Path, names: list[str] | None = None) -> Bank:
@@ -187,9 +264,9 @@ def read_bank(folder: Path, names: list[str] | None = None) -> Bank:
         doc = json.loads(path.read_text())
     except (OSError, ValueError) as e:
         _fail(folder, f"{BANK_FILE} is not readable JSON ({e})")
-    if not isinstance(doc, dict) or doc.get("format") != BANK_FORMAT:
+    if not isinstance(doc, dict) or doc.get("format") not in (BANK_FORMAT, FORMAT_1):
         _fail(folder, f"{BANK_FILE}: format {doc.get('format') if isinstance(doc, dict) else None!r}: expected "
-                      f"{BANK_FORMAT!r}")
+                      f"{BANK_FORMAT!r} (or {FORMAT_1!r})")
     records = doc.get("panels", [])
     if doc.get("complete") is not True or not records:
         _fail(folder, f"the bank is not complete ({len(records)} of {doc.get('count')} panels): re-run "
@@ -201,7 +278,7 @@ def read_bank(folder: Path, names: list[str] | None = None) -> Bank:
             _fail(folder, f"--display {unknown[0]!r} is not a panel of this bank (it has {', '.join(known)})")
         records = [r for r in records if r["name"] in names]
     settings = {k: v for k, v in doc.items() if k != "panels"}
-    return Bank(folder, settings, [read_panel(folder, r) for r in records])
+    return Bank(folder, settings, [read_panel(folder, r, doc["format"]) for r in records])
 
 
 def save_panel(folder: Path, index: int, panel: Panel) -> dict:

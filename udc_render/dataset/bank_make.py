@@ -17,7 +17,12 @@ a drawn panel's own lens, randomize.panel_scene):
   scene's auto exposure, pipeline.auto_exposure_s, without a render; a drawn panel's × exposure.scale), the
   defect pixels and FPN (a drawn panel's: capture draw i's, with their own seeds), the brightness (a drawn
   panel's exposure.brightness: the trainer scales the clean image by it, as a randomized dataset scales the
-  render).
+  render);
+- what the spectral synthesis adds (the physical profile; the per-channel form, the paper's, has neither):
+  the far field (panel_far: synth_kernels.far_field of the display's band kernels on the scene's render grid,
+  the very call, weighted per channel as γ weights the bands) and the display's haze (panel_haze: the
+  profile's stray light's for a preset, the drawn one for a drawn panel). A haze the bank cannot honour (drawn
+  under the per-channel form, or with the profile's haze off) and stray light beyond the haze are refused.
 
 make_bank writes each panel's file and then bank.json (both atomic), so an interrupted run resumes: a re-run
 with the same settings makes only the panels not yet recorded; other settings on the same folder are refused.
@@ -34,7 +39,8 @@ from tqdm import tqdm
 from psf.cache import cached
 from psf.spectral import channel_kernels
 from udc_render.content import spectra
-from udc_render.dataset.bank import BANK_FILE, BankError, Panel, PanelField, file_sha256, save_panel, write_bank_json
+from udc_render.dataset.bank import (BANK_FILE, FORMAT_1, BankError, Panel, PanelFar, PanelField, PanelHaze,
+                                     file_sha256, panel_effects, save_panel, write_bank_json)
 from udc_render.dataset.randomize import (PANEL_NAME, as_record, capture_config, capture_display, draw_capture,
                                          draw_panels, panel_scene, scaled_exposure_s)
 from udc_render.optics import field_basis, field_weights, gamma, live_phases
@@ -42,9 +48,14 @@ from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.pipeline import SynthConfig, auto_exposure_s, sensor_for_scene
 from udc_render.render import BandImage
 from udc_render.scene import Monitor, Scene
-from udc_render.scene.geometry import RenderGrid, psf_lens, render_grid
+from udc_render.scene.geometry import RenderGrid, psf_lens, render_grid, sensor_kernel_px
 from udc_render.sensor import rgb_to_rggb
-from udc_render.synth_kernels import display_channel_kernels, display_kernels, scene_object_distance_m
+from udc_render.synth_kernels import display_channel_kernels, display_kernels, far_field, scene_object_distance_m
+
+NOT_APPLIED = {"room light, ghost, lens glare, display emission": "off in the profile's stray light (optics.stray; "
+                                                                   "the bank refuses them on)",
+               "spectral integration": "per channel: one kernel and one γ per camera channel, for the monitor's white "
+                                       "(the spectral synthesis integrates every band)"}
 
 
 def monitor_white_bands(scene: Scene) -> np.ndarray:
@@ -77,15 +88,19 @@ def sensor_grid(scene: Scene, kernel_px: int) -> RenderGrid:
     return RenderGrid(float(scene.sensor.pitch_um), kernel_px // 2, tuple(float(e) for e in scene.bands.edges_nm))
 
 
+def scene_white(scene: Scene, edges_nm) -> np.ndarray:
+    """[K] the band radiance of the white γ is defined for: the scene's monitor's, else flat."""
+    return monitor_white_bands(scene) if isinstance(scene.content, Monitor) else np.ones(len(edges_nm) - 1)
+
+
 def panel_gamma(display: Display, scene: Scene, cfg: SynthConfig) -> tuple[tuple, str]:
     """γ (R, G, B) and its source, as pipeline.display_gamma for the scene's monitor white."""
     if display.source == "preset":
         return PAPER_GAMMA[display.name], "the paper's γ for this preset"
     grid, z = render_grid(scene), scene_object_distance_m(scene)
-    white = monitor_white_bands(scene) if isinstance(scene.content, Monitor) else np.ones(len(grid.edges_nm) - 1)
     g = gamma.display_gamma(display, display_kernels(display, scene, grid, cfg, object_distance_m=z),
                             display_kernels(Display("glass", None), scene, grid, cfg, object_distance_m=z),
-                            np.asarray(grid.edges_nm, float), cfg.sensor.camera, white)
+                            np.asarray(grid.edges_nm, float), cfg.sensor.camera, scene_white(scene, grid.edges_nm))
     return tuple(float(x) for x in g), "γ of the display file (optics.gamma)"
 
 
@@ -107,7 +122,8 @@ def panel_field(ks, scene: Scene, grid: RenderGrid, rank: int | None) -> PanelFi
     shifts = np.asarray(ks.field_shifts_um, float)
     return PanelField(bases, coeffs, live, shifts[0, :, 0], shifts[:, 0, 1], tuple(geometry["periodic"]),
                       tuple(geometry["period_um"]), float(ks.distance_mm), float(geometry["image_distance_um"]),
-                      np.asarray(ks.field_power, float), None if ks.field_series is None else np.asarray(ks.field_series))
+                      np.asarray(ks.field_power, float),
+                      None if ks.field_series is None else np.asarray(ks.field_series))
 
 
 def channel_kernel_set(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig):
@@ -128,22 +144,66 @@ def channel_kernel_set(display: Display, scene: Scene, grid: RenderGrid, cfg: Sy
     return ks
 
 
+def panel_far(display: Display, scene: Scene, cfg: SynthConfig, kernel_px: int) -> tuple[PanelFar | None, str]:
+    """(the panel's far field (bank.PanelFar) or None, what it is or why none): the spectral synthesis's far field
+    of the display's band kernels on the scene's render grid (synth_kernels.far_field, the same calls through the
+    kernel cache), F_c = Σ_k W_ck T_k τ_k f_k / Σ_k W_ck T_k τ_k (1 − o_k) with W the camera's electrons of the white
+    γ is defined for (optics.gamma.white_weights)."""
+    if cfg.form != "spectral":
+        return None, "not applied: the per-channel form (the paper's y = γ x ⊗ k + n) has none"
+    if cfg.far_field_threshold is None:
+        return None, "not applied: far_field_threshold None (off)"
+    grid, z = render_grid(scene), scene_object_distance_m(scene)
+    band = display_kernels(display, scene, grid, cfg, object_distance_m=z)
+    frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
+    far = far_field(display.layout, psf_lens(scene, z), grid, band, frame_um, cfg)
+    if far is None:
+        return None, (f"not applied: no band loses more than far_field_threshold = {cfg.far_field_threshold:g} "
+                      "past the kernel window, or the window reaches the whole frame")
+    coarse = far.coarse * grid.pitch_um / scene.sensor.pitch_um
+    if abs(coarse - round(coarse)) > 1e-9 or kernel_px > sensor_kernel_px(scene):
+        raise BankError(f"--kernel-px {kernel_px} with render.supersample {scene.render.supersample}: the far field is "
+                        f"split at the render window ({sensor_kernel_px(scene)} px) in whole sensor pixels of "
+                        f"{far.coarse} render pixels; use a smaller --kernel-px or render.supersample 1")
+    edges = np.asarray(grid.edges_nm, float)
+    w = gamma.white_weights(edges, cfg.sensor.camera, scene_white(scene, edges))
+    t = display.transmission.band_means(edges) * np.asarray(band.transmittance, float)
+    core = w @ (t * (1.0 - np.asarray(band.energy_outside, float)))
+    kernels = np.einsum("ck,kij->cij", w * t[None, :], far.kernels) / core[:, None, None]
+    return PanelFar(kernels, int(round(coarse))), "applied (optics.far_field per channel)"
+
+
+def panel_haze(name: str, haze: float, cfg: SynthConfig) -> tuple[PanelHaze | None, str]:
+    """(the panel's haze (bank.PanelHaze) or None, what it is or why none); a haze the bank cannot honour is
+    refused in one line."""
+    if haze == 0:
+        return None, ("not applied: the display's haze is 0" if cfg.form == "spectral" else
+                      "not applied: the per-channel form (the paper's y = γ x ⊗ k + n) has none")
+    if cfg.form != "spectral" or not cfg.stray_light.haze:
+        raise BankError(f"--display {name}: a haze of {haze:g} under the {cfg.form} form with the profile's haze "
+                        f"{dict(cfg.stray_light.haze) or 'off'}: the bank cannot apply it; set its haze to 0 (a "
+                        "distributions file's display.<family>.haze) or use --profile physical")
+    return PanelHaze(float(haze), cfg.stray_light.haze_inner_deg), "applied (optics.stray, effect d)"
+
+
 @dataclass(frozen=True)
 class PanelSpec:
     """What makes one panel: the display (its name the panel's), the scene (the lens: a drawn panel's own), the
-    synthesis settings (sensor, defects, FPN, kernels), the exposure (s) and extra record values (a drawn panel's
-    draws, its brightness: the factor on the clean image's radiance, 1 for a preset)."""
+    synthesis settings (sensor, defects, FPN, kernels), the exposure (s), extra record values (a drawn panel's
+    draws, its brightness: the factor on the clean image's radiance, 1 for a preset) and its haze."""
     display: Display
     scene: Scene
     cfg: SynthConfig
     exposure_s: float
     record: dict = field(default_factory=dict)
+    haze: float = 0.0
 
 
 def preset_specs(displays: list[Display], scene: Scene, cfg: SynthConfig) -> list[PanelSpec]:
     """One panel per display, every one with the synthesis's sensor and the scene's exposure (scene_exposure_s)."""
     exposure, rule = scene_exposure_s(scene, cfg)
-    return [PanelSpec(d, scene, cfg, exposure, {"brightness": 1.0, "exposure_rule": rule}) for d in displays]
+    return [PanelSpec(d, scene, cfg, exposure, {"brightness": 1.0, "exposure_rule": rule},
+                      cfg.stray_light.haze_of(d.name)) for d in displays]
 
 
 def random_specs(dists, n: int, seed: int, scene: Scene, cfg: SynthConfig) -> list[PanelSpec]:
@@ -158,7 +218,7 @@ def random_specs(dists, n: int, seed: int, scene: Scene, cfg: SynthConfig) -> li
         exposure, rule = scene_exposure_s(own, cfg)  # the panel's f-number's (randomized.py's rule)
         out.append(PanelSpec(display, own, capture_config(cfg, cap), scaled_exposure_s(exposure, cap),
                              {"brightness": float(cap.brightness), "exposure_rule": f"{rule} × exposure.scale",
-                              "panel_draw": as_record(draw), "capture_draw": as_record(cap)}))
+                              "panel_draw": as_record(draw), "capture_draw": as_record(cap)}, float(draw.haze)))
     return out
 
 
@@ -173,21 +233,33 @@ def make_panel(spec: PanelSpec, kernel_px: int) -> Panel:
     blend = None
     if ks.field_kernels is not None and ks.distance_mm > 0:
         blend = panel_field(ks, scene, grid, cfg.field_rank)
+    far, far_note = panel_far(display, scene, cfg, kernel_px)
+    haze, haze_note = panel_haze(display.name, spec.haze, cfg)
     record = {"display": display.describe(), "lens": psf_lens(scene).describe(), "gamma_source": why,
               "transmission_rgb": [v / display.gain for v in g], "kernel_notes": list(ks.notes),
               "kernel_params": ks.params, **spec.record}
-    return Panel(display.name, np.asarray(ks.kernels, np.float32), grid.pitch_um, g, sensor, cfg.defects, cfg.fpn,
-                 blend, json.loads(json.dumps(record, default=str)))
+    panel = Panel(display.name, np.asarray(ks.kernels, np.float32), grid.pitch_um, g, sensor, cfg.defects, cfg.fpn,
+                  blend, record, far=far, haze=haze)
+    missing = {k: v for k, v in (("far field", far_note), ("haze", haze_note)) if v.startswith("not applied")}
+    return replace(panel, record=json.loads(json.dumps({**record, "effects": panel_effects(
+        panel, {**missing, **NOT_APPLIED})}, default=str)))
 
 
 def bank_settings(scene: Scene, cfg: SynthConfig, kernel_px: int, specs: list[PanelSpec], extra: dict) -> dict:
     """What decides the bank's panels, as plain JSON values (a re-run with other settings is refused)."""
     synth = {k: v for k, v in asdict(cfg).items() if k not in ("use_cache", "kernel_cache", "stray_light")}
+    stray = cfg.stray_light
+    if stray.room_on or stray.lens_reflectance or stray.lens_glare or stray.emission_on:
+        raise BankError(f"stray light {stray.describe()}: a bank applies the display's haze only; switch the room "
+                        "light, ghost, lens glare and display emission off")
+    spectral = cfg.form == "spectral"
+    effects = {"far_field": "the spectral synthesis's, per channel (bank.PanelFar)" if spectral else "none",
+               "haze": "the display's (bank.PanelHaze)" if spectral else "none", "stray_light": stray.describe()}
     doc = {"scene": scene.source, "frame_px": [scene.sensor.width_px, scene.sensor.height_px],
            "pitch_um": scene.sensor.pitch_um, "kernel_px": kernel_px, "lens": psf_lens(scene).describe(),
            "edges_nm": list(scene.bands.edges_nm),
            "form": "per_channel (the numpy synthesis's y = γ x ⊗ k + n; d > 0: the field blend of each channel)",
-           "synth": synth, "displays": [s.display.describe() for s in specs], **extra}
+           "synth": synth, "displays": [s.display.describe() for s in specs], "effects": effects, **extra}
     return json.loads(json.dumps(doc, default=str))
 
 
@@ -211,9 +283,12 @@ def make_bank(out: Path, specs: list[PanelSpec], settings: dict, kernel_px: int,
 
 def differing_settings(doc: dict, settings: dict) -> list[str]:
     """The keys in which bank.json's `doc` and `settings` (bank_settings) differ, less its own bookkeeping (format,
-    count, complete, panels): none when the bank was made, or begun, with these settings."""
-    return sorted(k for k in settings.keys() | doc.keys()
-                  if k not in ("format", "count", "complete", "panels") and doc.get(k) != settings.get(k))
+    count, complete, panels): none when the bank was made, or begun, with these settings. A format-1 doc is
+    compared on the keys that format has (not "effects": its panels carry no far field and no haze, bank.
+    FORMAT_1_EFFECTS), so that the carried bank.json of a shipped model still names its bank
+    (restore.studies.random_row.carried_bank); make_bank never resumes one."""
+    skip = {"format", "count", "complete", "panels"} | ({"effects"} if doc.get("format") == FORMAT_1 else set())
+    return sorted(k for k in settings.keys() | doc.keys() if k not in skip and doc.get(k) != settings.get(k))
 
 
 def _resumable_records(out: Path, settings: dict) -> list[dict]:
@@ -225,7 +300,7 @@ def _resumable_records(out: Path, settings: dict) -> list[dict]:
         old = json.loads(path.read_text())
     except (OSError, ValueError):
         raise BankError(f"{path}: unreadable; use another --out or delete the folder") from None
-    if keys := differing_settings(old, settings):
+    if keys := differing_settings(old, settings) or (["format"] if old.get("format") == FORMAT_1 else []):
         raise BankError(f"--out {out} holds a different bank (differs in {', '.join(keys)}); use another --out or "
                         "delete the folder")
     done = []
