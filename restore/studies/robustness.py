@@ -59,6 +59,7 @@ from udc_render.content.charts import dead_leaves_colour
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.dataset.bank_make import bank_settings, make_bank, preset_specs, random_specs
 from udc_render.dataset.randomize import load_distributions
+from udc_render.errors import UdcError
 from udc_render.io.exr import save_exr
 from udc_render.io.files import save_text
 from udc_render.optics.displays import Display, micrograph_display, preset
@@ -122,22 +123,42 @@ def study_scene(b: Budget):
     return with_overrides(load_scene("monitor"), bands_nm=b.bands_nm, sensor_px=b.sensor_px, pitch_um=b.pitch_um)
 
 
+def clean_manifest(b: Budget) -> list[dict]:
+    """The manifest lines of the budget's clean set (module doc)."""
+    splits = ["train" if i < b.train_images else "val" for i in range(b.train_images + b.val_images)]
+    return [{"item": i, "split": split, "folder": str(Path(split) / f"item_{i:04d}"), "image": f"dead_leaves:{i}",
+             "displays": ["glass"]} for i, split in enumerate(splits)]
+
+
+def check_clean_images(folder: Path, b: Budget) -> None:
+    """Refuse, in one line, a clean set in `folder` that another budget made (its items or frame differ)."""
+    from udc_render.io.exr import read_exr
+    manifest = folder / "manifest.jsonl"
+    lines = [json.loads(line) for line in manifest.read_text().splitlines() if line.strip()]
+    h, w = read_exr(folder / lines[0]["folder"] / "gt.exr")["R"].shape if lines else (0, 0)
+    if lines != clean_manifest(b) or (w, h) != tuple(b.sensor_px):
+        raise UdcError(f"{manifest}: another budget's clean images ({len(lines)} of {w}×{h} px; the {b.name} budget "
+                       f"makes {b.train_images + b.val_images} of {b.sensor_px[0]}×{b.sensor_px[1]} px); use another "
+                       "--out or delete the folder")
+
+
 def write_clean_images(folder: Path, b: Budget) -> Path:
-    """The clean set (module doc) in `folder`, a dataset layout; kept when its manifest is there."""
+    """The clean set (module doc) in `folder`, a dataset layout; kept when its manifest is there and is this
+    budget's (check_clean_images)."""
     if (folder / "manifest.jsonl").is_file():
+        check_clean_images(folder, b)
         return folder
     w, h = b.sensor_px
     lines = []
-    for i in range(b.train_images + b.val_images):
-        split = "train" if i < b.train_images else "val"
+    for i, line in enumerate(clean_manifest(b)):
+        split = line["split"]
         # [IMAGES_SEED, 0] is default_rng(IMAGES_SEED) (zero padding), which nothing else draws from
         palette = np.random.default_rng([IMAGES_SEED, i]).uniform(0.0, WHITE_FILL, (16, 3))
         rgb = dead_leaves_colour(w, h, IMAGES_SEED * 1000 + i, palette).astype(np.float32)
         item = Path(split) / f"item_{i:04d}"
         (folder / item).mkdir(parents=True, exist_ok=True)
         save_exr(folder / item / "gt.exr", {c: rgb[k] for k, c in enumerate("RGB")})
-        lines.append(json.dumps({"item": i, "split": split, "folder": str(item), "image": f"dead_leaves:{i}",
-                                 "displays": ["glass"]}))
+        lines.append(json.dumps(line))
     save_text(folder / "manifest.jsonl", "\n".join(lines) + "\n")
     return folder
 

@@ -148,3 +148,19 @@ def test_score_rows_without_a_fingerprint_are_recomputed(fake_scoring, capsys):
     assert len(calls) == 2 * len(SETS)
     assert [{**r, "seconds": 0} for r in again] == [{**r, "seconds": 0} for r in rows]
     assert f"study robustness: {len(SETS)} logged rows in" in capsys.readouterr().out
+
+
+def test_another_budgets_clean_images_are_refused_in_one_line(tmp_path):
+    """A study folder resumed with another budget: its clean images (kept once made) are not this budget's."""
+    from dataclasses import replace
+
+    from restore.studies.robustness import BUDGETS, write_clean_images
+    quick = BUDGETS["quick"]
+    folder = write_clean_images(tmp_path / "clean", quick)
+    manifest = (folder / "manifest.jsonl").read_bytes()
+    assert write_clean_images(folder, quick) == folder and (folder / "manifest.jsonl").read_bytes() == manifest
+    for other, says in ((BUDGETS["full"], "(12 of 128×64 px; the full budget makes 56 of 512×256 px)"),
+                        (replace(quick, sensor_px=(64, 32)), "(12 of 128×64 px; the quick budget makes 12 of 64×32")):
+        with pytest.raises(UdcError, match="another budget's clean images") as e:
+            write_clean_images(folder, other)
+        assert says in str(e.value) and "\n" not in str(e.value)
