@@ -54,9 +54,11 @@ def worker_kernels(shared: Shared, panel: int | None = None) -> Kernels:
     on a worker's first item and kept for the next ones (KEEP_PANELS panels, the first loaded dropped first), the
     d > 0 phase kernels reduced to their rank-r bases (pipeline.compact_kernels: same numbers, 1/8 the memory)
     and their exact-power maps made once (pipeline.store_power_maps: same numbers, not remade per item).
-    Planned with the parent's BLAS thread count (Shared.blas_threads): without the kernel cache (--no-cache)
-    each worker computes its kernels, whose bits change with the BLAS thread count (threads.py), and a
-    pool worker has only a share of the cores' threads (raw.dng differed between 1 and 2 workers)."""
+    All made with the parent's BLAS thread count (Shared.blas_threads), the bits of a 1-worker run: a pool
+    worker has a share of the cores' threads, and the bits change with the BLAS thread count (threads.py):
+    without the kernel cache (--no-cache) the kernels themselves (raw.dng differed between 1 and 2 workers),
+    and the rank-r bases' residual, which capture.json records (field_rank_kernel_residual differed in its
+    last digits with 31-px kernels over 16 phases)."""
     from udc_render.pipeline import compact_kernels, plan_kernels, store_power_maps
     key = (str(shared.out), panel)
     if key not in _WORKER_KERNELS:
@@ -67,9 +69,8 @@ def worker_kernels(shared: Shared, panel: int | None = None) -> Kernels:
         scene, displays = (shared.scene, shared.displays) if panel is None else \
             panel_setup(shared.scene, shared.displays[0], shared.randomize.panels[panel])
         with blas_threads(shared.blas_threads):
-            planned = plan_kernels(scene, displays, shared.cfg)
-        kernels = compact_kernels(planned, scene, shared.cfg)
-        _WORKER_KERNELS[key] = store_power_maps(kernels, scene)
+            kernels = compact_kernels(plan_kernels(scene, displays, shared.cfg), scene, shared.cfg)
+            _WORKER_KERNELS[key] = store_power_maps(kernels, scene)
     return _WORKER_KERNELS[key]
 
 
@@ -165,9 +166,9 @@ def executor(workers: int, scheduler: str | None, shared: Shared):
         return
     threads = threads_per_worker(workers)
     # BLAS threads change the kernels' bits (psf's matrix products): a monitor's kernels come from this
-    # process (or, with --no-cache, from worker_kernels at this process's count), so its workers get a share of
-    # the cores; a 3D scene's workers compute their off-focus layers' kernels, so they get this process's BLAS
-    # threads (the same bits as a 1-worker run; threads.py)
+    # process (or, with --no-cache, from worker_kernels at this process's count, as their field bases), so
+    # its workers get a share of the cores; a 3D scene's workers compute their off-focus layers' kernels, so
+    # they get this process's BLAS threads (the same bits as a 1-worker run; threads.py)
     blas = threads if isinstance(shared.scene.content, Monitor) else shared.blas_threads
     with blas_threads_env(blas) if blas else contextlib.nullcontext():  # spawn: Dr.Jit threads and fork do not mix
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),

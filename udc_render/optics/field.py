@@ -17,13 +17,11 @@ of the display the sensor sees (psf.engine.field_shifts). 'source' conserves ene
 """
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft as sfft
-from threadpoolctl import ThreadpoolController
 
 from udc_render.optics.bright import BrightPixels, bright_blur, dimmed
 from udc_render.optics.field_power import PowerMap
@@ -74,23 +72,7 @@ def phase_basis(kernels: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray,
     matrix M Mᵀ = U Σ² Uᵀ; B = Σ⁻¹ Uᵀ M, c = U Σ, each row of c then scaled so that k̃_q has k_q's sum (1 for field kernels):
     the truncation changes the kernels' shape, not their power, which would print its own bands: T-OLED
     at d = 9.6 mm, rank 2, first harmonic 1.15× without the scaling, tests/udc_render/test_field_power.py).
-    Returns (B [r, S, S], c [n, r], the Frobenius error of the k̃_q over the kernels' norm).
-
-    Computed with one BLAS thread: a threaded product or norm sums in another order, and the residual, a
-    difference of near-equal numbers, then changes in its 15th digit with the thread count (0.004641275031693835
-    against …837 at 1 and 2 threads, S = 129, n = 16), so a dataset's records would depend on its worker
-    count (a pool worker gets a share of the cores' BLAS threads: dataset.threads)."""
-    with _blas().limit(limits=1, user_api="blas"):
-        return _phase_basis(kernels, rank)
-
-
-@functools.cache
-def _blas() -> ThreadpoolController:
-    """The loaded libraries' thread pools, found once (threadpool_limits would search them per call: 9 ms)."""
-    return ThreadpoolController()
-
-
-def _phase_basis(kernels: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray, float]:
+    Returns (B [r, S, S], c [n, r], the Frobenius error of the k̃_q over the kernels' norm)."""
     n, S = kernels.shape[0], kernels.shape[-1]
     M = kernels.reshape(n, S * S).astype(np.float64)
     vals, U = np.linalg.eigh(M @ M.T)
