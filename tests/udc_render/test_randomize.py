@@ -68,7 +68,8 @@ def test_distributions_have_their_moments(tmp_path):
     caps = [R.draw_capture(dists, 4, 0, i) for i in range(n)]
     u = np.array([c.read_noise_e for c in caps])
     assert abs(u.mean() - 4.0) < 4.5 * (4 / math.sqrt(12)) / math.sqrt(n)
-    assert u.var() == pytest.approx(16 / 12, rel=0.05) and 2.0 <= u.min() and u.max() < 6.0
+    # a uniform sample's variance errs by √(0.8 / n) = 0.9 % (1σ): 4.5σ is 4 % (measured 0.17 %)
+    assert u.var() == pytest.approx(16 / 12, rel=0.04) and 2.0 <= u.min() and u.max() < 6.0
     logs = np.log10([c.defects.hot_fraction for c in caps])
     assert abs(logs.mean() - (-4.0)) < 4.5 * (4 / math.sqrt(12)) / math.sqrt(n)  # log-uniform: uniform in log
     assert np.histogram(logs, bins=4, range=(-6, -2))[0].min() > n / 4 * 0.9

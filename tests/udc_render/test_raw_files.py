@@ -43,11 +43,12 @@ def test_libraw_reads_the_mosaic_pattern_and_levels(tmp_path):
         assert [[desc[i] for i in row] for row in r.raw_pattern] == [["R", "G"], ["G", "B"]]
         assert list(r.black_level_per_channel) == [BLACK] * 4 and r.white_level == WHITE
         wb = np.asarray(r.camera_whitebalance[:3])
-        np.testing.assert_allclose(wb / wb[1], 1 / as_shot_neutral(CAMERA), rtol=1e-3)  # AsShotNeutral, 4 decimals
+        # AsShotNeutral to 4 decimals: ≤ 5e-5 on each value, ≤ 2.5e-4 on a ratio of two (measured 7.5e-5)
+        np.testing.assert_allclose(wb / wb[1], 1 / as_shot_neutral(CAMERA), rtol=3e-4)
         # libraw's camera ──► sRGB matrix is inv(rows-normalised M · XYZ_RGB): it took our ColorMatrix1
         cam_rgb = color_matrix_fit(CAMERA)[0] @ XYZ_RGB
         np.testing.assert_allclose(r.color_matrix[:, :3], np.linalg.inv(cam_rgb / cam_rgb.sum(1, keepdims=True)),
-                                   atol=2e-3)
+                                   atol=4e-4)  # the stored rationals' rounding through the inverse: measured 1.0e-4
 
 
 def _developed_means(path, output_color) -> np.ndarray:
@@ -60,19 +61,20 @@ def _developed_means(path, output_color) -> np.ndarray:
 
 def test_developed_grey_is_neutral_and_colours_follow_the_mosaic(tmp_path):
     """Demosaiced by libraw with the camera's white balance: a flat D65-grey mosaic (camera levels ∝
-    AsShotNeutral) comes out neutral in camera RGB and in sRGB (within 1 %); a coloured flat field keeps its
-    channel ratios times the white-balance gains (within 1 %)."""
+    AsShotNeutral) comes out neutral in camera RGB and in sRGB (within 1e-3: measured 2.0e-4, the mosaic's DN
+    rounding); a coloured flat field keeps its channel ratios times the white-balance gains (within 5e-4:
+    measured 4.6e-5; one 16-bit output level on the 0.1 channel is 1.5e-4)."""
     rawpy = pytest.importorskip("rawpy")
     neutral = as_shot_neutral(CAMERA)
     save_dng(tmp_path / "grey.dng", flat_mosaic(0.3 * neutral / neutral.max()), CAMERA, BLACK, WHITE)
     for space in (rawpy.ColorSpace.raw, rawpy.ColorSpace.sRGB):
         out = _developed_means(tmp_path / "grey.dng", space)
-        np.testing.assert_allclose(out / out[1], 1, atol=0.01)
+        np.testing.assert_allclose(out / out[1], 1, atol=1e-3)
     levels = np.array([0.1, 0.3, 0.2])
     save_dng(tmp_path / "colour.dng", flat_mosaic(levels), CAMERA, BLACK, WHITE)
     out = _developed_means(tmp_path / "colour.dng", rawpy.ColorSpace.raw)
     expected = levels / neutral  # white balance: gains 1 / AsShotNeutral
-    np.testing.assert_allclose(out / out[1], expected / expected[1], rtol=0.01)
+    np.testing.assert_allclose(out / out[1], expected / expected[1], rtol=5e-4)
 
 
 def test_color_matrix_fits_the_checker():

@@ -240,7 +240,7 @@ def test_coarse_grid_matches_the_full_resolution_veil(monkeypatch):
     assert b > 1
     monkeypatch.setattr(S, "COARSE_PER_RADIUS", 1e9)
     fine, landed_fine, b1 = convolve(e, tail, 3.1)
-    assert b1 == 1 and landed == pytest.approx(landed_fine, rel=5e-3)
+    assert b1 == 1 and landed == pytest.approx(landed_fine, rel=1e-3)  # measured 3.3e-4
     assert np.abs(coarse - fine).max() < 0.01 * fine.max()
 
 

@@ -37,11 +37,11 @@ def test_disc_edge_width_tends_to_semicircle_constant():
     # A disc's LSF is a semicircle: its 10–90 % width is 2 t b / 2 with t√(1−t²) + asin t = 0.4 π.
     t = brentq(lambda t: t * math.sqrt(1 - t * t) + math.asin(t) - 0.4 * math.pi, 0.0, 1.0)
     for b in (60.0, 200.0):
-        assert M.disc_esf_width_px(b) == pytest.approx(t * b, rel=0.01)
+        assert M.disc_esf_width_px(b) == pytest.approx(t * b, rel=5e-4)  # measured 1.1e-4 (the pixel's width)
     # A disc within its pixel (b ≤ 1) steps the edge-sampled ESF at one pixel edge: 0.8 px, the floor.
     assert M.disc_esf_width_px(0.0) == pytest.approx(0.8) and M.disc_esf_width_px(0.9) == pytest.approx(0.8)
     for b in (1.5, 3.0, 17.3, 80.0):
-        assert M.equivalent_disc_px(M.disc_esf_width_px(b)) == pytest.approx(b, abs=2e-3)
+        assert M.equivalent_disc_px(M.disc_esf_width_px(b)) == pytest.approx(b, abs=3e-5)  # measured 9e-6
     assert M.equivalent_disc_px(0.5) == 0.0
 
 
@@ -103,7 +103,7 @@ def test_strongly_defocused_edge_matches_thin_lens_disc(vergence_per_m):
     b = M.geometric_coc_px(M.lens_at(vergence_per_m))
     assert b > 20
     ratio = M.esf_width_px(M.lsf(k, "x")) / M.disc_esf_width_px(b)
-    assert abs(ratio - 1) <= M.GEOM_TOL, ratio
+    assert abs(ratio - 1) <= 0.03, ratio  # measured 1.3 % (b = 26 px), 0.55 % (39 px); the study's GEOM_TOL 10 %
 
 
 @pytest.mark.parametrize("wavelength_nm", [450.0, 640.0])
@@ -112,7 +112,7 @@ def test_in_focus_glass_mtf_is_diffraction_limited(wavelength_nm):
     m = M.mtf_of_line(M.lsf(k, "x"))
     n_w = M.lens_at(V_F).image_distance_um / M.APERTURE_UM
     model = np.abs(M.diffraction_limit(M.FREQS_CPP, wavelength_nm, n_w))
-    assert np.max(np.abs(m - model)) <= M.DIFF_TOL
+    assert np.max(np.abs(m - model)) <= 3e-3  # measured 7.9e-4 (450 nm), 1.1e-3 (640 nm); the study's DIFF_TOL 0.01
     # The folding (pixel sampling) matters: the unfolded product alone is far off near Nyquist.
     assert np.max(np.abs(m - M.diffraction_limit(M.FREQS_CPP, wavelength_nm, n_w, folded=False))) > 0.05
     # The comparison can fail: the diffraction limit of another f-number (f/2.2) is refused.

@@ -43,22 +43,23 @@ def _centre(a, frac=0.25):
 
 
 def test_presets_reproduce_the_papers_gammas():
-    """The fitted T(λ) constants give all four γ (R, Gr, Gb, B) within 0.2 % of the paper's: T-OLED 0.97,
-    P-OLED 0.34/0.34/0.34/0.20, on the default rig's gains with the calibration square's far field
-    (calibration.fit_gains), and refitting returns the stored constants."""
+    """The fitted T(λ) constants give all four γ (R, Gr, Gb, B) of the paper's, on the default rig's gains with the
+    calibration square's far field (calibration.fit_gains): T-OLED 0.97 within 0.2 % (one flat T for four
+    channels: measured R −0.15 %, B +0.14 %), P-OLED 0.34/0.34/0.34/0.20 within 1e-5 (three parameters fitted to
+    three values: measured 3.2e-6); refitting returns the stored constants within 3e-5 (measured 4.9e-6)."""
     from psf import layouts
     from udc_render.calibration.fit_gains import FIT_EDGES_NM as edges, fit_gains
     from udc_render.sensor import rgb_to_rggb
     g = {name: fit_gains(lay) for name, lay in (("glass", None), ("toled", layouts.toled()),
                                                   ("poled", layouts.poled()))}
     w = G.white_weights(edges, "Nikon 5100 (NPL)")
-    for name in ("toled", "poled"):
+    for name, tol in (("toled", 0.002), ("poled", 1e-5)):
         rggb = np.array(rgb_to_rggb(G.channel_gamma(w, D.preset(name), g[name], g["glass"], edges)))
         paper = np.array(rgb_to_rggb(D.PAPER_GAMMA[name]))
-        assert np.all(np.abs(rggb / paper - 1) < 0.002), (name, rggb)
-    assert D.fit_toled_transmission(g["toled"], g["glass"], edges) == pytest.approx(D.TOLED_T, rel=1e-4)
+        assert np.all(np.abs(rggb / paper - 1) < tol), (name, rggb)
+    assert D.fit_toled_transmission(g["toled"], g["glass"], edges) == pytest.approx(D.TOLED_T, rel=3e-5)
     fit = D.fit_poled_transmission(g["poled"], g["glass"], edges)
-    assert fit == pytest.approx((D.POLED_SCALE, D.POLED_EDGE_NM, D.POLED_CATHODE_NM), rel=1e-4)
+    assert fit == pytest.approx((D.POLED_SCALE, D.POLED_EDGE_NM, D.POLED_CATHODE_NM), rel=3e-5)
     # the far field the calibration square collects: the P-OLED's orders past the window, 0.1-2.4 % of its gain
     extra = fit_gains(layouts.poled()) / fit_gains(layouts.poled(), far_field=False) - 1
     assert 0.0005 < extra.min() and extra.max() < 0.03, extra
@@ -164,7 +165,7 @@ def test_per_channel_form_uses_the_papers_gamma(white):
     for name in ("toled", "poled"):
         lv = pack_rggb(_centre(res.captures[name].clean_dn)).reshape(4, -1).mean(1)
         g = D.PAPER_GAMMA[name]
-        assert lv / gl == pytest.approx([g[0], g[1], g[1], g[2]], rel=0.01), name
+        assert lv / gl == pytest.approx([g[0], g[1], g[1], g[2]], rel=2e-6), name  # measured 2.2e-7 (float32)
         assert res.display_meta[name]["gamma_rgb"] == list(g)
 
 
@@ -350,7 +351,7 @@ def test_deps_known_gamma_is_the_gamma_that_made_the_capture(udc, tmp_path, rend
         for name in ("toled", "poled"):
             level = pack_rggb(_centre(read_dng_mosaic(out / name / "raw.dng").mosaic_dn.astype(float))).reshape(4, -1).mean(1)
             known = known_gamma_rggb(Pair(0, "test", out, name, "white"))
-            assert level / glass == pytest.approx(known, rel=0.01), (form, name)
+            assert level / glass == pytest.approx(known, rel=3e-3), (form, name)  # measured ≤ 0.14 %
             if form == "per_channel":
                 g = D.PAPER_GAMMA[name]
                 assert list(known) == [g[0], g[1], g[1], g[2]]
