@@ -37,7 +37,9 @@ from udc_render.dataset.bank import Panel
 from udc_render.optics.stray import Spread
 from udc_render.optics.stray.spread import coarse_factor, kernel
 
-WIDE_BUDGET_BYTES = 2.0e8  # the coarse maps kept: ~0.5 MB per frame and panel at 2048 × 1024 (far 15 px, veil 8 px)
+# The coarse sums and maps kept, at 2048 × 1024 in float32 (far field 15-px blocks, veil 8-px cells): ~1 MB per
+# frame (its sums) and ~0.6 MB per frame and panel (its maps)
+WIDE_BUDGET_BYTES = 1.0e9
 
 
 @dataclass(frozen=True)
@@ -122,46 +124,90 @@ class WideLight:
             veil.append(None if v is None else dihedral(v * src.brightness, src.mode))
         return far, veil
 
-    def _frame_maps(self, i: int, src: WideSource) -> tuple:
-        """((far coarse samples, rows, columns) or None, (veil cell densities, rows, columns) or None) of the frame
-        through panel i, kept within the budget."""
-        key = (src.key, i)
+    def prepare(self, sources: list[WideSource]) -> None:
+        """Make and keep the frames' coarse sums that the panels need (a frame's are the same through every panel):
+        done once before worker processes fork, they inherit them."""
+        for src in sources:
+            for i, p in enumerate(self.panels):
+                if p.far is not None:
+                    self._block_means(src, p.far.coarse_px)
+                if p.haze is not None:
+                    self._cells(src, *self._veil_grid(i, src.frame.shape[1:])[:2])
+
+    def _kept(self, key, make):
+        """make() kept under key (the frame's sums, a frame's maps through a panel) within the budget."""
         if key in self._maps:
             self._maps.move_to_end(key)
             return self._maps[key]
-        far = self._far_map(i, src.frame) if self.panels[i].far is not None else None
-        veil = self._veil_map(i, src.frame, far) if self.panels[i].haze is not None else None
-        self._maps[key] = (far, veil)
-        while len(self._maps) > 1 and sum(m[0].numel() * m[0].element_size() for v in self._maps.values()
-                                          for m in v if m is not None) > self.budget_bytes:
+        self._maps[key] = value = make()
+        size = lambda v: v.numel() * v.element_size() if isinstance(v, torch.Tensor) else sum(  # noqa: E731
+            size(u) for u in v if isinstance(u, (torch.Tensor, tuple)))
+        while len(self._maps) > 1 and sum(size(v) for v in self._maps.values()) > self.budget_bytes:
             self._maps.popitem(last=False)
-        return far, veil
+        return value
 
-    def _far_map(self, i: int, frame: torch.Tensor) -> tuple:
+    def _frame_maps(self, i: int, src: WideSource) -> tuple:
+        """((far coarse samples, rows, columns) or None, (veil cell densities, rows, columns) or None) of the frame
+        through panel i."""
+        def make():
+            far = self._far_map(i, src) if self.panels[i].far is not None else None
+            return far, self._veil_map(i, src, far) if self.panels[i].haze is not None else None
+        return self._kept((src.key, "maps", i), make)
+
+    def _mirrored(self, frame: torch.Tensor, pad: int) -> torch.Tensor:
+        """The frame with `pad` pixels mirrored around it (restore.tensors.region; one reflection: torch's pad)."""
+        H, W = frame.shape[1:]
+        if pad < min(H, W):
+            return torch.nn.functional.pad(frame.to(self.dtype)[None], (pad,) * 4, mode="reflect")[0]
+        return region(frame.to(self.dtype), -pad, -pad, H + 2 * pad, W + 2 * pad)
+
+    def _block_means(self, src: WideSource, c: int) -> torch.Tensor:
+        """far_light's c × c block means of the frame with the margin (mirrored), the last blocks held."""
+        def make():
+            m, (H, W) = self.margin_px, src.frame.shape[1:]
+            nby, nbx = -(-(H + 2 * m) // c), -(-(W + 2 * m) // c)
+            held = torch.nn.functional.pad(self._mirrored(src.frame, m)[None],
+                                           (0, nbx * c - W - 2 * m, 0, nby * c - H - 2 * m), mode="replicate")
+            return held[0].reshape(3, nby, c, nbx, c).mean(dim=(2, 4))
+        return self._kept((src.key, "blocks", c), make)
+
+    def _far_map(self, i: int, src: WideSource) -> tuple:
         """far_light's coarse samples [3, nby + 2, nbx + 2] of the frame with its margin, and the interpolation
         matrices of the frame's rows and columns."""
         f, m = self.panels[i].far, self.margin_px
         c, p = f.coarse_px, f.kernels.shape[-1] // 2
-        H, W = frame.shape[1:]
-        ext = region(frame.to(self.dtype), -m, -m, H + 2 * m, W + 2 * m)
-        nby, nbx = -(-(H + 2 * m) // c), -(-(W + 2 * m) // c)
-        held = torch.nn.functional.pad(ext[None], (0, nbx * c - W - 2 * m, 0, nby * c - H - 2 * m), mode="replicate")
-        means = held[0].reshape(3, nby, c, nbx, c).mean(dim=(2, 4))
+        H, W = src.frame.shape[1:]
+        means = self._block_means(src, c)
+        nby, nbx = means.shape[1:]
         xs = torch.nn.functional.pad(means[None], (p + 1,) * 4, mode="replicate")[0]
         shape = tuple(next_fast_len(n + 2 * (p + 1) + 2 * p, real=True) for n in (nby, nbx))
         spectrum = self._spectrum(("far", i, shape), lambda: np.fft.rfft2(f.kernels, s=shape))
         y = _fft_conv(xs, spectrum, shape)[:, 2 * p:2 * p + nby + 2, 2 * p:2 * p + nbx + 2].clamp_min(0)
         return y, far_rows(H, m, nby, c), far_rows(W, m, nbx, c)
 
-    def _veil_map(self, i: int, frame: torch.Tensor, far) -> tuple:
+    def _veil_grid(self, i: int, frame_hw) -> tuple[int, int, Spread]:
+        """(b, J, ρ): the veil's cells of b × b pixels (optics.stray.spread.coarse_factor), the binned kernel's
+        half-width in cells (bin_kernel) and the spread of panel i's haze."""
+        p, (H, W) = self.panels[i], frame_hw
+        spread = Spread("tail", p.sensor.focal_length_um, inner_deg=p.haze.inner_deg)
+        b = coarse_factor(H, W, spread.inner_radius_um() / p.pitch_um)
+        return b, -(-(p.kernel_px // 2) // b), spread
+
+    def _cells(self, src: WideSource, b: int, J: int) -> torch.Tensor:
+        """The b × b cell sums [3, H/b + 2J, W/b + 2J] of the frame with J cells mirrored around it."""
+        def make():
+            H, W = src.frame.shape[1:]
+            return self._mirrored(src.frame, J * b).reshape(3, H // b + 2 * J, b, W // b + 2 * J, b).sum(dim=(2, 4))
+        return self._kept((src.key, "cells", b, J), make)
+
+    def _veil_map(self, i: int, src: WideSource, far) -> tuple:
         """The veil's cell densities [3, H/b, W/b] of the frame through panel i (scaled as spread_back scales
         them), and the interpolation matrices of the frame's rows and columns."""
-        p, (H, W) = self.panels[i], frame.shape[1:]
+        p, (H, W) = self.panels[i], src.frame.shape[1:]
         s = p.sensor
-        spread = Spread("tail", s.focal_length_um, inner_deg=p.haze.inner_deg)
-        b = coarse_factor(H, W, spread.inner_radius_um() / p.pitch_um)
+        b, J, spread = self._veil_grid(i, (H, W))
         hc, wc = H // b, W // b
-        source = self._veil_source(i, frame, far, b)
+        source = self._veil_source(i, self._cells(src, b, J), far, b)
         shape = tuple(next_fast_len(3 * n - 2, real=True) for n in (hc, wc))
         rho = self._spectrum(("rho", H, W, s.focal_length_um, p.pitch_um, p.haze.inner_deg, shape),
                              lambda: np.fft.rfft2(kernel(spread, (hc, wc), b * p.pitch_um), s=shape))
@@ -173,13 +219,12 @@ class WideLight:
         scale = torch.where(got > 0, out.sum(dim=(1, 2)) / got, torch.zeros_like(got))
         return d * scale[:, None, None], rows, cols
 
-    def _veil_source(self, i: int, frame: torch.Tensor, far, b: int) -> torch.Tensor:
-        """The cells [3, H/b, W/b] of the frame's blurred light (with the far field's, times cos⁴): module doc."""
-        p, (H, W) = self.panels[i], frame.shape[1:]
-        J = -(-(p.kernel_px // 2) // b)  # the binned kernel's half-width in cells (bin_kernel)
-        hc, wc = H // b, W // b
-        ext = region(frame.to(self.dtype), -J * b, -J * b, H + 2 * J * b, W + 2 * J * b)
-        cells = ext.reshape(3, hc + 2 * J, b, wc + 2 * J, b).sum(dim=(2, 4))
+    def _veil_source(self, i: int, cells: torch.Tensor, far, b: int) -> torch.Tensor:
+        """The cells [3, H/b, W/b] of the frame's blurred light (with the far field's, times cos⁴; module doc) from
+        the frame's cells with J around them."""
+        p = self.panels[i]
+        J = -(-(p.kernel_px // 2) // b)
+        hc, wc = cells.shape[1] - 2 * J, cells.shape[2] - 2 * J
         shape = (next_fast_len(hc + 4 * J, real=True), next_fast_len(wc + 4 * J, real=True))
         kb = self._spectrum(("bin", i, b, shape), lambda: np.fft.rfft2(bin_kernel(p.kernels, b), s=shape))
         source = _fft_conv(cells, kb, shape)[:, 2 * J:2 * J + hc, 2 * J:2 * J + wc]

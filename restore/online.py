@@ -144,6 +144,8 @@ class OnlineBatches:
                 p.spectra(shape)
                 for frame in {im.pixels.shape[1:] for im in images}:
                     degrader.power_frame(i, frame)
+            if degrader.wide is not None:  # each frame's coarse sums (the far field's and the haze's)
+                degrader.wide.prepare([WideSource(i, px) for i, px in enumerate(self.pixels)])
 
     @property
     def count(self) -> int:
