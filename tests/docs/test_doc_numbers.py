@@ -271,3 +271,33 @@ def test_synth_guide_states_the_sensor_and_the_field_convolution():
         "Nikon 5100 (NPL)", 0.6, "poisson", 4.87, 15506.0, 16)
     assert cfg.field_rank == 4 and DEFAULT_FIELD_PHASES ** 2 == 16 and cfg.defocus_tolerance_px == 1.0
     assert 2 * math.ceil(DEFAULT_MARGIN_UM / 1.55) + 1 == 513
+
+
+def test_physics_page_states_the_stray_lights_coarse_grids():
+    """concepts/physics.md: the spreads are convolved on a grid coarser by a power of two, 'at most the inner
+    radius / 16: 8 px for the haze at 2048 × 1024, 4 px for the glare, 32 px for the ghost's disc'."""
+    from udc_render.optics.stray import StrayLight
+    from udc_render.optics.stray import settings
+    from udc_render.optics.stray.spread import COARSE_PER_RADIUS, Spread, coarse_factor
+    text = " ".join((CONCEPTS / "physics.md").read_text(encoding="utf-8").split())
+    _says(text, "(at most the inner radius / 16: 8 px for the haze at 2048 × 1024, 4 px for the glare, 32 px for "
+                "the ghost's disc)")
+    on = StrayLight()
+    spreads = {"haze": Spread("tail", 6000.0, inner_deg=on.haze_inner_deg),
+               "glare": Spread("tail", 6000.0, inner_deg=on.glare_inner_deg),
+               "ghost": Spread("disc", 6000.0, radius_um=settings.GHOST_BLUR_UM / 2)}
+    got = {k: coarse_factor(1024, 2048, s.inner_radius_um() / 1.55) for k, s in spreads.items()}
+    assert COARSE_PER_RADIUS == 16 and got == {"haze": 8, "glare": 4, "ghost": 32}
+
+
+def test_physics_page_states_the_poled_orders_spacing():
+    """concepts/physics.md: 'the P-OLED's orders are 52 µm apart at 550 nm, 33 render pixels' (λ z_i / p on the
+    default scene's 1.55 µm render grid, z_i of the monitor at its framing distance)."""
+    from psf import layouts
+    from udc_render.scene import load_scene
+    from udc_render.scene.geometry import camera_geometry
+    text = " ".join((CONCEPTS / "physics.md").read_text(encoding="utf-8").split())
+    _says(text, "the P-OLED's orders are 52 µm apart at 550 nm, 33 render pixels")
+    geom = camera_geometry(load_scene("monitor"))
+    spacing_um = 0.55 * geom.image_distance_um / layouts.poled().pitch_x_um
+    assert round(spacing_um) == 52 and round(spacing_um / geom.pitch_um) == 33
