@@ -19,8 +19,9 @@ d = 0 panel; at b > 1 light moves by whole-cell expectations and the field's ban
 left out of the veil's source (tests/restore/test_degrade_wide.py measures what it costs).
 
 A crop turned by restore.data.dihedral gets its wide light turned the same way, its place in the frame unchanged
-(as its field). The coarse maps of a frame (WideSource.key) through a panel are made once and kept
-(WIDE_BUDGET_BYTES); the brightness scales them.
+(as its field). A frame's coarse sums (WideSource.key: its far field's block means, its veil's cells) are the
+same through every panel and are made once (prepare: before worker processes fork); its maps through a panel
+once per panel; both kept within WIDE_BUDGET_BYTES, least recently used dropped. The brightness scales them.
 """
 from __future__ import annotations
 

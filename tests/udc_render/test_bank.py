@@ -11,9 +11,10 @@ from restore.degrade import Degrader, WideSource
 from restore.degrade_wide import WideLight
 from restore.tensors import region
 from udc_render.cli import main
-from udc_render.dataset.bank import BANK_FILE, read_bank
+from udc_render.dataset.bank import (BANK_FILE, BANK_FORMAT, FORMAT_1, FORMAT_1_EFFECTS, Panel, PanelFar, PanelHaze,
+                                     read_bank, read_panel, save_panel, write_bank_json)
 from udc_render.dataset.randomize import draw_capture, draw_panels, load_distributions
-from udc_render.dataset.bank_make import monitor_white_bands
+from udc_render.dataset.bank_make import differing_settings, monitor_white_bands
 from udc_render.optics.apply import far_field_images
 from udc_render.optics.displays import PAPER_GAIN, PAPER_GAMMA, preset
 from udc_render.pipeline import SynthConfig, plan_kernels, sensor_for_scene
@@ -21,7 +22,7 @@ from udc_render.profiles import resolve_profile
 from udc_render.scene import load_scene
 from udc_render.scene.geometry import psf_lens
 from udc_render.scene.overrides import with_overrides
-from udc_render.sensor import band_electron_weights
+from udc_render.sensor import SensorConfig, band_electron_weights
 from udc_render.synth_kernels import paper_channel_kernels
 
 TINY = ["--sensor-px", "64,32", "--pitch-um", "24.8", "--bands-nm", "400:700:100", "--quiet"]
@@ -142,12 +143,15 @@ def test_a_randomized_bank_records_its_draws(tmp_path, cache):
 
 def test_bad_bank_options_are_refused_in_one_line(tmp_path, cache, capsys):
     out = str(tmp_path / "b")
+    hazy = tmp_path / "hazy.toml"  # a haze the paper's per-channel form cannot apply: refused before any kernel
+    hazy.write_text('[display]\nfamily = "poled"\ndistance_mm = 0.0\n[display.poled]\nhaze = 0.02\n')
     for argv, words in (
             (["--display", "toled", "--randomize", "default"], ("--display with --randomize",)),
             (["--panels", "3"], ("--panels and --randomize-seed go with --randomize",)),
             (["--kernel-px", "32"], ("--kernel-px must be an odd integer",)),
             (["--display", "toled", "--channel-kernels", "paper"], ("--channel-kernels paper", "d = 2 mm")),
-            (["--randomize", "default", "--distance-mm", "1"], ("--distance-mm with --randomize",))):
+            (["--randomize", "default", "--distance-mm", "1"], ("--distance-mm with --randomize",)),
+            (["--randomize", str(hazy), "--panels", "1", "--profile", "paper"], ("a haze of 0.02", "physical"))):
         _one_line(capsys, ["bank", "--out", out, "--cache-dir", cache, *TINY, *argv], *words)
     assert _bank(tmp_path / "b1", cache, "--display", "glass", "--profile", "paper") == 0
     _one_line(capsys, ["bank", "--out", str(tmp_path / "b1"), "--cache-dir", cache, *TINY, "--display", "glass",
@@ -157,3 +161,57 @@ def test_bad_bank_options_are_refused_in_one_line(tmp_path, cache, capsys):
         read_bank(tmp_path / "b1")
     with pytest.raises(Exception, match="no bank.json"):
         read_bank(tmp_path)
+
+
+@pytest.mark.slow
+def test_a_hazy_randomized_bank_degrades_otherwise_than_a_clear_one(tmp_path, cache):
+    """--randomize with the P-OLED's haze fixed at 0.02 and at 0 (every other draw the same: each key has its own
+    stream): the hazy panel records and applies its haze, the clear one records why it has none; a bright square on
+    black degraded through both with the same noise loses light in the square and gains it 6 px and more away
+    (the veil). ~30 s; the fast sibling: tests/restore/test_degrade_wide.py, test_the_haze_moves_its_share_into_a_veil.
+    """
+    banks = []
+    for haze in (0.02, 0.0):
+        ranges = tmp_path / f"haze_{haze}.toml"
+        ranges.write_text(f'[display]\nfamily = "poled"\ndistance_mm = 1.0\n[display.poled]\nhaze = {haze}\n')
+        assert _bank(tmp_path / f"b{haze}", cache, "--randomize", str(ranges), "--panels", "1", "--field-phases",
+                     "2") == 0
+        banks.append(read_bank(tmp_path / f"b{haze}").panels[0])
+    hazy, clear = banks
+    assert hazy.haze.share == 0.02 and clear.haze is None and hazy.record["panel_draw"]["haze"] == 0.02
+    assert "haze is 0" in clear.record["effects"]["not_applied"]["haze"]
+    assert any(e.startswith("haze: 0.02") for e in hazy.record["effects"]["applied"])
+    np.testing.assert_array_equal(hazy.kernels, clear.kernels)
+    frame = torch.zeros(3, 32, 64)
+    frame[:, 8:16, 24:40] = 1.0
+    dn = [Degrader([p], "cpu", torch.float64).degrade(
+        region(frame, -16, -16, 64, 96).double(), 0, (32, 64), (0, 0), torch.Generator().manual_seed(0),
+        source=WideSource("f", frame)) for p in (hazy, clear)]
+    moved = (dn[0] - dn[1]).numpy()
+    away = np.ones((16, 32), bool)
+    away[1:11, 9:23] = False  # sites 6 px and more from the square
+    assert moved[:, 4:8, 12:20].sum() < 0 and moved[:, away].mean() > 0
+
+
+def test_a_format_1_bank_is_read_without_far_field_or_haze_and_never_resumed(tmp_path, cache, capsys):
+    """A bank.json of format 1 (made before panels carried the far field and the haze, as the shipped models'
+    carried banks) is read with neither, whatever its panel files hold, its effects saying so; its settings name the
+    bank today's settings make but for the effects it cannot have (what carried_bank compares), and `udc-render
+    bank` refuses to resume it in one line."""
+    out = tmp_path / "b1"
+    panel = Panel("p", np.full((3, 3, 3), 1 / 9, np.float32), 24.8, (0.3,) * 3, SensorConfig(), None, None, None, {},
+                  far=PanelFar(np.full((3, 5, 5), 0.002), 15), haze=PanelHaze(0.015, 2.5))
+    record = save_panel(out, 0, panel)
+    assert read_panel(out, record).far is not None  # format 2 reads what the file holds
+    write_bank_json(out, {"test": "format 1"}, [{k: v for k, v in record.items() if k not in ("far_field", "haze")}], 1)
+    (out / BANK_FILE).write_text((out / BANK_FILE).read_text().replace(BANK_FORMAT, FORMAT_1))
+    (p,) = read_bank(out).panels
+    assert (p.far, p.haze) == (None, None) and p.record["effects"]["not_applied"] == FORMAT_1_EFFECTS
+    paper = tmp_path / "paper"
+    argv = ["bank", "--out", str(paper), "--cache-dir", cache, *TINY, "--display", "glass", "--profile", "paper"]
+    assert main(argv) == 0
+    doc = json.loads((paper / BANK_FILE).read_text())
+    old = {**{k: v for k, v in doc.items() if k != "effects"}, "format": FORMAT_1}
+    assert differing_settings(old, doc) == [] and differing_settings({**old, "format": BANK_FORMAT}, doc) == ["effects"]
+    (paper / BANK_FILE).write_text(json.dumps(old))
+    _one_line(capsys, argv, "holds a different bank", "format")

@@ -40,7 +40,7 @@ from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig
 
 __all__ = ["BANK_FILE", "BANK_FORMAT", "FORMAT_1", "FORMAT_1_EFFECTS", "Bank", "BankError", "Panel", "PanelFar",
            "PanelField", "PanelHaze", "bank_json_fingerprint", "file_sha256", "panel_effects", "read_bank",
-           "save_panel", "write_bank_json"]
+           "read_panel", "save_panel", "write_bank_json"]
 
 BANK_FORMAT = "udc-render kernel bank 2"
 FORMAT_1 = "udc-render kernel bank 1"

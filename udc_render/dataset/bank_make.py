@@ -252,6 +252,8 @@ def bank_settings(scene: Scene, cfg: SynthConfig, kernel_px: int, specs: list[Pa
     if stray.room_on or stray.lens_reflectance or stray.lens_glare or stray.emission_on:
         raise BankError(f"stray light {stray.describe()}: a bank applies the display's haze only; switch the room "
                         "light, ghost, lens glare and display emission off")
+    for spec in specs:  # a haze the bank cannot apply: refused before any kernel is made
+        panel_haze(spec.display.name, spec.haze, spec.cfg)
     spectral = cfg.form == "spectral"
     effects = {"far_field": "the spectral synthesis's, per channel (bank.PanelFar)" if spectral else "none",
                "haze": "the display's (bank.PanelHaze)" if spectral else "none", "stray_light": stray.describe()}
