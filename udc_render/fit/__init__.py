@@ -149,7 +149,8 @@ def _flat_record(f) -> dict:
                      "periods_in_frame": a.periods_in_frame, "a1": pm(a.a1, a.a1_sigma), "a1_predicted": a.a1_predicted,
                      "contrast_ratio": ratio, "check": "passes" if CHECK_RATIO[0] <= ratio <= CHECK_RATIO[1] else
                      ("not made" if not a.counts else "FAILS"),
-                     "distance_mm": pm(a.distance_mm, a.distance_sigma_mm, "mm"), "counts": a.counts})
+                     "distance_mm": pm(a.distance_mm, a.distance_sigma_mm, "mm"), "counts": a.counts,
+                     "harmonic": {"why": a.choice, "candidates": list(a.candidates)}})
     return {"distance_mm": pm(f.distance_mm, f.distance_sigma_mm, "mm"), "axes": axes}
 
 
