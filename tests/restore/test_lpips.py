@@ -40,9 +40,10 @@ def test_larger_distortion_larger_distance(astronaut):
 
 
 def test_pinned_values(astronaut):
-    # computed once by this implementation (float32, torch 2.13 CPU); no official value for these inputs
-    assert lpips(astronaut, gaussian_filter(astronaut, (1.5, 1.5, 0))) == pytest.approx(0.355367, rel=1e-4)
-    assert lpips(astronaut, noisy(astronaut, 0.1)) == pytest.approx(0.136426, rel=1e-4)
+    # computed once by this implementation (float32, torch 2.13 CPU); no official value for these inputs: a
+    # regression pin, not an oracle. Six digits: rounding ≤ 3.7e-6 relative (measured 1.3e-6, 2.4e-6)
+    assert lpips(astronaut, gaussian_filter(astronaut, (1.5, 1.5, 0))) == pytest.approx(0.355367, rel=1e-5)
+    assert lpips(astronaut, noisy(astronaut, 0.1)) == pytest.approx(0.136426, rel=1e-5)
 
 
 def test_heads_have_official_shapes_and_are_nonnegative():
@@ -58,10 +59,11 @@ def test_float64_matches_float32_and_layouts(astronaut):
     t = lambda x: torch.from_numpy(x).permute(2, 0, 1)[None]
     with torch.no_grad():
         d64 = LPIPS().double()(t(astronaut), t(b)).item()
-    assert lpips(astronaut, b) == pytest.approx(d64, rel=1e-5)
-    assert lpips(astronaut.transpose(2, 0, 1), b.transpose(2, 0, 1)) == pytest.approx(d64, rel=1e-5)
+    # float32 against float64: measured 1.8e-7, 9.4e-8, 2.6e-7 relative; 2e-6 leaves float32's spread across CPUs
+    assert lpips(astronaut, b) == pytest.approx(d64, rel=2e-6)
+    assert lpips(astronaut.transpose(2, 0, 1), b.transpose(2, 0, 1)) == pytest.approx(d64, rel=2e-6)
     batch = lpips(np.stack([astronaut, astronaut]), np.stack([b, astronaut]))
-    assert batch.shape == (2,) and batch[0] == pytest.approx(d64, rel=1e-5) and batch[1] == 0
+    assert batch.shape == (2,) and batch[0] == pytest.approx(d64, rel=2e-6) and batch[1] == 0
 
 
 def test_missing_weights_name_the_install_command(monkeypatch):

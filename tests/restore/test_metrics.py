@@ -119,7 +119,8 @@ def test_level_matched_psnr_solves_each_channels_gain():
     out = gains * (gt + noise)
     plain, matched = paper_metrics(out, gt)["psnr_db_paper"], level_matched_psnr_db(out, gt)
     crop = (slice(None), slice(16, -16), slice(16, -16))
-    assert matched - plain > 20 and matched == pytest.approx(psnr_db((gt + noise)[crop], gt[crop]), abs=0.05)
+    # the gains are solved from the noisy output: measured 0.0039 dB from the noise's own PSNR
+    assert matched - plain > 20 and matched == pytest.approx(psnr_db((gt + noise)[crop], gt[crop]), abs=0.015)
     from udc_render.sensor import mosaic_of, pack_rggb
     packed = 0.3 * pack_rggb(mosaic_of(gt))
     assert level_matched_psnr_db(None, gt, packed=packed) > 150  # an exact gain: no error left but rounding
@@ -139,7 +140,7 @@ def test_an_output_at_k_times_the_truth_has_level_k_and_loses_exactly_that_to_it
     loss = 10 * math.log10(1 / np.mean(((1 - k[:, None, None]) * crop) ** 2))
     assert m["psnr_db_paper"] == pytest.approx(loss, rel=1e-9) and m["psnr_db_paper_matched"] > 250
     noisy = level_scores(0.5 * (gt + rng.normal(0, 0.01, gt.shape)), gt)
-    assert 35 < noisy["psnr_db_paper_matched"] < 45 and noisy["level_g"] == pytest.approx(0.5, abs=0.01)
+    assert 35 < noisy["psnr_db_paper_matched"] < 45 and noisy["level_g"] == pytest.approx(0.5, abs=1e-3)  # 2.4e-4
     packed = level_scores(None, gt, packed=0.3 * pack_rggb(mosaic_of(gt)))  # the input row: its two greens averaged
     assert (packed["level_r"], packed["level_g"], packed["level_b"]) == pytest.approx((0.3, 0.3, 0.3), rel=1e-12)
     dark = level_scores(np.zeros_like(gt), np.zeros_like(gt))  # no light in the truth: level 1 by definition

@@ -474,10 +474,10 @@ def test_exr_json_and_preview_roundtrip(udc, tmp_path):
     assert {"preview_white_cd_m2", "pitch_um", "margin_px", "shape_khw", "channels"} <= set(meta)
     assert meta["shape_khw"] == list(b.bands.shape) and meta["spp"] == b.meta["spp"] == 2
     # the preview's white is the luminance of the (uniform) frame: Y = band_xyz @ band values,
-    # exact here (every frame pixel is the same float32 value); ≈ the 300 cd/m² peak to 1 %
-    # (5 nm bands instead of the 1 nm table)
+    # exact here (every frame pixel is the same float32 value); ≈ the 300 cd/m² peak to 0.1 %
+    # (5 nm bands instead of the 1 nm table: measured 0.026 %)
     Y = spectra.band_xyz(b.edges_nm)[1] @ white_reference(s)
-    assert meta["preview_white_cd_m2"] == pytest.approx(Y, rel=1e-5) and Y == pytest.approx(300, rel=0.01)
+    assert meta["preview_white_cd_m2"] == pytest.approx(Y, rel=1e-5) and Y == pytest.approx(300, rel=1e-3)
     prev = iio.imread(out / "preview.png")
     H, W = b.frame(b.bands).shape[1:]
     assert prev.shape == (H, W, 3) and prev.dtype == np.uint8 and prev.min() > 200  # white everywhere
