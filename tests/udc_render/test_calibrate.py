@@ -92,7 +92,7 @@ def test_gamma_poled_and_blue_absorbed(poled):
 
 def test_noise_lambdas_poisson(toled_run, poled):
     for res in (toled_run[3]["noise"], poled["noise"]):
-        assert res["model"] == "poisson"
+        assert res["model"] == "poisson" and len(res["checks"]) == 8  # λ_read and λ_shot of R, Gr, Gb, B
         for c in res["checks"]:
             assert c["error"] < 0.05, c
 
@@ -100,7 +100,7 @@ def test_noise_lambdas_poisson(toled_run, poled):
 def test_noise_lambdas_gaussian(tmp_path):
     cfg = SynthConfig(sensor=replace(SynthConfig().sensor, noise="gaussian"))  # λ_read 1e-6, λ_shot 1e-3
     res = cal_noise.calibrate_noise(Rig(load_display("poled"), True, cfg, tmp_path))
-    assert np.allclose(res["truth_read"], 1e-6) and np.allclose(res["truth_shot"], 1e-3)
+    assert np.allclose(res["truth_read"], 1e-6) and np.allclose(res["truth_shot"], 1e-3) and len(res["fits"]) == 4
     for f in res["fits"]:
         assert abs(f["lambda_read"] / 1e-6 - 1) < 0.08 and abs(f["lambda_shot"] / 1e-3 - 1) < 0.02, f
 
