@@ -148,8 +148,10 @@ def test_noise_frames_give_the_sensors_lambdas_and_a_loadable_sensor_toml(tmp_pa
         save_dng(tmp_path / f"n{i:02d}.dng", f, CAMERA, cam.black_level_dn, 65535)
     fit = fit_noise(tmp_path)
     lr, ls = sensor_lambdas(cam.sensor())
-    assert np.all(np.abs(fit.lambda_shot / ls - 1) < 0.03) and np.all(np.abs(fit.lambda_shot - ls) < 3 * fit.lambda_shot_sigma)
-    assert np.all(np.abs(fit.lambda_read / lr - 1) < 0.3) and np.all(np.abs(fit.lambda_read - lr) < 3 * fit.lambda_read_sigma)
+    assert np.all(np.abs(fit.lambda_shot / ls - 1) < 0.03)
+    assert np.all(np.abs(fit.lambda_shot - ls) < 3 * fit.lambda_shot_sigma)
+    assert np.all(np.abs(fit.lambda_read / lr - 1) < 0.3)
+    assert np.all(np.abs(fit.lambda_read - lr) < 3 * fit.lambda_read_sigma)
     (tmp_path / "sensor.toml").write_text(sensor_toml(fit, "frames"))
     s = SensorConfig.from_toml(tmp_path / "sensor.toml")
     assert s.noise == "gaussian" and s.lambda_shot == pytest.approx(tuple(fit.lambda_shot), rel=1e-5)
@@ -164,7 +166,8 @@ def test_white_square_gives_gamma_per_channel(tmp_path):
     for name, m in (("g.dng", glass), ("d.dng", disp)):
         save_dng(tmp_path / name, m, CAMERA, 64, 65535)
     m = measure_gamma(inputs.read_frame(tmp_path / "g.dng"), inputs.read_frame(tmp_path / "d.dng"))
-    assert m.pixels > 500 and np.all(np.abs(m.gamma - truth) < 3 * m.sigma) and np.all(np.abs(m.gamma / truth - 1) < 0.01)
+    assert m.pixels > 500 and np.all(np.abs(m.gamma - truth) < 3 * m.sigma)
+    assert np.all(np.abs(m.gamma / truth - 1) < 0.01)
     # the 128-px square (rows and columns 64 … 191) and its central half: 31 px in from each side, 66 px
     assert m.square_xy_px == (128, 128) and m.region_xy_px == (66, 66)
 
@@ -175,7 +178,8 @@ def test_the_weighted_log_residual_is_finite_and_smooth_where_the_model_predicts
     the exact form above, value and slope continuous at the joint."""
     from udc_render.fit.refine import _weighted_log_residual as r
     y, s = np.array([0.0]), np.array([0.5])
-    assert np.isfinite(r(y, np.array([-1e4]), s)).all() and r(y, np.array([-60.0]), s)[0] > r(y, np.array([-40.0]), s)[0]
+    assert np.isfinite(r(y, np.array([-1e4]), s)).all()
+    assert r(y, np.array([-60.0]), s)[0] > r(y, np.array([-40.0]), s)[0]
     lm = np.array([0.3])
     m = np.exp(lm)
     assert r(y, lm, s)[0] == pytest.approx(((y - lm + s ** 2 / (2 * m * m)) * m / s)[0])

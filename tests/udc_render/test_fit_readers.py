@@ -13,13 +13,14 @@ import tifffile
 from tests.udc_render.camera_files import CameraDng, companding_table, write_camera_dng
 from udc_render.cli import main
 from udc_render.fit.inputs import FitError, read_frame
+from udc_render.streams import stream
 
 ACTIVE = (3, 5, 67, 97)  # odd top and left: LibRaw's own crop moves them to 4 and 6
 
 
 def _camera_dng(seed: int, tile=(32, 48)) -> CameraDng:
     """A 70 × 100 image of random 14-bit codes, GRBG at the ActiveArea's origin, four black levels, deltas."""
-    rng = np.random.default_rng(seed)
+    rng = stream(seed, "camera-dng")
     t, l, b, r = ACTIVE
     return CameraDng(rng.integers(0, 1 << 14, (70, 100)).astype(np.uint16), cfa=(1, 0, 2, 1),
                      black=((60.25, 64.0), (66.5, 70.0)), delta_v=rng.uniform(0, 5, b - t),
@@ -54,7 +55,7 @@ def test_what_libraw_alone_would_give_differs_from_the_tags(tmp_path):
 
 def test_a_dng_without_a_table_or_deltas_and_options_over_tags(tmp_path):
     """No table: the codes are the linear values; --black-level replaces the per-site map by one level."""
-    rng = np.random.default_rng(3)
+    rng = stream(3, "plain-dng")
     dng = CameraDng(rng.integers(100, 4000, (48, 64)).astype(np.uint16), black=((64, 64), (64, 64)), white=4095)
     write_camera_dng(tmp_path / "c.dng", dng)
     f = read_frame(tmp_path / "c.dng")
@@ -73,7 +74,7 @@ def _png16(path, data: np.ndarray) -> None:
 def test_sixteen_bit_colour_and_grey_png_and_tiff_keep_every_bit(tmp_path):
     """300 DN reads as 300 (Pillow gave 1): a 16-bit colour and grey PNG, a colour TIFF interleaved and
     planar, all read back equal to the values written, saturation 65535."""
-    rng = np.random.default_rng(4)
+    rng = stream(4, "sixteen-bit")
     rgb = rng.integers(0, 65536, (20, 24, 3)).astype(np.uint16)
     rgb[0, 0] = (300, 301, 302)
     _png16(tmp_path / "c.png", rgb)
