@@ -42,7 +42,7 @@ import numpy as np
 import torch
 
 from restore.captures import load_capture_draws
-from restore.degrade import Degrader, cpu_threads
+from restore.degrade import Degrader, WideSource, cpu_threads
 from restore.online import CleanImage, OnlineBatches
 from restore.losses import loss_fn
 from restore.models import UNET_CONFIG, build_model
@@ -116,6 +116,7 @@ def main() -> None:
     for other in degraders.values():
         other._power = deg._power  # the same maps, made once
     crops = torch.rand(a.batch, 3, c + 2 * m, c + 2 * m)
+    source = WideSource("bench", torch.rand(3, h, w, device=dev))  # a bank panel's far field and haze see it
     origins = [(2 * int(v), 2 * int(u)) for v, u in zip(np.linspace(0, (h - c) // 2, a.batch),
                                                         np.linspace(0, (w - c) // 2, a.batch))]
     model = build_model(UNET_CONFIG).to(dev, memory_format=torch.channels_last)
@@ -134,7 +135,7 @@ def main() -> None:
     def degrade(d, i, batched):
         d.batched = batched
         d.degrade_batch(crops, [i] * a.batch, [((h, w), o) for o in origins],
-                        [torch.Generator(dev).manual_seed(b) for b in range(a.batch)])
+                        [torch.Generator(dev).manual_seed(b) for b in range(a.batch)], sources=[source] * a.batch)
 
     rows = {f"degrade {p.name} ({'d > 0, rank ' + str(p.field.rank) if p.field else 'd = 0'}), "
             f"{n or torch.get_num_threads()} thread{'s' if (n or torch.get_num_threads()) > 1 else ''}, "
@@ -186,12 +187,14 @@ def region_runs(a) -> None:
         deg.power_frame(i, (h, w))
     m, c, tiles = deg.margin_px, a.crop_px, [int(t) for t in a.regions.split(",")]
     regions = {t: torch.rand(1, 3, t * c + 2 * m, t * c + 2 * m, device=dev) for t in tiles}
+    source = WideSource("bench", torch.rand(3, h, w, device=dev))
     times = {(i, t): [] for i in range(len(panels)) for t in tiles}
     for r in range(a.repeats + 1):  # the first repeat makes each shape's spectra: left out
         for i in range(len(panels)):
             for t in tiles:
                 t0 = time.perf_counter()
-                deg.degrade_batch(regions[t], [i], [((h, w), (0, 0))], [torch.Generator(dev).manual_seed(r)])
+                deg.degrade_batch(regions[t], [i], [((h, w), (0, 0))], [torch.Generator(dev).manual_seed(r)],
+                                  sources=[source])
                 if dev.type == "cuda":
                     torch.cuda.synchronize()
                 if r:

@@ -266,6 +266,7 @@ def test_cuda_equals_cpu(tiny_scene, field_kernels):
     y_cpu = blur(x, cpu.panels[0], (64, 128), (0, 0))
     y_gpu = blur(x.cuda(), gpu.panels[0], (64, 128), (0, 0)).cpu()
     assert (y_gpu - y_cpu).abs().max() <= 1e-12 * y_cpu.abs().max()
-    assert torch.equal(cpu.degrade(x, 0, (64, 128), (0, 0), draw=draw), gpu.degrade(x, 0, (64, 128), (0, 0), draw=draw).cpu())
+    assert torch.equal(cpu.degrade(x, 0, (64, 128), (0, 0), draw=draw),
+                       gpu.degrade(x, 0, (64, 128), (0, 0), draw=draw).cpu())
     dn = gpu.degrade(x, 0, (64, 128), (0, 0), torch.Generator("cuda").manual_seed(0))
     assert dn.is_cuda and torch.isfinite(dn).all() and dn.max() > 0

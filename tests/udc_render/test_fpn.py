@@ -153,7 +153,8 @@ def test_full_well_caps_the_read_out_charge_as_before():
     assert np.all(cap.mosaic_dn == s.white_level_dn)
 
 
-@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")  # radiometry's float32 3e38 / (a small e⁻ unit)
+# radiometry's float32 3e38 / (a small e⁻ unit)
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")
 def test_float32_huge_zero_and_tiny_exposure_stay_finite():
     """float32 input with 0, 1e-30 and 3e38 (near float32's max), PRNU 0 and the largest allowed PRNU,
     a 1 ns exposure: every DN is finite and in [0, white], the huge pixels saturate, the zeros read

@@ -44,7 +44,8 @@ def assert_var_chi2(x: np.ndarray, var: float, what: str):
     n = x.size
     stat = (n - 1) * x.var(ddof=1) / var
     lo, hi = chi2.ppf([1e-6, 1 - 1e-6], n - 1)
-    assert lo < stat < hi, f"{what}: variance {x.var(ddof=1):.4f} vs model {var:.4f} (χ² {stat:.0f} not in [{lo:.0f}, {hi:.0f}])"
+    assert lo < stat < hi, (f"{what}: variance {x.var(ddof=1):.4f} vs model {var:.4f} (χ² {stat:.0f} not in "
+                            f"[{lo:.0f}, {hi:.0f}])")
 
 
 # ---------------------------------------------------------------- noise statistics

@@ -4,7 +4,8 @@
     udc-render bank --randomize default|FILE.toml --panels N [--randomize-seed S] --out DIR
 
 Each panel: the per-channel kernels at the sensor pitch (d > 0: with the rank-r field bases), γ, the sensor
-(noise model, gain, exposure, defect pixels, fixed-pattern noise); udc_render/dataset/bank.py has the format.
+(noise model, gain, exposure, defect pixels, fixed-pattern noise) and, in the physical profile, the far field
+and the display's haze; its record's "effects" list what it applies. udc_render/dataset/bank.py has the format.
 """
 from __future__ import annotations
 
@@ -37,14 +38,16 @@ def register(sub) -> None:
     p.add_argument("--sensor-px", type=float_pair("--sensor-px"),
                    help="sensor width,height in pixels: the frame the field (d > 0) is laid on [the scene's]")
     p.add_argument("--pitch-um", type=positive("--pitch-um"), help="sensor pixel pitch in µm [the scene's]")
-    p.add_argument("--bands-nm", help="LOW:HIGH:STEP in nm: γ of display files, the d > 0 kernels' λ step [the scene's]")
+    p.add_argument("--bands-nm", help="LOW:HIGH:STEP in nm: γ of display files, the far field, the d > 0 kernels' "
+                                      "λ step [the scene's]")
     p.add_argument("--kernel-px", type=odd_size("--kernel-px"),
                    help="kernel size at the sensor pitch, odd (a crop needs half of it as margin on every side) "
                         "[the scene's: 2 · ceil(render.margin_um / pitch) + 1, 513 for the default scene]")
     p.add_argument("--profile", choices=tuple(PROFILES), default=DEFAULT_PROFILE,
-                   help=f"paper: its channel kernels at d = 0, Gaussian noise, no defects or FPN; physical: the camera's "
-                        f"channel kernels, d = {PHYSICAL_DISTANCE_MM:g} mm for the presets (field bases), Poisson "
-                        f"noise, defect pixels, FPN (udc_render/profiles.py) [{DEFAULT_PROFILE}]")
+                   help=f"paper: its channel kernels at d = 0, Gaussian noise, no defects, FPN, far field or haze; "
+                        f"physical: the camera's channel kernels, d = {PHYSICAL_DISTANCE_MM:g} mm for the presets "
+                        f"(field bases), Poisson noise, defect pixels, FPN, the far field, the display's haze "
+                        f"(udc_render/profiles.py) [{DEFAULT_PROFILE}]")
     p.add_argument("--distance-mm", type=non_negative("--distance-mm"),
                    help="display-to-lens distance d of every display [the profile's for the presets, a file's own]")
     add_channel_kernels_argument(p)
