@@ -33,7 +33,7 @@ import torch
 from scipy.fft import next_fast_len
 
 from restore.data import dihedral
-from restore.tensors import region
+from restore.tensors import host_to, region
 from udc_render.dataset.bank import Panel
 from udc_render.optics.stray import Spread
 from udc_render.optics.stray.spread import coarse_factor, kernel
@@ -117,8 +117,8 @@ class WideLight:
                                  f"frame of {frame_hw[0]} × {frame_hw[1]} px (sources)")
             maps = self._frame_maps(i, src)
             (y0, x0), (h, w) = origin, size_hw
-            at = lambda rows, cols, a: (torch.as_tensor(rows, device=self.device).to(self.dtype) @ a  # noqa: E731
-                                        @ torch.as_tensor(cols, device=self.device).to(self.dtype).T)
+            at = lambda rows, cols, a: (host_to(torch.from_numpy(rows), self.device, self.dtype) @ a  # noqa: E731
+                                        @ host_to(torch.from_numpy(cols), self.device, self.dtype).T)
             f = None if maps[0] is None else at(maps[0][1][y0:y0 + h], maps[0][2][x0:x0 + w], maps[0][0])
             v = None if maps[1] is None else at(maps[1][1][y0:y0 + h], maps[1][2][x0:x0 + w], maps[1][0])
             far.append(None if f is None else dihedral(f * src.brightness, src.mode))

@@ -14,8 +14,10 @@ import torch
 
 from restore.degrade import Degrader, WideSource
 from restore.degrade_wide import WideLight
+from restore.online import OnlineBatches, clean_images
 from restore.tensors import region
-from udc_render.dataset.bank import Panel, PanelFar, PanelHaze
+from tests.conftest import write_pairs
+from udc_render.dataset.bank import Panel, PanelFar, PanelHaze, read_bank, save_panel, write_bank_json
 from udc_render.optics import convolve_bands
 from udc_render.optics.far_field import FarField, far_light
 from udc_render.optics.stray import Spread, StrayContext, StrayLight, apply_view, convolve
@@ -152,3 +154,22 @@ def test_the_veil_of_coarse_cells_is_the_exact_blurs():
     veil = WideLight([panel], m, torch.device("cpu"), torch.float64).crops(
         [0], [((H, W), (0, 0))], [WideSource("x", torch.from_numpy(x))], (H, W))[1][0].numpy()
     assert b == 8 and np.abs(veil - ref).max() <= 1e-3 * ref.max()
+
+
+def test_online_batches_through_a_hazy_panel_are_the_same_in_a_worker(tmp_path):
+    """restore.online: crops through a panel with a far field and a haze get their frames' wide light, the same
+    numbers in the process and in a worker process (the frames' sums made before it forks), and other numbers
+    than through the same panel without either."""
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 2),), size_px=(48, 64))
+    sensor = SensorConfig(form="per_channel", gain=4.0, gamma_rggb=(0.1,) * 4, exposure_s=0.03, pitch_um=PITCH_UM)
+    wide = _panel(far=_far(), haze=PanelHaze(0.02, 2.5), sensor=sensor)
+    for name, panel in (("wide", wide), ("plain", replace(wide, far=None, haze=None))):
+        write_bank_json(tmp_path / name, {"test": name}, [save_panel(tmp_path / name, 0, panel)], 1)
+    batches = {}
+    for name, workers in (("wide", 0), ("wide", 1), ("plain", 0)):
+        b = read_bank(tmp_path / name)
+        ob = OnlineBatches(clean_images(data, "train"), b, Degrader(b.panels), 32, 2, seed=0, workers=workers)
+        batches[name, workers] = next(ob.epoch(0)[1])
+    assert all(torch.equal(a, b) for a, b in zip(batches["wide", 0], batches["wide", 1]))
+    assert not torch.equal(batches["wide", 0][0], batches["plain", 0][0])
+    assert torch.equal(batches["wide", 0][1], batches["plain", 0][1])  # the targets: the clean crops
