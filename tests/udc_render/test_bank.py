@@ -101,7 +101,7 @@ def test_the_far_field_is_the_spectral_synthesiss(tmp_path, cache):
     """The bank's far field through the torch path equals the spectral synthesis's (pipeline.plan_kernels' far field
     through optics.apply.far_field_images with the camera's band weights) for a scene of the monitor's white
     spectrum, relative to each channel's core light Σ_k w_ck g_k white_k (float64, 1e-9: the same light); the
-    P-OLED's share is 6–8 %, the T-OLED's 1 % (what the synthesis's far field brings, psf.far)."""
+    shares bank.md states (measured: T-OLED 0.94–1.16 %, P-OLED 5.77–7.64 %, B to R)."""
     out = tmp_path / "bank"
     assert _bank(out, cache, "--display", "toled,poled", "--field-phases", "2") == 0
     scene = with_overrides(load_scene("monitor"), bands_nm="400:700:100", sensor_px=(64, 32), pitch_um=24.8)
@@ -120,7 +120,7 @@ def test_the_far_field_is_the_spectral_synthesiss(tmp_path, cache):
                                                                            [WideSource("s", frame)], (32, 64))[0][0]
         np.testing.assert_allclose(ours.numpy(), far / core[:, None, None], rtol=1e-9)
     shares = [p.far.share_rgb for p in read_bank(out).panels]
-    assert all(0.008 < v < 0.013 for v in shares[0]) and all(0.05 < v < 0.09 for v in shares[1]), shares
+    assert all(0.009 < v < 0.012 for v in shares[0]) and all(0.057 < v < 0.077 for v in shares[1]), shares
 
 
 @pytest.mark.slow
