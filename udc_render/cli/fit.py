@@ -26,7 +26,8 @@ def _bands(text):
     except ValueError:
         lo = hi = step = float("nan")
     if not (300 <= lo < hi <= 1100 and 0 < step <= hi - lo):
-        raise argparse.ArgumentTypeError(f"--white-bands-nm must look like LOW:HIGH:STEP (e.g. 400:700:10), got '{text}'")
+        raise argparse.ArgumentTypeError(f"--white-bands-nm must look like LOW:HIGH:STEP (e.g. 400:700:10), got "
+                                         f"'{text}'")
     return lo, hi, step
 
 
@@ -36,15 +37,17 @@ def register(sub) -> None:
     p.set_defaults(run=run)
     p.add_argument("--psf", nargs="+", required=True, type=Path, metavar="IMAGE",
                    help="one or more exposures of a collimated laser through the display (PNG/TIFF of 8 or 16 bits, "
-                        "or DNG); several are merged into one HDR PSF, saturated pixels masked")
+                        "grey or colour, or a raw DNG of any compression LibRaw reads); several are merged into one "
+                        "HDR PSF, saturated pixels masked")
     p.add_argument("--wavelength-nm", type=positive("--wavelength-nm"), default=650.0,
                    help="the laser's wavelength [650, the paper's]")
     p.add_argument("--pixel-um", type=positive("--pixel-um"), default=1.55, help="the sensor's pixel pitch [1.55]")
     p.add_argument("--black-level", type=non_negative("--black-level"),
-                   help="black level in DN [a DNG's BlackLevel tag, else 0]")
+                   help="one black level in DN for every pixel [a DNG's, per CFA site, row and column (BlackLevel, "
+                        "BlackLevelDeltaH/V), else 0]")
     p.add_argument("--saturation", type=positive("--saturation"),
-                   help="pixels at or above this DN are clipped and masked [a DNG's WhiteLevel, else the integer "
-                        "type's largest value]")
+                   help="pixels at or above this DN are clipped and masked [a DNG's WhiteLevel (after its "
+                        "LinearizationTable), else the integer type's largest value]")
     p.add_argument("--focal-length-mm", type=positive("--focal-length-mm"), default=6.0,
                    help="the lens's focal length: the orders sit m λ f / p apart on the sensor [6, the paper's rig]")
     p.add_argument("--f-number", type=positive("--f-number"), default=1.8, help="the lens's f-number [1.8]")
