@@ -20,9 +20,9 @@ Per exposure i (d: DN above the black level):
 κ: from the scatter of each exposure against the next brighter one,
 var(d_i / f − d_j) = σ_i² / f² + σ_j² + κ s (1/f + 1) / G at the brighter one's signal s, solved for κ by the
 median of the normalised differences (on the sites of the laser's colour); else (one exposure) from
---noise-frames (λ_shot (white − black), assuming the frames were taken at the PSF's gain); else κ = saturation / ASSUMED_FULL_WELL_E (noted). The merged pixel is the
-inverse-variance mean of d_i / f_i over the exposures where it is unmasked: w_i = f_i² / var_i,
-var = 1 / Σ w_i.
+--noise-frames (λ_shot (white − black), assuming the frames were taken at the PSF's gain); else
+κ = saturation / ASSUMED_FULL_WELL_E (noted). The merged pixel is the inverse-variance mean of d_i / f_i over
+the exposures where it is unmasked: w_i = f_i² / var_i, var = 1 / Σ w_i.
 """
 from __future__ import annotations
 
