@@ -6,10 +6,11 @@ from types import SimpleNamespace
 
 import pytest
 
-from restore.studies.budgets import BUDGETS
-from restore.studies.random_row import (BANK_SECONDS_FILE, SECONDS_FILE, BankRecord, bank_hours, bank_plan, carried_bank,
-                                       family_distributions, online_settings, restore_bank_seconds)
+from restore.studies.budgets import BUDGETS, shipped_folder
+from restore.studies.random_row import (BANK_SECONDS_FILE, RANDOM_ROW, SECONDS_FILE, BankRecord, bank_hours, bank_plan,
+                                       carried_bank, family_distributions, online_settings, restore_bank_seconds)
 from restore.train import TrainSettings
+from udc_render.dataset.bank import FORMAT_1
 from udc_render.dataset.randomize import default_distributions, draw_panels
 from udc_render.scene import scenes_dir
 
@@ -90,3 +91,17 @@ def test_a_carried_banks_time_is_counted_once(tmp_path):
     restore_bank_seconds(tmp_path / "nothing", out)
     assert json.loads((out / "banks" / SECONDS_FILE).read_text()) == {"random_poled": 1800.0}
     assert bank_hours(out) == 0.5
+
+
+@pytest.mark.parametrize("family", ["toled", "poled"])
+def test_the_shipped_slots_carried_bank_still_names_todays_plan(tmp_path, family):
+    """The shipped UNet (randomized) models were trained through format-1 banks (no far field, no haze: bank.
+    FORMAT_1_EFFECTS); their carried bank.json, kept byte for byte, still names the cpu budget's plan, so the
+    slot scores without making the banks (udc_render.dataset.bank_make.differing_settings)."""
+    run = shipped_folder() / f"{RANDOM_ROW}_{family}"
+    if not (run / "bank.json").is_file():
+        pytest.skip(f"the shipped slot has no {RANDOM_ROW}_{family} bank.json")
+    assert json.loads((run / "bank.json").read_text())["format"] == FORMAT_1
+    record = carried_bank(run, bank_plan(tmp_path / "out", BUDGETS["cpu"], family))
+    assert record is not None
+    assert record.fingerprint == hashlib.sha256((run / "bank.json").read_bytes()).hexdigest()[:16]
