@@ -184,16 +184,17 @@ def panel_effects(panel: Panel, not_applied: dict) -> dict:
     """What a panel applies to a clean crop, in order, and what it does not (not_applied: {effect: why}): the
     "effects" of its record."""
     s = panel.sensor
-    applied = ["blur: the per-channel kernels (γ x ⊗ k)" + ("; d > 0: the field blend" if panel.field else ""),
-               "γ (R, G, B) and the display's gain"]
+    applied = ["blur: the per-channel kernels (x ⊗ k)" + ("; d > 0: the field blend" if panel.field else "")]
     if panel.far is not None:
         applied.append(f"far field: {', '.join(f'{v:.4g}' for v in panel.far.share_rgb)} of the core's light (R, G, "
                        f"B), at {panel.far.coarse_px}-px coarse pixels")
+    applied += ["γ (R, G, B) and the display's gain"] + ["cos⁴ fall-off"] * s.cos4_falloff
     if panel.haze is not None:
         applied.append(f"haze: {panel.haze.share:g} of the light into a θ⁻² veil from {panel.haze.inner_deg:g}°")
-    applied += ["cos⁴ fall-off"] * s.cos4_falloff + [f"noise: {s.noise}"]
-    applied += ["fixed-pattern noise"] * (panel.fpn is not None) + ["dead and hot pixels"] * (panel.defects is not None)
-    return {"applied": applied + ["full well, quantisation, black and white levels"], "not_applied": not_applied}
+    applied += ["fixed-pattern noise"] * (panel.fpn is not None) + [f"noise: {s.noise}"]
+    applied.append("full well, quantisation, black and white levels")
+    applied += ["dead and hot pixels"] * (panel.defects is not None)
+    return {"applied": applied, "not_applied": not_applied}
 
 
 def panel_arrays(panel: Panel) -> dict:
