@@ -118,3 +118,15 @@ def test_what_cannot_be_read_is_one_line_naming_the_file(tmp_path, capsys, make,
     assert main(["fit", "--psf", str(path), "--quiet", "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err
     assert says in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_linear_raw_dng_with_a_black_level_per_sample(tmp_path):
+    """A LinearRaw DNG (three samples a pixel, as a demosaicing camera writes): its BlackLevel holds one level
+    per sample (BlackLevelRepeatDim 1 × 1), each subtracted from its own plane."""
+    rgb = (np.arange(40 * 48 * 3).reshape(40, 48, 3) % 4000 + 100).astype(np.uint16)
+    tags = [(50706, "B", 4, (1, 4, 0, 0), True), (50708, "s", 0, "udc-test linear", True),
+            (50713, "H", 2, (1, 1), True), (50714, "H", 3, (60, 64, 70), True), (50717, "H", 1, 4095, True)]
+    tifffile.imwrite(tmp_path / "l.dng", rgb, photometric=34892, extratags=tags, software=False, metadata=None)
+    f = read_frame(tmp_path / "l.dng")
+    assert f.kind == "rgb" and f.saturation_dn == 4095
+    assert np.array_equal(f.above_black(), rgb - np.array([60.0, 64.0, 70.0]))
