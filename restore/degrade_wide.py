@@ -6,7 +6,7 @@ Far field (optics.far_field.far_light, per channel, in the blur's units): the fr
 (the image mirrored beyond its edges, as a crop's margin), its c × c block means x̄ (the last blocks' rows and
 columns held), continued as their edge by the far kernel's half-width + 1, convolved with F_c (a linear FFT of
 far_light's shape), the coarse samples of blocks −1 … n interpolated linearly at the crop's pixels:
-y_c += x̄_c ⊗ F_c. It equals far_light on the same input (tests: float64, 1e-12).
+y_c += x̄_c ⊗ F_c. It equals far_light on the same input (tests: float64, 4e-14 of the peak).
 
 Haze (optics.stray.apply, effect d): e ← (1 − h) e + h V, V = e_frame ⊗ ρ, on the b × b cells of
 optics.stray.spread.convolve (b its coarse_factor; ρ its cell kernel of the θ⁻² tail from inner_deg; the light
