@@ -4,7 +4,7 @@ T(λ): the T-OLED's flat T (optics.displays.TOLED_T, fitted to the paper's γ) �
 P-OLED's polyimide edge × silver cathode at the drawn Urbach width w, its (scale, edge, cathode) fitted
 to the paper's γ (0.34/0.34/0.34/0.20) at each width (POLED_T_TABLE, every 1 nm from 8 to 30 nm:
 optics.displays.fit_poled_transmission on the default rig, as `udc-render study realism` does) and
-interpolated linearly in w (γ within 0.08 % of the paper's at every width, 0.25 nm steps), then
+interpolated linearly in w (γ within 0.082 % of the paper's at every width, 0.25 nm steps), then
 × transmission_scale. The gain is the paper's for the family (6, 25).
 
 The family 'file' is a user's panel (file_display): a display file (`udc-render fit` writes one) or a micrograph
