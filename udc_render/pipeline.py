@@ -87,14 +87,16 @@ from udc_render.sensor.frames import burst_sensor, mean_of_frames
 from udc_render.synth_config import (CHANNEL_KERNELS, DEFAULT_DEFOCUS_TOLERANCE_PX, EXPOSURE_FILL,
                                      EXPOSURE_PERCENTILE, FORMS, SynthConfig, SynthError)
 from udc_render.synth_kernels import (Kernels, band_kernel_set, compact_kernels, display_channel_kernels,
-                                      display_kernels, plan_kernels, scene_object_distance_m, store_power_maps)
+                                      display_kernels, plan_kernels, prepare_kernels, scene_object_distance_m,
+                                      store_power_maps)
 from udc_render.views import View, bin_pixels, bright_pixels, layered_electrons, per_channel_blur
 
 # The settings (synth_config) and the kernels (synth_kernels) are part of the pipeline's public names.
 __all__ = ["CHANNEL_KERNELS", "DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "EXPOSURE_PERCENTILE", "FORMS", "Kernels", "SynthConfig",
            "SynthError", "SynthResult", "auto_exposure_s", "band_kernel_set", "capture_scene", "capture_views",
            "check_grid", "compact_kernels", "depth_layers", "display_channel_kernels", "display_gamma",
-           "display_kernels", "gt_noise_seed", "layer_kernels", "noise_seed", "plan_kernels", "scene_object_distance_m",
+           "display_kernels", "gt_noise_seed", "layer_kernels", "noise_seed", "plan_kernels", "prepare_kernels",
+           "scene_object_distance_m",
            "sensor_for_scene", "store_power_maps", "synthesize"]
 
 

@@ -1,6 +1,11 @@
 """The PSF kernels of a synthesis (udc_render.pipeline): per display, the band kernel sets of the scene's
 render grid (psf.compute_kernels, cached), the 3 channel kernels of the per-channel form, and the
 compact rank-r bases a dataset worker keeps. Re-exported by udc_render.pipeline.
+
+What is made from the kernels and the render grid alone (a display's far field, its rank-r field bases and
+exact-power maps on the grid) goes into the kernel cache beside them (psf.cache.cached_arrays, keyed by the
+kernel entries' keys, Kernels.keys, and the grid), uncompressed: made once by the first process that needs
+it (a dataset's parent, before its workers start), memory-mapped by every other.
 """
 from __future__ import annotations
 
@@ -10,7 +15,7 @@ from dataclasses import dataclass, field, replace
 from tqdm import tqdm
 
 from psf import KernelSet, compute_kernels
-from psf.cache import cached
+from psf.cache import cached, cached_arrays, cached_keyed
 from psf.engine import DEFAULT_FIELD_PHASES
 from psf.far import CACHE_NAME as FAR_CACHE_NAME, ORDER_PIXEL_FACTOR, order_kernels
 from psf.spectral import channel_kernels
@@ -36,11 +41,18 @@ class Kernels:
     power_maps: dict[str, PowerMap] = field(default_factory=dict)  # store_power_maps: exact power, made once
     object_distance_m: float = math.nan  # the distance the kernels are focused for (scene_object_distance_m)
     far: dict[str, FarField] = field(default_factory=dict)  # spectral form: the light past the window (far_field)
+    keys: dict[str, str] = field(default_factory=dict)  # the band kernel sets' cache keys (none without the cache)
 
 
 def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um: tuple[float, float],
                     cfg: SynthConfig, label: str = "", progress: bool = False) -> KernelSet:
     """psf.KernelSet at the band centres of `grid` (field phases when d > 0), through the kernel cache."""
+    return band_kernel_entry(layout, lens, grid, distance_mm, frame_um, cfg, label, progress)[0]
+
+
+def band_kernel_entry(layout, lens, grid: RenderGrid, distance_mm: float, frame_um: tuple[float, float],
+                      cfg: SynthConfig, label: str = "", progress: bool = False) -> tuple[KernelSet, str | None]:
+    """band_kernel_set and its cache key (None without the cache)."""
     size = grid.kernel_size_px
     if size < 3:
         raise SynthError(f"render margin {grid.margin_px} px leaves no room for a kernel: raise render.margin_um")
@@ -48,21 +60,22 @@ def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um
     phases = (cfg.field_phases or DEFAULT_FIELD_PHASES) ** 2 if d_mm > 0 else 1
     with tqdm(total=phases * grid.centres_nm.size, desc=f"kernels {label}", unit="kernel",
               disable=not progress, leave=False) as bar:  # ticks only when the kernels are not cached
-        ks, _ = cached(compute_kernels, "mono", layout, lens, cfg.use_cache, cache_dir=cfg.kernel_cache,
-                       wavelengths_nm=grid.centres_nm, pixel_um=grid.pitch_um, size_px=size, distance_mm=d_mm,
-                       field_phases=cfg.field_phases, precision=cfg.kernel_precision, sensor_um=frame_um,
-                       progress=bar.update)
-    return ks
+        ks, _, key = cached_keyed(compute_kernels, "mono", layout, lens, cfg.use_cache, cache_dir=cfg.kernel_cache,
+                                  wavelengths_nm=grid.centres_nm, pixel_um=grid.pitch_um, size_px=size, distance_mm=d_mm,
+                                  field_phases=cfg.field_phases, precision=cfg.kernel_precision, sensor_um=frame_um,
+                                  progress=bar.update)
+    return ks, key
 
 
 def far_field(layout, lens, grid: RenderGrid, core: KernelSet, frame_um: tuple[float, float],
-              cfg: SynthConfig) -> FarField | None:
+              cfg: SynthConfig, core_key: str | None = None) -> FarField | None:
     """The far field of the band kernels `core` (optics.far_field): the same PSF computed at cfg.far_field_coarse
     × the render pitch over the acceptance (through the kernel cache), less the core window's part: a periodic
     display's and the bare lens's from the diffraction orders (psf.far.order_kernels), an aperiodic tile's (or
     at a coarse pitch too fine for orders as points) by the engine at d = 0. None when it is off
     (far_field_threshold None), when no band loses more than the threshold, or when the core window already
-    reaches every frame pixel from every render pixel."""
+    reaches every frame pixel from every render pixel. core_key: the core's cache key, which puts the far field
+    into the kernel cache (module doc)."""
     threshold = cfg.far_field_threshold
     if threshold is None or not (core.energy_outside > threshold).any():
         return None
@@ -75,10 +88,14 @@ def far_field(layout, lens, grid: RenderGrid, core: KernelSet, frame_um: tuple[f
     orders = layout is None or (getattr(layout, "periodic", True) and hasattr(layout, "fourier_coefficients"))
     airy_um = grid.edges_nm[-1] * 1e-3 * lens.image_distance_um / lens.aperture_um  # λ z / D at the longest λ
     if orders and coarse * grid.pitch_um >= ORDER_PIXEL_FACTOR * airy_um:
-        far, _ = cached(order_kernels, FAR_CACHE_NAME, layout, lens, cfg.use_cache, **common)
+        far, _, far_key = cached_keyed(order_kernels, FAR_CACHE_NAME, layout, lens, cfg.use_cache, **common)
     else:
-        far, _ = cached(compute_kernels, "mono", layout, lens, cfg.use_cache, distance_mm=0.0, **common)
-    return make_far_field(core, far, coarse, acceptance_um(frame_um), threshold)
+        far, _, far_key = cached_keyed(compute_kernels, "mono", layout, lens, cfg.use_cache, distance_mm=0.0, **common)
+    acceptance = acceptance_um(frame_um)
+    arrays = cached_arrays("far-field-1", (core_key, far_key),
+                           lambda: make_far_field(core, far, coarse, acceptance, threshold).arrays(), cfg.kernel_cache,
+                           coarse=coarse, acceptance_um=acceptance, threshold=threshold)
+    return FarField.from_arrays(arrays)
 
 
 def scene_object_distance_m(scene: Scene) -> float:
@@ -93,9 +110,15 @@ def display_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: Synth
                     progress: bool = False, object_distance_m: float | None = None) -> KernelSet:
     """The band kernels of `display` for `scene` (its lens and frame) on `grid`, for objects at
     `object_distance_m` (None: the focus distance)."""
+    return display_kernel_entry(display, scene, grid, cfg, progress, object_distance_m)[0]
+
+
+def display_kernel_entry(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig, progress: bool = False,
+                         object_distance_m: float | None = None) -> tuple[KernelSet, str | None]:
+    """display_kernels and its cache key (None without the cache)."""
     frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
-    return band_kernel_set(display.layout, psf_lens(scene, object_distance_m), grid, display.distance_mm, frame_um,
-                           cfg, display.name, progress)
+    return band_kernel_entry(display.layout, psf_lens(scene, object_distance_m), grid, display.distance_mm, frame_um,
+                             cfg, display.name, progress)
 
 
 def display_channel_kernels(display: Display, scene: Scene, grid: RenderGrid, cfg: SynthConfig,
@@ -142,11 +165,12 @@ def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progre
     if z is None:
         z = camera_geometry(scene).focus_distance_m if cfg.defocus_tolerance_px is None else scene_object_distance_m(scene)
     glass = Display("glass", None)
-    band = {"glass": display_kernels(glass, scene, grid, cfg, progress, z)}
+    band, keys = {}, {}
+    band["glass"], keys["glass"] = display_kernel_entry(glass, scene, grid, cfg, progress, z)
     channel = {}
     for d in displays:
         if d.name not in band and (cfg.form == "spectral" or d.source != "preset"):  # per_channel: analytic γ
-            band[d.name] = display_kernels(d, scene, grid, cfg, progress, z)
+            band[d.name], keys[d.name] = display_kernel_entry(d, scene, grid, cfg, progress, z)
         if cfg.form == "per_channel":
             channel[d.name] = display_channel_kernels(d, scene, grid, cfg, z)
     far_fields = {}
@@ -154,17 +178,18 @@ def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progre
         frame_um = (scene.sensor.width_px * scene.sensor.pitch_um, scene.sensor.height_px * scene.sensor.pitch_um)
         layouts = {"glass": None, **{d.name: d.layout for d in displays}}
         for name, ks in band.items():
-            f = far_field(layouts[name], psf_lens(scene, z), grid, ks, frame_um, cfg)
+            f = far_field(layouts[name], psf_lens(scene, z), grid, ks, frame_um, cfg, keys[name])
             if f is not None:
                 far_fields[name] = f
-    return Kernels(grid, band, channel, object_distance_m=float(z), far=far_fields)
+    return Kernels(grid, band, channel, object_distance_m=float(z), far=far_fields,
+                   keys={n: k for n, k in keys.items() if k is not None})
 
 
 def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels:
     """The kernels with each d > 0 set's phase kernels [K, P, P, S, S] replaced by their rank-r bases on
     the scene's render grid (optics.field_basis; the same numbers convolve_field would make per call):
-    a dataset worker keeps 2/16 of the memory and makes the SVDs once. Unchanged when the field rank is
-    None (exact: every phase kernel is used)."""
+    a dataset worker keeps 2/16 of the memory and makes the SVDs once, or loads them from the kernel cache
+    (module doc). Unchanged when the field rank is None (exact: every phase kernel is used)."""
     if cfg.field_rank is None:
         return kernels
     cam = camera_geometry(scene)
@@ -172,22 +197,37 @@ def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels
     for name, ks in kernels.band.items():
         if ks.field_kernels is not None and ks.distance_mm > 0:
             wy, wx, _ = field_weights(ks, (cam.height_px, cam.width_px), kernels.grid.pitch_um, ks.distance_mm)
-            bases[name] = field_basis(ks.field_kernels, live_phases(wy, wx), cfg.field_rank)
+            live = live_phases(wy, wx)
+            arrays = cached_arrays("field-basis-1", (kernels.keys.get(name),),
+                                   lambda: field_basis(ks.field_kernels, live, cfg.field_rank).arrays(),
+                                   cfg.kernel_cache, live=live, rank=cfg.field_rank)
+            bases[name] = FieldBasis.from_arrays(arrays)
             band[name] = replace(ks, field_kernels=None)
     return replace(kernels, band=band, field_bases=bases)
 
 
-def store_power_maps(kernels: Kernels, scene: Scene) -> Kernels:
+def store_power_maps(kernels: Kernels, scene: Scene, cache_dir: str | None = None) -> Kernels:
     """The kernels with each d > 0 set's exact-power map on the scene's render grid made now and kept
     (optics.field_power: the numbers apply_kernels would make per capture, two chirp z-transforms per band,
     5–7 s for 30 bands at 2558 × 1534 px; kept in float32, K · H · W · 4 bytes per display: 0.47 GB there):
-    a dataset worker makes them once, not once per item (benchmarks/bench_banding_rank.py --full-frame)."""
+    a dataset worker makes them once, not once per item (benchmarks/bench_banding_rank.py --full-frame), or
+    loads them from the kernel cache in `cache_dir` (module doc; cached when kernels.keys names the set)."""
     cam = camera_geometry(scene)
     shape, pitch = (cam.height_px, cam.width_px), kernels.grid.pitch_um
     maps = {}
     for name, ks in kernels.band.items():
         if ks.field_series is not None and ks.distance_mm > 0:
             _, _, g = field_weights(ks, shape, pitch, ks.distance_mm)
-            maps[name] = field_power_map(ks, shape, pitch, ks.distance_mm, g["image_distance_um"],
-                                         g["period_um"]).stored()
+            fresh = field_power_map(ks, shape, pitch, ks.distance_mm, g["image_distance_um"], g["period_um"])
+            arrays = cached_arrays("power-map-1", (kernels.keys.get(name),), lambda: {"maps": fresh.stored().maps},
+                                   cache_dir, shape=list(shape), pitch_um=pitch, distance_mm=ks.distance_mm,
+                                   image_distance_um=g["image_distance_um"], period_um=list(g["period_um"]))
+            maps[name] = replace(fresh, maps=arrays["maps"])
     return replace(kernels, power_maps=maps)
+
+
+def prepare_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig) -> Kernels:
+    """Every kernel product a dataset worker keeps: plan_kernels, compact_kernels and store_power_maps, through
+    the kernel cache (a dataset's parent makes them there once; its workers load them)."""
+    kernels = compact_kernels(plan_kernels(scene, displays, cfg), scene, cfg)
+    return store_power_maps(kernels, scene, cfg.kernel_cache)

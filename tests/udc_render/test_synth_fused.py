@@ -97,3 +97,32 @@ def test_stored_power_maps_are_made_once_and_give_the_same_bytes(small, monkeypa
     with pytest.raises(OpticsError, match="power_map"):
         apply_kernels(small_grid, stored.band["toled"], None, field_rank=cfg.field_rank,
                       field_basis=stored.field_bases["toled"], power_map=stored.power_maps["toled"])
+
+
+def test_kernel_products_are_made_once_into_the_cache_then_loaded(small, monkeypatch, tmp_path):
+    """prepare_kernels (a dataset's parent) puts the far fields, the rank-r field bases and the exact-power maps
+    into the kernel cache beside the kernels; a second call (a worker) makes none of them and has the same bits
+    (loaded: tests/psf/test_cache.py)."""
+    import udc_render.synth_kernels as synth_kernels
+    from udc_render.optics import field_power
+    from udc_render.pipeline import prepare_kernels
+    scene, _ = small
+    displays = [preset("glass"), replace(preset("toled"), distance_mm=2.0), preset("poled")]
+    cfg = SynthConfig(field_phases=2, kernel_cache=str(tmp_path), far_field_threshold=0.0)
+    first = prepare_kernels(scene, displays, cfg)
+    assert set(first.far) == {"glass", "toled", "poled"} and set(first.field_bases) == set(first.power_maps) == {"toled"}
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("made again: expected from the cache")
+    for module, name in ((synth_kernels, "field_basis"), (synth_kernels, "make_far_field"),
+                         (field_power, "power_lattice")):
+        monkeypatch.setattr(module, name, refuse)
+    again = prepare_kernels(scene, displays, cfg)
+    for name, far in first.far.items():
+        assert again.far[name].kernels.tobytes() == far.kernels.tobytes()
+        assert again.far[name].describe() == far.describe()
+    a, b = first.field_bases["toled"], again.field_bases["toled"]
+    assert (a.rank, a.live, a.residuals) == (b.rank, b.live, b.residuals)
+    assert all(x.tobytes() == y.tobytes() for x, y in zip(a.bases + a.coeffs, b.bases + b.coeffs))
+    maps = again.power_maps["toled"].maps
+    assert maps.tobytes() == first.power_maps["toled"].maps.tobytes()

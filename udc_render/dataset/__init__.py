@@ -39,8 +39,9 @@ A randomized job (randomized.py; --randomize, --panels N) draws N panels once an
 job.json; item i sees panel capture_panel(N, seed, i) with its own sensor and exposure, its panel's
 capture in <item>/random/; the items are dispatched sorted by panel.
 
-Kernels are planned once in this process (pipeline.plan_kernels, into the kernel cache folder)
-before items are dispatched, and each worker loads them once: the monitor plane's, or a 3D scene's
+Kernels are planned once in this process (pipeline.prepare_kernels, into the kernel cache folder, with what
+is made of them: far fields, rank-r field bases and exact-power maps) before items are dispatched, and each
+worker loads them once (memory-mapped, psf.cache): the monitor plane's, or a 3D scene's
 in-focus kernels; the synthesis plans the other depth layers' kernels of each item itself, through
 the same cache (executors.cache_layer_kernels plans them into the cache first, with this process's
 BLAS thread count, so they are loaded, never used straight from their computation: the same bits on
@@ -71,7 +72,7 @@ from udc_render.dataset.plan import (BUILTIN_THEN, DEFAULT_ORIGIN_JITTER_M, DEFA
 from udc_render.dataset.store import check_job, clean_stale, locked, write_manifest
 from udc_render.dataset.threads import parent_blas_threads
 from udc_render.optics.displays import Display
-from udc_render.pipeline import SynthConfig, plan_kernels
+from udc_render.pipeline import SynthConfig, prepare_kernels
 from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import camera_geometry
 
@@ -198,8 +199,8 @@ def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None,
         if todo and shared.cfg.use_cache:
             # once, into the cache, before dispatching (a 3D scene: the in-focus ones; the synthesis plans
             # each item's other depth layers through the same cache); a randomized job: every panel's
-            if rand is None:
-                plan_kernels(shared.scene, shared.displays, shared.cfg)
+            if rand is None:  # the kernels and what the workers make of them (far fields, bases, power maps)
+                prepare_kernels(shared.scene, shared.displays, shared.cfg)
             else:
                 plan_s = plan_panels(rand, shared.scene, shared.displays[0], shared.cfg)
         if rand is not None:  # a worker keeps few panels' kernels: one panel's items after another

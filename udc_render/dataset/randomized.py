@@ -24,7 +24,7 @@ import numpy as np
 from udc_render.dataset.randomize import (CaptureDraw, Distributions, PanelDraw, as_record, capture_config,
                                           capture_display, draw_capture, panel_scene, scaled_exposure_s)
 from udc_render.optics.displays import Display
-from udc_render.pipeline import SynthConfig, SynthResult, auto_exposure_s, plan_kernels, sensor_for_scene
+from udc_render.pipeline import SynthConfig, SynthResult, auto_exposure_s, prepare_kernels, sensor_for_scene
 from udc_render.render import BandImage
 from udc_render.scene import Scene
 
@@ -67,7 +67,7 @@ def plan_panels(rand: Randomization, scene: Scene, glass: Display, cfg: SynthCon
     seconds = []
     for p in rand.panels:
         t0 = time.perf_counter()
-        plan_kernels(*panel_setup(scene, glass, p), cfg)
+        prepare_kernels(*panel_setup(scene, glass, p), cfg)
         seconds.append(time.perf_counter() - t0)
     return seconds
 

@@ -100,6 +100,20 @@ class FieldBasis:
     coeffs: list  # K × [n_live, r]
     residuals: list  # K relative residuals (phase_basis)
 
+    def arrays(self) -> dict:
+        """As arrays (a kernel cache entry: psf.cache.cached_arrays); from_arrays reads them back."""
+        out = {"rank": np.asarray(self.rank), "live": np.asarray(self.live, np.int64).reshape(-1, 2),
+               "residuals": np.asarray(self.residuals, np.float64)}
+        for k, (b, c) in enumerate(zip(self.bases, self.coeffs)):
+            out[f"basis_{k}"], out[f"coeffs_{k}"] = b, c
+        return out
+
+    @classmethod
+    def from_arrays(cls, a) -> "FieldBasis":
+        K = a["residuals"].size
+        return cls(int(a["rank"]), tuple((int(j), int(i)) for j, i in a["live"]), [a[f"basis_{k}"] for k in range(K)],
+                   [a[f"coeffs_{k}"] for k in range(K)], [float(r) for r in a["residuals"]])
+
 
 def live_phases(weights_y: np.ndarray, weights_x: np.ndarray) -> tuple:
     """The (j, i) phases whose interpolation weights are non-zero somewhere on the grid."""
