@@ -2,7 +2,13 @@
 pentile, micrograph; udc_render.fit.synthetic) with photon and read noise, saturation, a black offset,
 hot pixels, vignetting, an off-centre spot turned by a few degrees, then fitted. The pitch must come back
 within 1 %, the open fraction within 10 %, d within 5 % from a flat field, each within 3 of its stated σ;
-the written display.toml must load where --display does; what cannot be fitted is refused in one line."""
+the written display.toml must load where --display does; what cannot be fitted is refused in one line.
+
+What these can and cannot catch: their PSFs are the fit's own forward model (the engine's kernel, resampled
+and turned by fit.synthetic.psf_image), so they catch the pipeline's regressions (readers, HDR, lattice,
+photometry, the search, files, the command) and the statistics of σ against an exact model, but not an error
+the data and the model share (the engine's rendering, the resampling, the rotation): test_fit_oracles.py
+fits PSFs made from closed forms for that."""
 from __future__ import annotations
 
 import json
@@ -221,16 +227,17 @@ def test_what_cannot_be_fitted_is_refused_in_one_line(case, says, tmp_path, caps
     assert err.count("\n") == 0 and says in err and "Traceback" not in err
 
 
-def test_an_opening_the_orders_do_not_determine_is_refused():
-    """A P-OLED in one exposure at 0.1 of the full well (benchmarks/bench_fit_exposures.py's seed 3): 13 powers
-    left the open fraction at 0.005 ± 0.15 (truth 0.23), accepted before; now refused in one line."""
-    from udc_render.fit import FitError
+def test_a_weak_pentile_is_fitted_from_every_order_it_shows():
+    """A P-OLED in one exposure at 0.1 of the full well (benchmarks/bench_fit_exposures.py's seed 3): its 13
+    log-domain rows at SNR ≥ 3 left the open fraction at 0.005 ± 0.15 (truth 0.23), accepted before the rule
+    that refused it; the power-domain fit on every measured row gives the open fraction and the ratio within 3 σ
+    and 5 % (measured 0.2297 ± 0.0051 and 0.708 ± 0.0072: 0.1 % and 1.1 %)."""
     from udc_render.fit.inputs import Frame
     rng = np.random.default_rng([3, 7])
     rot = rng.uniform(-4, 4)
     frames = S.psf_measurement(layouts.poled(), shape_hw=(400, 400), offset_px=tuple(rng.uniform(-6, 6, 2)),
                                rotation_deg=rot, peaks_fw=(0.1,), hot_pixels=3, seed=3, window_px=383)
     plane = merge_psf([Frame("f0", frames[0].astype(float), "mono", None, 64.0, 65535.0, 16)], 650.0, CAMERA)
-    with pytest.raises(FitError, match="do not determine the poled opening") as err:
-        fit_psf(plane, FitSpec(psf=("x",)).optics(), "poled", window_px=383)
-    assert "\n" not in str(err.value)
+    c = fit_psf(plane, FitSpec(psf=("x",)).optics(), "poled", window_px=383).chosen
+    for truth, v, s in zip((0.23, 0.7), c.fit.params, c.fit.sigma):
+        assert abs(v / truth - 1) < 0.05 and abs(v - truth) < 3 * s

@@ -7,7 +7,9 @@ the noise, l.265) plus a flat field for the display-to-lens distance (the bands 
     lattice.py     the orders' lattice in closed form: pitch (x, y) and rotation ± σ
     photometry.py  each order's power (a matched filter, the same on the model)
     families.py    the forward models: toled, poled, micrograph (psf.layouts, psf.micrograph)
-    refine.py      least squares of the opening on the orders' powers, the engine's kernel as the model
+    refine.py      least squares of the opening on the orders' powers (every row measured, the noise at the
+                   model), the engine's kernel as the model; the minima that fit alike
+    search.py      the opening's search: the grid's starts, the twins, the reweighted polish
     psf_fit.py     the PSF fit's stages, the family chosen, the synthesis check
     flat.py        d from a flat field's bands (T = z_i p / d), their contrast a check
     white.py       γ per RGGB channel from the white-square pair; T(λ) fitted to it
@@ -20,6 +22,7 @@ run_fit(spec, out) runs what the spec asks and writes the files into out (made a
 from __future__ import annotations
 
 import math
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,11 +34,11 @@ from udc_render.fit.hdr import merge_psf
 from udc_render.fit.inputs import FitError, read_frame, read_frames
 from udc_render.fit.noise import fit_noise, sensor_toml
 from udc_render.fit.photometry import Optics
-from udc_render.fit.psf_fit import fit_psf, orders_table, synthesis_check
+from udc_render.fit.psf_fit import fit_psf, orders_table, refuse_synthesis, synthesis_check, trade_offs
 from udc_render.fit.report import display_toml, pm, write_all, write_tile
 from udc_render.fit.white import fit_white
 from udc_render.io.files import save_text
-from udc_render.optics.displays import load_display
+from udc_render.optics.displays import parse_display
 
 __all__ = ["FitSpec", "FitError", "run_fit", "FAMILY_CHOICES"]
 
@@ -113,7 +116,8 @@ def _parameters(spec: FitSpec, cand) -> dict:
 
 def _candidate_record(c) -> dict:
     return {"family": c.family.name, "orientation": c.family.orientation, "chi2_red": c.fit.chi2_red,
-            "rms_log": c.fit.rms_log, "rows": int(c.fit.used.sum()), "engine_kernels": int(c.fit.passes),
+            "chi2_red_signal": c.fit.chi2_signal_red, "rms_relative": c.fit.rms_rel, "rows": int(c.fit.used.sum()),
+            "rows_with_signal": c.fit.signal_rows, "starts": c.fit.starts, "engine_kernels": int(c.fit.passes),
             "pitch_x_um": pm(*c.pitch_um[0], "um"), "pitch_y_um": pm(*c.pitch_um[1], "um")}
 
 
@@ -136,7 +140,12 @@ def _psf_record(psf, spec: FitSpec) -> dict:
             "exposure_factors": {"hdr_merge": list(psf.plane.factors),
                                  "fitted": {str(e): pm(math.exp(v), math.exp(v) * s) for e, v, s in
                                             zip(c.fit.exposures[1:], lin[5:], sig[5:])}},
-            "dn_per_electron": psf.plane.dn_per_e, "chi2_red": c.fit.chi2_red, "dof": c.fit.dof, "rms_log": c.fit.rms_log,
+            "dn_per_electron": psf.plane.dn_per_e, "chi2_red": c.fit.chi2_red, "dof": c.fit.dof,
+            "chi2_red_signal": c.fit.chi2_signal_red, "rows_with_signal": c.fit.signal_rows,
+            "rms_relative": c.fit.rms_rel, "starts": c.fit.starts,
+            "correlation": {f"{a} × {b}": float(c.fit.correlation[i, j]) for i, a in enumerate(c.family.names)
+                            for j, b in enumerate(c.family.names) if i < j},
+            "trade_offs": trade_offs(c),
             "candidates": [_candidate_record(x) for x in psf.candidates], "skipped": psf.skipped,
             "orders": orders_table(c)}
 
@@ -173,6 +182,11 @@ def run_fit(spec: FitSpec, out: Path, progress=None) -> dict:
     plane = merge_psf(frames, spec.wavelength_nm, spec.camera, noise.dn_per_e() if noise else None)
     psf = fit_psf(plane, optics, spec.family, spec.micrograph, spec.window_px, say)
     layout_table, layout = _file_layout(spec, psf.chosen, out)
+    say("synthesis check")
+    layout_text = display_toml(spec.name, layout_table, None, None, None, "the fitted layout alone")
+    check, synthesised = synthesis_check(psf, parse_display(tomllib.loads(layout_text), out / "display.toml").layout,
+                                         optics)
+    refuse_synthesis(check, spec.family)
     flat = white = None
     if spec.flat:
         say("flat field")
@@ -193,14 +207,14 @@ def run_fit(spec: FitSpec, out: Path, progress=None) -> dict:
     if noise:
         save_text(out / "sensor.toml", sensor_toml(noise, spec.noise_frames))
         written.append("sensor.toml")
-    say("synthesis check")
-    check, synthesised = synthesis_check(psf, load_display(str(out / "display.toml")).layout, optics)
     result = {"display": {"name": spec.name, "file": "display.toml", "layout": layout_table},
               "inputs": {"psf": [str(p) for p in spec.psf], "optics": f"λ {spec.wavelength_nm:g} nm, pixel "
                          f"{spec.pixel_um:g} um, f {spec.focal_length_mm:g} mm, f/{spec.f_number:g}",
                          "camera": spec.camera, "black_dn": frames[0].black_dn, "saturation_dn": frames[0].saturation_dn},
               "psf": _psf_record(psf, spec), "synthesis_check": check,
-              "notes": list(plane.notes) + (list(flat.notes) if flat else []) + list(spec.notes),
+              "notes": list(plane.notes) + (list(flat.notes) if flat else []) + list(spec.notes) +
+              [f"warning: the {psf.chosen.family.name} opening's {t} trade off: the orders measure a combination "
+               "better than each (fit.json: psf.correlation)" for t in trade_offs(psf.chosen)],
               "written": written + ["fit.json", "fit.md", "fit.png"]}
     if flat:
         result["flat"] = _flat_record(flat)

@@ -73,12 +73,24 @@ class Family:
 
     def power(self, params, index: np.ndarray) -> np.ndarray:
         """|c_mn|² of the orders index [N, 2] (m, n) at the shape `params` (pitch-free)."""
-        m, n = index[:, 0], index[:, 1]
-        kx, ix = np.unique(m, return_inverse=True)
-        ky, iy = np.unique(n, return_inverse=True)
+        kx, ix = np.unique(index[:, 0], return_inverse=True)
+        ky, iy = np.unique(index[:, 1], return_inverse=True)
+        return self.power_grid(params, kx, ky)[iy, ix]
+
+    def power_grid(self, params, kx: np.ndarray, ky: np.ndarray) -> np.ndarray:
+        """|c_mn|² [len(ky), len(kx)] on the grid of orders m in kx, n in ky."""
         c = self.layout(1.0, 1.0, params).fourier_coefficients(kx, ky) if self.tile is None else \
             self.layout(float(self.tile.shape[1]), float(self.tile.shape[0])).fourier_coefficients(kx, ky)
-        return np.abs(c[iy, ix]) ** 2
+        return np.abs(c) ** 2
+
+    def twins(self, params) -> list[np.ndarray]:
+        """Other shapes whose |c_mn|² equal these at every order with m ≠ 0 and n ≠ 0: the stripe's widths w and
+        1 − w, heights h and 1 − h (sin²(π m w) = sin²(π m (1 − w))); only (m, 0), (0, n) and the zeroth tell
+        them apart, and those are the orders a long exposure saturates (refine polishes the twins too)."""
+        if self.name != "toled":
+            return []
+        w, h = params
+        return [np.clip(np.array(t, float), self.lower, self.upper) for t in ((1 - w, h), (w, 1 - h), (1 - w, 1 - h))]
 
     def default_params(self) -> tuple:
         """The presets' shapes (psf.layouts.toled / poled defaults): what decides the visible orders."""

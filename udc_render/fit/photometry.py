@@ -5,7 +5,10 @@ P_mn ∝ |c_mn|² (c: the mask's Fourier coefficients). Its power is estimated b
 the template t_j (the Airy pattern's energy on pixel j, centred at u_mn: A / (λ z_i)² ∫ (2 J1(v)/v)² over the
 pixel, v = π D r / (λ z_i), by a NODES × NODES Gauss–Legendre rule) on the data d_j within the aperture
 (APERTURE_SPACING of the shortest order spacing, at most APERTURE_MAX_PX) of u_mn:
-    P = Σ_j t_j d_j / Σ_j t_j²,   var P = Σ_j t_j² var_j / (Σ_j t_j²)²,   over the unmasked pixels.
+    P = Σ_j t_j d_j / Σ_j t_j²,   var P = Σ_j t_j² var_j / (Σ_j t_j²)²,   over the unmasked pixels,
+and the parts of var P the fit moves to its model's level (refine): the order's own shot noise per unit power
+B = Σ_j t_j² (κ / G_j) t_j / (Σ_j t_j²)² (the order puts P t_j on pixel j; κ / G_j its DN per electron) and the
+read noise alone R = Σ_j t_j² σ_r,j² / (Σ_j t_j²)².
 The weights are uniform, not 1 / var_j: the same filter runs on the model's kernel (refine), so the light
 that neighbours and interference add to an order is counted alike in both only when the pixels weigh the
 same in both (an HDR image's pixels come from different exposures, with variances that differ 100-fold
@@ -46,13 +49,15 @@ class Optics:
 class Orders:
     """One row per order and exposure: cell orders [N, 2] (m, n), window positions [N, 2], powers and their
     σ (the exposure's units), measured (the aperture inside the window and its pixels unmasked), the
-    exposure's number."""
+    exposure's number, B and R (module doc)."""
     index: np.ndarray
     xy: np.ndarray
     power: np.ndarray
     sigma: np.ndarray
     measured: np.ndarray
     exposure: np.ndarray
+    shot: np.ndarray
+    floor: np.ndarray
 
     def snr(self) -> np.ndarray:
         return np.where(self.sigma > 0, self.power / np.where(self.sigma > 0, self.sigma, 1.0), 0.0)
@@ -76,9 +81,11 @@ def airy_pixels(dx: np.ndarray, dy: np.ndarray, lens: Lens, wavelength_nm: float
     return np.einsum("...ij,i,j->...", airy, w, w) * area / lz ** 2 * pixel_um ** 2
 
 
-def measure(value, var, usable, xy, index, radius_px, lens: Lens, wavelength_nm: float, pixel_um: float) -> Orders:
+def measure(value, var, usable, xy, index, radius_px, lens: Lens, wavelength_nm: float, pixel_um: float,
+            read_var=None, shot_per_dn=None) -> Orders:
     """The matched-filter power of every order at window positions xy [N, 2] (module doc). value, var,
-    usable: the window's arrays [S, S] (centre pixel at (0, 0))."""
+    usable: the window's arrays [S, S] (centre pixel at (0, 0)); read_var, shot_per_dn: σ_r² and κ / G per pixel
+    (None: 0)."""
     size = value.shape[0]
     half = size // 2
     r = int(math.ceil(radius_px))
@@ -100,17 +107,22 @@ def measure(value, var, usable, xy, index, radius_px, lens: Lens, wavelength_nm:
     den = np.where(den > 0, den, 1.0)
     power = np.sum(t * np.where(ok, d, 0.0), axis=(1, 2)) / den
     sigma = np.sqrt(np.sum(tt * np.where(ok, var[iy, ix], 0.0), axis=(1, 2))) / den
+    zero = np.zeros(len(index))
+    read = zero if read_var is None else np.sum(tt * read_var[iy, ix], axis=(1, 2)) / den ** 2
+    shot = zero if shot_per_dn is None else np.sum(tt * t * shot_per_dn[iy, ix], axis=(1, 2)) / den ** 2
     return Orders(index, xy, np.where(measured, power, 0.0), np.where(measured, sigma, np.inf), measured,
-                  np.zeros(len(index), int))
+                  np.zeros(len(index), int), np.where(measured, shot, 0.0), np.where(measured, read, 0.0))
 
 
-def measure_exposures(exposures, window, xy, index, radius_px, optics: "Optics") -> Orders:
-    """measure() in every exposure (its own pixels and units; hdr.Exposure), rows stacked."""
+def measure_exposures(exposures, window, xy, index, radius_px, optics: "Optics", dn_per_e: float) -> Orders:
+    """measure() in every exposure (its own pixels and units; hdr.Exposure: σ_r² its read variance, κ / G its
+    shot noise), rows stacked."""
     rows = [measure(window.crop(e.d), window.crop(e.var), window.crop(e.usable), xy, index, radius_px, optics.lens,
-                    optics.wavelength_nm, optics.pixel_um) for e in exposures]
+                    optics.wavelength_nm, optics.pixel_um, window.crop(e.sigma) ** 2, dn_per_e / window.crop(e.gain))
+            for e in exposures]
     cat = lambda name: np.concatenate([getattr(r, name) for r in rows])  # noqa: E731
     return Orders(cat("index"), cat("xy"), cat("power"), cat("sigma"), cat("measured"),
-                  np.repeat(np.arange(len(rows)), len(index)))
+                  np.repeat(np.arange(len(rows)), len(index)), cat("shot"), cat("floor"))
 
 
 def lattice_orders(lattice, index_basis: np.ndarray, half: int, radius_px: float) -> np.ndarray:

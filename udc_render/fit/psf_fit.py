@@ -4,12 +4,18 @@ family's opening (refine), the lattice's centroid bias removed with the fitted m
 The centroid bias: the light of an order's neighbours and the pixels pull each centroid a little (on the
 T-OLED's weak y orders beside the zeroth, 6e-4 of the pitch: 8 σ of a good measurement). The fitted model
 is rendered where the measurement's lattice is (synthetic.psf_image: the engine's kernel at the fitted
-pitch, shape, origin and rotation, times the fitted vignetting) and centroided at the same pixels; its centroids minus its known orders'
-positions are each peak's bias, taken off before the lattice is solved again (lattice.centroid_bias).
+pitch, shape, origin and rotation, times the fitted vignetting) and centroided at the same pixels; its centroids
+minus its known orders' positions are each peak's bias, taken off before the lattice is solved again
+(lattice.centroid_bias).
 
 Auto: every family whose visible lattice matches the peaks' (lattice.cell_basis) is fitted; the lowest
-χ²/dof wins. A family is refused when its residual is far above the noise: χ²/dof > CHI2_MAX and the
-noise-weighted RMS of the log residuals > LOG_RMS_MAX (orders' powers off by more than 20 % on average).
+χ²/dof wins. A family is refused when its residual is far above the noise: χ²/dof over the rows with signal
+> CHI2_MAX and the noise-weighted RMS of their relative residuals > REL_RMS_MAX (orders' powers off by more
+than 20 % on average); when the orders do not determine its opening (fewer rows with signal than parameters
++ 2, a shape parameter's σ above SHAPE_REL_SIGMA_MAX of its value, or another minimum that fits as well:
+refine); and when the synthesis with the written display file misses the measured orders' powers by more
+than SYNTHESIS_MAX × what the noise alone gives (refuse_synthesis). Shape parameters that trade off
+(|correlation| > CORRELATED) are named in a note.
 """
 from __future__ import annotations
 
@@ -23,11 +29,13 @@ from udc_render.fit.families import Family, family
 from udc_render.fit.hdr import Plane
 from udc_render.fit.inputs import FitError
 from udc_render.fit.photometry import Optics, Orders, aperture_px, lattice_orders, measure, measure_exposures
-from udc_render.fit.refine import FamilyFit, Geometry, fit_family
+from udc_render.fit.refine import AMBIGUOUS_CHI2, SIGNAL_SNR, FamilyFit, Geometry, fit_family
 from udc_render.fit.synthetic import render_window
 
-CHI2_MAX, LOG_RMS_MAX = 9.0, 0.2
+CHI2_MAX, REL_RMS_MAX = 9.0, 0.2
 SHAPE_REL_SIGMA_MAX = 0.25  # a shape parameter whose σ exceeds this share of its value is not determined
+CORRELATED = 0.9
+SYNTHESIS_MAX = 5.0  # the synthesis check's orders' relative L2 over the noise's alone
 MIN_ORDERS_ACROSS = 3  # the window must hold ± this many spacings (and an aperture) around the spot
 
 
@@ -43,6 +51,7 @@ class Candidate:
     skew_deg: float
     radius_px: float
     raw_pitch_um: tuple  # before the centroid bias was removed
+    saturated_orders: int = 0  # orders whose centre is saturated in every exposure
 
 
 @dataclass(frozen=True)
@@ -93,7 +102,7 @@ def _candidate(fam: Family, plane: Plane, window, peaks, visible, optics: Optics
                        f"{window.size}-px window; at least {need} px (± {MIN_ORDERS_ACROSS} orders) are needed")
     raw = pitch_of(lattice, optics)
     index = lattice_orders(lattice, m, window.half, radius)
-    orders = measure_exposures(plane.exposures, window, lattice.points(index), index, radius, optics)
+    orders = measure_exposures(plane.exposures, window, lattice.points(index), index, radius, optics, plane.dn_per_e)
     geometry = Geometry(window.size, lattice.origin, lattice.angle_deg(0)[0])
     fit = fit_family(fam, orders, plane.factors, (raw[0][0], raw[1][0]), optics, geometry, radius)
     model = fit.image if fit.image is not None else render(fam.layout(raw[0][0], raw[1][0], fit.params), optics,
@@ -103,12 +112,14 @@ def _candidate(fam: Family, plane: Plane, window, peaks, visible, optics: Optics
         np.diag([optics.lz_px / raw[0][0], optics.lz_px / raw[1][0]])
     model = model * field_map(fit, window.size)  # the fitted vignetting too
     bias = lat_mod.centroid_bias(model, lattice, e_model, lattice.origin)
-    ok = np.all(np.isfinite(bias), axis=1)
-    lattice = lat_mod.solve_lattice(lattice.xy[ok] - bias[ok], lattice.sigma[ok], lattice.index[ok], m)
+    bias = np.where(np.isfinite(bias), bias, 0.0)  # a peak where the model has no light: as measured
+    lattice = lat_mod.solve_lattice(lattice.xy - bias, lattice.sigma, lattice.index, m)
     pitch = pitch_of(lattice, optics)
     rot = lattice.angle_deg(0)
     skew = lattice.angle_deg(1)[0] - rot[0]
-    return Candidate(fam, lattice, orders, fit, pitch, rot, skew, radius, raw), ""
+    centre = np.rint(lattice.points(index)).astype(int) + window.half
+    saturated = int(window.crop(plane.clipped)[centre[:, 1], centre[:, 0]].sum())
+    return Candidate(fam, lattice, orders, fit, pitch, rot, skew, radius, raw, saturated), ""
 
 
 def fit_psf(plane: Plane, optics: Optics, family_name: str, micrograph=None, window_px: int = 511,
@@ -136,26 +147,61 @@ def fit_psf(plane: Plane, optics: Optics, family_name: str, micrograph=None, win
         raise FitError(f"--family {family_name}: no family's lattice matches the orders found "
                        f"({'; '.join(f'{k}: {v}' for k, v in skipped.items())})")
     chosen = min(candidates, key=lambda c: c.fit.chi2_red)
-    if chosen.fit.chi2_red > CHI2_MAX and chosen.fit.rms_log > LOG_RMS_MAX:
-        raise FitError(f"--family {family_name}: the best family ({chosen.family.name}) leaves a residual far above the "
-                       f"noise (χ²/dof {chosen.fit.chi2_red:.3g}, orders' powers off by {chosen.fit.rms_log * 100:.3g} % RMS): "
-                       "the layout is not one of the families; try --family micrograph with the panel's micrograph")
+    f = chosen.fit
+    if f.chi2_signal_red > CHI2_MAX and f.rms_rel > REL_RMS_MAX:
+        raise FitError(f"--family {family_name}: the best family ({chosen.family.name}) leaves a residual far above "
+                       f"the noise (χ²/dof {f.chi2_signal_red:.3g} over the orders with signal, their powers off by "
+                       f"{f.rms_rel * 100:.3g} % RMS): the layout is not one of the families; try --family micrograph "
+                       "with the panel's micrograph")
     _refuse_undetermined(chosen, family_name)
     return PsfFit(plane, window, peaks, candidates, skipped, chosen)
 
 
+def _named(names, values) -> str:
+    return ", ".join(f"{n} {v:.2f}" for n, v in zip(names, values))
+
+
+def trade_offs(c: Candidate) -> list[str]:
+    """The pairs of shape parameters whose |correlation| exceeds CORRELATED, as 'a and b (correlation ρ)'."""
+    names, rho = c.family.names, c.fit.correlation
+    return [f"{names[i]} and {names[j]} (correlation {rho[i, j]:+.3f})" for i in range(len(names))
+            for j in range(i + 1, len(names)) if abs(rho[i, j]) > CORRELATED]
+
+
 def _refuse_undetermined(c: Candidate, family_name: str) -> None:
-    """Refuse a shape the orders do not determine: fewer rows than parameters + 2, or a shape parameter's σ
-    above SHAPE_REL_SIGMA_MAX of its value (a P-OLED in one exposure at 0.1 of the full well: 4–13 rows, the
-    open fraction 0.41 ± 3.1 or 0.005 ± 0.15, where the truth is 0.23)."""
-    f, k = c.fit, len(c.family.names)
+    """Refuse a shape the orders do not determine: fewer rows with signal than parameters + 2, a shape
+    parameter's σ above SHAPE_REL_SIGMA_MAX of its value (a P-OLED in one exposure at 0.1 of the full well:
+    the open fraction 0.41 ± 3.1 or 0.005 ± 0.15, where the truth is 0.23), or another minimum that fits as
+    well (a stripe whose zeroth and nearest orders are saturated: widths w and 1 − w give every other
+    order's power alike)."""
+    f, fam = c.fit, c.family
+    k = len(fam.names)
     sig = np.sqrt(np.maximum(np.diag(f.cov)[:k], 0.0))
-    loose = [f"{n} {v:.3g} ± {s:.2g}" for n, v, s in zip(c.family.names, f.x[:k], sig)
+    loose = [f"{n} {v:.3g} ± {s:.2g}" for n, v, s in zip(fam.names, f.x[:k], sig)
              if not s <= SHAPE_REL_SIGMA_MAX * abs(v)]
-    if int(f.used.sum()) < len(f.x) + 2 or loose:
-        raise FitError(f"--family {family_name}: the orders measured ({int(f.used.sum())} powers) do not determine "
-                       f"the {c.family.name} opening ({', '.join(loose) or 'fewer powers than parameters + 2'}): "
-                       "give a brighter exposure, or a second one 10x longer")
+    trade = "; " + ", ".join(trade_offs(c)) + " trade off" if trade_offs(c) else ""
+    what = f"--family {family_name}: the orders measured ({f.signal_rows} powers with signal) do not determine the " \
+        f"{fam.name} opening"
+    todo = (f"{c.saturated_orders} orders are saturated in every exposure: add a shorter exposure that keeps the "
+            "zeroth order and its neighbours unsaturated") if c.saturated_orders else \
+        "give a brighter exposure, or a second one 10x longer"
+    if f.signal_rows < len(f.x) + 2 or loose:
+        raise FitError(f"{what} ({', '.join(loose) or 'fewer powers than parameters + 2'}{trade}): {todo}")
+    if f.alternatives:
+        others = "; ".join(f"{_named(fam.names, x)} (χ² {chi2:.1f})" for x, chi2 in f.alternatives)
+        raise FitError(f"{what}: {_named(fam.names, f.x[:k])} (χ² {f.chi2:.1f}) and {others} fit alike (Δχ² < "
+                       f"{AMBIGUOUS_CHI2:g}{trade}): the orders that tell them apart are too weak or saturated: {todo}")
+
+
+def refuse_synthesis(check: dict, family_name: str) -> None:
+    """Refuse a fit whose display file's synthesis misses the measured orders' powers by more than
+    SYNTHESIS_MAX × the noise's relative L2 (synthesis_check)."""
+    ratio = check["orders_relative_l2"] / check["orders_noise_l2"]
+    if ratio > SYNTHESIS_MAX:
+        raise FitError(f"--family {family_name}: the fitted display's PSF misses the measured orders' powers by a "
+                       f"relative L2 of {check['orders_relative_l2']:.3g}, {ratio:.3g}× the noise's "
+                       f"{check['orders_noise_l2']:.2g} (at most {SYNTHESIS_MAX:g}×): the opening found is not the "
+                       "panel's; try --family micrograph with the panel's micrograph")
 
 
 def orders_table(c: Candidate) -> dict:
@@ -196,14 +242,16 @@ def synthesis_check(psf: PsfFit, layout, optics: Optics) -> tuple[dict, np.ndarr
                 c.radius_px, optics.lens, optics.wavelength_nm, optics.pixel_um)
     synth = synth * field_map(fit, w.size)
     model = np.exp(fit.log_field(o.xy, half) + fit.exposure_log_factor(o.exposure)) * q.power[inv.ravel()]
-    u = fit.used & (model > 0)
+    sg_all = np.where(fit.used, o.sigma, np.inf)
+    u = fit.used & ((o.power >= SIGNAL_SNR * sg_all) | (model >= SIGNAL_SNR * sg_all))
     pw, sg = o.power[u], o.sigma[u]
+    pos = (pw > 0) & (model[u] > 0)
     v, var, ok = w.crop(psf.plane.value), w.crop(psf.plane.var), w.crop(psf.plane.usable)
     a = float(np.sum(v[ok] * synth[ok]) / np.sum(synth[ok] ** 2))
     norm = float(np.sqrt(np.sum(v[ok] ** 2)))
     return {"orders_relative_l2": float(np.linalg.norm(pw - model[u]) / np.linalg.norm(pw)),
             "orders_noise_l2": float(np.linalg.norm(sg) / np.linalg.norm(pw)),
-            "orders_median_abs_log": float(np.median(np.abs(np.log(pw / model[u])))),
+            "orders_median_abs_log": float(np.median(np.abs(np.log(pw[pos] / model[u][pos])))),
             "orders": int(u.sum()),
             "image_relative_l2": float(np.sqrt(np.sum((v[ok] - a * synth[ok]) ** 2)) / norm),
             "image_noise_l2": float(np.sqrt(np.sum(var[ok])) / norm)}, a * synth

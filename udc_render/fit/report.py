@@ -77,9 +77,12 @@ def plot(path: Path, measured: np.ndarray, synthesised: np.ndarray, var: np.ndar
     fig.colorbar(im, ax=ax[2], fraction=0.046)
     p, m, s, used = (np.asarray(orders[k]) for k in ("power", "model", "sigma", "used"))
     ok = p > 0
-    ax[3].errorbar(m[ok & used], p[ok & used], yerr=s[ok & used], fmt=".", ms=3, lw=0.5, label="orders fitted")
-    shown = ok & ~used & (p > 2 * s)
-    ax[3].plot(m[shown], p[shown], "x", ms=3, color="0.6", label="not fitted (model below 3 σ), measured > 2 σ")
+    ok = ok & used & (m > 0)
+    near = np.abs(p - m) <= 3 * s
+    ax[3].errorbar(m[ok & near], p[ok & near], yerr=s[ok & near], fmt=".", ms=3, lw=0.5,
+                   label="orders fitted, within 3 σ")
+    ax[3].errorbar(m[ok & ~near], p[ok & ~near], yerr=s[ok & ~near], fmt=".", ms=3, lw=0.5, color="C3",
+                   label="orders fitted, beyond 3 σ")
     lim = [max(min(m[ok].min(), p[ok].min()), p[ok].max() * 1e-7), p[ok].max() * 2]
     ax[3].plot(lim, lim, "k--", lw=0.8, label="measured = model")
     ax[3].set(xscale="log", yscale="log", xlim=lim, ylim=lim, title="orders' powers (brightest exposure's DN)",
@@ -93,42 +96,54 @@ def markdown(result: dict) -> str:
     """fit.md: the parameters ± σ, the families, the check, the other measurements, the notes."""
     p, lat = result["psf"], result["psf"]["lattice"]
     out = [f"# udc-render fit: {result['display']['name']}", "",
-           f"Inputs: {', '.join(result['inputs']['psf'])} ({p['exposures']} exposure(s)); {result['inputs']['optics']}.", "",
+           f"Inputs: {', '.join(result['inputs']['psf'])} ({p['exposures']} exposure(s)); "
+           f"{result['inputs']['optics']}.", "",
            f"## Display layout: {p['family']}", "", "| parameter | value |", "|---|---|"]
     out += [f"| {k} | {fmt(v)} |" for k, v in p["parameters"].items()]
-    out += [f"| pitch along x (lattice) | {fmt(lat['pitch_x_um'])} |", f"| pitch along y (lattice) | {fmt(lat['pitch_y_um'])} |",
+    out += [f"| correlation of {k} | {v:+.3f} |" for k, v in p["correlation"].items()]
+    out += [f"| pitch along x (lattice) | {fmt(lat['pitch_x_um'])} |",
+            f"| pitch along y (lattice) | {fmt(lat['pitch_y_um'])} |",
             f"| rotation of the display's x axis (towards +y) | {fmt(lat['rotation_deg'])} |",
             f"| skew of its y axis | {lat['skew_deg']:.3g} ° |", "",
             f"Lattice: {lat['peaks']} peaks, RMS residual {lat['rms_px']:.3g} px, scatter beyond the noise "
-            f"{lat['floor_px']:.3g} px; the pitch is λ z_i / spacing: a focal-length error passes into it one to one.", "",
-            "| family | χ²/dof | orders' powers off (noise-weighted RMS) | rows | kernels |", "|---|---|---|---|---|"]
-    out += [f"| {c['family']}{' (' + c['orientation'] + ')' if c.get('orientation') else ''} | {c['chi2_red']:.3g} | "
-            f"{c['rms_log']:.2%} | {c['rows']} | {c['engine_kernels']} |" for c in p["candidates"]]
-    out += [f"| {k} | not fitted: {v} | | | |" for k, v in p["skipped"].items()]
+            f"{lat['floor_px']:.3g} px; the pitch is λ z_i / spacing: a focal-length error passes into it one to "
+            "one.", "",
+            "| family | χ²/dof (rows with signal) | orders' powers off (noise-weighted RMS) | rows (with signal) | "
+            "starts | kernels |", "|---|---|---|---|---|---|"]
+    out += [f"| {c['family']}{' (' + c['orientation'] + ')' if c.get('orientation') else ''} | {c['chi2_red']:.3g} "
+            f"({c['chi2_red_signal']:.3g}) | {c['rms_relative']:.2%} | {c['rows']} ({c['rows_with_signal']}) | "
+            f"{c['starts']} | {c['engine_kernels']} |" for c in p["candidates"]]
+    out += [f"| {k} | not fitted: {v} | | | | |" for k, v in p["skipped"].items()]
     s = result["synthesis_check"]
     out += ["", "## Synthesis with display.toml", "",
             f"The display file's layout through the PSF engine, placed where the measurement's spot is and turned "
-            f"by its rotation, against the measurement: orders' powers relative L2 {s['orders_relative_l2']:.4f} (noise "
+            "by its rotation, against the measurement: orders' powers relative L2 "
+            f"{s['orders_relative_l2']:.4f} (noise "
             f"alone {s['orders_noise_l2']:.4f}), median |ln(measured / synthesised)| {s['orders_median_abs_log']:.4f}; "
             f"image relative L2 {s['image_relative_l2']:.4f} (noise alone {s['image_noise_l2']:.4f})."]
     if result.get("flat"):
         f = result["flat"]
         out += ["", "## Distance from the flat field", "", f"d = {fmt(f['distance_mm'])}", ""]
-        out += [f"- along {a['axis']}: period {fmt(a['period_px'])}, {a['periods_in_frame']:.1f} periods, first harmonic "
+        out += [f"- along {a['axis']}: period {fmt(a['period_px'])}, {a['periods_in_frame']:.1f} periods, first "
+                "harmonic "
                 f"{fmt(a['a1'])} (predicted {a['a1_predicted']:.3g}: ratio {a['contrast_ratio']:.3g}, check "
-                f"{a['check']}), d = {fmt(a['distance_mm'])}{'' if a['counts'] else ' (not counted)'}" for a in f["axes"]]
+                f"{a['check']}), d = {fmt(a['distance_mm'])}{'' if a['counts'] else ' (not counted)'}"
+                for a in f["axes"]]
     if result.get("white"):
         w = result["white"]
         out += ["", "## γ and transmission from the white square", "",
-                "γ R/Gr/Gb/B: " + ", ".join(fmt(g) for g in w["gamma"]) + f" (gain {w['gain']:g}, {w['pixels']} px per channel)",
+                "γ R/Gr/Gb/B: " + ", ".join(fmt(g) for g in w["gamma"]) +
+                f" (gain {w['gain']:g}, {w['pixels']} px per channel)",
                 "the square {0} × {1} px, the region {2} × {3} px (its far field counted in the gains)".format(
                     *w["square_px"], *w["region_px"]),
-                f"T(λ): {w['transmission']['type']}: " + ", ".join(f"{k} {fmt(v)}" for k, v in w["parameters"].items()),
+                f"T(λ): {w['transmission']['type']}: " +
+                ", ".join(f"{k} {fmt(v)}" for k, v in w["parameters"].items()),
                 "γ it gives: " + "/".join(f"{g:.4f}" for g in w["gamma_model"])]
     if result.get("noise"):
         n = result["noise"]
         out += ["", "## Noise", "", f"{n['frames']} frames in {n['series']} series; per R/Gr/Gb/B:",
-                "λ_read " + ", ".join(fmt(v) for v in n["lambda_read"]), "λ_shot " + ", ".join(fmt(v) for v in n["lambda_shot"])]
+                "λ_read " + ", ".join(fmt(v) for v in n["lambda_read"]),
+                "λ_shot " + ", ".join(fmt(v) for v in n["lambda_shot"])]
     if result["notes"]:
         out += ["", "## Notes", ""] + [f"- {n}" for n in result["notes"]]
     out += ["", f"Written: {', '.join(result['written'])}."]

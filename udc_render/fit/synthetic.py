@@ -31,17 +31,18 @@ OVERSAMPLE = 3  # sub-pixels per pixel and axis of psf_image (odd: the kernel's 
 @dataclass(frozen=True)
 class Camera:
     """The virtual camera of the measurements: 1.55 µm pixels, the project's sensor noise (read 4.87 e⁻,
-    full well 15 506 e⁻, 16 bits) at `gain`, a black level of 64 DN."""
+    full well 15 506 e⁻, 16 bits: a 12-bit camera's frames end at 4095 DN) at `gain`, a black level of 64 DN."""
     pixel_um: float = 1.55
     gain: float = 1.0
     black_level_dn: int = 64
     read_noise_e: float = 4.87
     full_well_e: float = 15506.0
+    bit_depth: int = 16
 
     def sensor(self, gain: float | None = None) -> SensorConfig:
         return SensorConfig(pitch_um=self.pixel_um, gain=self.gain if gain is None else gain,
                             black_level_dn=self.black_level_dn, read_noise_e=self.read_noise_e,
-                            full_well_e=self.full_well_e)
+                            full_well_e=self.full_well_e, bit_depth=self.bit_depth)
 
 
 def psf_image(layout, lens: Lens, wavelength_nm: float, pixel_um: float, shape_hw, centre_px,
