@@ -70,6 +70,7 @@ from __future__ import annotations
 import time
 import zlib
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 
 import numpy as np
 from tqdm import tqdm
@@ -87,9 +88,9 @@ from udc_render.sensor.frames import burst_sensor, mean_of_frames
 from udc_render.synth_config import (CHANNEL_KERNELS, DEFAULT_DEFOCUS_TOLERANCE_PX, EXPOSURE_FILL,
                                      EXPOSURE_PERCENTILE, FORMS, SynthConfig, SynthError)
 from udc_render.synth_kernels import (Kernels, band_kernel_set, compact_kernels, display_channel_kernels,
-                                      display_kernels, plan_kernels, prepare_kernels, scene_object_distance_m,
-                                      store_power_maps)
-from udc_render.views import View, bin_pixels, bright_pixels, layered_electrons, per_channel_blur
+                                      display_kernels, kernel_spectra, plan_kernels, prepare_kernels,
+                                      scene_object_distance_m, store_power_maps)
+from udc_render.views import View, bin_pixels, bright_pixels, field_print, layered_electrons, per_channel_blur
 
 # The settings (synth_config) and the kernels (synth_kernels) are part of the pipeline's public names.
 __all__ = ["CHANNEL_KERNELS", "DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "EXPOSURE_PERCENTILE", "FORMS", "Kernels", "SynthConfig",
@@ -223,17 +224,31 @@ def layer_kernels(layers: DepthLayers, kernels: Kernels, scene: Scene, displays:
     return out
 
 
-def capture_views(kernels: Kernels, displays: list[Display], edges_nm, far: dict | None = None) -> list[View]:
+def capture_views(kernels: Kernels, displays: list[Display], edges_nm, far: dict | None = None,
+                  prints: dict | None = None) -> list[View]:
     """The ground truth ('gt': glass, T = 1) and every display but a glass with T = 1 (that one is the ground
     truth's optics exactly), each with its far field from `far` (None: kernels.far; a depth layer's views
-    share the focus kernels' far fields)."""
-    far = kernels.far if far is None else far
-    out = [View("gt", kernels.band["glass"], None, far_field=far.get("glass"))]
+    share the focus kernels' far fields) and its field blend's verdict from `prints` (field_prints)."""
+    far, prints = kernels.far if far is None else far, prints or {}
+    out = [View("gt", kernels.band["glass"], None, far_field=far.get("glass"),
+                spectra=partial(kernel_spectra, kernels, "glass"))]
     for d in displays:
         t = d.transmission.band_means(edges_nm)
         if not (d.is_glass and np.all(t == 1)):
             out.append(View(d.name, kernels.band[d.name], t, kernels.field_bases.get(d.name), far.get(d.name),
-                            kernels.power_maps.get(d.name)))
+                            kernels.power_maps.get(d.name), prints.get(d.name), partial(kernel_spectra, kernels, d.name)))
+    return out
+
+
+def field_prints(band_image: BandImage, kernels: Kernels, displays: list[Display], sensor: SensorConfig,
+                 cfg: SynthConfig) -> dict:
+    """{view name: views.field_print's verdict} of every d > 0 view of the focus kernels (every depth layer's view
+    follows it)."""
+    out = {}
+    for v in capture_views(kernels, displays, band_image.edges_nm):
+        verdict = field_print(band_image, v, sensor, kernels.field_spread.get(v.name), cfg.field_print_sigma)
+        if verdict is not None:
+            out[v.name] = verdict
     return out
 
 
@@ -255,9 +270,9 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     bright = bright_pixels(band_image, base_sensor) if cfg.bright_split else None
     bar = tqdm(total=len(displays) + 1, desc="captures", unit="view", disable=not progress, leave=False)
     spectral_views = displays if cfg.form == "spectral" else []
-    electrons = layered_electrons(band_image, layers,
-                                  lambda l: capture_views(per_layer[l], spectral_views, band_image.edges_nm, kernels.far),
-                                  base_sensor, cfg, bright)
+    prints = field_prints(band_image, kernels, spectral_views, base_sensor, cfg)
+    electrons = layered_electrons(band_image, layers, lambda l: capture_views(
+        per_layer[l], spectral_views, band_image.edges_nm, kernels.far, prints), base_sensor, cfg, bright)
     electrons, stray = synthesis_stray_light(cfg.stray_light, electrons, band_image, base_sensor, cfg.form,
                                              {d.name for d in displays if d.is_glass})
     glass_e, gt_optics = electrons["gt"]

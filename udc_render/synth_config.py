@@ -67,6 +67,11 @@ class SynthConfig:
     # share exceeds the threshold (None: never, the light is lost); coarse: render pixels per coarse pixel (odd)
     far_field_threshold: float | None = DEFAULT_FAR_FIELD_THRESHOLD
     far_field_coarse: int = DEFAULT_FAR_FIELD_COARSE
+    # d > 0: the field blend is left out of a view (its mean kernel and mean power taken) when what it could change
+    # in any pixel (a bound: views.field_print) is at most this many σ of the read noise, the least noise of any
+    # pixel (Poisson noise only; None: always blended). 0.25: on the paper's frame at 2 mm the P-OLED's blend is left
+    # out (bound 0.11 σ; measured at most 0.004 σ), the T-OLED's kept (bound 19 σ); benchmarks/bench_field_knobs.py
+    field_print_sigma: float | None = 0.25
     # The ground truth as the paper took it (l.235): the mean of N glass captures at gain 1 (sensor.frames:
     # temporal noise σ/√N, quantised, saturating); None: the ideal noise-free ground truth (pipeline module doc)
     gt_frames: int | None = None
@@ -97,6 +102,9 @@ class SynthConfig:
         fc = self.far_field_coarse
         if isinstance(fc, bool) or not isinstance(fc, int) or fc < 1 or fc % 2 == 0:
             raise SynthError(f"far_field_coarse = {fc!r}: expected an odd whole number of render pixels ≥ 1")
+        fp = self.field_print_sigma
+        if fp is not None and (isinstance(fp, bool) or not isinstance(fp, (int, float)) or not 0 <= fp < math.inf):
+            raise SynthError(f"field_print_sigma = {fp!r}: expected a number of read-noise σ ≥ 0, or None (always blend)")
         tol = self.defocus_tolerance_px
         if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
                                 or not tol >= 0.05):

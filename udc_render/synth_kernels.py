@@ -20,6 +20,8 @@ from psf.engine import DEFAULT_FIELD_PHASES
 from psf.far import CACHE_NAME as FAR_CACHE_NAME, ORDER_PIXEL_FACTOR, order_kernels
 from psf.spectral import channel_kernels
 from udc_render.optics import FieldBasis, PowerMap, field_basis, field_power_map, field_weights, live_phases
+from udc_render.optics.convolution import kernel_spectra as spectra_of
+from udc_render.optics.field import phase_spread_l1
 from udc_render.optics.displays import Display
 from udc_render.optics.far_field import FarField, acceptance_um, far_window_px, make_far_field
 from udc_render.scene import Monitor, Scene
@@ -42,6 +44,9 @@ class Kernels:
     object_distance_m: float = math.nan  # the distance the kernels are focused for (scene_object_distance_m)
     far: dict[str, FarField] = field(default_factory=dict)  # spectral form: the light past the window (far_field)
     keys: dict[str, str] = field(default_factory=dict)  # the band kernel sets' cache keys (none without the cache)
+    field_spread: dict = field(default_factory=dict)  # d > 0 sets: [K] max_q ‖k_q − k̄‖₁ (optics.phase_spread_l1)
+    cache_dir: str | None = None  # the kernel cache folder they came from (None: psf.cache's default)
+    cache_spectra: bool = False  # the kernels' spectra on the render grid go into the cache too (kernel_spectra)
 
 
 def band_kernel_set(layout, lens, grid: RenderGrid, distance_mm: float, frame_um: tuple[float, float],
@@ -181,8 +186,14 @@ def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progre
             f = far_field(layouts[name], psf_lens(scene, z), grid, ks, frame_um, cfg, keys[name])
             if f is not None:
                 far_fields[name] = f
+    spread = {}
+    if cfg.field_print_sigma is not None:  # what the field blend can change (views.field_print)
+        for name, ks in band.items():
+            if ks.field_kernels is not None and ks.distance_mm > 0:
+                spread[name] = cached_arrays("phase-spread-1", (keys[name],), lambda ks=ks: {
+                    "l1": phase_spread_l1(ks.field_kernels, ks.kernels)}, cfg.kernel_cache)["l1"]
     return Kernels(grid, band, channel, object_distance_m=float(z), far=far_fields,
-                   keys={n: k for n, k in keys.items() if k is not None})
+                   keys={n: k for n, k in keys.items() if k is not None}, field_spread=spread, cache_dir=cfg.kernel_cache)
 
 
 def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels:
@@ -228,6 +239,27 @@ def store_power_maps(kernels: Kernels, scene: Scene, cache_dir: str | None = Non
 
 def prepare_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig) -> Kernels:
     """Every kernel product a dataset worker keeps: plan_kernels, compact_kernels and store_power_maps, through
-    the kernel cache (a dataset's parent makes them there once; its workers load them)."""
+    the kernel cache (a dataset's parent makes them there once; its workers load them); the kernels' spectra go
+    there too when first used (cache_spectra)."""
     kernels = compact_kernels(plan_kernels(scene, displays, cfg), scene, cfg)
-    return store_power_maps(kernels, scene, cfg.kernel_cache)
+    return replace(store_power_maps(kernels, scene, cfg.kernel_cache), cache_spectra=True)
+
+
+def kernel_spectra(kernels: Kernels, name: str, blends: bool, shape, precision: str):
+    """The spectra at FFT shape `shape` of view `name`'s kernels through the kernel cache (module doc): the band
+    kernels [K, Fy, Fx//2 + 1] (blends False), or per band its rank-r field basis's [r, Fy, Fx//2 + 1] (blends);
+    None when not cached (kernels.cache_spectra off, no cache key, or a blend without a basis): made per call.
+    Float32 spectra of a 2048 × 1024 frame's grid are 15.7 MB a kernel: 0.47 GB for 30 band kernels, 1.9 GB for
+    their rank-4 bases, shared by every process that maps them."""
+    key = kernels.keys.get(name)
+    basis = kernels.field_bases.get(name) if blends else None
+    if not kernels.cache_spectra or key is None or (blends and basis is None):
+        return None
+    params = dict(shape=[int(n) for n in shape], precision=precision)
+    if not blends:
+        return cached_arrays("kernel-spectra-1", (key,), lambda: {
+            "spectra": spectra_of(kernels.band[name].kernels, shape, precision)}, kernels.cache_dir, **params)["spectra"]
+    arrays = cached_arrays("basis-spectra-1", (key,), lambda: {
+        f"spectra_{k}": spectra_of(b, shape, precision) for k, b in enumerate(basis.bases)}, kernels.cache_dir,
+        rank=basis.rank, live=basis.live, **params)
+    return [arrays[f"spectra_{k}"] for k in range(len(basis.bases))]

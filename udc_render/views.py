@@ -15,12 +15,14 @@ view, from the whole render, after the layers are composited (its occlusion by n
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from typing import Callable
 
 import numpy as np
 
-from udc_render.optics import BrightPixels, FieldBasis, PowerMap, apply_kernels, band_spectra, convolve_bands
+from udc_render.optics import BrightPixels, FieldBasis, PowerMap, apply_kernels, band_spectra, convolve_bands, fft_shape
 from udc_render.optics.apply import far_field_images
 from udc_render.optics.far_field import FarField
+from udc_render.optics.field_power import power_deviation
 from udc_render.optics.layers import Compositor, DepthLayers, occluder_kernels
 from udc_render.render import BandImage
 from udc_render.sensor import SensorConfig, band_electron_weights, cos4_map
@@ -45,11 +47,47 @@ class View:
     field_basis: FieldBasis | None = None
     far_field: FarField | None = None
     power_map: PowerMap | None = None  # d > 0: the exact-power map made once (synth_kernels.store_power_maps)
+    field_print: dict | None = None  # d > 0: field_print's verdict; 'prints' False: the mean kernel, no field blend
+    spectra: Callable | None = None  # (blends, FFT shape, precision) -> its kernels' spectra or None (kernel_spectra)
+
+    @property
+    def blends(self) -> bool:
+        """Convolves with the field blend (d > 0, unless field_print left it out)."""
+        has_field = self.field_basis is not None or self.kernel_set.field_kernels is not None
+        return has_field and self.kernel_set.distance_mm > 0 and (self.field_print or {}).get("prints", True)
 
     @property
     def plain(self) -> bool:
-        """Convolves the plain bands (d = 0 or glass), so it can share their spectra."""
-        return self.field_basis is None and self.kernel_set.field_kernels is None
+        """Convolves the plain bands (d = 0, glass, or a field blend left out), so it can share their spectra."""
+        return not self.blends
+
+
+def field_print(band_image: BandImage, view: View, sensor: SensorConfig, spread_l1: np.ndarray | None,
+                sigmas: float | None) -> dict | None:
+    """Whether the field blend of a d > 0 view can change any pixel by more than `sigmas` σ of the read noise (the
+    least noise of any pixel under Poisson noise), and the bound it was judged by (None: the view has no blend).
+
+    With gains g_k, band maxima x̂_k, the electron weights w_ck, the phase kernels' spread s_k = max_q ‖k_q − k̄‖₁
+    (optics.field.phase_spread_l1) and the power's deviation δ_k ≥ max |m_k − 1| (optics.field_power.power_deviation):
+    y_blend − y_mean = g Σ_q (k_q − k̄) ⊗ (w_q m x) + g k̄ ⊗ ((m − 1) x), and a kernel difference of zero sum acting
+    on 0 ≤ x ≤ x̂ gives at most x̂ ‖k_q − k̄‖₁ / 2, so every pixel's electrons move by at most
+    Δ_c = Σ_k w_ck g_k x̂_k (s_k (1 + δ_k) / 2 + δ_k). The blend is left out when max_c Δ_c ≤ sigmas · σ_read."""
+    ks = view.kernel_set
+    if not (view.field_basis is not None or ks.field_kernels is not None) or ks.distance_mm <= 0:
+        return None
+    why = ("always blended (field_print_sigma None)" if sigmas is None else "judged under Poisson noise only"
+           if sensor.noise != "poisson" else "no phase spread planned (plan_kernels)" if spread_l1 is None else None)
+    if why is not None:
+        return {"prints": True, "rule": why, "threshold_sigma": sigmas}
+    t = np.ones(ks.kernels.shape[0]) if view.transmission is None else np.asarray(view.transmission, float)
+    gains = t * np.asarray(ks.transmittance, float) * (1.0 - np.asarray(ks.energy_outside, float))
+    peak = band_image.bands.max(axis=(1, 2)).astype(np.float64)
+    dev = power_deviation(ks)
+    bound = float((band_electron_weights(band_image.edges_nm, sensor) @ (
+        gains * peak * (np.asarray(spread_l1) * (1.0 + dev) / 2 + dev))).max())
+    return {"prints": bool(bound > sigmas * sensor.read_noise_e), "bound_e": bound,
+            "read_noise_e": float(sensor.read_noise_e), "threshold_sigma": sigmas,
+            "rule": "left out when the bound on any pixel's change ≤ threshold_sigma · read noise (views.field_print)"}
 
 
 def bin_pixels(a: np.ndarray, pitch_um: float, sensor_pitch_um: float) -> np.ndarray:
@@ -81,11 +119,17 @@ def bright_pixels(band_image: BandImage, sensor: SensorConfig) -> BrightPixels |
     return BrightPixels.of_mask(e > flat[keep - 1] if keep > 0 else np.ones(e.shape, bool))
 
 
-def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectra, bright) -> tuple[np.ndarray, dict]:
+def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectra, bright,
+            far_blocks: dict | None = None) -> tuple[np.ndarray, dict]:
     """One optics pass: electrons [3, h, w] (float64, render pitch, before binning) and its record."""
     w = band_electron_weights(band_image.edges_nm, sensor)
-    kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=view.field_basis, bright=bright,
-              far_field=view.far_field, power_map=view.power_map)
+    blends = view.blends
+    shape = fft_shape(band_image.bands.shape[1:], view.kernel_set.size_px, band_image.margin_px)
+    spectra_k = (view.spectra(blends, shape, cfg.precision) if view.spectra is not None
+                 and (cfg.blend == "source" or not blends) else None)
+    kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=view.field_basis if blends else None,
+              bright=bright, far_field=view.far_field, power_map=view.power_map if blends else None, field=blends,
+              kernel_spectra=spectra_k, far_blocks=far_blocks)
     if cfg.blend == "source":
         optics = apply_kernels(band_image, view.kernel_set, view.transmission, cfg.precision, channel_weights=w,
                                spectra=spectra, **kw)
@@ -93,7 +137,13 @@ def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectr
     else:
         optics = apply_kernels(band_image, view.kernel_set, view.transmission, cfg.precision, **kw)
         e = np.einsum("ck,khw->chw", w, optics.images, dtype=np.float64, optimize=True)
-    return e, {**optics.applied, "gains": optics.gains.tolist(), "transmission": optics.transmission.tolist()}
+    applied = dict(optics.applied)
+    if view.field_print is not None:
+        applied["field_print"] = view.field_print
+        if not blends:
+            applied["skipped"] = [f"field-dependent blur: it changes no pixel by more than {view.field_print['bound_e']:.3g}"
+                                  f" e- ≤ {view.field_print['threshold_sigma']:g} σ of the read noise (field_print)"]
+    return e, {**applied, "gains": optics.gains.tolist(), "transmission": optics.transmission.tolist()}
 
 
 def _finish(e: np.ndarray, band_image: BandImage, sensor: SensorConfig, applied: dict) -> tuple[np.ndarray, dict]:
@@ -105,12 +155,13 @@ def _finish(e: np.ndarray, band_image: BandImage, sensor: SensorConfig, applied:
 
 
 def channel_electrons(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectra=None,
-                      bright: BrightPixels | None = None) -> tuple[np.ndarray, dict]:
+                      bright: BrightPixels | None = None, far_blocks: dict | None = None) -> tuple[np.ndarray, dict]:
     """Mean electrons [3, H, W] (float64, sensor pitch, cos⁴ included) that an R, G and B pixel would
     collect through one view: e_c = cos⁴ · bin(Σ_k w_ck g_k (x_k ⊗ k_k)), w = band_electron_weights.
     The band sum is taken in Fourier space (apply_kernels' channel_weights: three inverse FFTs, not K);
-    blend 'output' sums the K blurred bands instead."""
-    e, applied = _optics(band_image, view, sensor, cfg, spectra, bright)
+    blend 'output' sums the K blurred bands instead. far_blocks: the far field's block means of these bands, kept
+    for the next view (optics.far_field.far_light)."""
+    e, applied = _optics(band_image, view, sensor, cfg, spectra, bright, far_blocks)
     return _finish(e, band_image, sensor, applied)
 
 
@@ -138,8 +189,8 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
     views_of_layer(l) gives the views with layer l's kernels (layers far to near, as DepthLayers)."""
     if layers.labels is None:
         views = views_of_layer(0)
-        spectra = shared_spectra(band_image, views, cfg, bright)
-        return {v.name: channel_electrons(band_image, v, sensor, cfg, spectra, bright) for v in views}
+        spectra, blocks = shared_spectra(band_image, views, cfg, bright), {}
+        return {v.name: channel_electrons(band_image, v, sensor, cfg, spectra, bright, blocks) for v in views}
     w = band_electron_weights(band_image.edges_nm, sensor)
     mean_bands = band_image.frame(band_image.bands).mean(axis=(1, 2), dtype=np.float64)
     comp, records, far = {}, {}, {}
@@ -160,11 +211,12 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
             comp.setdefault(v.name, Compositor()).add(y, cover if l > 0 else None, cover_behind)
         behind -= alpha
         del layer, spectra
-    return {name: _finish(c.result() + _far_electrons(band_image, far[name], w, records[name]), band_image, sensor,
-                          records[name]) for name, c in comp.items()}
+    blocks = {}
+    return {name: _finish(c.result() + _far_electrons(band_image, far[name], w, records[name], blocks), band_image,
+                          sensor, records[name]) for name, c in comp.items()}
 
 
-def _far_electrons(band_image: BandImage, view: View, w: np.ndarray, record: dict):
+def _far_electrons(band_image: BandImage, view: View, w: np.ndarray, record: dict, blocks: dict):
     """The far field's electrons [3, h, w] of the whole render through one view (0 without one; module doc),
     noted in its record."""
     if view.far_field is None:
@@ -172,7 +224,7 @@ def _far_electrons(band_image: BandImage, view: View, w: np.ndarray, record: dic
     t = np.ones(len(w[0])) if view.transmission is None else np.asarray(view.transmission, float)
     record["far_field"] = {**view.far_field.describe(), "layers": "added once, after compositing, from the whole render"}
     return far_field_images(band_image.bands, view.far_field, band_image.margin_px,
-                            t * np.asarray(view.kernel_set.transmittance, float), w)
+                            t * np.asarray(view.kernel_set.transmittance, float), w, blocks)
 
 
 def per_channel_blur(rgb: np.ndarray, layers: DepthLayers, kernels_of_layer, margin_px: int, precision: str,

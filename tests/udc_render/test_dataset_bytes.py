@@ -21,7 +21,7 @@ from udc_render.cli import main
 from udc_render.dataset.executors import Shared, worker_kernels
 from udc_render.optics.displays import load_display
 from udc_render.optics.field import phase_basis
-from udc_render.pipeline import SynthConfig, plan_kernels
+from udc_render.pipeline import Kernels, SynthConfig, plan_kernels
 from udc_render.scene import load_scene
 
 pytestmark = pytest.mark.usefixtures("render_cache")
@@ -38,9 +38,9 @@ def test_a_worker_prepares_its_kernels_at_the_parents_blas_threads(tiny_dataset_
     seen = {}
 
     def spy(name):
-        def made(kernels, *args, **kwargs):
+        def made(*args, **kwargs):
             seen[name] = blas_count()
-            return kernels
+            return Kernels(None, {})
         return made
     for name in ("plan_kernels", "compact_kernels", "store_power_maps"):
         monkeypatch.setattr(pipeline, name, spy(name))

@@ -28,7 +28,8 @@ def test_fused_synthesis_equals_the_per_band_reference(small, distance_mm):
     scene, band_image = small
     displays = [preset("glass")] + [replace(preset(n), distance_mm=distance_mm) for n in ("toled", "poled")]
     # the stray light (optics.stray) acts after the optics, on the electrons: off, to compare the optics alone
-    cfg = SynthConfig(field_phases=2 if distance_mm else None, use_cache=False, stray_light=StrayLight.off())
+    cfg = SynthConfig(field_phases=2 if distance_mm else None, use_cache=False, stray_light=StrayLight.off(),
+                      field_print_sigma=None)  # every d > 0 view blended, as the reference (test_field_print.py)
     kernels = plan_kernels(scene, displays, cfg)
     result = synthesize(band_image, scene, displays, cfg, kernels=kernels)
     sensor = sensor_for_scene(cfg.sensor, scene)

@@ -174,4 +174,7 @@ def panel_drive(spec: str, cols: int, rows: int, transfer: str, base: Path | Non
     if spec.startswith("pattern:"):
         return pattern(spec.split(":", 1)[1], cols, rows), {"pattern": spec}
     code, how = fit_to_panel(read_code_values(spec, base), cols, rows)
-    return decode(code, transfer), how
+    (x0, y0), (w, h) = how["offset_px"], how["shown_px"]
+    shown = (slice(None), slice(y0, y0 + h), slice(x0, x0 + w))
+    code[shown] = decode(code[shown], transfer)  # the black bars decode to 0: left as they are
+    return code, how

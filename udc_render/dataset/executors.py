@@ -70,7 +70,8 @@ def worker_kernels(shared: Shared, panel: int | None = None) -> Kernels:
             panel_setup(shared.scene, shared.displays[0], shared.randomize.panels[panel])
         with blas_threads(shared.blas_threads):
             kernels = compact_kernels(plan_kernels(scene, displays, shared.cfg), scene, shared.cfg)
-            _WORKER_KERNELS[key] = store_power_maps(kernels, scene, shared.cfg.kernel_cache)
+            kernels = store_power_maps(kernels, scene, shared.cfg.kernel_cache)
+            _WORKER_KERNELS[key] = replace(kernels, cache_spectra=True)  # their spectra: made once, into the cache
     return _WORKER_KERNELS[key]
 
 

@@ -45,7 +45,9 @@ class OpticsResult:
 
 
 def _check_finite(bands: np.ndarray, names=None) -> None:
-    bad = ~np.isfinite(bands).reshape(bands.shape[0], -1).all(axis=1)
+    """A one-line error naming the first band with a NaN or an infinity (a band's float64 sum is finite exactly
+    when its float32 values are: one pass, no mask)."""
+    bad = ~np.isfinite(bands.sum(axis=(1, 2), dtype=np.float64))
     if bad.any():
         k = int(np.argmax(bad))
         name = names[k] if names is not None else f"band {k}"
@@ -64,11 +66,11 @@ def _transmission(transmission, K: int) -> np.ndarray:
 
 
 def far_field_images(bands: np.ndarray, far_field: FarField, margin_px: int, far_gains: np.ndarray,
-                     channel_weights=None) -> np.ndarray:
+                     channel_weights=None, blocks: dict | None = None) -> np.ndarray:
     """The far field's light on the frame (optics.far_field.far_light) with gains T τ [K]: per band [K, h, w],
-    or the channel sums [C, h, w] with channel_weights [C, K]."""
+    or the channel sums [C, h, w] with channel_weights [C, K]; blocks: far_light's block means, kept between calls."""
     w = np.diag(far_gains) if channel_weights is None else np.asarray(channel_weights, float) * far_gains[None, :]
-    return far_light(bands, far_field, margin_px, w)
+    return far_light(bands, far_field, margin_px, w, blocks)
 
 
 def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "float32", workers: int | None = None,
@@ -76,7 +78,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
                   image_distance_um: float | None = None, period_um=None,
                   field_rank: int | None = None, channel_weights=None, spectra: np.ndarray | None = None,
                   field_basis: FieldBasis | None = None, bright: BrightPixels | None = None,
-                  far_field: FarField | None = None, power_map: PowerMap | None = None) -> OpticsResult:
+                  far_field: FarField | None = None, power_map: PowerMap | None = None,
+                  kernel_spectra=None, far_blocks: dict | None = None) -> OpticsResult:
     """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
 
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (optics.convolution).
@@ -90,6 +93,9 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     bright: very bright pixels, convolved apart in float64 (optics.bright; pipeline.bright_pixels).
     far_field: the light past the kernel window, added at a coarse pitch (optics.far_field; None: lost).
     power_map: the exact-power map of this kernel set on this grid, made once (PowerMap.stored; None: made here).
+    kernel_spectra: the kernels' spectra at this grid's FFT shape, made once (convolution.kernel_spectra): [K, …] of
+    the band kernels on the field-independent path, or per band those of field_basis on the field path.
+    far_blocks: a dict that keeps the far field's block means of these bands for the next call (far_light).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -128,14 +134,15 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     if not use_field:
         why = ("field kernels disabled" if has_field and not field else "d = 0 or no field kernels: one kernel per band")
         applied.update(model="field-independent", skipped=[f"field-dependent blur ({why})"])
-        images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra, bright)
+        images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra, bright,
+                                kernel_spectra)
     else:
         wy, wx, geometry = field_weights(kernel_set, (H, W), pitch, d_mm, image_distance_um, period_um)
         power_map = stored_or_fresh(power_map, field_power_map(kernel_set, (H, W), pitch, d_mm,
                                                                geometry["image_distance_um"], geometry["period_um"]))
         images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
                                           gains, blend, precision, workers, field_rank, channel_weights, field_basis,
-                                          bright, power_map)
+                                          bright, power_map, kernel_spectra)
         applied["field_power"] = ("exact series at each pixel's shift (optics.field_power)" if power_map is not None
                                   else "the phases' powers, interpolated (the kernel set has no field_series)")
         if field_rank is not None:
@@ -143,6 +150,6 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         applied.update(model="field-dependent", blend=blend, **geometry)
     if far_field is not None:
         images = images + far_field_images(bands, far_field, m, t * np.asarray(kernel_set.transmittance, float),
-                                           channel_weights).astype(images.dtype)
+                                           channel_weights, far_blocks).astype(images.dtype)
         applied["far_field"] = far_field.describe()
     return OpticsResult(np.ascontiguousarray(images, dtype=np.float32), pitch, wl.copy(), gains, t, applied)

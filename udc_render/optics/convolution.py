@@ -72,6 +72,24 @@ def _kernel_spectrum(kernel: np.ndarray, shape, dtype, workers: int) -> np.ndarr
     return sfft.rfft2(buf, workers=workers)
 
 
+def kernel_spectra(kernels: np.ndarray, shape, precision: str = "float32", workers: int | None = None) -> np.ndarray:
+    """[n, Fy, Fx//2 + 1] the spectra of kernels [n, S, S] at FFT shape `shape` (the convolutions' own,
+    _kernel_spectrum), made once for many convolutions (convolve_bands' and convolve_field's kernel_spectra)."""
+    dtype = _precision(precision)
+    workers = _workers(workers)
+    out = np.empty((kernels.shape[0], shape[0], shape[1] // 2 + 1), np.result_type(dtype, np.complex64))
+    for i, k in enumerate(kernels):
+        out[i] = _kernel_spectrum(np.asarray(k).astype(dtype, copy=False), shape, dtype, workers)
+    return out
+
+
+def _check_spectra(kernel_spectra, n: int, shape, what: str) -> None:
+    """kernel_spectra [n, Fy, Fx//2 + 1] (None: made per call) for `what`, or a one-line OpticsError."""
+    if kernel_spectra is not None and tuple(kernel_spectra.shape) != (n, shape[0], shape[1] // 2 + 1):
+        raise OpticsError(f"kernel spectra of shape {tuple(kernel_spectra.shape)} do not match {what} at FFT shape "
+                          f"{tuple(shape)}: make them for this grid (kernel_spectra)")
+
+
 def band_spectra(bands: np.ndarray, size_px: int, margin_px: int, precision: str = "float32",
                  workers: int | None = None, bright: BrightPixels | None = None) -> np.ndarray:
     """rfft2 of every band [K, H, W] at fft_shape((H, W), size_px, margin_px): [K, Fy, Fx//2 + 1].
@@ -80,7 +98,10 @@ def band_spectra(bands: np.ndarray, size_px: int, margin_px: int, precision: str
     dtype = _precision(precision)
     workers = _workers(workers)
     shape = fft_shape(bands.shape[1:], size_px, margin_px)
-    return np.stack([sfft.rfft2(dimmed(b, bright, dtype), s=shape, workers=workers) for b in bands])
+    out = np.empty((bands.shape[0], shape[0], shape[1] // 2 + 1), np.result_type(dtype, np.complex64))
+    for k, b in enumerate(bands):
+        out[k] = sfft.rfft2(dimmed(b, bright, dtype), s=shape, workers=workers)
+    return out
 
 
 def _channel_weights(channel_weights, K: int) -> np.ndarray | None:
@@ -104,6 +125,7 @@ class _Output:
         self.out = np.empty((n, H - 2 * m, W - 2 * m), dtype=dtype)
         self.acc = None if channel_weights is None else [None] * n
         self.spatial = None if channel_weights is None else [None] * n
+        self._term = None  # w_ck · Y_k, in place (no new array per term)
 
     def add(self, k: int, spec: np.ndarray) -> None:
         if self.w is None:
@@ -115,7 +137,9 @@ class _Output:
             if self.acc[c] is None:
                 self.acc[c] = spec * self.dtype(wc)
             else:
-                self.acc[c] += spec * self.dtype(wc)
+                if self._term is None:
+                    self._term = np.empty_like(spec)
+                self.acc[c] += np.multiply(spec, self.dtype(wc), out=self._term)
 
     def add_frame(self, k: int, frame: np.ndarray) -> None:
         """Band k's blurred frame made in space (the bright pixels' float64 blur), after add(k, ...): into
@@ -142,7 +166,8 @@ class _Output:
 
 def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains=None,
                    precision: str = "float32", workers: int | None = None, channel_weights=None,
-                   spectra: np.ndarray | None = None, bright: BrightPixels | None = None) -> np.ndarray:
+                   spectra: np.ndarray | None = None, bright: BrightPixels | None = None,
+                   kernel_spectra: np.ndarray | None = None) -> np.ndarray:
     """Linear convolution per band, cropped to the frame: y_k = g_k · (x_k ⊗ k_k)[m:H−m, m:W−m].
 
     bands [K, H, W], kernels [K, S, S] (odd S, centre S//2), margin_px ≥ S//2. Output [K, H−2m, W−2m]
@@ -151,6 +176,7 @@ def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains
     channel_weights [C, K]: return the channel images Σ_k w_ck y_k [C, H−2m, W−2m] instead (C inverse
     FFTs, not K). spectra: band_spectra(bands, ...) computed once and shared (no forward FFT here; made
     with the same `bright`). bright: pixels left out of the FFTs and convolved apart in float64 (optics.bright).
+    kernel_spectra: the kernels' spectra made beforehand (kernel_spectra: the same numbers as made here).
     """
     dtype = _precision(precision)
     workers = _workers(workers)
@@ -166,11 +192,18 @@ def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains
     shape = fft_shape((H, W), kernels.shape[-1], m)
     if spectra is not None and spectra.shape != (K, shape[0], shape[1] // 2 + 1):
         raise OpticsError(f"band spectra of shape {spectra.shape} do not match {K} bands at FFT shape {shape}")
+    _check_spectra(kernel_spectra, K, shape, f"{K} kernels")
     out = _Output(K, H, W, m, shape, dtype, gains, _channel_weights(channel_weights, K), workers)
+    product = None  # the shared band spectrum times the kernel's, in one reused array
     for k in range(K):
-        spec = (sfft.rfft2(dimmed(bands[k], bright, dtype), s=shape, workers=workers) if spectra is None
-                else spectra[k].copy())
-        spec *= _kernel_spectrum(kernels[k].astype(dtype, copy=False), shape, dtype, workers)
+        kspec = (_kernel_spectrum(kernels[k].astype(dtype, copy=False), shape, dtype, workers) if kernel_spectra is None
+                 else kernel_spectra[k])
+        if spectra is None:
+            spec = sfft.rfft2(dimmed(bands[k], bright, dtype), s=shape, workers=workers)
+            spec *= kspec
+        else:
+            product = np.empty_like(spectra[k]) if product is None else product  # add() only reads it
+            spec = np.multiply(spectra[k], kspec, out=product)
         out.add(k, spec)
         if bright is not None:
             out.add_frame(k, bright_blur(bands[k], bright, [(kernels[k], None, 1.0)], (H - 2 * m, W - 2 * m), m))

@@ -25,7 +25,7 @@ changes, the banding and the core's shape, lies within the core window).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.fft as sfft
@@ -69,6 +69,14 @@ class FarField:
     acceptance_um: float
     threshold: float
     clipped: float
+    spectra: dict = field(default_factory=dict, compare=False, repr=False)  # (band, FFT shape) -> rfft2 of f_k
+
+    def spectrum(self, k: int, shape) -> np.ndarray:
+        """rfft2 of f_k at FFT shape `shape`, made once (far_light)."""
+        key = (int(k), tuple(shape))
+        if key not in self.spectra:
+            self.spectra[key] = sfft.rfft2(self.kernels[k], s=shape)
+        return self.spectra[key]
 
     def describe(self) -> dict:
         return {"model": "two-scale kernel: core window + far field at coarse pitch (optics.far_field)",
@@ -81,12 +89,12 @@ class FarField:
 
     def arrays(self) -> dict:
         """Its fields as arrays (a kernel cache entry: psf.cache.cached_arrays); from_arrays reads them back."""
-        return {f: np.asarray(getattr(self, f)) for f in self.__dataclass_fields__}
+        return {f: np.asarray(getattr(self, f)) for f in self.__dataclass_fields__ if f != "spectra"}
 
     @classmethod
     def from_arrays(cls, a) -> "FarField":
         scalars = {"coarse": int, "pitch_um": float, "acceptance_um": float, "threshold": float, "clipped": float}
-        return cls(**{f: scalars[f](a[f]) if f in scalars else a[f] for f in cls.__dataclass_fields__})
+        return cls(**{f: scalars[f](a[f]) if f in scalars else a[f] for f in cls.__dataclass_fields__ if f != "spectra"})
 
 
 def _blocks(size_px: int, coarse: int) -> tuple[np.ndarray, np.ndarray]:
@@ -169,10 +177,12 @@ def _block_means(band: np.ndarray, coarse: int, nby: int, nbx: int) -> np.ndarra
     return x.reshape(nby, coarse, nbx, coarse).mean(axis=(1, 3), dtype=np.float64)
 
 
-def far_light(bands: np.ndarray, far: FarField, margin_px: int, weights: np.ndarray) -> np.ndarray:
+def far_light(bands: np.ndarray, far: FarField, margin_px: int, weights: np.ndarray,
+              blocks: dict | None = None) -> np.ndarray:
     """Σ_k weights[c, k] (x_k ⊗ f_k) on the sensor frame [C, H − 2m, W − 2m] (float64; module doc): bands
     [K, H, W] of the render grid (margin m), weights [C, K] (the gains T τ times channel weights, or a
-    diagonal for the bands themselves). Bands not in far.used are skipped."""
+    diagonal for the bands themselves). Bands not in far.used are skipped. blocks: a dict that keeps each
+    band's block means for the next call on the same bands (views of one render share them)."""
     K, H, W = bands.shape
     w = np.asarray(weights, np.float64)
     if far.kernels.shape[0] != K or w.ndim != 2 or w.shape[1] != K:
@@ -182,9 +192,12 @@ def far_light(bands: np.ndarray, far: FarField, margin_px: int, weights: np.ndar
     pad = p + 1
     shape = tuple(sfft.next_fast_len(n + 2 * pad + 2 * p, real=True) for n in (nby, nbx))
     acc = [None] * w.shape[0]
+    blocks = {} if blocks is None else blocks
     for k in np.flatnonzero(far.used):
-        xs = np.pad(_block_means(bands[k], c, nby, nbx), pad, mode="edge")
-        spec = sfft.rfft2(xs, s=shape) * sfft.rfft2(far.kernels[k], s=shape)
+        if (k, c) not in blocks:
+            blocks[k, c] = _block_means(bands[k], c, nby, nbx)
+        xs = np.pad(blocks[k, c], pad, mode="edge")
+        spec = sfft.rfft2(xs, s=shape) * far.spectrum(k, shape)
         for ch in np.flatnonzero(w[:, k]):
             acc[ch] = spec * w[ch, k] if acc[ch] is None else acc[ch] + spec * w[ch, k]
     m = int(margin_px)

@@ -25,8 +25,8 @@ import scipy.fft as sfft
 
 from udc_render.optics.bright import BrightPixels, bright_blur, dimmed
 from udc_render.optics.field_power import PowerMap
-from udc_render.optics.convolution import (OpticsError, _channel_weights, _check_margin, _kernel_spectrum, _Output,
-                                           _precision, _workers, fft_shape)
+from udc_render.optics.convolution import (OpticsError, _channel_weights, _check_margin, _check_spectra,
+                                           _kernel_spectrum, _Output, _precision, _workers, fft_shape)
 
 BLENDS = ("source", "output")
 
@@ -115,6 +115,18 @@ class FieldBasis:
                    [a[f"coeffs_{k}"] for k in range(K)], [float(r) for r in a["residuals"]])
 
 
+def phase_spread_l1(field_kernels: np.ndarray, mean_kernels: np.ndarray) -> np.ndarray:
+    """[K] max_q ‖k_q − k̄‖₁ of each band's phase kernels k_q [K, P, P, S, S] about its mean kernel k̄ [K, S, S]:
+    how far the field blend's kernel can stray from the field-independent one (field_print_bound)."""
+    K = field_kernels.shape[0]
+    out = np.empty(K)
+    for k in range(K):
+        mean = np.asarray(mean_kernels[k], np.float64)
+        out[k] = max(float(np.abs(np.asarray(q, np.float64) - mean).sum())
+                     for q in field_kernels[k].reshape((-1,) + mean.shape))
+    return out
+
+
 def live_phases(weights_y: np.ndarray, weights_x: np.ndarray) -> tuple:
     """The (j, i) phases whose interpolation weights are non-zero somewhere on the grid."""
     return tuple((j, i) for j in range(weights_y.shape[0]) for i in range(weights_x.shape[0])
@@ -147,7 +159,8 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
                    weights_x: np.ndarray, margin_px: int, gains=None, blend: str = "source",
                    precision: str = "float32", workers: int | None = None, rank: int | None = None,
                    channel_weights=None, basis: FieldBasis | None = None,
-                   bright: BrightPixels | None = None, power_map: PowerMap | None = None) -> tuple[np.ndarray, float]:
+                   bright: BrightPixels | None = None, power_map: PowerMap | None = None,
+                   kernel_spectra=None) -> tuple[np.ndarray, float]:
     """Field-varying blur: y_k = g_k Σ_{j,i} k_kji ⊗ (w_j(row) w_i(col) P_kji x_k)  (blend='source'),
     or g_k Σ_{j,i} w_j w_i P_kji (k_kji ⊗ x_k) (blend='output'). Frame cropped as convolve_bands.
 
@@ -161,6 +174,8 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     bright: pixels left out of the FFTs and convolved apart in float64 (optics.bright).
     power_map: the exact power m_k(s(x)) at every pixel (optics.field_power) in place of the phases' P_kji:
     the weight maps become w_j w_i m_k (None: the sampled powers, interpolated).
+    kernel_spectra: with `basis`, each band's basis spectra [r, Fy, Fx//2 + 1] made beforehand
+    (convolution.kernel_spectra of basis.bases[k]: the same numbers as made here).
     Returns (the images, the largest relative kernel residual over the bands; 0 when exact).
     """
     dtype = _precision(precision)
@@ -181,6 +196,8 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     wy = weights_y.astype(dtype)
     wx = weights_x.astype(dtype)
     live = live_phases(wy, wx)
+    if kernel_spectra is not None and (basis is None or blend != "source"):
+        raise OpticsError("kernel_spectra need a field basis and blend 'source'")
     if basis is not None and (basis.live != live or basis.rank != rank):
         raise OpticsError(f"field basis of rank {basis.rank} on {len(basis.live)} phases does not fit rank {rank} "
                           f"on this grid's {len(live)} phases: make it for this grid (field_basis)")
@@ -199,6 +216,8 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
             b_k, coeff, residual = ((basis.bases[k], basis.coeffs[k], basis.residuals[k]) if basis is not None
                                     else phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank))
             worst = max(worst, residual)
+            if kernel_spectra is not None:
+                _check_spectra(kernel_spectra[k], b_k.shape[0], shape, f"band {k}'s rank-{b_k.shape[0]} basis")
             maps = [(b_k[r], _times(_basis_map(coeff[:, r], live, power, wy, wx, dtype), exact), dtype(1.0))
                     for r in range(b_k.shape[0])]
 
@@ -207,11 +226,14 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
         terms = phase_terms()
         if blend == "source":
             acc, weighted = None, np.empty_like(x)
-            for kern, wmap, power in terms:
+            spectra = None if kernel_spectra is None else kernel_spectra[k]
+            for r, (kern, wmap, power) in enumerate(terms):
                 np.multiply(x, wmap, out=weighted)
-                weighted *= power
+                if power != 1:
+                    weighted *= power
                 term = sfft.rfft2(weighted, s=shape, workers=workers)
-                term *= _kernel_spectrum(kern.astype(dtype, copy=False), shape, dtype, workers)
+                term *= (_kernel_spectrum(kern.astype(dtype, copy=False), shape, dtype, workers) if spectra is None
+                         else spectra[r])
                 if acc is None:
                     acc = term
                 else:

@@ -65,6 +65,18 @@ class PowerMap:
                 and np.array_equal(self.series, other.series))
 
 
+def power_deviation(kernel_set) -> np.ndarray:
+    """[K] a bound on max_s |m_k(s) − 1| over every mask shift: |γ_0 ŵ_0 − 1| + Σ_{k ≠ 0} γ_k |ŵ_k| of the
+    series (the triangle inequality), or without one max_q |P_q − 1| of the phases' powers (which the blend
+    then interpolates)."""
+    series = kernel_set.field_series
+    if series is None:
+        return np.abs(np.asarray(kernel_set.field_power, np.float64) - 1.0).reshape(kernel_set.kernels.shape[0], -1).max(1)
+    a = np.abs(np.asarray(series)) * np.where(np.arange(series.shape[2]) > 0, 2.0, 1.0)
+    c = series.shape[1] // 2
+    return a.sum(axis=(1, 2)) - a[:, c, 0] + np.abs(np.asarray(series)[:, c, 0] - 1.0)
+
+
 def field_power_map(kernel_set, shape_hw, pitch_um: float, distance_mm: float, image_distance_um: float,
                     period_um: tuple[float, float]) -> PowerMap | None:
     """The PowerMap of a render grid of shape (H, W) (pixel centres from the optical axis at the grid centre,
