@@ -23,6 +23,7 @@ from udc_render.optics import BrightPixels, FieldBasis, PowerMap, apply_kernels,
 from udc_render.optics.apply import far_field_images
 from udc_render.optics.far_field import FarField
 from udc_render.optics.field_power import power_deviation
+from udc_render.optics.primaries import Primaries, plane_spectra
 from udc_render.optics.layers import Compositor, DepthLayers, occluder_kernels
 from udc_render.render import BandImage
 from udc_render.sensor import SensorConfig, band_electron_weights, cos4_map
@@ -120,7 +121,7 @@ def bright_pixels(band_image: BandImage, sensor: SensorConfig) -> BrightPixels |
 
 
 def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectra, bright,
-            far_blocks: dict | None = None) -> tuple[np.ndarray, dict]:
+            far_blocks: dict | None = None, primaries: Primaries | None = None) -> tuple[np.ndarray, dict]:
     """One optics pass: electrons [3, h, w] (float64, render pitch, before binning) and its record."""
     w = band_electron_weights(band_image.edges_nm, sensor)
     blends = view.blends
@@ -129,7 +130,7 @@ def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectr
                  and (cfg.blend == "source" or not blends) else None)
     kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=view.field_basis if blends else None,
               bright=bright, far_field=view.far_field, power_map=view.power_map if blends else None, field=blends,
-              kernel_spectra=spectra_k, far_blocks=far_blocks)
+              kernel_spectra=spectra_k, far_blocks=far_blocks, primaries=primaries)
     if cfg.blend == "source":
         optics = apply_kernels(band_image, view.kernel_set, view.transmission, cfg.precision, channel_weights=w,
                                spectra=spectra, **kw)
@@ -155,14 +156,28 @@ def _finish(e: np.ndarray, band_image: BandImage, sensor: SensorConfig, applied:
 
 
 def channel_electrons(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectra=None,
-                      bright: BrightPixels | None = None, far_blocks: dict | None = None) -> tuple[np.ndarray, dict]:
+                      bright: BrightPixels | None = None, far_blocks: dict | None = None,
+                      primaries: Primaries | None = None) -> tuple[np.ndarray, dict]:
     """Mean electrons [3, H, W] (float64, sensor pitch, cos⁴ included) that an R, G and B pixel would
     collect through one view: e_c = cos⁴ · bin(Σ_k w_ck g_k (x_k ⊗ k_k)), w = band_electron_weights.
     The band sum is taken in Fourier space (apply_kernels' channel_weights: three inverse FFTs, not K);
     blend 'output' sums the K blurred bands instead. far_blocks: the far field's block means of these bands, kept
-    for the next view (optics.far_field.far_light)."""
-    e, applied = _optics(band_image, view, sensor, cfg, spectra, bright, far_blocks)
+    for the next view (optics.far_field.far_light). primaries: the band image's planes (shared_primaries)."""
+    e, applied = _optics(band_image, view, sensor, cfg, spectra, bright, far_blocks, primaries)
     return _finish(e, band_image, sensor, applied)
+
+
+def shared_primaries(band_image: BandImage, views: list[View], cfg, bright=None) -> Primaries | None:
+    """The render's three planes and their spectra (optics.primaries), made once for every view, when the band
+    image keeps them (a monitor: BandImage.primaries_image) and the optics can take them (spectral form, blend
+    'source', no bright pixels); else None."""
+    planes = band_image.primaries_image
+    if planes is None or cfg.form != "spectral" or cfg.blend != "source" or bright is not None:
+        return None
+    spectra = None
+    if any(v.plain for v in views):
+        spectra = plane_spectra(planes, views[0].kernel_set.size_px, band_image.margin_px, cfg.precision)
+    return Primaries(planes, band_image.primaries_matrix, spectra)
 
 
 def shared_spectra(band_image: BandImage, views: list[View], cfg, bright=None):
@@ -189,8 +204,9 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
     views_of_layer(l) gives the views with layer l's kernels (layers far to near, as DepthLayers)."""
     if layers.labels is None:
         views = views_of_layer(0)
-        spectra, blocks = shared_spectra(band_image, views, cfg, bright), {}
-        return {v.name: channel_electrons(band_image, v, sensor, cfg, spectra, bright, blocks) for v in views}
+        primaries = shared_primaries(band_image, views, cfg, bright)
+        spectra, blocks = None if primaries is not None else shared_spectra(band_image, views, cfg, bright), {}
+        return {v.name: channel_electrons(band_image, v, sensor, cfg, spectra, bright, blocks, primaries) for v in views}
     w = band_electron_weights(band_image.edges_nm, sensor)
     mean_bands = band_image.frame(band_image.bands).mean(axis=(1, 2), dtype=np.float64)
     comp, records, far = {}, {}, {}

@@ -20,6 +20,7 @@ from udc_render.optics.convolution import OpticsError, _check_margin, _precision
 from udc_render.optics.far_field import FarField, far_light
 from udc_render.optics.field import FieldBasis, convolve_field, field_weights
 from udc_render.optics.field_power import PowerMap, field_power_map, stored_or_fresh
+from udc_render.optics.primaries import Primaries, convolve_primaries, far_light_primaries
 
 PITCH_RTOL = 1e-6
 
@@ -79,7 +80,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
                   field_rank: int | None = None, channel_weights=None, spectra: np.ndarray | None = None,
                   field_basis: FieldBasis | None = None, bright: BrightPixels | None = None,
                   far_field: FarField | None = None, power_map: PowerMap | None = None,
-                  kernel_spectra=None, far_blocks: dict | None = None) -> OpticsResult:
+                  kernel_spectra=None, far_blocks: dict | None = None,
+                  primaries: Primaries | None = None) -> OpticsResult:
     """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
 
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (optics.convolution).
@@ -96,6 +98,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     kernel_spectra: the kernels' spectra at this grid's FFT shape, made once (convolution.kernel_spectra): [K, …] of
     the band kernels on the field-independent path, or per band those of field_basis on the field path.
     far_blocks: a dict that keeps the far field's block means of these bands for the next call (far_light).
+    primaries: the band image's three planes (optics.primaries; with channel_weights, no bright pixels): the
+    field-independent blur and the far field through them (the same numbers, another round-off).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -129,13 +133,17 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
                "fft_shape": list(fft_shape((H, W), S, m)), "margin_px": m, "kernel_px": S,
                "gain": "T · transmittance · (1 − energy_outside)", "distance_mm": d_mm, "workers": workers,
                "bright_pixels": 0 if bright is None else int(bright.mask.sum())}
+    through_planes = primaries is not None and channel_weights is not None and bright is None
     has_field = kernel_set.field_kernels is not None or field_basis is not None
     use_field = field and has_field and d_mm > 0
     if not use_field:
         why = ("field kernels disabled" if has_field and not field else "d = 0 or no field kernels: one kernel per band")
         applied.update(model="field-independent", skipped=[f"field-dependent blur ({why})"])
-        images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra, bright,
-                                kernel_spectra)
+        if through_planes:
+            images = convolve_primaries(primaries, kernel_set.kernels, m, gains, channel_weights, precision, workers)
+        else:
+            images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra,
+                                    bright, kernel_spectra)
     else:
         wy, wx, geometry = field_weights(kernel_set, (H, W), pitch, d_mm, image_distance_um, period_um)
         power_map = stored_or_fresh(power_map, field_power_map(kernel_set, (H, W), pitch, d_mm,
@@ -149,7 +157,14 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
             applied.update(field_rank=int(field_rank), field_rank_kernel_residual=residual)
         applied.update(model="field-dependent", blend=blend, **geometry)
     if far_field is not None:
-        images = images + far_field_images(bands, far_field, m, t * np.asarray(kernel_set.transmittance, float),
-                                           channel_weights, far_blocks).astype(images.dtype)
+        far_gains = t * np.asarray(kernel_set.transmittance, float)
+        far = (far_light_primaries(primaries, far_field, m, np.asarray(channel_weights, float) * far_gains[None, :],
+                                   far_blocks) if through_planes else
+               far_field_images(bands, far_field, m, far_gains, channel_weights, far_blocks))
+        images = images + far.astype(images.dtype)
         applied["far_field"] = far_field.describe()
+    if through_planes and (far_field is not None or not use_field):
+        what = "the far field" if use_field else "the blur" + (" and the far field" if far_field is not None else "")
+        applied["primaries"] = (f"{what} through the monitor's 3 planes (bands Σ_c M_ck r_c): each channel's kernels "
+                                "summed per plane (optics.primaries)")
     return OpticsResult(np.ascontiguousarray(images, dtype=np.float32), pitch, wl.copy(), gains, t, applied)

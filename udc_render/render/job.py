@@ -171,12 +171,6 @@ class _Job:
         a, b = self.groups[g]
         return img[:b - a] / np.diff(self.edges[a:b + 1]).astype(np.float32)[:, None, None]
 
-    def to_bands(self, values: list[np.ndarray]) -> np.ndarray:
-        """Band images [K, H, W] from each group's rendered mean."""
-        if self.path == "rgb_matrix":
-            return np.einsum("ck,chw->khw", self.matrix.astype(np.float32), values[0])
-        return np.concatenate(values, 0)
-
     def render_all(self, spp: int, n_pass: int, seed: int, pilot: bool = False, bar=None) -> tuple[list, float | None]:
         """Each group's mean over `n_pass` passes of `spp` (group by group: one Mitsuba scene
         alive at a time) and the relative noise of the bands (None for a single pass)."""
@@ -266,7 +260,6 @@ def render_analytic(scene: Scene) -> BandImage:
     drive, _, matrix, content_meta = monitor_content(scene, g)
     rgb = monitor_area_means(g, scene.content.size_m, drive)
     del drive  # 200 MB at 3840 × 2160
-    bands = np.einsum("ck,chw->khw", matrix.astype(np.float32), rgb)
     r = scene.render
     depth = monitor_depth_m(g, scene.content.size_m) if r.depth else None
     edges = np.asarray(scene.bands.edges_nm)
@@ -276,9 +269,9 @@ def render_analytic(scene: Scene) -> BandImage:
         "spp": None, "passes": 0, "spp_per_pass": None, "seed": r.seed, "sampler": None,
         "spp_from_noise_target": r.noise, "pilot_noise_rel": None, "pilot_spp": None, "noise_rel": 0.0, "max_depth": None, "bands_per_render": None,
         **_grid_meta(scene, g, edges, depth), "seconds": None, **content_meta}
+    image = BandImage.of_primaries(rgb, matrix, edges, g.pitch_um, g.margin_px, depth, meta)
     meta["seconds"] = round(time.perf_counter() - t0, 3)
-    return BandImage(bands=bands, edges_nm=edges, pitch_um=g.pitch_um, margin_px=g.margin_px, depth_m=depth,
-                     meta=meta, primaries_matrix=matrix)
+    return image
 
 
 def render_scene(scene: Scene, progress: bool = True) -> BandImage:
@@ -299,7 +292,8 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
                unit="pass", disable=not progress, leave=False)
     means, noise = job.render_all(pass_spp, n_pass, r.seed, bar=bar)
     bar.close()
-    bands = job.to_bands(means)
+    planes = means[0] if path == "rgb_matrix" else None  # the drive-weighted RGB: bands Σ_c M_ck r_c (of_primaries)
+    bands = None if path == "rgb_matrix" else np.concatenate(means, 0)
     del means
     want_depth = r.depth if r.depth is not None else not isinstance(job.scene.content, Monitor)
     depth = job.depth() if want_depth else None
@@ -315,5 +309,7 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
         **_grid_meta(job.scene, g, job.edges, depth), "seconds": None, **job.meta,
     }
     meta["seconds"] = round(time.perf_counter() - t0, 3)
+    if path == "rgb_matrix":  # bands = Σ_c M_ck r_c of the rendered planes: kept (BandImage.of_primaries)
+        return BandImage.of_primaries(planes, job.matrix, job.edges, g.pitch_um, g.margin_px, depth, meta)
     return BandImage(bands=bands.astype(np.float32), edges_nm=job.edges, pitch_um=g.pitch_um, margin_px=g.margin_px,
                      depth_m=depth, meta=meta, primaries_matrix=job.matrix)

@@ -1,0 +1,48 @@
+"""A monitor's bands are x_k = Σ_c M_ck r_c of its three planes (BandImage.primaries_image), so the optics convolve
+the planes with each channel's summed kernels (optics.primaries) instead of every band: the same electrons as the
+band path but for float32 round-off (the blur and the far field of d = 0 views, the far field of a d > 0 one)."""
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from udc_render.optics.displays import preset
+from udc_render.optics.stray import StrayLight
+from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
+from udc_render.render import render_scene
+from udc_render.scene import Bands, Sensor, load_scene
+
+TOL = 2e-6  # of the image maximum: float32 FFTs summed in another order (test_synth_fused's)
+
+
+@pytest.fixture(scope="module")
+def small():
+    scene = replace(load_scene("monitor"), sensor=Sensor(96, 48, 12.4), bands=Bands((400.0, 700.0), 50.0))
+    return scene, render_scene(scene, progress=False)
+
+
+def test_the_render_keeps_its_planes_and_replace_drops_them(small):
+    _, band_image = small
+    planes, matrix = band_image.primaries_image, band_image.primaries_matrix
+    assert planes.shape == (3,) + band_image.bands.shape[1:] and band_image.meta["render_path"] == "analytic"
+    assert np.array_equal(np.einsum("ck,chw->khw", matrix.astype(np.float32), planes), band_image.bands)
+    assert replace(band_image, bands=band_image.bands * 2).primaries_image is None  # stale planes never kept
+
+
+@pytest.mark.parametrize("distance_mm", [0.0, 2.0])
+def test_through_the_planes_equals_the_band_path(small, distance_mm):
+    scene, band_image = small
+    displays = [preset("glass")] + [replace(preset(n), distance_mm=distance_mm) for n in ("toled", "poled")]
+    cfg = SynthConfig(field_phases=2 if distance_mm else None, use_cache=False, stray_light=StrayLight.off(),
+                      far_field_threshold=0.0, field_print_sigma=None)
+    kernels = plan_kernels(scene, displays, cfg)
+    assert set(kernels.far) == {"glass", "toled", "poled"}
+    planes = synthesize(band_image, scene, displays, cfg, kernels=kernels)
+    bands = synthesize(replace(band_image), scene, displays, cfg, kernels=kernels)  # replace: no planes
+    np.testing.assert_allclose(planes.gt, bands.gt, rtol=0, atol=TOL * bands.gt.max())
+    for d in displays:
+        got, want = planes.captures[d.name].electrons, bands.captures[d.name].electrons
+        np.testing.assert_allclose(got, want, rtol=0, atol=TOL * want.max(), err_msg=d.name)
+        optics, old = planes.display_meta[d.name]["optics"], bands.display_meta[d.name]["optics"]
+        through = "the far field" if distance_mm and not d.is_glass else "the blur and the far field"
+        assert optics["primaries"].startswith(through) and "primaries" not in old

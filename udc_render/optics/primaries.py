@@ -1,0 +1,105 @@
+"""The optics of a band image made of three planes: a monitor's render is x_k = Σ_c M_ck r_c exactly (its panel's
+primaries c = R, G, B at band means M [3, K], the drive-weighted planes r [3, H, W]: render.analytic and the
+rgb_matrix path; BandImage.primaries_image), so a view's channel sums (apply_kernels with channel_weights w) are
+
+    y_C = Σ_k w_Ck g_k (x_k ⊗ k_k) = Σ_c r_c ⊗ H_Cc,    H_Cc = Σ_k w_Ck g_k M_ck k_k
+
+by linearity: 3 forward FFTs of the planes (shared by the views), C × 3 kernel spectra of the summed kernels and
+C inverse FFTs per view, in place of K forward FFTs, K kernel spectra and C × K products. The far field the same
+way: y_C = Σ_c r̄_c ⊗ F_Cc, F_Cc = Σ_k v_Ck M_ck f_k (optics.far_field). The same numbers as the band path but for
+float32 round-off in another order (tests/udc_render/test_primaries.py).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.fft as sfft
+
+from udc_render.optics.convolution import OpticsError, _check_margin, _kernel_spectrum, _precision, _workers, fft_shape
+from udc_render.optics.far_field import FarField, _block_means, _upsampling
+
+
+@dataclass(frozen=True)
+class Primaries:
+    """planes [3, H, W] (float32) and matrix [3, K] with bands x_k = Σ_c matrix[c, k] planes[c]; spectra: rfft2 of
+    the planes at the convolution's FFT shape (plane_spectra: made once, shared by the views), or None."""
+    planes: np.ndarray
+    matrix: np.ndarray
+    spectra: np.ndarray | None = None
+
+
+def plane_spectra(planes: np.ndarray, size_px: int, margin_px: int, precision: str = "float32",
+                  workers: int | None = None) -> np.ndarray:
+    """rfft2 of each plane [P, H, W] at fft_shape((H, W), size_px, margin_px): [P, Fy, Fx//2 + 1]."""
+    dtype = _precision(precision)
+    shape = fft_shape(planes.shape[1:], size_px, margin_px)
+    return np.stack([sfft.rfft2(p.astype(dtype, copy=False), s=shape, workers=_workers(workers)) for p in planes])
+
+
+def _summed(weights: np.ndarray, kernels: np.ndarray) -> np.ndarray:
+    """Σ_k weights[k] kernels[k] in float64 (a loop: the same bits on any BLAS), bands of zero weight skipped."""
+    out = np.zeros(kernels.shape[1:])
+    for k in np.flatnonzero(weights):
+        out += weights[k] * np.asarray(kernels[k], np.float64)
+    return out
+
+
+def convolve_primaries(p: Primaries, kernels: np.ndarray, margin_px: int, gains, channel_weights,
+                       precision: str = "float32", workers: int | None = None) -> np.ndarray:
+    """The channel sums [C, H − 2m, W − 2m] of Σ_k w_Ck g_k (x_k ⊗ k_k) through the planes (module doc); kernels
+    [K, S, S], gains [K], channel_weights [C, K]."""
+    dtype = _precision(precision)
+    workers = _workers(workers)
+    planes, matrix = p.planes, np.asarray(p.matrix, np.float64)
+    w = np.asarray(channel_weights, np.float64) * np.asarray(gains, np.float64)[None, :]
+    K, S = kernels.shape[0], kernels.shape[-1]
+    _, H, W = planes.shape
+    m = int(margin_px)
+    _check_margin(m, S, (H, W))
+    if matrix.shape != (planes.shape[0], K) or w.shape[1] != K:
+        raise OpticsError(f"primaries {matrix.shape} and channel weights {w.shape}: expected [P, K={K}] and [C, K]")
+    shape = fft_shape((H, W), S, m)
+    spectra = p.spectra if p.spectra is not None else plane_spectra(planes, S, m, precision, workers)
+    out = np.empty((w.shape[0], H - 2 * m, W - 2 * m), dtype)
+    for C in range(w.shape[0]):
+        acc = None
+        for c in range(planes.shape[0]):
+            kernel = _summed(w[C] * matrix[c], kernels).astype(dtype)
+            term = _kernel_spectrum(kernel, shape, dtype, workers)
+            term *= spectra[c]
+            if acc is None:
+                acc = term
+            else:
+                acc += term
+        out[C] = sfft.irfft2(acc, s=shape, workers=workers)[m:H - m, m:W - m]
+    return out
+
+
+def far_light_primaries(p: Primaries, far: FarField, margin_px: int, weights: np.ndarray,
+                        blocks: dict | None = None) -> np.ndarray:
+    """far_field.far_light through the planes (module doc): [C, H − 2m, W − 2m] float64 of Σ_k weights[C, k]
+    (x_k ⊗ f_k) over the bands in far.used; blocks: a dict keeping the planes' block means for the next view."""
+    planes, matrix = p.planes, np.asarray(p.matrix, np.float64)
+    _, H, W = planes.shape
+    w = np.where(far.used[None, :], np.asarray(weights, np.float64), 0.0)
+    c_, half = far.coarse, far.kernels.shape[-1] // 2
+    nby, nbx = -(-H // c_), -(-W // c_)
+    pad = half + 1
+    shape = tuple(sfft.next_fast_len(n + 2 * pad + 2 * half, real=True) for n in (nby, nbx))
+    blocks = {} if blocks is None else blocks
+    spectra = []
+    for c in range(planes.shape[0]):
+        if ("plane", c, c_) not in blocks:
+            blocks["plane", c, c_] = _block_means(planes[c], c_, nby, nbx)
+        spectra.append(sfft.rfft2(np.pad(blocks["plane", c, c_], pad, mode="edge"), s=shape))
+    m = int(margin_px)
+    uy, ux = _upsampling(H - 2 * m, m, nby, c_), _upsampling(W - 2 * m, m, nbx, c_)
+    out = np.zeros((w.shape[0], H - 2 * m, W - 2 * m))
+    for C in range(w.shape[0]):
+        if not w[C].any():
+            continue
+        acc = sum(spectra[c] * sfft.rfft2(_summed(w[C] * matrix[c], far.kernels), s=shape) for c in range(len(spectra)))
+        y = sfft.irfft2(acc, s=shape)[2 * half:2 * half + nby + 2, 2 * half:2 * half + nbx + 2]
+        out[C] = uy @ np.maximum(y, 0.0) @ ux.T  # the FFT's round-off kept non-negative, as far_light
+    return out
