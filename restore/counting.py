@@ -29,14 +29,17 @@ def count_parameters(model: nn.Module) -> int:
 def _flop_counts(config: dict, input_shape) -> dict:
     with torch.device("meta"):
         model = build_model(config)
+    from restore.conditioning import empty_description_tensors, needs_description, spec_kernel_px
+    x = torch.empty(input_shape, device="meta")
+    extra = [empty_description_tensors(input_shape[0], spec_kernel_px(model), "meta")] * needs_description(model)
     with FlopCounterMode(display=False) as counter:
-        model(torch.empty(input_shape, device="meta"))
+        model(x, *extra)
     return counter.get_flop_counts()
 
 
 def count_macs(config: dict, input_shape=PAPER_INPUT_SHAPE) -> int:
     """MACs of one forward pass of build_model(config) on a tensor of `input_shape` (module doc)."""
-    return sum(_flop_counts(config, input_shape)["Global"].values()) // 2
+    return sum(_flop_counts(config, input_shape).get("Global", {}).values()) // 2
 
 
 def mac_breakdown(config: dict, input_shape=PAPER_INPUT_SHAPE) -> dict[str, int]:

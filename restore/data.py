@@ -116,6 +116,9 @@ def load_pair(pair: Pair) -> tuple[np.ndarray, np.ndarray]:
     return packed, gt
 
 
+ALL_MODES = tuple(range(8))  # dihedral's
+
+
 def dihedral(a, mode: int):
     """One of the 8 flips/transposes of the last two axes of an array or a tensor (views of an array): bit 0
     transpose, bit 1 flip rows, bit 2 flip columns."""
@@ -158,19 +161,23 @@ def augment_crop(packed: np.ndarray, gt: np.ndarray, mode: int, crop_px: int | N
 
 class PairDataset(torch.utils.data.Dataset):
     """Random square crops (crop_px full-resolution pixels, 256 by default) of the pairs, `crops_per_pair`
-    per pair and epoch, with Bayer-preserving augmentation. Deterministic: the crop and transform
+    per pair and epoch, with Bayer-preserving augmentation drawn from `modes` (all 8 by default; those the
+    panel's kernel is symmetric under: restore.augment, modes_why says why). Deterministic: the crop and transform
     of index i in epoch e come from the named stream (seed, 'pair crop', e, i) (udc_render.streams; set_epoch),
     so resumed training sees the same samples. Every pair is read (and checked, load_pair) when the dataset is
     made, and kept in memory."""
 
     def __init__(self, pairs: list[Pair], crop_px: int | None = 256, augment: bool = True, seed: int = 0,
-                 crops_per_pair: int = 1):
+                 crops_per_pair: int = 1, modes: tuple[int, ...] = ALL_MODES, modes_why: str = ""):
         if not pairs:
             raise DataError("no pairs to train on: the split is empty")
         if crop_px is not None and (crop_px < 2 or crop_px % 2):
             raise DataError(f"crop_px = {crop_px}: expected an even number ≥ 2 (whole RGGB cells)")
         self.pairs, self.crop_px, self.augment, self.seed = pairs, crop_px, augment, seed
         self.crops_per_pair, self.epoch = crops_per_pair, 0
+        if not modes or 0 not in modes or not set(modes) <= set(ALL_MODES):
+            raise DataError(f"augmentation modes {modes}: expected the identity 0 and others of {ALL_MODES}")
+        self.modes, self.modes_why = tuple(modes), modes_why
         self.arrays = [load_pair(p) for p in pairs]
 
     def __len__(self):
@@ -182,7 +189,7 @@ class PairDataset(torch.utils.data.Dataset):
     def __getitem__(self, i: int):
         packed, gt = self.arrays[i % len(self.pairs)]
         rng = stream(self.seed, "pair crop", self.epoch, i)
-        mode = int(rng.integers(0, 8)) if self.augment else 0
+        mode = self.modes[int(rng.integers(0, len(self.modes)))] if self.augment else 0
         x, y = augment_crop(packed, gt, mode, self.crop_px, rng)
         return torch.from_numpy(x), torch.from_numpy(y)
 
@@ -198,6 +205,11 @@ class PairBatches:
     @property
     def count(self) -> int:
         return len(self.data.pairs)
+
+    @property
+    def record(self) -> dict:
+        """What train_summary.json records of the data: the transforms drawn and why."""
+        return {"augment": {"modes": list(self.data.modes if self.data.augment else (0,)), "why": self.data.modes_why}}
 
     def epoch(self, epoch: int):
         """(None: no draws to record, the epoch's batches (x, y))."""

@@ -51,7 +51,8 @@ class EvalSettings:
     """How a method is scored: the split, displays (None: a checkpoint's own, else all of the dataset's),
     the row name (None: the method or model type), torch device, previews per display, DeP's denoiser
     (None: restore.dep's default), DeP's kernel size (None: restore.known's default) and the items scored
-    (image_prefix: only those whose image label starts with it; None: all)."""
+    (image_prefix: only those whose image label starts with it; None: all); display_specs: the --display items as
+    given, from which a model that needs the panel's description gets it (restore.conditioning)."""
     split: str = "test"
     displays: tuple[str, ...] | None = None
     name: str | None = None
@@ -60,6 +61,7 @@ class EvalSettings:
     denoiser: str | None = None
     kernel_px: int | None = None
     image_prefix: str | None = None
+    display_specs: tuple[str, ...] | None = None  # the --display items as given (restore.conditioning)
 
 
 def check_frame_size(pair: Pair) -> None:
@@ -135,21 +137,27 @@ class ModelRestorer:
         self.method = method
         self.model, self.record = load_model(Path(method), settings.device)
         self.name = settings.name or self.record["model_config"]["type"]
+        self.settings, self.descriptions = settings, {}
 
     def displays(self, data_dir: Path) -> list[str]:
         """The display it was trained on; a model trained online, the bank's panels it drew from."""
         return self.record["display"].split(",")
 
     def prepare(self, pairs_by_display: dict) -> None:
-        pass
+        """The panel's description of each display, for a model that needs one (restore.conditioning)."""
+        from restore.conditioning import evaluation_descriptions
+        self.descriptions = evaluation_descriptions(self.model, self.name, pairs_by_display,
+                                                    self.settings.display_specs)
 
     def restore(self, packed: np.ndarray, pair: Pair) -> tuple[np.ndarray, float, dict]:
         import torch
 
+        from restore.conditioning import predict_described
         from restore.train import predict
         dev = next(self.model.parameters()).device
         t0 = time.perf_counter()
-        out = predict(self.model, packed, dev)
+        d = self.descriptions.get(pair.display)
+        out = predict(self.model, packed, dev) if d is None else predict_described(self.model, packed, d, dev)
         if dev.type == "cuda":
             torch.cuda.synchronize()
         return out, time.perf_counter() - t0, {}
@@ -159,7 +167,8 @@ class ModelRestorer:
         cfg = self.record["model_config"]
         return {"method": self.method, "model_config": cfg, "params": count_parameters(self.model),
                 "macs_g": count_macs(cfg, MAC_INPUT_SHAPE) / 1e9, "trained_on": self.record["display"],
-                "train_settings": self.record["settings"], "device": self.record["device"]}
+                "train_settings": self.record["settings"], "device": self.record["device"],
+                **({"descriptions": {d: v.source for d, v in self.descriptions.items()}} if self.descriptions else {})}
 
 
 # method → factory(method, settings) of a restorer: `name`, `displays(data_dir)` (its default displays),

@@ -32,6 +32,7 @@ import numpy as np
 
 from psf import Lens
 from restore.data import DataError, Pair, load_pair
+from udc_render.description import packed_window
 from udc_render.optics.displays import load_display, preset
 from udc_render.optics.gamma import display_gamma
 from udc_render.pipeline import SynthConfig, band_kernel_set
@@ -103,11 +104,8 @@ def packed_from_sensor(kernels: np.ndarray) -> np.ndarray:
     k = np.asarray(kernels, np.float64)
     if k.ndim != 3 or k.shape[0] != 3 or k.shape[1] != k.shape[2] or k.shape[1] % 2 == 0:
         raise DataError(f"kernels: shape {k.shape}: expected [3, S, S] (R, G, B) with S odd")
-    p = np.pad(k, ((0, 0), (1, 1), (1, 1)))
-    box = 0.5 * p[:, :-2] + p[:, 1:-1] + 0.5 * p[:, 2:]
-    box = 0.5 * box[:, :, :-2] + box[:, :, 1:-1] + 0.5 * box[:, :, 2:]
-    c = k.shape[1] // 2
-    return rggb_stack(box[:, c % 2::2, c % 2::2])
+    c = k.shape[1] // 2  # the one definition: udc_render.description.packed_window, every packed pixel kept
+    return rggb_stack(packed_window(k, 2 * (c // 2) + 1, normalise=False)[0])
 
 
 def known_kernels_rggb(pair: Pair, size_px: int | None = None, use_cache: bool = True,

@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from restore.augment import ONLINE_WHY
 from restore.captures import CaptureDraws, captured_panel, crop_capture, crop_values, load_capture_draws
 from restore.data import DataError, dihedral, load_gt, read_manifest
 from restore.degrade import Degrader, WideSource, normalised
@@ -70,7 +71,8 @@ def _read_rgb(path: Path) -> np.ndarray:
     return np.stack([ch[c] for c in "RGB"]).astype(np.float32)
 
 
-def _checked(name: str, rgb: np.ndarray) -> CleanImage:
+def checked_image(name: str, rgb: np.ndarray) -> CleanImage:
+    """A CleanImage of linear RGB [3, H, W], refused in one line unless finite and ≥ 0, cut to whole RGGB cells."""
     bad = np.count_nonzero(~np.isfinite(rgb)) + np.count_nonzero(rgb < 0)
     if bad:
         raise DataError(f"{name}: {bad} negative, NaN or infinite values: expected finite linear RGB ≥ 0")
@@ -84,7 +86,7 @@ def clean_images(data: Path, split: str) -> list[CleanImage]:
     data = Path(data)
     if (data / "manifest.jsonl").is_file():
         rows = [r for r in read_manifest(data) if r["split"] == split]
-        return [_checked(str(data / r["folder"] / "gt.exr"), load_gt(data / r["folder"])) for r in rows]
+        return [checked_image(str(data / r["folder"] / "gt.exr"), load_gt(data / r["folder"])) for r in rows]
     if not data.is_dir():
         raise DataError(f"--data {data}: no such folder: expected a dataset folder or a folder of .exr images")
     if split != "train":
@@ -93,7 +95,7 @@ def clean_images(data: Path, split: str) -> list[CleanImage]:
     if not paths:
         raise DataError(f"--data {data}: no manifest.jsonl and no .exr image: expected a dataset folder "
                         "(`udc-render dataset`) or a folder of linear RGB .exr images")
-    return [_checked(str(p), _read_rgb(p)) for p in paths]
+    return [checked_image(str(p), _read_rgb(p)) for p in paths]
 
 
 def images_fingerprint(data: Path) -> str:
@@ -153,6 +155,11 @@ class OnlineBatches:
         return len(self.images)
 
     @property
+    def record(self) -> dict:
+        """What train_summary.json records of the data: every transform, before the degradation."""
+        return {"augment": {"modes": list(range(8)), "why": ONLINE_WHY}}
+
+    @property
     def crops(self) -> int:
         """An epoch's crops: crops_per_image of each image."""
         return len(self.images) * self.crops_per_image
@@ -195,18 +202,24 @@ class OnlineBatches:
 
     def epoch(self, epoch: int):
         """(the epoch's draws in order, an iterator of batches (x [B, 4, c/2, c/2], y [B, 3, c, c]) on the device)."""
-        order = stream(self.seed, "online order", epoch).permutation(self.crops)
-        draws = [self.draw(epoch, int(k)) for k in order]
+        draws = self.epoch_draws(epoch)
+        return draws, self.batches_of(draws)
 
+    def epoch_draws(self, epoch: int) -> list[dict]:
+        """The epoch's draws in its order (module doc)."""
+        return [self.draw(epoch, int(k)) for k in stream(self.seed, "online order", epoch).permutation(self.crops)]
+
+    def batches_of(self, draws: list[dict]):
+        """An iterator of the batches of `draws` in their order, `batch` at a time, made where `workers` says (in
+        this process, in worker processes, or in a thread on a GPU: the same numbers)."""
         def batches():
             for i in range(0, len(draws), self.batch):
                 yield self.samples(draws[i:i + self.batch])
         if not self.workers:
-            return draws, batches()
+            return batches()
         if self.degrader.device.type != "cpu":
-            return draws, _ahead(batches, self.degrader.device)
-        return draws, iter(torch.utils.data.DataLoader(_Crops(self, draws), batch_size=self.batch,
-                                                       num_workers=self.workers))
+            return _ahead(batches, self.degrader.device)
+        return iter(torch.utils.data.DataLoader(_Crops(self, draws), batch_size=self.batch, num_workers=self.workers))
 
 
 def _ahead(batches, device: torch.device, depth: int = 2):

@@ -2,7 +2,7 @@
 
     L1 loss (or L1 + (1 − SSIM)), Adam β = (0.9, 0.999), ε = 1e-8, learning rate 1e-4 halved at
     half the schedule (the paper: 400 epochs, halved after 200), random 256-px crops with
-    Bayer-preserving augmentation (restore.data).
+    Bayer-preserving augmentation, the transforms the panel allows (restore.data, restore.augment).
 
 An epoch is `crops_per_pair` random crops of every training pair. The run folder holds:
     train.json       the settings (a different run on the same folder is refused)
@@ -35,7 +35,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from restore.data import PairBatches, PairDataset, largest_crop_px, list_pairs, load_pair, read_manifest
+from restore.augment import pair_dataset
+from restore.data import PairBatches, largest_crop_px, list_pairs, load_pair, read_manifest
 from restore.online import DrawLog, online_data
 from restore.precision import check_autocast
 from restore.losses import loss_fn
@@ -226,8 +227,7 @@ def _training_data(data_dir: Path, settings: TrainSettings, dev, bank: Path | No
         data, val = online_data(data_dir, bank, settings, dev, workers)
         h, w = min((im.pixels.shape[1:] for im in data.images), key=min)
     else:
-        pairs = PairDataset(list_pairs(data_dir, "train", [settings.display]), settings.crop_px, augment=True,
-                            seed=settings.seed, crops_per_pair=settings.crops_per_pair)
+        pairs = pair_dataset(data_dir, settings)  # the transforms the panel allows (restore.augment)
         h, w = min((gt.shape[1:] for _, gt in pairs.arrays), key=min)
         if settings.crop_px > largest_crop_px(h, w):
             raise TrainError(f"--crop-px = {settings.crop_px}: too large for the {w} × {h} px frames of {data_dir} "
@@ -376,7 +376,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     summary = {"epochs": epochs_done, "epochs_planned": settings.epochs, "steps": step, "plateau_step": plateau,
                "plateaued": plateau is not None, "final_loss": log[-1]["loss"] if log else None,
                "val_psnr_db": next((r["val_psnr_db"] for r in reversed(log) if r["val_psnr_db"] is not None), None),
-               "train_pairs": data.count, "val_pairs": len(val_pairs), "device": str(dev),
+               "train_pairs": data.count, "val_pairs": len(val_pairs), "device": str(dev), **data.record,
                "seconds": round(time.perf_counter() - t_start, 1)}
     save_json(out / "train_summary.json", summary)
     return summary

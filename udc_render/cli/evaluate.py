@@ -16,7 +16,9 @@ def register(sub) -> None:
     e.add_argument("--split", default="test", choices=("train", "val", "test"),
                    help="the dataset split to score: train, val (validation) or test [test]")
     add_display_argument(e, "the displays to score, by their names in the dataset (a file: the name it gives; any "
-                            "other word: a display name of the dataset)", several=True,
+                            "other word: a display name of the dataset; `udc-render fit`'s folder: its display.toml). "
+                            "A model that needs the panel's description gets it computed from the preset, display "
+                            "file or fit folder given here", several=True,
                          unset="a checkpoint's own; all of the dataset's for input and DeP")
     e.add_argument("--image-prefix", help="score only the items whose image starts with this, e.g. builtin: "
                                           "(the scikit-image photographs) or pattern:dead_leaves [all]")
@@ -36,8 +38,9 @@ def run(args) -> int:
     from restore.evaluate import EvalSettings, evaluate
     from udc_render.optics.displays import display_name
     set_threads(args.threads)
-    displays = tuple(display_name(t) for t in args.display.split(",") if t.strip()) if args.display else None
-    settings = EvalSettings(split=args.split, displays=displays or None,
+    specs = tuple(t.strip() for t in args.display.split(",") if t.strip()) if args.display else ()
+    displays = tuple(display_name(str(Path(t) / "display.toml") if Path(t).is_dir() else t) for t in specs)
+    settings = EvalSettings(split=args.split, displays=displays or None, display_specs=specs or None,
                             name=args.name, device=args.device, previews=args.previews, denoiser=args.denoiser,
                             kernel_px=args.kernel_px, image_prefix=args.image_prefix)
     entry = evaluate(args.data, args.model, args.out, settings, progress=not args.quiet)

@@ -1,0 +1,127 @@
+"""How a restorer conditioned on the panel gets the panel's description (udc_render.description), in training and
+in evaluation.
+
+A model that needs one says so: its class has NEEDS_DESCRIPTION = True, its forward is model(x, description) with
+`description` the tensors of description_tensors, and its `description_spec` (a dict of udc_render.description.
+DescriptionSpec: camera, sensor pitch, frame, bits and levels, kernel window) names what its descriptions were
+made for. Tensors of a batch of B descriptions (description_tensors; float32 unless stated):
+
+    kernels       [B, 3, K, K]   R, G, B at the packed pitch, unit sum (d > 0: the phases' power-weighted mean)
+    outside       [B, 3]         the share of each kernel outside the window
+    gamma         [B, 4]         γ per packed channel R, Gr, Gb, B
+    gain          [B]            the sensor's analogue gain
+    lambda_read   [B, 4]         var(w) = λ_read + λ_shot · w of the normalised input, per packed channel
+    lambda_shot   [B, 4]
+    saturation    [B]            w at which the full well clips
+    black_level_dn, white_level_dn, bit_depth   [B] (float32)
+    distance_mm   [B]            the display-to-lens gap (0: no field)
+
+A d > 0 panel's field (its phase basis) stays in the PanelDescription records; the tensors carry its mean kernel.
+
+In evaluation (`udc-render evaluate --model CHECKPOINT --display FILE`), each display's description is computed
+by describe_display from the --display item (a preset, a display file, or `udc-render fit`'s folder or its
+display.toml: describe_fit) for the dataset's sensor (capture.json) and frame, with the rig the dataset's
+synth.json records (udc_render.description.make.dataset_rig): evaluation_descriptions. A model asked to restore
+without a description it needs, or with one made for another sensor or frame, is refused in one line.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from restore.data import DataError
+from udc_render.description import DescriptionError, PanelDescription, check_spec
+
+TENSOR_KEYS = ("kernels", "outside", "gamma", "gain", "lambda_read", "lambda_shot", "saturation", "black_level_dn",
+               "white_level_dn", "bit_depth", "distance_mm")
+
+
+def needs_description(model) -> bool:
+    """Whether a model restores only with a panel description (module doc)."""
+    return bool(getattr(model, "NEEDS_DESCRIPTION", False))
+
+
+def description_tensors(descriptions: list[PanelDescription], device=None) -> dict[str, torch.Tensor]:
+    """The tensors of a batch of descriptions (module doc), stacked in their order, on `device`."""
+    if len({d.kernel_px for d in descriptions}) > 1:
+        raise DescriptionError(f"descriptions of {sorted({d.kernel_px for d in descriptions})} px kernels: a batch "
+                               "needs one kernel window")
+    rows = {"kernels": [d.kernels for d in descriptions], "outside": [d.outside_rgb for d in descriptions],
+            "gamma": [d.gamma_rggb for d in descriptions], "gain": [d.gain for d in descriptions],
+            "lambda_read": [d.lambda_read for d in descriptions], "lambda_shot": [d.lambda_shot for d in descriptions],
+            "saturation": [d.saturation for d in descriptions],
+            "black_level_dn": [d.black_level_dn for d in descriptions],
+            "white_level_dn": [d.white_level_dn for d in descriptions],
+            "bit_depth": [d.bit_depth for d in descriptions],
+            "distance_mm": [0.0 if d.field is None else d.field.distance_mm for d in descriptions]}
+    return {k: torch.as_tensor(np.asarray(rows[k], np.float32), device=device) for k in TENSOR_KEYS}
+
+
+def check_model_description(model, description: PanelDescription | None, name: str) -> None:
+    """Refuse a model that needs a description without one, or with one made for another sensor or frame."""
+    if description is None:
+        raise DescriptionError(f"{name} restores only with the panel's description: give --display as a preset, a "
+                               "display file or `udc-render fit`'s folder (its display.toml and sensor.toml)")
+    spec = getattr(model, "description_spec", None)
+    if spec is not None:
+        check_spec(spec, description, who=name)
+
+
+def empty_description_tensors(batch: int, kernel_px: int, device=None) -> dict[str, torch.Tensor]:
+    """Zero tensors of description_tensors' shapes (a model's MACs counted on the meta device: restore.counting)."""
+    shapes = {"kernels": (3, kernel_px, kernel_px), "outside": (3,), "gamma": (4,), "lambda_read": (4,),
+              "lambda_shot": (4,)}
+    return {k: torch.zeros((batch,) + shapes.get(k, ()), device=device) for k in TENSOR_KEYS}
+
+
+def spec_kernel_px(model) -> int:
+    """The kernel window of the descriptions a model was made for (its description_spec; else the default)."""
+    from udc_render.description import DESCRIPTION_KERNEL_PX
+    return int((getattr(model, "description_spec", None) or {}).get("kernel_px", DESCRIPTION_KERNEL_PX))
+
+
+def evaluation_description(spec: str, pair, kernel_px: int | None = None) -> PanelDescription:
+    """The description of --display item `spec` for a dataset pair's sensor, frame and rig, in a kernel_px window
+    (None: the default) (module doc)."""
+    from restore.data import load_gt
+    from udc_render.description.make import dataset_rig, describe_display, describe_fit
+    path = Path(spec)
+    capture = json.loads((pair.folder / pair.display / "capture.json").read_text())
+    h, w = load_gt(pair.folder).shape[1:]
+    rig, k = dataset_rig(pair.folder), {} if kernel_px is None else {"kernel_px": kernel_px}
+    if path.is_dir():
+        return describe_fit(path, capture["sensor"], (w, h), rig, **k)
+    if path.name == "display.toml" and (path.parent / "sensor.toml").is_file():
+        return describe_fit(path.parent, capture["sensor"], (w, h), rig, **k)
+    return describe_display(spec, capture["sensor"], (w, h), rig, **k)
+
+
+def evaluation_descriptions(model, name: str, pairs_by_display: dict, specs: tuple | None) -> dict:
+    """{display: its description} for a model that needs one (module doc), else {}: the --display items
+    `specs` in the order of pairs_by_display's displays; each checked against the model (check_model_description)."""
+    if not needs_description(model):
+        return {}
+    from udc_render.optics.displays import PRESETS, display_name
+    known = {}
+    for s in specs or ():
+        if Path(s).is_dir() or Path(s).suffix or s in PRESETS:
+            known[display_name(str(Path(s) / "display.toml") if Path(s).is_dir() else s)] = s
+    out = {}
+    for display, pairs in pairs_by_display.items():
+        if display not in known:
+            raise DataError(f"{name} restores only with the panel's description, and display {display!r} is none of "
+                            "a preset, a display file or `udc-render fit`'s folder: give --display as one of those")
+        out[display] = evaluation_description(known[display], pairs[0], spec_kernel_px(model))
+        check_model_description(model, out[display], name)
+    return out
+
+
+def predict_described(model, packed: np.ndarray, description: PanelDescription, device: torch.device) -> np.ndarray:
+    """[3, H, W] float32 restored image of one packed RAW [4, H/2, W/2] by a model that needs its description."""
+    with torch.inference_mode():
+        x = torch.from_numpy(np.ascontiguousarray(packed, np.float32))[None].to(device)
+        return model(x.to(memory_format=torch.channels_last), description_tensors([description], device))[0] \
+            .float().cpu().numpy()
