@@ -1,29 +1,30 @@
 #!/usr/bin/env python
-"""Dataset throughput: items and captures per minute at 1 and 2 workers, the per-stage split, peak
-memory per worker, and a lower bound beside each stage.
+"""Dataset throughput: captures per minute at 1 and 2 workers, each worker's set-up before its first item, the
+per-stage split, peak memory per worker, and the FFTs an item needs beside its synthesis time.
 
     PYTHONPATH=. .venv/bin/python benchmarks/bench_dataset.py --out out/bench_dataset [--count 6]
-        [--workers 1,2] [--profiles physical,paper] [--display toled,poled]
+        [--workers 1,2] [--profiles physical,paper] [--display toled,poled] [--one-thread 1]
 
 Each (profile, workers) case runs `udc-render dataset --builtin --display toled,poled --count N` at the
 monitor scene's 2048 × 1024 frame, 30 bands (glass + T-OLED + P-OLED: 3 captures per item) into a fresh
-folder, with the job's kernels planned and cached beforehand (their cost is the kernel benchmark's:
-benchmarks/bench_kernels.py). Figures:
+folder, after one warm-up job of the profile (the kernel cache then holds the kernels and what is made of them:
+far fields, field bases, power maps, kernel spectra; their first cost is benchmarks/bench_kernels.py's).
+Figures:
 
-- threads: per worker, cores // workers (udc_render.dataset.threads); a last row pins 1 worker to
-  1 thread, so that the pool's scaling per process shows beside the threads' (--one-thread 0: skip);
-- wall: the whole run_dataset call (pool start-up and each worker's kernel load included);
+- threads: per worker, cores // workers (udc_render.dataset.threads); a last row pins 1 worker to 1 thread;
+- wall: the whole run_dataset call (pool start-up, every worker's set-up and the parent's check of the cache);
+- set-up: per worker, its process's age at its first item plus that item's kernel load (timing.jsonl's
+  process_age_s + kernels_s: imports and kernels), the largest over the workers;
 - per item: medians over the items of timing.jsonl (render, synth, write; seconds in one worker);
-- steady captures/min = workers · 60 / (median item seconds) · 3: what a long run approaches;
 - speedup_vs_1: captures/min over the first case's (1 worker, all cores);
-- peak RSS per worker: the largest ru_maxrss any item's process reported (MB);
-- lower bounds, per item: synth = (FFT count) × (median time of one FFT of that shape at the worker's
-  thread count); render = bytes of the band image at the measured copy bandwidth (the K band images
-  must be written at least once); write = bytes of the item's files at the measured file write speed.
-
-The FFT count per item (pipeline.synthesize, spectral form): ground truth K forward + K kernel +
-3 inverse; a d = 0 display K kernel + 3 inverse (the band spectra are shared); a d > 0 display with
-field rank r: K·r forward + K·r kernel + 3 inverse. The machine is shared: compare ratios in one run.
+- peak RSS per worker: the largest ru_maxrss any item's process reported (MB; the memory-mapped cache entries'
+  pages count in it, though every worker shares them);
+- FFTs per item, from the first item's capture.json records (fft_counts): 'now' as the synthesis made them
+  (large: the frame's FFT shape; small: the far field's), 'before' as the same item at today's defaults would
+  have made them before issue 46 (every band transformed, every display's field blend, kernel spectra per
+  item); the bound = large FFTs now × one FFT of that shape at the worker's thread count (the mean of an
+  rfft2 and an irfft2), and the synthesis time over it.
+The machine is shared: the load average is written beside each case; compare ratios within one run.
 """
 from __future__ import annotations
 
@@ -63,22 +64,29 @@ def median_time(fn, repeats: int = 5) -> float:
     return statistics.median(timed(fn, repeats).seconds)
 
 
-def fft_count(job, kernels) -> int:
-    """FFTs per item of pipeline.synthesize (module doc)."""
-    K = kernels.grid.centres_nm.size
-    if job.cfg.form != "spectral":
-        return 2 * K + 3 + 9 * sum(not d.is_glass for d in job.displays)  # per-channel: 3 channel kernels each
-    count = 2 * K + 3  # ground truth
-    for d in job.displays:
-        ks = kernels.band[d.name]
-        if d.is_glass:
-            continue  # the ground truth's electrons
-        if ks.field_kernels is None:
-            count += K + 3
-        else:
-            r = job.cfg.field_rank or ks.field_kernels.shape[1] * ks.field_kernels.shape[2]
-            count += 2 * K * r + 3
-    return count
+def fft_counts(item: Path, bands: int, rank: int) -> dict:
+    """FFTs of one item (module doc) from its records: per view, blend or not (optics.model), through the
+    monitor's planes or the bands (optics.primaries), the far field's bands (far_field.bands_added)."""
+    views = {"gt": json.loads((item / "synth.json").read_text())["gt_optics"]}
+    for folder in sorted(p.parent for p in item.glob("*/capture.json")):
+        optics = json.loads((folder / "capture.json").read_text()).get("optics")
+        if optics and folder.name != "glass":
+            views[folder.name] = optics
+    now, small, before, small_before = 0, 0, 0, 0
+    planes = any("primaries" in o and o["model"] != "field-dependent" for o in views.values())
+    plain_bands = sum(o["model"] != "field-dependent" and "primaries" not in o for o in views.values())
+    now += 3 if planes else bands if plain_bands else 0  # forward: the planes, or the bands shared by plain views
+    for name, o in views.items():
+        blend = o["model"] == "field-dependent"
+        r = o.get("field_rank", rank)
+        now += (bands * r if blend else 9 if "primaries" in o else 0) + 3  # kernel spectra of the cache: none
+        far = o.get("far_field")
+        if far:
+            small += (9 + 3 if "primaries" in o else 2 * far["bands_added"]) + 3
+            small_before += 2 * far["bands_added"] + 3
+        before += (2 * bands * rank if name != "gt" else 2 * bands) + 3  # every display blended (d > 0)
+    return {"ffts_now": now, "small_ffts_now": small + (3 if planes else 0), "ffts_before": before,
+            "small_ffts_before": small_before}
 
 
 def fft_seconds(shape, threads: int) -> float:
@@ -88,24 +96,6 @@ def fft_seconds(shape, threads: int) -> float:
     fwd = median_time(lambda: sfft.rfft2(x, workers=threads))
     inv = median_time(lambda: sfft.irfft2(spec, s=shape, workers=threads))
     return (fwd + inv) / 2
-
-
-def copy_bandwidth_b_s(nbytes: int) -> float:
-    a = np.ones(nbytes // 4, np.float32)
-    b = np.empty_like(a)
-    return nbytes / median_time(lambda: np.copyto(b, a), 3)
-
-
-def write_bandwidth_b_s(folder: Path, nbytes: int = 64 << 20) -> float:
-    data = os.urandom(nbytes)
-    path = folder / "bandwidth.bin"
-
-    def write():
-        with open(path, "wb") as f:
-            f.write(data)
-    t = median_time(write, 3)
-    path.unlink()
-    return nbytes / t
 
 
 def item_bytes(out: Path) -> float:
@@ -122,37 +112,39 @@ def run_case(profile: str, display: str, count: int, workers: int, root: Path, t
     job, _ = setup(dataset_args(profile, display, count, workers, out))
     if workers == 1:
         set_worker_threads(threads or threads_per_worker(1))
+    load = os.getloadavg()[0]
     summary = run_dataset(job, workers, progress=False)
     log = [json.loads(line) for line in (out / "timing.jsonl").read_text().splitlines()]
     med = {k: statistics.median(r[k] for r in log) for k in ("render_s", "synth_s", "write_s", "seconds")}
-    return {"profile": profile, "workers": workers, "threads": threads or threads_per_worker(workers), "items": count, "wall_s": summary["wall_s"],
-            "items_per_min": 60 * count / summary["wall_s"],
-            "captures_per_min": 60 * count * CAPTURES_PER_ITEM / summary["wall_s"],
-            "steady_captures_per_min": workers * 60 / med["seconds"] * CAPTURES_PER_ITEM,
-            **{f"item_{k}": v for k, v in med.items()},
-            "peak_rss_mb": max(r["peak_rss_mb"] for r in log), "item_mb": item_bytes(out) / 1e6, "out": out}
+    first = {}
+    for r in sorted(log, key=lambda r: r["process_age_s"]):
+        first.setdefault(r["pid"], r)
+    in_process = workers == 1  # the age of this process is not a worker's start-up: its kernel load only
+    setup_s = max(r["kernels_s"] + (0 if in_process else r["process_age_s"]) for r in first.values())
+    return {"profile": profile, "workers": workers, "threads": threads or threads_per_worker(workers), "items": count,
+            "wall_s": summary["wall_s"], "captures_per_min": 60 * count * CAPTURES_PER_ITEM / summary["wall_s"],
+            "setup_s": setup_s, **{f"item_{k}": v for k, v in med.items()},
+            "peak_rss_mb": max(r["peak_rss_mb"] for r in log), "item_mb": item_bytes(out) / 1e6, "out": out,
+            "load_start": load, "load_end": os.getloadavg()[0]}
 
 
-def bounds(profile: str, display: str, workers: int, threads: int, root: Path, item_mb: float) -> dict:
-    """Per-item lower bounds (s) of the three stages (module doc), at the worker's thread count."""
+def bounds(profile: str, display: str, threads: int, out: Path) -> dict:
+    """The FFTs of the case's first item and its synthesis bound (module doc), at the worker's thread count."""
     from udc_render.optics import fft_shape
-    from udc_render.pipeline import plan_kernels
-    from udc_render.scene.geometry import camera_geometry
-    job, cfg = setup(dataset_args(profile, display, 1, workers, root / "bounds"))
-    kernels = plan_kernels(job.scene, job.displays, cfg)
-    g, cam = kernels.grid, camera_geometry(job.scene)
+    from udc_render.scene.geometry import camera_geometry, render_grid
+    job, cfg = setup(dataset_args(profile, display, 1, 1, out))
+    g, cam = render_grid(job.scene), camera_geometry(job.scene)
     shape = fft_shape((cam.height_px, cam.width_px), g.kernel_size_px, g.margin_px)
-    n = fft_count(job, kernels)
+    item = sorted(out.glob("train/shard_*/item_*"))[0]
+    counts = fft_counts(item, g.centres_nm.size, cfg.field_rank or 16)
     one = fft_seconds(shape, threads)
-    band_bytes = g.centres_nm.size * cam.height_px * cam.width_px * 4
-    return {"ffts_per_item": n, "fft_shape": f"{shape[0]}x{shape[1]}", "one_fft_ms": 1e3 * one,
-            "bound_synth_s": n * one, "bound_render_s": band_bytes / copy_bandwidth_b_s(band_bytes),
-            "bound_write_s": item_mb * 1e6 / write_bandwidth_b_s(root)}
+    return {**counts, "fft_shape": f"{shape[0]}x{shape[1]}", "one_fft_ms": 1e3 * one,
+            "bound_synth_s": counts["ffts_now"] * one}
 
 
-COLUMNS = ["profile", "workers", "threads", "items", "wall_s", "items_per_min", "captures_per_min", "steady_captures_per_min",
-           "item_render_s", "bound_render_s", "item_synth_s", "bound_synth_s", "ffts_per_item", "one_fft_ms",
-           "item_write_s", "bound_write_s", "item_mb", "peak_rss_mb", "speedup_vs_1"]
+COLUMNS = ["profile", "workers", "threads", "items", "wall_s", "captures_per_min", "speedup_vs_1", "setup_s",
+           "item_render_s", "item_synth_s", "bound_synth_s", "synth_over_bound", "ffts_now", "small_ffts_now",
+           "ffts_before", "one_fft_ms", "item_write_s", "item_mb", "peak_rss_mb", "load_start", "load_end"]
 
 
 def table(rows: list[dict]) -> str:
@@ -178,20 +170,19 @@ def main() -> None:
     with tempfile.TemporaryDirectory(dir=a.out) as tmp:
         root = Path(tmp)
         for profile in a.profiles.split(","):
-            from udc_render.pipeline import plan_kernels
-            job, cfg = setup(dataset_args(profile, a.display, 1, 1, root / "plan"))
-            plan_kernels(job.scene, job.displays, cfg, progress=True)  # cached: the runs load them
+            run_case(profile, a.display, 1, 1, root / "warm-up")  # the cache's kernels and what is made of them
             base = None
             cases = [(int(w), None) for w in a.workers.split(",")] + [(1, 1)] * a.one_thread
             for w, threads in cases:
                 r = run_case(profile, a.display, a.count, w, root, threads)
-                r |= bounds(profile, a.display, w, r["threads"], root, r["item_mb"])
+                r |= bounds(profile, a.display, r["threads"], r["out"])
+                r["synth_over_bound"] = r["item_synth_s"] / r["bound_synth_s"] if r["bound_synth_s"] else None
                 base = base or r["captures_per_min"]
                 r["speedup_vs_1"] = r["captures_per_min"] / base
                 rows.append(r)
                 print(table([r]).splitlines()[-1], flush=True)
     head = (f"bench_dataset: {a.count} items per case, displays glass,{a.display}, {os.cpu_count()} CPUs, "
-            f"load average {os.getloadavg()[0]:.1f} at the end\n\n")
+            f"load average (1 min) at each case's start and end in its row\n\n")
     save_text(a.out / "bench_dataset.md", head + table(rows))
     save_text(a.out / "bench_dataset.csv", csv_text([{c: r.get(c) for c in COLUMNS} for r in rows], COLUMNS))
     print(head + table(rows))

@@ -15,7 +15,6 @@ import math
 
 import numpy as np
 import scipy.fft as sfft
-from scipy.signal import czt
 from scipy.special import j1
 
 from . import fourier
@@ -163,6 +162,7 @@ def power_grid(half: np.ndarray, period_um, xs_um: np.ndarray, ys_um: np.ndarray
 def _chirp_sum(x: np.ndarray, m: int, frequency: float) -> np.ndarray:
     """X[..., j] = Σ_n x[..., n] e^{−2πi f n j} for j = 0…m−1 (last axis): scipy's chirp z-transform
     (Bluestein, N log N), the one psf.fourier's 'czt' method uses."""
+    from scipy.signal import czt  # here: scipy.signal costs a dataset worker's start-up ~1 s, and it has the maps
     return czt(x, m=m, w=np.exp(-2j * np.pi * frequency), a=1.0, axis=-1)
 
 

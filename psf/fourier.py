@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.fft as sfft
-from scipy.signal import czt
 
 __all__ = ["WORKERS", "LAG_TRANSFORMS", "padded_shape", "power_spectrum", "lags_from_power", "autocorrelation_half",
            "PixelMFT", "pixel_kernel", "lag_transform", "point_kernel",
@@ -186,6 +185,7 @@ def _czt_lags(c: np.ndarray, lags: np.ndarray, step_um: float, u_um: np.ndarray,
     c0 = u_um[0] / (u_um[1] - u_um[0])  # u_j = (j + c0)·Δu
     w = np.exp(-2j * np.pi * alpha)
     a = np.exp(2j * np.pi * alpha * c0)
+    from scipy.signal import czt  # here: scipy.signal costs every process that imports psf ~1 s
     out = czt(c, m=u_um.size, w=w, a=a, axis=axis)
     post = np.exp(-2j * np.pi * lags[0] * step_um * u_um / scale_um)
     shape = [1, 1]

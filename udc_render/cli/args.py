@@ -96,6 +96,19 @@ def far_field_threshold(text):
     return value
 
 
+def field_print_sigma(text):
+    """--field-print-sigma: a number of read-noise σ ≥ 0, or 'off' (always blend: None)."""
+    if text == "off":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not 0 <= value < math.inf:
+        raise argparse.ArgumentTypeError(f"--field-print-sigma = {text!r}: expected a number of σ ≥ 0 or 'off'")
+    return value
+
+
 def far_field_coarse(text):
     """--far-field-coarse: an odd whole number of render pixels per coarse pixel."""
     if not (text.isdigit() and int(text) >= 1 and int(text) % 2 == 1):
@@ -251,6 +264,10 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--field-rank", type=field_rank, default=argparse.SUPPRESS,
                    help="d > 0: convolve with a rank-R basis of each band's phase kernels (R FFT pairs per band "
                         "instead of one per phase; the kernel residual is recorded), or 'exact' [4]")
+    p.add_argument("--field-print-sigma", type=field_print_sigma, default=argparse.SUPPRESS,
+                   help="d > 0: leave a display's field blend out (its mean kernel and power) when it can change no "
+                        "pixel by more than this many σ of the read noise (udc_render/views.py field_print), or "
+                        "'off' (always blend) [0.25]")
     p.add_argument("--precision", choices=("float32", "float64"), default="float32",
                    help="the optics' FFT convolutions: float32: single precision (default); float64: double "
                         "precision [float32]")
@@ -299,6 +316,7 @@ def synth_config(args):
                        defocus_tolerance_px=getattr(args, "defocus_tolerance_px", SynthConfig.defocus_tolerance_px),
                        far_field_threshold=getattr(args, "far_field_threshold", SynthConfig.far_field_threshold),
                        far_field_coarse=getattr(args, "far_field_coarse", SynthConfig.far_field_coarse),
+                       field_print_sigma=getattr(args, "field_print_sigma", SynthConfig.field_print_sigma),
                        seed=getattr(args, "noise_seed", 0),
                        use_cache=not getattr(args, "no_cache", False), kernel_cache=None if cache is None else str(cache))
 

@@ -18,7 +18,8 @@ from pathlib import Path
 from udc_render.dataset.plan import DatasetError, Task
 from udc_render.dataset.randomized import Randomization, exposed, item_setup, panel_setup, recorded
 from udc_render.dataset.store import TMP_PREFIX, item_record
-from udc_render.dataset.threads import blas_threads, blas_threads_env, set_worker_threads, threads_per_worker
+from udc_render.dataset.threads import (blas_threads, blas_threads_env, process_age_s, set_worker_threads,
+                                       threads_per_worker)
 from udc_render.io.capture import write_synthesis
 from udc_render.io.files import current_umask, save_json
 from udc_render.optics.displays import Display
@@ -98,7 +99,7 @@ def make_item(shared: Shared, task: Task) -> dict:
     Runs in this process, a pool process or a Dask worker; returns run times (s) for the log."""
     from udc_render.pipeline import synthesize
     from udc_render.render import render_scene
-    t0 = time.perf_counter()
+    age, t0 = process_age_s(), time.perf_counter()
     scene = replace(shared.scene, render=replace(shared.scene.render, seed=task.render_seed))
     if task.pose is None:  # a monitor item: its image
         scene = replace(scene, content=replace(scene.content, image=task.image))
@@ -114,6 +115,7 @@ def make_item(shared: Shared, task: Task) -> dict:
         band_image, cfg, exposure = exposed(setup, band_image)
     t1 = time.perf_counter()
     kernels = worker_kernels(shared, None if setup is None else setup.panel.index)
+    t_kernels = time.perf_counter()
     cache_layer_kernels(band_image, scene, shared, kernels, displays)
     result = synthesize(band_image, scene, displays, cfg, task.item, kernels=kernels)
     if setup is not None:
@@ -131,8 +133,9 @@ def make_item(shared: Shared, task: Task) -> dict:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return {"item": task.item, "folder": task.folder, "render_s": round(t1 - t0, 3), "synth_s": round(t2 - t1, 3),
-            "write_s": round(time.perf_counter() - t2, 3), "host": socket.gethostname(), "pid": os.getpid(),
+    return {"item": task.item, "folder": task.folder, "render_s": round(t1 - t0, 3), "kernels_s": round(t_kernels - t1, 3),
+            "synth_s": round(t2 - t_kernels, 3), "write_s": round(time.perf_counter() - t2, 3),
+            "process_age_s": None if age is None else round(age, 3), "host": socket.gethostname(), "pid": os.getpid(),
             "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
 
 

@@ -34,6 +34,19 @@ def set_worker_threads(threads: int) -> None:
     drjit.set_thread_count(threads)
 
 
+def process_age_s() -> float | None:
+    """Seconds since this process started (Linux: /proc/self/stat's start time against /proc/uptime), or None
+    elsewhere: a worker's start-up before its first item (imports, kernels) in timing.jsonl."""
+    try:
+        with open("/proc/self/stat") as f:
+            start_ticks = int(f.read().rsplit(")", 1)[1].split()[19])  # field 22, starttime
+        with open("/proc/uptime") as f:
+            uptime_s = float(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return None
+    return uptime_s - start_ticks / os.sysconf("SC_CLK_TCK")
+
+
 def parent_blas_threads() -> int | None:
     """The thread count of the BLAS numpy loaded in this process (threadpoolctl reads the library itself:
     the environment may have changed since it was loaded, e.g. by a Dask LocalCluster), or None."""

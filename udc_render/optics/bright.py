@@ -9,8 +9,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
-from scipy.signal import fftconvolve
 
 
 @dataclass(frozen=True)
@@ -25,6 +23,7 @@ class BrightPixels:
         """The clusters of `mask` (8-connected), or None when it is empty."""
         if not mask.any():
             return None
+        from scipy import ndimage  # here: scipy.ndimage and scipy.signal cost a worker's start-up ~1 s
         labels, _ = ndimage.label(mask, structure=np.ones((3, 3)))
         return cls(mask, tuple(ndimage.find_objects(labels)))
 
@@ -39,6 +38,7 @@ def bright_blur(x: np.ndarray, bright: BrightPixels, terms, frame_shape, m: int,
     """float64 frame [h, w] of Σ_terms k ⊗ (w · P · x_bright) (blend 'source'), or Σ w · P · (k ⊗ x_bright)
     (at_output: blend 'output'), on each bright box only (direct FFT convolution of the box, full size:
     output row i of a box starting at row r0 is grid row r0 + i − S//2; the kernel convention of convolve_bands)."""
+    from scipy.signal import fftconvolve
     h, w = frame_shape
     out = np.zeros((h, w))
     patches = [np.where(bright.mask[rows, cols], x[rows, cols], 0).astype(np.float64) for rows, cols in bright.boxes]
