@@ -22,12 +22,12 @@ from restore.data import ALL_MODES, DataError, PairDataset, list_pairs
 from udc_render.description import symmetric_modes
 
 # A transform is allowed where max |k − T(k)| / max k is below this in every channel. Measured at the default rig
-# (1.55 µm pixels, the 129-px packed window): the T-OLED's flips 2e-8, its transpose 0.79; the P-OLED's transpose
-# and double flip 2e-8, its single flips 8.5e-5 (all 8 allowed: 12× below the tolerance).
+# (1.55 µm pixels, SYMMETRY_KERNEL_PX): the T-OLED's flips 2e-8, its transposes 0.69; the P-OLED's transposes and
+# double flip ≤ 5e-8, its single flips 3.4e-5 (all 8 allowed, 30× below the tolerance). In the description's
+# 129-px window: the T-OLED's transposes 0.79, the P-OLED's single flips 8.5e-5: the same modes.
 SYMMETRY_TOLERANCE = 1e-3
 # The window the symmetry is tested in (packed pixels, odd; ±16 sensor px): the core and the first two orders of the
-# T-OLED (10 µm apart at 520 nm), cheaper to make at train time than the description's 129 px and as telling (the
-# same modes for both presets at the default rig).
+# T-OLED (10 µm apart at 520 nm), cheaper to make at train time than the description's 129 px and as telling.
 SYMMETRY_KERNEL_PX = 17
 ONLINE_WHY = "online: every transform, applied to the clean crop before the degradation (restore.augment)"
 
