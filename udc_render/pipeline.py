@@ -236,7 +236,8 @@ def capture_views(kernels: Kernels, displays: list[Display], edges_nm, far: dict
         t = d.transmission.band_means(edges_nm)
         if not (d.is_glass and np.all(t == 1)):
             out.append(View(d.name, kernels.band[d.name], t, kernels.field_bases.get(d.name), far.get(d.name),
-                            kernels.power_maps.get(d.name), prints.get(d.name), partial(kernel_spectra, kernels, d.name)))
+                            kernels.power_maps.get(d.name), prints.get(d.name),
+                            partial(kernel_spectra, kernels, d.name)))
     return out
 
 

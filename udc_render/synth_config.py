@@ -104,7 +104,8 @@ class SynthConfig:
             raise SynthError(f"far_field_coarse = {fc!r}: expected an odd whole number of render pixels ≥ 1")
         fp = self.field_print_sigma
         if fp is not None and (isinstance(fp, bool) or not isinstance(fp, (int, float)) or not 0 <= fp < math.inf):
-            raise SynthError(f"field_print_sigma = {fp!r}: expected a number of read-noise σ ≥ 0, or None (always blend)")
+            raise SynthError(f"field_print_sigma = {fp!r}: expected a number of read-noise σ ≥ 0, or None "
+                             "(always blend)")
         tol = self.defocus_tolerance_px
         if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
                                 or not tol >= 0.05):

@@ -66,9 +66,9 @@ def band_kernel_entry(layout, lens, grid: RenderGrid, distance_mm: float, frame_
     with tqdm(total=phases * grid.centres_nm.size, desc=f"kernels {label}", unit="kernel",
               disable=not progress, leave=False) as bar:  # ticks only when the kernels are not cached
         ks, _, key = cached_keyed(compute_kernels, "mono", layout, lens, cfg.use_cache, cache_dir=cfg.kernel_cache,
-                                  wavelengths_nm=grid.centres_nm, pixel_um=grid.pitch_um, size_px=size, distance_mm=d_mm,
-                                  field_phases=cfg.field_phases, precision=cfg.kernel_precision, sensor_um=frame_um,
-                                  progress=bar.update)
+                                  wavelengths_nm=grid.centres_nm, pixel_um=grid.pitch_um, size_px=size,
+                                  distance_mm=d_mm, field_phases=cfg.field_phases, precision=cfg.kernel_precision,
+                                  sensor_um=frame_um, progress=bar.update)
     return ks, key
 
 
@@ -192,8 +192,8 @@ def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progre
             if ks.field_kernels is not None and ks.distance_mm > 0:
                 spread[name] = cached_arrays("phase-spread-1", (keys[name],), lambda ks=ks: {
                     "l1": phase_spread_l1(ks.field_kernels, ks.kernels)}, cfg.kernel_cache)["l1"]
-    return Kernels(grid, band, channel, object_distance_m=float(z), far=far_fields,
-                   keys={n: k for n, k in keys.items() if k is not None}, field_spread=spread, cache_dir=cfg.kernel_cache)
+    return Kernels(grid, band, channel, object_distance_m=float(z), far=far_fields, field_spread=spread,
+                   keys={n: k for n, k in keys.items() if k is not None}, cache_dir=cfg.kernel_cache)
 
 
 def compact_kernels(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels:
@@ -258,7 +258,8 @@ def kernel_spectra(kernels: Kernels, name: str, blends: bool, shape, precision: 
     params = dict(shape=[int(n) for n in shape], precision=precision)
     if not blends:
         return cached_arrays("kernel-spectra-1", (key,), lambda: {
-            "spectra": spectra_of(kernels.band[name].kernels, shape, precision)}, kernels.cache_dir, **params)["spectra"]
+            "spectra": spectra_of(kernels.band[name].kernels, shape, precision)},
+            kernels.cache_dir, **params)["spectra"]
     arrays = cached_arrays("basis-spectra-1", (key,), lambda: {
         f"spectra_{k}": spectra_of(b, shape, precision) for k, b in enumerate(basis.bases)}, kernels.cache_dir,
         rank=basis.rank, live=basis.live, **params)

@@ -142,8 +142,9 @@ def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectr
     if view.field_print is not None:
         applied["field_print"] = view.field_print
         if not blends:
-            applied["skipped"] = [f"field-dependent blur: it changes no pixel by more than {view.field_print['bound_e']:.3g}"
-                                  f" e- ≤ {view.field_print['threshold_sigma']:g} σ of the read noise (field_print)"]
+            bound, sigmas = view.field_print["bound_e"], view.field_print["threshold_sigma"]
+            applied["skipped"] = [f"field-dependent blur: it changes no pixel by more than {bound:.3g} e- ≤ "
+                                  f"{sigmas:g} σ of the read noise (field_print)"]
     return e, {**applied, "gains": optics.gains.tolist(), "transmission": optics.transmission.tolist()}
 
 
@@ -206,7 +207,8 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
         views = views_of_layer(0)
         primaries = shared_primaries(band_image, views, cfg, bright)
         spectra, blocks = None if primaries is not None else shared_spectra(band_image, views, cfg, bright), {}
-        return {v.name: channel_electrons(band_image, v, sensor, cfg, spectra, bright, blocks, primaries) for v in views}
+        return {v.name: channel_electrons(band_image, v, sensor, cfg, spectra, bright, blocks, primaries)
+                for v in views}
     w = band_electron_weights(band_image.edges_nm, sensor)
     mean_bands = band_image.frame(band_image.bands).mean(axis=(1, 2), dtype=np.float64)
     comp, records, far = {}, {}, {}

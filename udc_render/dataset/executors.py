@@ -133,8 +133,9 @@ def make_item(shared: Shared, task: Task) -> dict:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return {"item": task.item, "folder": task.folder, "render_s": round(t1 - t0, 3), "kernels_s": round(t_kernels - t1, 3),
-            "synth_s": round(t2 - t_kernels, 3), "write_s": round(time.perf_counter() - t2, 3),
+    return {"item": task.item, "folder": task.folder, "render_s": round(t1 - t0, 3),
+            "kernels_s": round(t_kernels - t1, 3), "synth_s": round(t2 - t_kernels, 3),
+            "write_s": round(time.perf_counter() - t2, 3),
             "process_age_s": None if age is None else round(age, 3), "host": socket.gethostname(), "pid": os.getpid(),
             "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
 

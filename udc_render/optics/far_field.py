@@ -94,7 +94,8 @@ class FarField:
     @classmethod
     def from_arrays(cls, a) -> "FarField":
         scalars = {"coarse": int, "pitch_um": float, "acceptance_um": float, "threshold": float, "clipped": float}
-        return cls(**{f: scalars[f](a[f]) if f in scalars else a[f] for f in cls.__dataclass_fields__ if f != "spectra"})
+        names = [f for f in cls.__dataclass_fields__ if f != "spectra"]
+        return cls(**{f: scalars[f](a[f]) if f in scalars else a[f] for f in names})
 
 
 def _blocks(size_px: int, coarse: int) -> tuple[np.ndarray, np.ndarray]:

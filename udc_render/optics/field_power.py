@@ -71,7 +71,8 @@ def power_deviation(kernel_set) -> np.ndarray:
     then interpolates)."""
     series = kernel_set.field_series
     if series is None:
-        return np.abs(np.asarray(kernel_set.field_power, np.float64) - 1.0).reshape(kernel_set.kernels.shape[0], -1).max(1)
+        power = np.asarray(kernel_set.field_power, np.float64)
+        return np.abs(power - 1.0).reshape(power.shape[0], -1).max(axis=1)
     a = np.abs(np.asarray(series)) * np.where(np.arange(series.shape[2]) > 0, 2.0, 1.0)
     c = series.shape[1] // 2
     return a.sum(axis=(1, 2)) - a[:, c, 0] + np.abs(np.asarray(series)[:, c, 0] - 1.0)
