@@ -225,13 +225,14 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
                 return iter(maps)
         terms = phase_terms()
         if blend == "source":
-            acc, weighted = None, np.empty_like(x)
+            acc, padded = None, np.zeros(shape, dtype)  # the FFT's zero padding kept: no copy per transform
+            weighted = padded[:H, :W]
             spectra = None if kernel_spectra is None else kernel_spectra[k]
             for r, (kern, wmap, power) in enumerate(terms):
                 np.multiply(x, wmap, out=weighted)
                 if power != 1:
                     weighted *= power
-                term = sfft.rfft2(weighted, s=shape, workers=workers)
+                term = sfft.rfft2(padded, workers=workers)
                 term *= (_kernel_spectrum(kern.astype(dtype, copy=False), shape, dtype, workers) if spectra is None
                          else spectra[r])
                 if acc is None:
