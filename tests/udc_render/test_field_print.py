@@ -93,3 +93,14 @@ def test_cached_kernel_spectra_give_the_same_bytes(small, tmp_path, monkeypatch)
         assert result.gt.tobytes() == per_call.gt.tobytes()
         for name in ("glass", "toled", "poled"):
             assert result.captures[name].mosaic_dn.tobytes() == per_call.captures[name].mosaic_dn.tobytes()
+
+
+def test_the_guides_state_the_default():
+    """guides/synth.md ('--field-print-sigma', default 0.25) and concepts/defaults.md's row against SynthConfig."""
+    from pathlib import Path
+    docs = Path(__file__).resolve().parents[2] / "docs"
+    synth = " ".join((docs / "guides" / "synth.md").read_text(encoding="utf-8").split())
+    defaults = (docs / "concepts" / "defaults.md").read_text(encoding="utf-8")
+    assert SynthConfig().field_print_sigma == 0.25
+    assert "(`--field-print-sigma`, default 0.25:" in synth and "[--field-print-sigma 0.25|off]" in synth
+    assert "| field print threshold (d > 0) | 0.25 σ of the read noise (`field_print_sigma`) |" in defaults
