@@ -35,7 +35,9 @@ def region(img: torch.Tensor, y0: int, x0: int, rows: int, cols: int) -> torch.T
     """img[:, y0:y0 + rows, x0:x0 + cols] of a tensor [C, H, W] (on its own device) with the image mirrored beyond
     its edges (edge pixels not repeated: numpy's 'reflect'). Axis by axis: inside the image a slice; a mirror
     within one reflection, flipped slices joined; else a gather (a 768² crop of a 2048 × 1024 tensor mirrored on
-    one side: 0.6 ms, where one 2-D fancy index took 7 ms)."""
+    one side: 0.6 ms, where one 2-D fancy index took 7 ms). The rows first where they are a slice, else the
+    columns first on the rows read, so that no intermediate spans the frame's width (a crop mirrored at the top:
+    10 → 2.5 ms on the loaded 2-core machine)."""
     def axis(a: torch.Tensor, dim: int, start: int, n: int) -> torch.Tensor:
         size = a.shape[dim]
         if 0 <= start and start + n <= size:
@@ -52,4 +54,15 @@ def region(img: torch.Tensor, y0: int, x0: int, rows: int, cols: int) -> torch.T
         i %= max(period, 1)
         i = np.where(i >= size, period - i, i)
         return a.index_select(dim, torch.as_tensor(i, device=a.device))
-    return axis(axis(img, 1, y0, rows), 2, x0, cols)
+    def read(size: int, start: int, n: int) -> tuple[int, int]:
+        """The rows a cut mirrored at one edge within one reflection reads, bounds of a view that keeps its mirror
+        (from 0 when it mirrors at 0, to size when at the end); else the whole axis."""
+        if start < 0 <= start + n <= size and -start < size:
+            return 0, max(start + n, 1 - start)
+        if 0 <= start < size < start + n < 2 * size:
+            return min(start, 2 * size - 1 - start - n), size
+        return 0, size
+    if 0 <= y0 and y0 + rows <= img.shape[1]:  # the rows a view: cut first, then the columns, one copy
+        return axis(axis(img, 1, y0, rows), 2, x0, cols)
+    r0, r1 = read(img.shape[1], y0, rows)  # else the columns first, on the rows read: no full-width copy
+    return axis(axis(img[:, r0:r1], 2, x0, cols), 1, y0 - r0, rows)
