@@ -20,7 +20,8 @@ import pytest
 from psf import MicrographLayout, layouts
 from udc_render.cli import build_parser, main
 from udc_render.cli.args import capture_setup, synth_config
-from udc_render.fit import FitSpec, synthetic as S
+from udc_render.fit import FitSpec
+from udc_render.fit import synthetic as S
 from udc_render.fit.hdr import merge_psf
 from udc_render.fit.inputs import read_frames
 from udc_render.fit.psf_fit import fit_psf
@@ -57,8 +58,8 @@ def toled_fit(tmp_path_factory):
                                        window_px=255), "psf")
     iio.imwrite(tmp / "flat.png", S.flat_measurement(lay, 4.0, shape_hw=(256, 1024), seed=12))
     edges = np.array([400.0, 500.0, 600.0, 700.0])
-    from udc_render.fit.white import band_gains
     from psf import Lens
+    from udc_render.fit.white import band_gains
     d_gain, g_gain = band_gains(lay, Lens(), edges, 1.55, (128, 128), (66, 66), (256 * 1.55, 256 * 1.55))
     rgb = channel_gamma(white_weights(edges, CAMERA), Display("t", lay, Transmission("flat", 0.6), 6.0), d_gain,
                         g_gain, edges)

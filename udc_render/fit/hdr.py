@@ -197,6 +197,9 @@ def merge_psf(frames: list[Frame], wavelength_nm: float, camera: str, dn_per_e: 
         notes.append(f"CFA sites balanced by {camera}'s response at {wavelength_nm:g} nm: R/G/B "
                      f"{gains[0]:.3f}/{gains[1]:.3f}/{gains[2]:.3f}")
     parts = [_prepare(f, channel, gains) for f in frames]
+    hot = np.logical_or.reduce([~p["usable"] & ~p["sat"] for p in parts])  # a hot pixel is hot in every frame,
+    for p in parts:  # where an order's light around it hides it from the spike test
+        p["usable"] &= ~hot
     assumed = frames[0].saturation_dn / ASSUMED_FULL_WELL_E
     factors, pairs, _ = _chain(parts, dn_per_e or assumed)
     kappa = _shot_gain(parts, factors, pairs)

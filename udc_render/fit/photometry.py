@@ -30,6 +30,7 @@ NODES = 4
 APERTURE_MAX_PX = 8.0
 APERTURE_SPACING = 0.45  # the aperture's radius: this fraction of the shortest order spacing (at most 8 px)
 MIN_TEMPLATE_SHARE = 0.99  # an order is measured in an exposure when its unmasked pixels hold ≥ this of Σ t²
+CROSSTALK_REACH = 3  # the neighbours (± orders) whose Airy wings crosstalk counts
 
 
 @dataclass(frozen=True)
@@ -123,6 +124,26 @@ def measure_exposures(exposures, window, xy, index, radius_px, optics: "Optics",
     cat = lambda name: np.concatenate([getattr(r, name) for r in rows])  # noqa: E731
     return Orders(cat("index"), cat("xy"), cat("power"), cat("sigma"), cat("measured"),
                   np.repeat(np.arange(len(rows)), len(index)), cat("shot"), cat("floor"))
+
+
+def crosstalk(e_px: np.ndarray, radius_px: float, lens: Lens, wavelength_nm: float, pixel_um: float,
+              reach: int = CROSSTALK_REACH) -> np.ndarray:
+    """X [2 reach + 1, 2 reach + 1] (Δn, Δm): the matched filter's power at an order from a unit-power Airy
+    spot Δm e_1 + Δn e_2 away (e_px: columns e_1, e_2), X(0) = 1: the neighbours' incoherent light each order's
+    power holds, Σ_Δ X(Δ) P_(m+Δm, n+Δn) (the orders' interference and the pixels' phases aside: the engine's
+    render adds those; the filter is centred on a pixel)."""
+    r = int(math.ceil(radius_px))
+    g = np.arange(-r, r + 1, dtype=float)
+    dx, dy = np.meshgrid(g, g)
+    disc = np.hypot(dx, dy) <= radius_px
+    t = np.where(disc, airy_pixels(dx, dy, lens, wavelength_nm, pixel_um), 0.0)
+    k = np.arange(-reach, reach + 1)
+    out = np.zeros((len(k), len(k)))
+    for a, dn in enumerate(k):
+        for b, dm in enumerate(k):
+            sx, sy = e_px @ np.array([dm, dn], float)
+            out[a, b] = np.sum(t * airy_pixels(dx - sx, dy - sy, lens, wavelength_nm, pixel_um)) / np.sum(t * t)
+    return out
 
 
 def lattice_orders(lattice, index_basis: np.ndarray, half: int, radius_px: float) -> np.ndarray:

@@ -14,36 +14,44 @@ favour the rows whose noise came out low). Why not the log domain: ln P has no f
 Model: M_ki = exp(ln s + ln f_i + g_x X_k + g_y Y_k + q R_k² + q₂ R_k⁴) Q_k(θ) (R² = X² + Y²); f_i: exposure
 i's factor against the reference (the brightest exposure with signal; fitted here with the orders, so that their
 error is in the covariance); X, Y: the order's position over the window's half side (the vignetting: a gradient
-where the spot is off the axis, a radial fall-off whose log has an r⁴ term); Q_k(θ) = κ |c_k(θ)|² + δ_k. δ is
-what the engine's PSF holds at each order beyond κ |c|²: the neighbours' light, the orders' interference, the
-pixels' phases: the layout at θ̂ and the fitted pitch rendered where the measurement's spot is
-(synthetic.render_window), the same photometry run on it: Q^eng, κ = Σ Q^eng |c|² / Σ |c|⁴ and
-δ_k = Q^eng_k − κ |c_k(θ̂)|². Renders are repeated until θ moves by less than 0.05 σ (at most ENGINE_PASSES).
-Search (search.py): the family's grid scored on all rows, its best local minima and a spread of its points
-each polished by the reweighted least squares; after every render every distinct minimum is polished
-again with the new δ and the lowest χ² is taken: no solution another start beats is accepted, and a distinct
-one within AMBIGUOUS_CHI2 · max(1, χ²/dof) of it is reported (psf_fit refuses the fit: the orders do not
-tell them apart).
-Covariance: the Jacobian's (JᵀJ)⁻¹ · max(1, χ²/dof), raised where White's sandwich gives more.
+where the spot is off the axis, a radial fall-off whose log has an r⁴ term); Q_k(θ) = κ C_k(θ) + δ_k, C_k =
+Σ_Δ X(Δ) |c_(k+Δ)(θ)|² the order's own |c|² and its neighbours' Airy wings in its matched filter (photometry.
+crosstalk: without it the search's first stage, before any render, could not fit a weak order beside a
+saturated one: a 0.11-wide stripe at 190× the full well went to a slit height of 0.15). δ is what the
+engine's PSF holds at each order beyond κ C: the orders' interference, the pixels' phases, the far wings: the
+layout at θ̂ and the fitted pitch rendered where the measurement's spot is (synthetic.render_window), the same
+photometry run on it: Q^eng, κ = Σ Q^eng C / Σ C² and δ_k = Q^eng_k − κ C_k(θ̂). Renders are repeated until θ
+moves by less than 0.05 σ (at most ENGINE_PASSES).
+Search (search.py, minima): the family's grid scored on all rows, its best local minima, a spread of its
+points and the stripe's twins each polished, the distinct minima kept; each one within CONTEND_CHI2 ·
+max(1, χ²/dof) of the best gets its own render (δ at its own shape: the neighbours' light differs between two
+openings) and is polished again, at every pass; the lowest χ² is taken, so no solution another start beats
+is accepted, and a distinct one within AMBIGUOUS_CHI2 · max(1, χ²/dof) of it is reported (alike: psf_fit
+refuses the fit, the orders do not tell them apart).
+Covariance: the Jacobian's (JᵀJ)⁻¹ · max(1, χ²/dof), raised where White's sandwich gives more, and each shape
+parameter's σ widened to its profile likelihood's where the χ² rises less than the linear covariance says
+(search.profile). Then the search again with the engine's δ at the best (the first stage, with δ = 0, can miss
+a basin where the neighbours' interference is a large part of the orders' light, as beside saturated ones):
+a basin it or the profile finds within CONTEND_CHI2 gets its own render and the passes go on (once).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from udc_render.fit.families import Family
 from udc_render.fit.inputs import border
-from udc_render.fit.photometry import Optics, Orders, measure
-from udc_render.fit.search import OrderSet, Rows, Solution, distinct, grid_starts, polish
+from udc_render.fit.photometry import Optics, Orders, crosstalk, measure
+from udc_render.fit.search import FIELD_TERMS, OrderSet, Rows, Solution, distinct, grid_starts, polish, profile
 from udc_render.fit.synthetic import render_window
 
 SIGNAL_SNR, START_SNR = 3.0, 5.0
-FIELD_TERMS = 5  # ln s, g_x, g_y, q, q₂
 ENGINE_PASSES = 3
 AMBIGUOUS_CHI2 = 4.0  # a distinct minimum this close (× max(1, χ²/dof)) fits as well: Δχ² < 4 is 2 σ
 CONTEND_CHI2, MAX_CONTENDERS, KEEP_MINIMA = 100.0, 4, 6
+PROFILE_ROUNDS = 2  # the engine's passes again from a point of the profile below the minimum, once
 
 
 @dataclass(frozen=True)
@@ -111,12 +119,15 @@ class Geometry:
     origin: np.ndarray
     rotation_deg: float
 
-    def orders_xy(self, index: np.ndarray, pitch_um, optics: Optics) -> np.ndarray:
-        """Window positions of cell orders [N, 2] of a display of that pitch (x, y), turned and placed."""
+    def basis(self, pitch_um, optics: Optics) -> np.ndarray:
+        """E [2, 2] (columns e_1, e_2, px per order) of a display of that pitch (x, y), turned."""
         a = math.radians(self.rotation_deg)
         rot = np.array([[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]])
-        e = rot @ np.diag([optics.lz_px / pitch_um[0], optics.lz_px / pitch_um[1]])
-        return self.origin[None, :] + index @ e.T
+        return rot @ np.diag([optics.lz_px / pitch_um[0], optics.lz_px / pitch_um[1]])
+
+    def orders_xy(self, index: np.ndarray, pitch_um, optics: Optics) -> np.ndarray:
+        """Window positions of cell orders [N, 2] of a display of that pitch (x, y), turned and placed."""
+        return self.origin[None, :] + index @ self.basis(pitch_um, optics).T
 
 
 def engine_powers(fam: Family, params, pitch_um, optics: Optics, geometry: Geometry, index: np.ndarray,
@@ -152,60 +163,79 @@ def _rows(orders: Orders, use: np.ndarray, exposures: list[int], half: int, inve
                 orders.floor[use], design, np.log(np.array([factors[e] / ref for e in orders.exposure[use]])))
 
 
-def _engine_terms(fam: Family, x, pitch_um, optics, geometry, uniq, radius_px):
+def _engine_terms(fam: Family, x, pitch_um, optics, geometry, grid: OrderSet, uniq, radius_px):
     """(κ, δ [U], the orders the render measured [U], the render) at shape x (module doc)."""
     eng, image = engine_powers(fam, x, pitch_um, optics, geometry, uniq, radius_px)
-    c2 = fam.power(x, uniq)
+    c2 = grid.power(fam, x)
     ok = eng.measured & (c2 > 0)
     kappa = float(np.sum(eng.power[ok] * c2[ok]) / np.sum(c2[ok] ** 2))
     return kappa, np.where(eng.measured, eng.power - kappa * c2, 0.0), eng.measured, image
 
 
 def fit_family(fam: Family, orders: Orders, factors, pitch_um, optics: Optics, geometry: Geometry,
-               radius_px: float) -> FamilyFit:
-    """The family's shape fitted to the measured orders' powers (module doc)."""
+               radius_px: float, starts: list | None = None, profiled: bool = True) -> FamilyFit:
+    """The family's shape fitted to the measured orders' powers (module doc); starts: x of a fit before (the
+    same orders measured elsewhere) to polish instead of the search's; profiled: the σ from the profile
+    likelihood (search.profile; not needed for a fit the orders will be measured again for)."""
     half, k = geometry.size // 2, len(fam.names)
     uniq, inverse = np.unique(orders.index, axis=0, return_inverse=True)
     inverse = inverse.ravel()
     exposures = _reference(orders, factors)
     use = orders.measured & np.isin(orders.exposure, exposures)
     rows = _rows(orders, use, exposures, half, inverse, factors)
-    grid = OrderSet.of(uniq)
-    sols, starts = minima(fam, rows, grid)
+    grid = OrderSet.of(uniq, crosstalk(geometry.basis(pitch_um, optics), radius_px, optics.lens, optics.wavelength_nm,
+                                       optics.pixel_um))
+    if starts is None:
+        sols, starts = minima(fam, rows, grid)
+    else:
+        sols = [polish(fam, rows, grid, 1.0, np.zeros(len(uniq)), x) for x in starts]
+        starts = len(sols)
     best, image, renders = min(sols, key=lambda s: s.chi2), None, 0
-    contenders = _contenders(sols, min(sols, key=lambda s: s.chi2), k, rows)
-    for _ in range(ENGINE_PASSES):
-        fitted = []
-        renders += len(contenders)
-        for c in contenders:
-            kappa, delta, seen, render = _engine_terms(fam, c.x[:k], pitch_um, optics, geometry, uniq, radius_px)
-            if not seen[inverse[use]].all():  # an order the render cannot measure (the same for every shape)
-                use = use & seen[inverse]
-                rows = _rows(orders, use, exposures, half, inverse, factors)
-            fitted.append((polish(fam, rows, grid, kappa, delta, c.x), render))
-        new, image = min(fitted, key=lambda f: f[0].chi2)
-        moved = np.max(np.abs(new.x - best.x)[:k] / np.maximum(np.sqrt(np.diag(new.cov))[:k], 1e-12), initial=0.0)
-        best, sols = new, [f[0] for f in fitted]
+    for _ in range(PROFILE_ROUNDS):
         contenders = _contenders(sols, best, k, rows)
-        if moved < 0.05 or k == 0:
+        for _ in range(ENGINE_PASSES):
+            fitted = []
+            renders += len(contenders)
+            for c in contenders:
+                kappa, delta, seen, render = _engine_terms(fam, c.x[:k], pitch_um, optics, geometry, grid, uniq,
+                                                           radius_px)
+                if not seen[inverse[use]].all():  # an order the render cannot measure (the same for every shape)
+                    use = use & seen[inverse]
+                    rows = _rows(orders, use, exposures, half, inverse, factors)
+                fitted.append((polish(fam, rows, grid, kappa, delta, c.x), render, kappa, delta))
+            new, image, kappa, delta = min(fitted, key=lambda f: f[0].chi2)
+            moved = np.max(np.abs(new.x - best.x)[:k] / np.maximum(np.sqrt(np.diag(new.cov))[:k], 1e-12),
+                           initial=0.0)
+            best, sols = new, [f[0] for f in fitted]
+            contenders = _contenders(sols, best, k, rows)
+            if moved < 0.05 or k == 0:
+                break
+        if not profiled:
+            cov = best.cov
             break
-    return _result(fam, orders, rows, use, best, sols, renders, tuple(exposures), image, starts)
+        cov, found = profile(fam, rows, grid, kappa, delta, best)
+        again = minima(fam, rows, grid, kappa, delta)[0]  # the search again with the engine's δ at best: a basin
+        near = _contenders(sols + found + again, best, k, rows)  # the first stage (δ = 0) could not see
+        if all(any(np.allclose(n.x, s.x) for s in sols) for n in near):
+            break
+        sols = sols + found + again  # a basin within reach (or below): its own render, the passes again
+        best = min(sols, key=lambda s: s.chi2)
+    return _result(fam, orders, rows, use, replace(best, cov=cov), sols, renders, tuple(exposures), image, starts)
 
 
-def minima(fam: Family, rows: Rows, grid: OrderSet) -> tuple[list[Solution], int]:
-    """(the minima of the search (module doc) before any render (κ = 1, δ = 0), the starts): every grid start
-    polished once
-    on the orders with signal (≥ START_SNR σ in some exposure: the basins, at a fraction of the rows), then the
-    twins of the best (Family.twins), then the distinct minima (at most KEEP_MINIMA, the lowest first)
-    polished on every row."""
-    zero, k = np.zeros(len(grid.ix)), len(fam.names)
+def minima(fam: Family, rows: Rows, grid: OrderSet, kappa: float = 1.0, delta=None) -> tuple[list[Solution], int]:
+    """(the minima of the search (module doc) with κ and δ (before any render: 1, 0), the starts): every grid start
+    polished once on the orders with signal (≥ START_SNR σ in some exposure: the basins, at a fraction of the
+    rows), then the twins of the best (Family.twins), then the distinct minima (at most KEEP_MINIMA, the lowest
+    first) polished on every row."""
+    delta, k = np.zeros(len(grid.ix)) if delta is None else delta, len(fam.names)
     quick = rows.with_signal(START_SNR)
-    sols = [polish(fam, quick, grid, 1.0, zero, x0, steps=1) for x0 in grid_starts(fam, quick, grid)]
+    sols = [polish(fam, quick, grid, kappa, delta, x0, steps=1) for x0 in grid_starts(fam, quick, grid, kappa, delta)]
     first = min(sols, key=lambda s: s.chi2)
-    sols += [polish(fam, quick, grid, 1.0, zero, np.concatenate([t, first.x[k:]]), steps=1)
+    sols += [polish(fam, quick, grid, kappa, delta, np.concatenate([t, first.x[k:]]), steps=1)
              for t in fam.twins(first.x[:k])]
     best = min(sols, key=lambda s: s.chi2)
-    return [polish(fam, rows, grid, 1.0, zero, s.x) for s in distinct(sols, best, k)[:KEEP_MINIMA]], len(sols)
+    return [polish(fam, rows, grid, kappa, delta, s.x) for s in distinct(sols, best, k)[:KEEP_MINIMA]], len(sols)
 
 
 def alike(sols: list[Solution], best: Solution, k: int, dof: int) -> tuple:
