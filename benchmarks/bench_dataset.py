@@ -15,7 +15,10 @@ Figures:
 - wall: the whole run_dataset call (pool start-up, every worker's set-up and the parent's check of the cache);
 - set-up: per worker, its process's age at its first item plus that item's kernel load (timing.jsonl's
   process_age_s + kernels_s: imports and kernels), the largest over the workers;
-- per item: medians over the items of timing.jsonl (render, synth, write; seconds in one worker);
+- per item: medians over the items of timing.jsonl (render, synth, write; seconds in one worker), and its CPU
+  seconds (cpu_s: every thread of the worker's process); cpu_captures_per_min = cores · 60 · 3 / cpu_s, what
+  the item's core-seconds allow when the cores do nothing else (a machine shared with other work shows its
+  wall figures below it; this one does not depend on the others' load as much);
 - speedup_vs_1: captures/min over the first case's (1 worker, all cores);
 - peak RSS per worker: the largest ru_maxrss any item's process reported (MB; the memory-mapped cache entries'
   pages count in it, though every worker shares them);
@@ -115,7 +118,7 @@ def run_case(profile: str, display: str, count: int, workers: int, root: Path, t
     load = os.getloadavg()[0]
     summary = run_dataset(job, workers, progress=False)
     log = [json.loads(line) for line in (out / "timing.jsonl").read_text().splitlines()]
-    med = {k: statistics.median(r[k] for r in log) for k in ("render_s", "synth_s", "write_s", "seconds")}
+    med = {k: statistics.median(r[k] for r in log) for k in ("render_s", "synth_s", "write_s", "seconds", "cpu_s")}
     first = {}
     for r in sorted(log, key=lambda r: r["process_age_s"]):
         first.setdefault(r["pid"], r)
@@ -124,6 +127,7 @@ def run_case(profile: str, display: str, count: int, workers: int, root: Path, t
     return {"profile": profile, "workers": workers, "threads": threads or threads_per_worker(workers), "items": count,
             "wall_s": summary["wall_s"], "captures_per_min": 60 * count * CAPTURES_PER_ITEM / summary["wall_s"],
             "setup_s": setup_s, **{f"item_{k}": v for k, v in med.items()},
+            "cpu_captures_per_min": os.cpu_count() * 60 * CAPTURES_PER_ITEM / med["cpu_s"],
             "peak_rss_mb": max(r["peak_rss_mb"] for r in log), "item_mb": item_bytes(out) / 1e6, "out": out,
             "load_start": load, "load_end": os.getloadavg()[0]}
 
@@ -143,8 +147,9 @@ def bounds(profile: str, display: str, threads: int, out: Path) -> dict:
 
 
 COLUMNS = ["profile", "workers", "threads", "items", "wall_s", "captures_per_min", "speedup_vs_1", "setup_s",
-           "item_render_s", "item_synth_s", "bound_synth_s", "synth_over_bound", "ffts_now", "small_ffts_now",
-           "ffts_before", "one_fft_ms", "item_write_s", "item_mb", "peak_rss_mb", "load_start", "load_end"]
+           "item_cpu_s", "cpu_captures_per_min", "item_render_s", "item_synth_s", "bound_synth_s", "synth_over_bound",
+           "ffts_now", "small_ffts_now", "ffts_before", "one_fft_ms", "item_write_s", "item_mb", "peak_rss_mb",
+           "load_start", "load_end"]
 
 
 def table(rows: list[dict]) -> str:

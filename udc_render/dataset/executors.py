@@ -99,7 +99,7 @@ def make_item(shared: Shared, task: Task) -> dict:
     Runs in this process, a pool process or a Dask worker; returns run times (s) for the log."""
     from udc_render.pipeline import synthesize
     from udc_render.render import render_scene
-    age, t0 = process_age_s(), time.perf_counter()
+    age, t0, cpu0 = process_age_s(), time.perf_counter(), time.process_time()
     scene = replace(shared.scene, render=replace(shared.scene.render, seed=task.render_seed))
     if task.pose is None:  # a monitor item: its image
         scene = replace(scene, content=replace(scene.content, image=task.image))
@@ -136,6 +136,7 @@ def make_item(shared: Shared, task: Task) -> dict:
     return {"item": task.item, "folder": task.folder, "render_s": round(t1 - t0, 3),
             "kernels_s": round(t_kernels - t1, 3), "synth_s": round(t2 - t_kernels, 3),
             "write_s": round(time.perf_counter() - t2, 3),
+            "cpu_s": round(time.process_time() - cpu0, 3),  # this process's CPU seconds (every thread's)
             "process_age_s": None if age is None else round(age, 3), "host": socket.gethostname(), "pid": os.getpid(),
             "peak_rss_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1)}
 
