@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 import torch
 
@@ -50,7 +51,6 @@ def srgb_to_linear(v: np.ndarray) -> np.ndarray:
 
 
 def _png(path: Path) -> np.ndarray:
-    import imageio.v3 as iio
     a = iio.imread(path)
     if a.ndim != 3 or a.shape[2] < 3 or a.dtype not in (np.uint8, np.uint16):
         raise DataError(f"{path}: shape {a.shape}, {a.dtype}: expected an 8- or 16-bit RGB(A) PNG")

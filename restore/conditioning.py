@@ -33,7 +33,7 @@ import numpy as np
 import torch
 
 from restore.data import DataError
-from udc_render.description import DescriptionError, PanelDescription, check_spec
+from udc_render.description import DESCRIPTION_KERNEL_PX, DescriptionError, PanelDescription, check_spec
 
 TENSOR_KEYS = ("kernels", "outside", "gamma", "gain", "lambda_read", "lambda_shot", "saturation", "black_level_dn",
                "white_level_dn", "bit_depth", "distance_mm")
@@ -79,7 +79,6 @@ def empty_description_tensors(batch: int, kernel_px: int, device=None) -> dict[s
 
 def spec_kernel_px(model) -> int:
     """The kernel window of the descriptions a model was made for (its description_spec; else the default)."""
-    from udc_render.description import DESCRIPTION_KERNEL_PX
     return int((getattr(model, "description_spec", None) or {}).get("kernel_px", DESCRIPTION_KERNEL_PX))
 
 

@@ -48,11 +48,13 @@ from udc_render.description import (
 from udc_render.io.files import read_toml
 from udc_render.optics import field_basis, field_weights, gamma, live_phases
 from udc_render.optics.displays import PAPER_GAMMA, Display, load_display
-from udc_render.scene.geometry import RenderGrid
+from udc_render.scene import load_scene
+from udc_render.scene.geometry import RenderGrid, psf_lens, render_grid
+from udc_render.scene.overrides import with_overrides
 from udc_render.sensor import SensorConfig, SensorError, rgb_to_rggb
 from udc_render.sensor.noise import sensor_lambdas
 from udc_render.synth_config import SynthConfig
-from udc_render.synth_kernels import band_kernel_set, camera_channel_kernels
+from udc_render.synth_kernels import band_kernel_set, camera_channel_kernels, scene_object_distance_m
 
 __all__ = ["Rig", "dataset_rig", "describe_display", "describe_fit", "describe_panel", "display_kernels", "scene_rig",
            "with_sensor"]
@@ -78,10 +80,6 @@ class Rig:
 def scene_rig(scene=None, frame_px: tuple[int, int] | None = None, pitch_um: float | None = None) -> Rig:
     """The rig of a scene (None: the monitor scene) at frame_px (width, height) and pitch_um (None: its own)."""
     from udc_render.dataset.bank_make import scene_white
-    from udc_render.scene import load_scene
-    from udc_render.scene.geometry import psf_lens, render_grid
-    from udc_render.scene.overrides import with_overrides
-    from udc_render.synth_kernels import scene_object_distance_m
     scene = with_overrides(scene or load_scene("monitor"), sensor_px=frame_px, pitch_um=pitch_um)
     grid = render_grid(scene)
     return Rig(psf_lens(scene, scene_object_distance_m(scene)), grid,
