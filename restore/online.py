@@ -193,7 +193,7 @@ class OnlineBatches:
         if self.captures is not None:
             panels = [captured_panel(p, d["capture"]) for p, d in zip(panels, draws)]
         brightness = [d["capture"].brightness if "capture" in d else self.brightness[d["panel"]] for d in draws]
-        x = clean * per_crop(brightness, clean)
+        x = clean.mul_(per_crop(brightness, clean))  # the stacked crops are this batch's own: scaled in place
         gens = [torch.Generator(self.degrader.device).manual_seed(d["noise_seed"]) for d in draws]
         crops = [(self.pixels[d["image"]].shape[1:], (d["y0"], d["x0"])) for d in draws]
         sources = [WideSource(d["image"], self.pixels[d["image"]], b, d["mode"]) for d, b in zip(draws, brightness)]
