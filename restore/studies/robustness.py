@@ -60,7 +60,7 @@ from udc_render.dataset.bank import Bank, read_bank
 from udc_render.dataset.bank_make import bank_settings, make_bank, preset_specs, random_specs
 from udc_render.dataset.randomize import load_distributions
 from udc_render.errors import UdcError
-from udc_render.io.exr import save_exr
+from udc_render.io.exr import read_exr, save_exr
 from udc_render.io.files import save_text
 from udc_render.optics.displays import Display, micrograph_display, preset
 from udc_render.pipeline import SynthConfig
@@ -132,7 +132,6 @@ def clean_manifest(b: Budget) -> list[dict]:
 
 def check_clean_images(folder: Path, b: Budget) -> None:
     """Refuse, in one line, a clean set in `folder` that another budget made (its items or frame differ)."""
-    from udc_render.io.exr import read_exr
     manifest = folder / "manifest.jsonl"
     lines = [json.loads(line) for line in manifest.read_text().splitlines() if line.strip()]
     h, w = read_exr(folder / lines[0]["folder"] / "gt.exr")["R"].shape if lines else (0, 0)

@@ -23,6 +23,7 @@ HEAVY = {  # import time after numpy
     "scipy.optimize": "281 ms",
     "scipy.ndimage": "233 ms",
     "scipy.fft": "175 ms",
+    "scipy.stats": "1.1-1.4 s",
     "skimage.restoration": "760 ms (scikit-image loads its subpackages lazily: the cost comes on first use)",
     "skimage.transform": "310 ms",
     "skimage.data": "279 ms with its first image",

@@ -119,7 +119,8 @@ def _differing(a: dict, b: dict) -> set[str]:
 
 def test_profiles_differ_only_where_they_say(scene, tmp_path):
     """One scene synthesised under each profile: synth.json differs in form, channel kernels, defects, fixed-pattern
-    noise, the far field the spectral form adds and the profile record alone (the job's sensor record also in the noise); each capture.json's display record only in the distance (glass: not at all); the
+    noise, the far field the spectral form adds, the ground truth's optics (the spectral form's
+    monitor planes) and the profile record alone (the job's sensor record also in the noise); each capture.json's display record only in the distance (glass: not at all); the
     physical captures carry the defect and FPN records, the paper's none. The same goes for a dataset's job.json."""
     out = {}
     for name in ("paper", "physical"):
@@ -128,7 +129,7 @@ def test_profiles_differ_only_where_they_say(scene, tmp_path):
                      str(out[name])]) == 0
     synth = {n: json.loads((o / "synth.json").read_text()) for n, o in out.items()}
     assert _differing(synth["paper"], synth["physical"]) == {"form", "channel_kernels", "defects", "fpn", "profile",
-                                                             "stray_light", "gt_noise", "far_field"}
+                                                             "stray_light", "gt_noise", "far_field", "gt_optics"}
     assert synth["paper"]["far_field"]["far_share"] == {}  # the far field is the spectral form's (optics.far_field)
     assert synth["physical"]["far_field"]["threshold"] == synth["paper"]["far_field"]["threshold"]
     # both average the paper's 16 ground-truth frames, each with its own noise model (gaussian / poisson)

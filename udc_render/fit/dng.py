@@ -25,9 +25,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import rawpy
 import tifffile
 
-from udc_render.fit.inputs import FitError
+from udc_render.fit.errors import FitError
 
 CFA, LINEAR_RAW = 32803, 34892
 T_PATTERN_DIM, T_PATTERN, T_PLANE_COLOR = 33421, 33422, 50710
@@ -78,7 +79,6 @@ def _values(page, code) -> np.ndarray | None:
 
 def _decode_libraw(path: Path, shape_hw, table) -> tuple[np.ndarray, bool, str]:
     """(the stored image as LibRaw decodes it, whether the table is already applied, a note or '')."""
-    import rawpy
     with rawpy.imread(str(path)) as raw:
         data = np.array(raw.raw_image, copy=True)
         curve = np.array(raw.tone_curve, copy=True)  # a view into LibRaw's memory until copied

@@ -13,16 +13,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import png
 import tifffile
 
-from udc_render.errors import UdcError
+from udc_render.fit.dng import read_dng
+from udc_render.fit.errors import FitError
 
 SUFFIXES = (".png", ".tif", ".tiff", ".dng")
 COLOURS = "RGB"
-
-
-class FitError(UdcError):
-    """What udc-render fit cannot read or fit; one line naming the file or option, the value and what is allowed."""
 
 
 @dataclass(frozen=True)
@@ -71,7 +69,6 @@ class Frame:
 
 def _png(path: Path) -> np.ndarray:
     """A PNG's pixels at their own depth (pypng: 16 bits stay 16; palette expanded; sBIT honoured)."""
-    import png
     w, h, rows, info = png.Reader(filename=str(path)).asDirect()
     dtype = np.uint16 if info["bitdepth"] > 8 else np.uint8
     data = np.vstack([np.asarray(r, dtype) for r in rows]).reshape(h, w, info["planes"])
@@ -111,7 +108,6 @@ def _levels(path: Path, black_dn, saturation_dn, tag_black, tag_white, bits) -> 
 
 def read_frame(path, black_dn: float | None = None, saturation_dn: float | None = None) -> Frame:
     """One measurement file as a Frame (module doc)."""
-    from udc_render.fit.dng import read_dng
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in SUFFIXES:

@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from udc_render.fit.families import Family
 
@@ -133,7 +134,6 @@ def grid_starts(fam: Family, rows: Rows, orders: OrderSet, kappa: float = 1.0, d
 def polish(fam: Family, rows: Rows, orders: OrderSet, kappa, delta, x0, steps: int = IRLS_STEPS) -> Solution:
     """The minimum of the module doc from x0: `steps` least-squares solves, each with V at the model of the one
     before (the first at x0's)."""
-    from threadpoolctl import threadpool_limits
     x = np.asarray(x0, float)
     with threadpool_limits(limits=1, user_api="blas"):  # N × 12 matrices: a 3000-row SVD took 1.2 ms on one
         for _ in range(steps):  # thread, 157 ms on OpenBLAS's threads of a loaded 2-core machine
