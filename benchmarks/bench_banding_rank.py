@@ -30,8 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from udc_render.optics import displays as D
-from udc_render.optics import field as field_module
+from udc_render.optics import displays as D, field as field_module
 from udc_render.pipeline import SynthConfig
 from udc_render.studies import banding as B
 

@@ -33,11 +33,11 @@ from pathlib import Path
 import numpy as np
 import scipy.signal
 
+from psf.engine import KernelSet
 from udc_render.io.files import csv_text, save_text
 from udc_render.optics import apply_kernels, convolve_bands
 from udc_render.render import BandImage
 from udc_render.sensor import SensorConfig, capture
-from psf.engine import KernelSet
 
 H, W, M, S, K = 1024, 2048, 256, 513, 30
 

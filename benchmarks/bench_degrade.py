@@ -43,9 +43,9 @@ import torch
 
 from restore.captures import load_capture_draws
 from restore.degrade import Degrader, WideSource, cpu_threads
-from restore.online import CleanImage, OnlineBatches
 from restore.losses import loss_fn
 from restore.models import UNET_CONFIG, build_model
+from restore.online import CleanImage, OnlineBatches
 from restore.train import TrainSettings, train_step
 from udc_render.dataset.bank import Bank, Panel, PanelField, read_bank
 from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig

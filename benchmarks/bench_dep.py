@@ -29,10 +29,9 @@ import numpy as np
 import scipy.signal
 
 from restore.dep import DENOISERS, DePError, dep_restore
-from udc_render.sensor import demosaic_bilinear, mosaic_of
-from udc_render.metrics import psnr_db
 from udc_render.io.files import csv_text, save_figure, save_text
-from udc_render.sensor import pack_rggb, unpack_rggb
+from udc_render.metrics import psnr_db
+from udc_render.sensor import demosaic_bilinear, mosaic_of, pack_rggb, unpack_rggb
 
 GAMMA, SHOT, READ = 0.97, 1e-3, 1e-6
 
@@ -40,6 +39,7 @@ GAMMA, SHOT, READ = 0.97, 1e-3, 1e-6
 def toled_pair(h: int, w: int, kernel_px: int, seed: int = 0):
     """(noisy packed [4, h, w], ground truth [3, 2h, 2w], kernels [4, k, k]); see the module doc."""
     import skimage.data
+
     from psf import Lens, compute_kernels, layouts
     k3 = compute_kernels(layouts.toled(), Lens(), wavelengths_nm=[640, 520, 450], pixel_um=3.1,
                          size_px=kernel_px).kernels

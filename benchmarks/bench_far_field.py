@@ -31,8 +31,14 @@ import numpy as np
 from udc_render.io.files import save_text
 from udc_render.optics.apply import far_field_images
 from udc_render.optics.displays import load_displays
-from udc_render.pipeline import (SynthConfig, auto_exposure_s, capture_views, depth_layers, plan_kernels,
-                                 sensor_for_scene)
+from udc_render.pipeline import (
+    SynthConfig,
+    auto_exposure_s,
+    capture_views,
+    depth_layers,
+    plan_kernels,
+    sensor_for_scene,
+)
 from udc_render.render import render_scene
 from udc_render.scene import load_scene, parse_bands
 from udc_render.sensor import SensorConfig, band_electron_weights

@@ -61,7 +61,7 @@ def timed_electrons(band_image, view, sensor, cfg, primaries) -> tuple[np.ndarra
 def cases(shared, kernels, band_image, sensor, ranks) -> list[dict]:
     """Per d > 0 display: every phase (the reference; its phase kernels' spectra made per call), each rank (its
     bases' spectra made beforehand, as a dataset worker has them from the kernel cache) and the mean kernel."""
-    from udc_render.optics import field_basis, field_weights, fft_shape, live_phases
+    from udc_render.optics import fft_shape, field_basis, field_weights, live_phases
     from udc_render.optics.convolution import kernel_spectra
     from udc_render.pipeline import capture_views, field_prints
     from udc_render.views import shared_primaries

@@ -20,8 +20,7 @@ import time
 import numpy as np
 
 from psf import layouts
-from udc_render.fit import FitSpec, FitError
-from udc_render.fit import synthetic as S
+from udc_render.fit import FitError, FitSpec, synthetic as S
 from udc_render.fit.hdr import merge_psf
 from udc_render.fit.inputs import Frame
 from udc_render.fit.psf_fit import fit_psf

@@ -23,8 +23,17 @@ from pathlib import Path
 
 from udc_render.io.files import save_text
 from udc_render.optics.displays import load_displays
-from udc_render.pipeline import (DEFAULT_DEFOCUS_TOLERANCE_PX, SynthConfig, auto_exposure_s, capture_views,
-                                 compact_kernels, depth_layers, layer_kernels, plan_kernels, sensor_for_scene)
+from udc_render.pipeline import (
+    DEFAULT_DEFOCUS_TOLERANCE_PX,
+    SynthConfig,
+    auto_exposure_s,
+    capture_views,
+    compact_kernels,
+    depth_layers,
+    layer_kernels,
+    plan_kernels,
+    sensor_for_scene,
+)
 from udc_render.profiles import resolve_profile
 from udc_render.render import render_scene
 from udc_render.scene import load_scene

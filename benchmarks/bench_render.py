@@ -70,8 +70,8 @@ def worker(spec: dict) -> dict:
     from dataclasses import replace
 
     from udc_render.render import render_scene
+    from udc_render.scene import Sensor, load_scene, scenes_dir
     from udc_render.scene.geometry import camera_geometry
-    from udc_render.scene import scenes_dir, Sensor, load_scene
 
     scene = load_scene(scenes_dir() / f"{spec['scene']}.toml")
     if spec["sensor"]:
@@ -140,8 +140,8 @@ def run_case(case, repeats: int, quick: bool, stop_after_s: float) -> dict:
 
 
 def _full_grid(scene: str) -> tuple[int, int]:
+    from udc_render.scene import load_scene, scenes_dir
     from udc_render.scene.geometry import camera_geometry
-    from udc_render.scene import scenes_dir, load_scene
     g = camera_geometry(load_scene(scenes_dir() / f"{scene}.toml"))
     return g.width_px, g.height_px
 

@@ -7,10 +7,9 @@
 numpy and scipy only; see README.md and docs/PHYSICS.md for the model.
 """
 from . import layouts
-from .engine import (AliasingWarning, KernelSet, PSFError, UnderSamplingWarning, compute_kernels,
-                     auto_pupil_samples)
-from .lens import Lens, LensError
+from .engine import AliasingWarning, KernelSet, PSFError, UnderSamplingWarning, auto_pupil_samples, compute_kernels
 from .layouts import LayoutError
+from .lens import Lens, LensError
 from .micrograph import MicrographLayout
 
 __all__ = ["layouts", "Lens", "LensError", "LayoutError", "MicrographLayout", "KernelSet", "PSFError",

@@ -27,9 +27,23 @@ from . import fourier, paper
 from .banding import PowerSeries
 from .errors import AliasingWarning, PSFError, UnderSamplingWarning  # noqa: F401 (re-exported)
 from .lens import Lens
-from .plan import (ALIAS_GUARD, DEFAULT_FIELD_PHASES, DEFAULT_PUPIL_SAMPLES, MAX_PUPIL_WINDOW_SAMPLES,
-                   MAX_PUPIL_WINDOW_SAMPLES_D0, METHODS, PAPER_SENSOR_UM, PRECISIONS, WAVELENGTH_RANGE_NM, Plan,
-                   auto_pupil_samples, check_alias, field_shifts, make_plan, validate_request)
+from .plan import (
+    ALIAS_GUARD,
+    DEFAULT_FIELD_PHASES,
+    DEFAULT_PUPIL_SAMPLES,
+    MAX_PUPIL_WINDOW_SAMPLES,
+    MAX_PUPIL_WINDOW_SAMPLES_D0,
+    METHODS,
+    PAPER_SENSOR_UM,
+    PRECISIONS,
+    WAVELENGTH_RANGE_NM,
+    Plan,
+    auto_pupil_samples,
+    check_alias,
+    field_shifts,
+    make_plan,
+    validate_request,
+)
 from .propagation import angular_spectrum_tf, ramp
 
 __all__ = ["METHODS", "PRECISIONS", "DEFAULT_PUPIL_SAMPLES", "DEFAULT_FIELD_PHASES", "ALIAS_GUARD",

@@ -18,7 +18,6 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-
 from scipy.special import j1
 
 from .geometry import ellipse_areas, rect_areas

@@ -30,8 +30,14 @@ from dataclasses import dataclass, replace
 
 from restore.tensors import stream_seed
 from udc_render.dataset.bank import Bank, Panel
-from udc_render.dataset.randomize import (CaptureDraw, Distributions, RandomizeError, draw_capture, load_distributions,
-                                         parse)
+from udc_render.dataset.randomize import (
+    CaptureDraw,
+    Distributions,
+    RandomizeError,
+    draw_capture,
+    load_distributions,
+    parse,
+)
 
 BANK = "bank"  # --capture-draws bank: the bank's own distributions
 

@@ -24,9 +24,9 @@ import numpy as np
 import torch
 
 from restore.tensors import stream_seed
+from udc_render.errors import UdcError
 from udc_render.io import capture as capture_files
 from udc_render.sensor import pack_rggb, unpack_rggb
-from udc_render.errors import UdcError
 from udc_render.streams import stream
 
 SPLITS = ("train", "val", "test")

@@ -32,11 +32,11 @@ from contextlib import contextmanager
 import numpy as np
 import torch
 
+from psf.banding import power_lattice
 from restore.degrade_sensor import FrameMaps, NoiseDraw, expose_batch, packed_sites
 from restore.degrade_wide import WideLight, WideSource, wide_panel
 from restore.tensors import host_to, per_crop
 from udc_render.dataset.bank import Panel
-from psf.banding import power_lattice
 from udc_render.optics import fft_shape, phase_weights
 
 __all__ = ["Degrader", "NoiseDraw", "TorchPanel", "WideSource", "blur", "blur_batch", "normalised"]

@@ -28,8 +28,16 @@ import torch
 
 from restore.tensors import host_to, per_crop
 from udc_render.dataset.bank import Panel
-from udc_render.sensor import SITES, DefectConfig, FpnConfig, defect_levels, defect_map, fpn_normals, noise_lambdas
-from udc_render.sensor import readout
+from udc_render.sensor import (
+    SITES,
+    DefectConfig,
+    FpnConfig,
+    defect_levels,
+    defect_map,
+    fpn_normals,
+    noise_lambdas,
+    readout,
+)
 
 
 def packed_sites(a: torch.Tensor) -> torch.Tensor:

@@ -32,9 +32,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from udc_render.sensor import demosaic_bilinear
-from udc_render.sensor import unpack_rggb
 from udc_render.errors import UdcError
+from udc_render.sensor import demosaic_bilinear, unpack_rggb
 
 DENOISERS = ("nlm", "wavelet", "bm3d", "none")
 BOUNDARIES = ("reflect", "symmetric", "edge", "taper")

@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import torch
 from torch import nn
+from torch.nn.functional import interpolate
 
 from udc_render.errors import UdcError
-from torch.nn.functional import interpolate
 
 INSTALL = "pip install --no-deps facenet-pytorch==2.6.0"
 

@@ -48,12 +48,11 @@ from restore.captures import CaptureDraws, captured_panel, crop_capture, crop_va
 from restore.data import DataError, dihedral, load_gt, read_manifest
 from restore.degrade import Degrader, WideSource, normalised
 from restore.tensors import per_crop, region, stream_seed
-from udc_render.optics import fft_shape
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.io.exr import read_exr
 from udc_render.io.files import save_text
+from udc_render.optics import fft_shape
 from udc_render.streams import stream
-
 
 
 @dataclass(frozen=True)

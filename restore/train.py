@@ -37,10 +37,10 @@ from tqdm import tqdm
 
 from restore.augment import pair_dataset
 from restore.data import PairBatches, largest_crop_px, list_pairs, load_pair, read_manifest
-from restore.online import DrawLog, online_data
-from restore.precision import check_autocast
 from restore.losses import loss_fn
 from restore.models import build_model, model_config
+from restore.online import DrawLog, online_data
+from restore.precision import check_autocast
 from udc_render.errors import UdcError
 from udc_render.io.files import atomic_path, csv_text, save_figure, save_json, save_text
 from udc_render.io.plots import pyplot

@@ -179,6 +179,7 @@ def monitor_doc(image="pattern:white", framing="fill", sensor_px=(128, 64), pitc
 def write_scene(path, doc: dict):
     """Write `doc` as TOML to `path` and return the validated Scene."""
     from pathlib import Path
+
     from udc_render.scene import load_scene
     path = Path(path)
     path.write_text(toml_text(doc))
@@ -216,10 +217,12 @@ def write_pairs(root, splits=(("train", 6), ("val", 1), ("test", 2)), size_px=(6
     + Gaussian noise (σ = noise), mosaicked and written as raw.dng. Returns the folder."""
     import json
     from pathlib import Path
+
     from scipy.ndimage import gaussian_filter, uniform_filter1d
-    from udc_render.sensor import mosaic_of
+
     from udc_render.io.dng import save_dng
     from udc_render.io.exr import save_exr
+    from udc_render.sensor import mosaic_of
     root, rng = Path(root), np.random.default_rng(seed)
     h, w = size_px
     lines, item = [], 0

@@ -75,21 +75,45 @@ from functools import partial
 import numpy as np
 from tqdm import tqdm
 
-from udc_render.optics.layers import DefocusGeometry, DepthLayers, LayerError, choose_layers, one_layer
 from udc_render.optics import gamma
 from udc_render.optics.displays import PAPER_GAMMA, Display
+from udc_render.optics.layers import DefocusGeometry, DepthLayers, LayerError, choose_layers, one_layer
 from udc_render.optics.stray import synthesis_stray_light
 from udc_render.render import BandImage, render_scene, resolve_xml_camera
 from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens
-from udc_render.sensor import (Capture, SensorConfig, band_electron_weights, capture, capture_electrons,
-                               electrons_rgb, mosaic_of, rgb_to_rggb)
+from udc_render.sensor import (
+    Capture,
+    SensorConfig,
+    band_electron_weights,
+    capture,
+    capture_electrons,
+    electrons_rgb,
+    mosaic_of,
+    rgb_to_rggb,
+)
 from udc_render.sensor.frames import burst_sensor, mean_of_frames
-from udc_render.synth_config import (CHANNEL_KERNELS, DEFAULT_DEFOCUS_TOLERANCE_PX, EXPOSURE_FILL,
-                                     EXPOSURE_PERCENTILE, FORMS, SynthConfig, SynthError)
-from udc_render.synth_kernels import (Kernels, band_kernel_set, compact_kernels, display_channel_kernels,
-                                      display_kernels, kernel_spectra, plan_kernels, prepare_kernels,
-                                      scene_object_distance_m, store_power_maps)
+from udc_render.synth_config import (
+    CHANNEL_KERNELS,
+    DEFAULT_DEFOCUS_TOLERANCE_PX,
+    EXPOSURE_FILL,
+    EXPOSURE_PERCENTILE,
+    FORMS,
+    SynthConfig,
+    SynthError,
+)
+from udc_render.synth_kernels import (
+    Kernels,
+    band_kernel_set,
+    compact_kernels,
+    display_channel_kernels,
+    display_kernels,
+    kernel_spectra,
+    plan_kernels,
+    prepare_kernels,
+    scene_object_distance_m,
+    store_power_maps,
+)
 from udc_render.views import View, bin_pixels, bright_pixels, field_print, layered_electrons, per_channel_blur
 
 # The settings (synth_config) and the kernels (synth_kernels) are part of the pipeline's public names.

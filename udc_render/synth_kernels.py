@@ -21,9 +21,9 @@ from psf.far import CACHE_NAME as FAR_CACHE_NAME, ORDER_PIXEL_FACTOR, order_kern
 from psf.spectral import channel_kernels
 from udc_render.optics import FieldBasis, PowerMap, field_basis, field_power_map, field_weights, live_phases
 from udc_render.optics.convolution import kernel_spectra as spectra_of
-from udc_render.optics.field import phase_spread_l1
 from udc_render.optics.displays import Display
 from udc_render.optics.far_field import FarField, acceptance_um, far_window_px, make_far_field
+from udc_render.optics.field import phase_spread_l1
 from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens, render_grid
 from udc_render.synth_config import SynthConfig, SynthError

@@ -23,8 +23,8 @@ from udc_render.optics import BrightPixels, FieldBasis, PowerMap, apply_kernels,
 from udc_render.optics.apply import far_field_images
 from udc_render.optics.far_field import FarField
 from udc_render.optics.field_power import power_deviation
-from udc_render.optics.primaries import Primaries, plane_spectra
 from udc_render.optics.layers import Compositor, DepthLayers, occluder_kernels
+from udc_render.optics.primaries import Primaries, plane_spectra
 from udc_render.render import BandImage
 from udc_render.sensor import SensorConfig, band_electron_weights, cos4_map
 from udc_render.sensor.radiometry import checked_nonnegative

@@ -64,8 +64,15 @@ def train_models(out: Path, b: dict, progress: bool, times: dict, carry: Path | 
     from restore.models import RESNET_CONFIG, UNET_CONFIG
     from restore.studies.carry import bring_back, keep
     from restore.studies.datasets import make_dataset
-    from restore.studies.random_row import (BANK_SECONDS_FILE, BankRecord, bank_plan, carried_bank, online_settings,
-                                            random_bank, restore_bank_seconds)
+    from restore.studies.random_row import (
+        BANK_SECONDS_FILE,
+        BankRecord,
+        bank_plan,
+        carried_bank,
+        online_settings,
+        random_bank,
+        restore_bank_seconds,
+    )
     from restore.train import TrainSettings, data_fingerprint, train
     defaults = {"unet": UNET_CONFIG, "resnet": RESNET_CONFIG}
     models, datasets = {}, {}

@@ -12,11 +12,11 @@ import torch
 
 from restore.evaluate import level_table, protocol_table, results_markdown
 from restore.studies.budgets import DISPLAY_NAMES, DISPLAYS, ROWS, run_dir
-from restore.studies.random_row import bank_hours
 from restore.studies.error_bands import markdown, weakest_band_text
 from restore.studies.faces import faces_markdown
 from restore.studies.heldout import HELD_OUT
 from restore.studies.orderings import ordering_checks
+from restore.studies.random_row import bank_hours
 from restore.studies.scoring import BAND_CROP_PX, BAND_ITEMS
 from restore.studies.stage_times import EPOCH_CAP_X_MEDIAN, active_seconds
 from restore.train import PLATEAU_MIN_VALIDATIONS, read_log, trend_db_per_fifth, validations

@@ -34,8 +34,17 @@ from restore.captures import load_capture_draws
 from restore.metrics import level_matched_psnr_db, paper_metrics
 from restore.online import clean_images, images_fingerprint
 from restore.studies.options import parse_options
-from restore.studies.robustness import (BUDGETS, SCORE_SEED, SCORES_FILE, TRAIN_SEED, Budget, panel_pairs, read_scores,
-                                        run_study, train_settings)
+from restore.studies.robustness import (
+    BUDGETS,
+    SCORE_SEED,
+    SCORES_FILE,
+    TRAIN_SEED,
+    Budget,
+    panel_pairs,
+    read_scores,
+    run_study,
+    train_settings,
+)
 from restore.studies.robustness_report import DEP, MODELS, SETS, two
 from restore.train import load_model, predict, train
 from udc_render.dataset.bank import Bank, read_bank

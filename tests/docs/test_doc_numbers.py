@@ -183,8 +183,7 @@ def test_defaults_of_fixed_pattern_noise(defaults):
 
 
 def test_defaults_of_stray_light(defaults):
-    from udc_render.optics.stray import ON_VALUES, StrayLight
-    from udc_render.optics.stray import settings as S
+    from udc_render.optics.stray import ON_VALUES, StrayLight, settings as S
     on = StrayLight()
     _says(defaults["room light on the monitor's screen (`room_illuminance_lux`)"],
           "off (on-value 500 lx; `screen_reflectance` 0.044")
@@ -276,8 +275,7 @@ def test_synth_guide_states_the_sensor_and_the_field_convolution():
 def test_physics_page_states_the_stray_lights_coarse_grids():
     """concepts/physics.md: the spreads are convolved on a grid coarser by a power of two, 'at most the inner
     radius / 16: 8 px for the haze at 2048 × 1024, 4 px for the glare, 32 px for the ghost's disc'."""
-    from udc_render.optics.stray import StrayLight
-    from udc_render.optics.stray import settings
+    from udc_render.optics.stray import StrayLight, settings
     from udc_render.optics.stray.spread import COARSE_PER_RADIUS, Spread, coarse_factor
     text = " ".join((CONCEPTS / "physics.md").read_text(encoding="utf-8").split())
     _says(text, "(at most the inner radius / 16: 8 px for the haze at 2048 × 1024, 4 px for the glare, 32 px for "

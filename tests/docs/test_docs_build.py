@@ -10,11 +10,7 @@ from __future__ import annotations
 import subprocess
 import sys
 
-
-
 from tests.docs.examples import ROOT
-
-
 
 
 def test_docs_build_without_warnings(tmp_path):

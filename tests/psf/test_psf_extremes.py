@@ -11,8 +11,18 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from psf import (AliasingWarning, LayoutError, Lens, LensError, MicrographLayout, PSFError, UnderSamplingWarning,
-                 compute_kernels, fourier, layouts)
+from psf import (
+    AliasingWarning,
+    LayoutError,
+    Lens,
+    LensError,
+    MicrographLayout,
+    PSFError,
+    UnderSamplingWarning,
+    compute_kernels,
+    fourier,
+    layouts,
+)
 from psf.layouts import PeriodicLayout, Rect
 from psf.pupil import aperture_slices, lens_grid
 

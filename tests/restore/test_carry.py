@@ -3,10 +3,10 @@ import numpy as np
 import pytest
 import torch
 
-from tests.conftest import write_pairs
 from restore.data import list_pairs, load_pair
 from restore.studies.carry import CARRIED, bring_back, keep
 from restore.train import TrainError, TrainSettings, load_model, predict, train
+from tests.conftest import write_pairs
 
 TINY_UNET = {"type": "unet", "width": 8, "depth": 3}
 

@@ -2,9 +2,9 @@
 import pytest
 import torch
 
-from tests.conftest import write_pairs
 from restore.studies.continued_training import continue_run
 from restore.train import TrainError, TrainSettings, data_fingerprint, train
+from tests.conftest import write_pairs
 
 TINY_RESNET = {"type": "resnet", "features": 8, "blocks": 2}
 

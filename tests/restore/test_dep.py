@@ -11,10 +11,9 @@ import numpy as np
 import pytest
 import scipy.signal
 
-from restore.dep import DENOISERS, DePError, centred_psf, dep_restore, denoise_plane, wiener_plane
-from udc_render.sensor import demosaic_bilinear, mosaic_of
+from restore.dep import DENOISERS, DePError, centred_psf, denoise_plane, dep_restore, wiener_plane
 from udc_render.metrics import psnr_db
-from udc_render.sensor import pack_rggb, unpack_rggb
+from udc_render.sensor import demosaic_bilinear, mosaic_of, pack_rggb, unpack_rggb
 
 GAMMA = 0.97
 H, W = 128, 192  # packed plane size
@@ -24,6 +23,7 @@ H, W = 128, 192  # packed plane size
 def toled():
     """(noisy packed [4, H, W], ground truth [3, 2H, 2W], kernels [4, 65, 65], noiseless blurred packed)."""
     import skimage.data
+
     from psf import Lens, compute_kernels, layouts
     k3 = compute_kernels(layouts.toled(pitch_um=60.0), Lens(), wavelengths_nm=[640, 520, 450], pixel_um=3.1, size_px=65).kernels
     k4 = k3[[0, 1, 1, 2]].astype(np.float64)

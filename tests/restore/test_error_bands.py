@@ -33,6 +33,7 @@ def test_band_transfer_of_a_delta_and_a_box():
 
 def test_early_training_variants_parse_or_fail_in_one_line():
     import pytest
+
     from restore.models import ModelConfigError
     from restore.studies.early_training import parse_variant
     v = parse_variant('unet:128:2e-4:{"width": 64}')

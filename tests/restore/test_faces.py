@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 import torch
 
-from restore.studies.face_chart import STUDY_FACE_PX, face_chart
 from restore.mtcnn import MTCNN, box_iou, recall
+from restore.studies.face_chart import STUDY_FACE_PX, face_chart
 
 torch.set_num_threads(2)
 

@@ -10,9 +10,8 @@ from torch import nn
 
 from restore.lpips import LPIPS
 from restore.metrics import image_metrics, level_scores, lpips_distance, paper_metrics, ssim
-from udc_render.metrics import BORDER_PX, border_px, display_referred
 from udc_render.io.previews import daylight_balance
-from udc_render.metrics import psnr_db
+from udc_render.metrics import BORDER_PX, border_px, display_referred, psnr_db
 
 torch.set_num_threads(2)
 ONES = np.ones(3)

@@ -7,8 +7,18 @@ import torch.nn.functional as F
 from torch import nn
 
 from restore.counting import count_macs, count_parameters, mac_breakdown
-from restore.models import (MODELS, RESNET_CONFIG, UNET_CONFIG, UNET_SINGLE_ENCODER_CONFIG, ModelConfigError, ResNet,
-                            UNet, build_model, load_config, model_config)
+from restore.models import (
+    MODELS,
+    RESNET_CONFIG,
+    UNET_CONFIG,
+    UNET_SINGLE_ENCODER_CONFIG,
+    ModelConfigError,
+    ResNet,
+    UNet,
+    build_model,
+    load_config,
+    model_config,
+)
 
 
 @pytest.fixture(autouse=True, scope="module")

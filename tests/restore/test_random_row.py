@@ -7,8 +7,18 @@ from types import SimpleNamespace
 import pytest
 
 from restore.studies.budgets import BUDGETS, shipped_folder
-from restore.studies.random_row import (BANK_SECONDS_FILE, RANDOM_ROW, SECONDS_FILE, BankRecord, bank_hours, bank_plan,
-                                       carried_bank, family_distributions, online_settings, restore_bank_seconds)
+from restore.studies.random_row import (
+    BANK_SECONDS_FILE,
+    RANDOM_ROW,
+    SECONDS_FILE,
+    BankRecord,
+    bank_hours,
+    bank_plan,
+    carried_bank,
+    family_distributions,
+    online_settings,
+    restore_bank_seconds,
+)
 from restore.train import TrainSettings
 from udc_render.dataset.bank import FORMAT_1
 from udc_render.dataset.randomize import default_distributions, draw_panels

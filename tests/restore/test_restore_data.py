@@ -8,8 +8,7 @@ import torch
 from restore.data import DataError, PairDataset, augment_crop, dihedral, list_pairs, load_pair
 from restore.losses import loss_fn, ssim
 from udc_render.io.exr import read_exr, save_exr
-from udc_render.sensor import mosaic_of
-from udc_render.sensor import pack_rggb
+from udc_render.sensor import mosaic_of, pack_rggb
 from udc_render.streams import stream
 
 

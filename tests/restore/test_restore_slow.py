@@ -1,5 +1,6 @@
 """End-to-end restoration checks on rendered captures (slow: `pytest -m slow`)."""
 import json
+
 import numpy as np
 import pytest
 

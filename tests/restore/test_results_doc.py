@@ -50,6 +50,7 @@ def test_face_exposure_text_is_computed_from_the_face_table():
 def test_evaluation_stamp_follows_the_checkpoint_and_the_data(tmp_path):
     """A row is scored again (restore.studies.scoring.evaluate_rows) exactly when its stamp changes."""
     import json
+
     from restore.studies.scoring import evaluation_stamp
     data = tmp_path / "data"
     data.mkdir()
@@ -71,6 +72,7 @@ def test_machine_time_is_summed_from_what_each_stage_recorded(tmp_path):
     (each summed over resumed parts; a model's active time where it has a loss log), plus this invocation's
     redone stages: a golden total."""
     import json
+
     from restore.studies.results_document import budget_section
     out = tmp_path / "res"
     datasets = {p: out / f"dataset_{p}" for p in ("physical", "paper")}
@@ -97,6 +99,7 @@ def test_training_table_reports_each_models_trend_at_the_end(tmp_path):
     """A model stopped by its epoch cap while still rising shows the plateau as not reached and its rise per
     fifth of the steps: here 0.05 dB per validation of 150 steps, at step 2400 a fifth is 480 steps: +0.16 dB."""
     import json
+
     from restore.studies.budgets import BUDGETS, run_dir
     from restore.studies.results_document import training_table
     from restore.train import LOG_COLUMNS

@@ -8,7 +8,16 @@ import math
 import pytest
 
 from restore.studies.robustness import BUDGETS
-from restore.studies.robustness_panels import COLUMNS, PANEL_SETS, STEM, Run, first_panels, run_name, run_panels, summary
+from restore.studies.robustness_panels import (
+    COLUMNS,
+    PANEL_SETS,
+    STEM,
+    Run,
+    first_panels,
+    run_name,
+    run_panels,
+    summary,
+)
 from udc_render.dataset.bank import Bank
 from udc_render.errors import UdcError
 

@@ -7,14 +7,13 @@ import numpy as np
 import pytest
 import torch
 
-from tests.conftest import write_pairs
-from restore.data import list_pairs, load_pair
 import restore.precision
+from restore.data import list_pairs, load_pair
 from restore.precision import PrecisionError
 from restore.train import TrainError, TrainSettings, load_model, predict, train
-from udc_render.sensor import demosaic_bilinear
+from tests.conftest import write_pairs
 from udc_render.cli import main
-from udc_render.sensor import unpack_rggb
+from udc_render.sensor import demosaic_bilinear, unpack_rggb
 
 TINY_UNET = {"type": "unet", "width": 8, "depth": 3}
 TINY_RESNET = {"type": "resnet", "features": 8, "blocks": 2}

@@ -11,10 +11,21 @@ from restore.degrade import Degrader, WideSource
 from restore.degrade_wide import WideLight
 from restore.tensors import region
 from udc_render.cli import main
-from udc_render.dataset.bank import (BANK_FILE, BANK_FORMAT, FORMAT_1, FORMAT_1_EFFECTS, Panel, PanelFar, PanelHaze,
-                                     read_bank, read_panel, save_panel, write_bank_json)
-from udc_render.dataset.randomize import draw_capture, draw_panels, load_distributions
+from udc_render.dataset.bank import (
+    BANK_FILE,
+    BANK_FORMAT,
+    FORMAT_1,
+    FORMAT_1_EFFECTS,
+    Panel,
+    PanelFar,
+    PanelHaze,
+    read_bank,
+    read_panel,
+    save_panel,
+    write_bank_json,
+)
 from udc_render.dataset.bank_make import differing_settings, monitor_white_bands
+from udc_render.dataset.randomize import draw_capture, draw_panels, load_distributions
 from udc_render.optics.apply import far_field_images
 from udc_render.optics.displays import PAPER_GAIN, PAPER_GAMMA, preset
 from udc_render.pipeline import SynthConfig, plan_kernels, sensor_for_scene

@@ -12,11 +12,7 @@ import numpy as np
 import pytest
 
 from psf import layouts
-from udc_render.calibration import Rig
-from udc_render.calibration import mtf as cal_mtf
-from udc_render.calibration import noise as cal_noise
-from udc_render.calibration import protocols as cal
-from udc_render.calibration import psf as cal_psf
+from udc_render.calibration import Rig, mtf as cal_mtf, noise as cal_noise, protocols as cal, psf as cal_psf
 from udc_render.cli import main
 from udc_render.optics.displays import load_display
 from udc_render.pipeline import SynthConfig

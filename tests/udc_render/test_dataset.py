@@ -13,9 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from udc_render.dataset import executors
-from udc_render.dataset import plan as dataset
 from udc_render.cli import main
+from udc_render.dataset import executors, plan as dataset
 
 pytestmark = pytest.mark.usefixtures("render_cache")
 

@@ -7,10 +7,10 @@ import shutil
 import numpy as np
 import pytest
 
+from tests.udc_render.test_dataset import tree
 from udc_render.cli import main
 from udc_render.dataset import randomize as R
 from udc_render.io.exr import read_exr
-from tests.udc_render.test_dataset import tree
 
 pytestmark = pytest.mark.usefixtures("render_cache")
 

@@ -11,8 +11,16 @@ import pytest
 
 from udc_render.optics import displays as D
 from udc_render.optics.layers import MAX_LAYERS, Compositor, DefocusGeometry, LayerError, choose_layers
-from udc_render.pipeline import (SynthConfig, SynthError, capture_views, depth_layers, display_kernels,
-                                 plan_kernels, sensor_for_scene, synthesize)
+from udc_render.pipeline import (
+    SynthConfig,
+    SynthError,
+    capture_views,
+    depth_layers,
+    display_kernels,
+    plan_kernels,
+    sensor_for_scene,
+    synthesize,
+)
 from udc_render.render import BandImage, render_scene
 from udc_render.scene import Bands, load_scene
 from udc_render.scene.geometry import camera_geometry, psf_lens, render_grid

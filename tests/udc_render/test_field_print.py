@@ -8,8 +8,16 @@ import pytest
 
 from udc_render.optics.displays import preset
 from udc_render.optics.stray import StrayLight
-from udc_render.pipeline import (SynthConfig, auto_exposure_s, capture_views, field_prints, plan_kernels,
-                                 prepare_kernels, sensor_for_scene, synthesize)
+from udc_render.pipeline import (
+    SynthConfig,
+    auto_exposure_s,
+    capture_views,
+    field_prints,
+    plan_kernels,
+    prepare_kernels,
+    sensor_for_scene,
+    synthesize,
+)
 from udc_render.render import render_scene
 from udc_render.scene import Bands, Sensor, load_scene
 from udc_render.views import channel_electrons

@@ -20,8 +20,7 @@ import pytest
 from psf import MicrographLayout, layouts
 from udc_render.cli import build_parser, main
 from udc_render.cli.args import capture_setup, synth_config
-from udc_render.fit import FitSpec
-from udc_render.fit import synthetic as S
+from udc_render.fit import FitSpec, synthetic as S
 from udc_render.fit.hdr import merge_psf
 from udc_render.fit.inputs import read_frames
 from udc_render.fit.psf_fit import fit_psf

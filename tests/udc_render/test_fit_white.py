@@ -9,7 +9,6 @@ import math
 import numpy as np
 import pytest
 import tifffile
-
 from scipy.special import j1, jn_zeros
 
 from psf import Lens, MicrographLayout

@@ -4,17 +4,16 @@ References are independent of udc_render.optics: scipy.signal.fftconvolve (mode=
 hand), np.interp for the phase interpolation, psf.banding.banding_profile for the banding.
 """
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 import scipy.signal
 
 from psf import compute_kernels, layouts
-from dataclasses import replace
-
 from psf.banding import SERIES_RTOL, PowerSeries, banding_profile
-from psf.lens import Lens
 from psf.engine import KernelSet
+from psf.lens import Lens
 from udc_render.optics import OpticsError, apply_kernels, convolve_bands, fft_shape, field_power_map, phase_weights
 from udc_render.optics.field import phase_basis
 from udc_render.render import BandImage

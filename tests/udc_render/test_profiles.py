@@ -11,9 +11,8 @@ import pytest
 
 from udc_render.cli import build_parser, main
 from udc_render.cli.args import capture_setup
-from udc_render.profiles import (DEFAULT_PROFILE, PHYSICAL_DISTANCE_MM, PROFILES, ProfileError, describe,
-                                 resolve_profile)
 from udc_render.optics.stray import StrayLight
+from udc_render.profiles import DEFAULT_PROFILE, PHYSICAL_DISTANCE_MM, PROFILES, ProfileError, describe, resolve_profile
 from udc_render.sensor import DefectConfig, FpnConfig
 
 pytestmark = pytest.mark.usefixtures("render_cache")

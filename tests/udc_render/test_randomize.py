@@ -177,8 +177,8 @@ def test_table_refits_and_gives_the_papers_gamma_between_its_rows():
     two rows re-fitted to 3e-5 (measured 5.8e-6 and 1.5e-6: 5×, an optimiser's stop), and γ within 0.1 % of the
     paper's at every 0.5 nm from 8 to 30 nm, the table every 1 nm (randomize.md: "within 0.08 %"; measured
     8.1e-4 at 29.5 nm, the largest: a linear interpolation's error between rows, deterministic, 1.2×)."""
-    from udc_render.optics import gamma as G
     from udc_render.calibration.fit_gains import FIT_EDGES_NM as edges, fit_gains
+    from udc_render.optics import gamma as G
     gains = {name: fit_gains(lay) for name, lay in (("glass", None), ("poled", layouts.poled()))}
     for w in (8.0, 26.0):
         fit = D.fit_poled_transmission(gains["poled"], gains["glass"], edges, urbach_width_nm=w)
@@ -192,8 +192,8 @@ def test_table_refits_and_gives_the_papers_gamma_between_its_rows():
 
 
 def test_capture_config_sets_the_sensor_and_the_panels_haze(dists):
-    from udc_render.pipeline import SynthConfig
     from udc_render.optics.stray import StrayLight
+    from udc_render.pipeline import SynthConfig
     panel = next(p for p in R.draw_panels(dists, 8, 0) if p.family == "poled")
     cap = R.draw_capture(dists, 8, 0, 5)
     cfg = R.capture_config(SynthConfig(), cap, panel)

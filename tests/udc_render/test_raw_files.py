@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from udc_render.io import capture as capture_files
-from udc_render.io.dng import (DngError, as_shot_neutral, checker_responses, color_matrix_fit, read_dng_mosaic,
-                               save_dng)
+from udc_render.io.dng import DngError, as_shot_neutral, checker_responses, color_matrix_fit, read_dng_mosaic, save_dng
 from udc_render.sensor import SensorConfig, capture_electrons, pack_rggb
 
 CAMERA = "Nikon 5100 (NPL)"

@@ -10,9 +10,7 @@ import pytest
 
 from psf import layouts
 from udc_render.optics.displays import Display, Transmission, preset
-from udc_render.studies import realism_banding as rb
-from udc_render.studies import realism_capture as rc
-from udc_render.studies import realism_paper as rp
+from udc_render.studies import realism_banding as rb, realism_capture as rc, realism_paper as rp
 
 
 def _stripe(distance_mm: float, pitch_um: float = 60.0) -> Display:

@@ -17,12 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from udc_render.scene import geometry as rig
 from udc_render.content import spectra
-from udc_render.render import variants
-from udc_render.render import band_names, render_scene
+from udc_render.render import band_names, render_scene, variants
 from udc_render.render.job import pass_statistics
-from udc_render.scene import Camera, parse_scene
+from udc_render.scene import Camera, geometry as rig, parse_scene
 
 pytestmark = pytest.mark.usefixtures("render_cache")
 
@@ -281,7 +279,7 @@ def test_hdr_sky_and_sun_have_their_luminance(spp):
     sub-pixel: Σ Y over its pixels = Y_sun × its projected area in px² = Ω v²/(cos³θ pitch²);
     the hit count is binomial, σ_rel ≤ 1/√(spp · area) (12.5 % at 256 spp, 2.2 % at 8192)."""
     from udc_render.render.mitsuba_scene import SUN_ANGULAR_DIAMETER_DEG, SUN_SEEN_AT_M, WINDOW_M
-    from udc_render.scene import load_scene, Sensor, Bands
+    from udc_render.scene import Bands, Sensor, load_scene
     s = load_scene("hdr")
     s = replace(s, sensor=Sensor(32, 16, 99.2), bands=Bands((400.0, 700.0), 50.0))
     s = s.with_render(spp=spp, max_depth=1, depth=False, seed=1, sampler="independent")  # i.i.d. pixels, binomial hits
@@ -447,9 +445,10 @@ def test_pass_statistics_noise_formula():
 
 
 def test_exr_json_and_preview_roundtrip(udc, tmp_path):
-    from udc_render.io.band_image import load_band_image, save_band_image
     import imageio.v3 as iio
     import OpenEXR
+
+    from udc_render.io.band_image import load_band_image, save_band_image
     s = scene_of(udc, tmp_path, framing="fill", **SMALL,
                  render={"spp": 2, "path": "rgb_matrix", "depth": True}, bands={"range_nm": [400, 700], "step_nm": 5})
     b = render_scene(s, progress=False)

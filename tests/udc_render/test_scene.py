@@ -9,12 +9,19 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from udc_render.content import monitor_image as di
-from udc_render.scene import geometry as rig
-from udc_render.content import spectra
-from udc_render.scene import (scenes_dir, Bands, HDRRoom, Monitor, Room, SceneError, load_scene, parse_bands,
-                              parse_scene)
-
+from udc_render.content import monitor_image as di, spectra
+from udc_render.scene import (
+    Bands,
+    HDRRoom,
+    Monitor,
+    Room,
+    SceneError,
+    geometry as rig,
+    load_scene,
+    parse_bands,
+    parse_scene,
+    scenes_dir,
+)
 
 # ---------------------------------------------------------------- shipped scene files
 

@@ -18,8 +18,19 @@ import numpy as np
 import pytest
 from scipy.stats import chi2, norm
 
-from udc_render.sensor import (CHANNELS, Capture, DefectConfig, SensorConfig, SensorError, capture, electrons_spectral,
-                               pack_rggb, sample_brooks, sensor_lambdas, unpack_rggb)
+from udc_render.sensor import (
+    CHANNELS,
+    Capture,
+    DefectConfig,
+    SensorConfig,
+    SensorError,
+    capture,
+    electrons_spectral,
+    pack_rggb,
+    sample_brooks,
+    sensor_lambdas,
+    unpack_rggb,
+)
 
 H_C = 6.62607015e-34 * 299792458.0
 N_SIDE = 256  # flat fields: 256 × 256 mosaic, 16384 pixels per RGGB channel

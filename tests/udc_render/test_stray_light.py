@@ -12,9 +12,17 @@ import pytest
 
 from udc_render.content.spectra import band_means, illuminant, luminance_cd_m2, scaled_to_luminance
 from udc_render.optics import displays as D
-from udc_render.optics.stray import (ON_VALUES, Spread, StrayContext, StrayLight, StrayLightError, apply_view,
-                                     convolve, uniform_electrons)
-from udc_render.optics.stray import spread as S
+from udc_render.optics.stray import (
+    ON_VALUES,
+    Spread,
+    StrayContext,
+    StrayLight,
+    StrayLightError,
+    apply_view,
+    convolve,
+    spread as S,
+    uniform_electrons,
+)
 from udc_render.pipeline import SynthConfig, SynthError, plan_kernels, synthesize
 from udc_render.profiles import resolve_profile
 from udc_render.render import render_scene

@@ -8,13 +8,12 @@ import numpy as np
 import pytest
 
 from psf.banding import PowerSeries
-from udc_render.cli import main
 from psf.engine import DEFAULT_FIELD_PHASES
+from udc_render.cli import main
 from udc_render.optics import displays as D
 from udc_render.pipeline import SynthConfig
 from udc_render.scene.geometry import psf_lens
-from udc_render.studies import banding as B
-from udc_render.studies import banding_fit as F
+from udc_render.studies import banding as B, banding_fit as F
 
 
 @pytest.fixture(scope="module")

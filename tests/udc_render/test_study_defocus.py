@@ -8,8 +8,7 @@ import pytest
 from scipy.optimize import brentq
 
 from psf import layouts
-from udc_render.studies import defocus as D
-from udc_render.studies import defocus_measures as M
+from udc_render.studies import defocus as D, defocus_measures as M
 
 V_F = M.focus_vergence_per_m()
 

@@ -9,14 +9,12 @@ import numpy as np
 import pytest
 
 from psf import layouts
-from udc_render.optics import displays as D
-from udc_render.optics import gamma as G
-from udc_render.sensor import demosaic_bilinear, mosaic_of
 from udc_render.io.dng import read_dng_mosaic
 from udc_render.metrics import psnr_db
-from udc_render.render import render_scene
-from udc_render.sensor import SensorConfig, pack_rggb
+from udc_render.optics import displays as D, gamma as G
 from udc_render.pipeline import SynthConfig, SynthError, display_gamma, plan_kernels, sensor_for_scene, synthesize
+from udc_render.render import render_scene
+from udc_render.sensor import SensorConfig, demosaic_bilinear, mosaic_of, pack_rggb
 
 PRESETS = [D.preset(n) for n in ("glass", "toled", "poled")]
 NOISELESS = SynthConfig(sensor=SensorConfig(noise="none"))
@@ -69,9 +67,9 @@ def test_presets_reproduce_the_papers_gammas():
 def test_virtual_calibration_measures_the_papers_gamma_through_the_poled(tmp_path):
     """calibration.gamma's white-square protocol on the default rig (the square and region calibration.fit_gains
     assumes) gives the P-OLED's γ: truth within 0.3 % of the paper's, the noisy regression within 1.5 %."""
+    from udc_render.calibration.fit_gains import FIT_REGION_PX, FIT_SQUARE_PX
     from udc_render.calibration.gamma import calibrate_gamma
     from udc_render.calibration.rig import Rig
-    from udc_render.calibration.fit_gains import FIT_REGION_PX, FIT_SQUARE_PX
     from udc_render.sensor import rgb_to_rggb
     r = calibrate_gamma(Rig(D.preset("poled"), out=tmp_path))
     assert (r["square_px"], r["region_px"]) == (FIT_SQUARE_PX, FIT_REGION_PX)
@@ -244,8 +242,9 @@ def test_banding_period_in_the_capture(udc, tmp_path, render_cache):
 
 @pytest.mark.fallback
 def test_synth_files_round_trip_and_are_byte_identical(udc, tmp_path, render_cache):
-    from udc_render.cli import main
     import OpenEXR
+
+    from udc_render.cli import main
     scene_file = tmp_path / "img.toml"
     _scene(udc, scene_file, image="builtin:camera", framing="fit")
     outs = [tmp_path / "a", tmp_path / "b"]
@@ -313,6 +312,7 @@ def test_the_scene_is_the_one_source_of_the_optics(tmp_path):
     """A scene at f/2.8 with a 4 mm lens gets f/2.8 kernels (aperture f/N), f/2.8 irradiance (electrons
     ∝ 1/N²) and its own focal length in the cos⁴ fall-off; a sensor file may not set them."""
     from dataclasses import replace
+
     from udc_render.scene import load_scene
     from udc_render.scene.geometry import psf_lens
     from udc_render.sensor import SensorError, band_electron_weights

@@ -9,13 +9,12 @@ import sys
 import numpy as np
 import pytest
 
+from tests.udc_render.cornell_box import CBOX, LOOKAT, ORIGIN, SENSOR, TARGET, UP
 from udc_render.cli import main
 from udc_render.io.band_image import load_band_image
 from udc_render.render import resolve_xml_camera
 from udc_render.render.xml_camera import scalar_param
 from udc_render.scene import load_scene
-
-from tests.udc_render.cornell_box import CBOX, LOOKAT, ORIGIN, SENSOR, TARGET, UP
 
 # a tiny sensor (64 x 32 px of 6.2 µm behind a 1 mm lens: a 23° view of the box), 3 bands, 4 spp and
 # a 31 µm margin (kernels of 11 px): seconds, not minutes

@@ -12,8 +12,7 @@ from udc_render.errors import UdcError
 from udc_render.scene import RENDER_PATHS, SAMPLERS, load_scene
 from udc_render.scene.overrides import with_overrides
 from udc_render.sensor import SensorConfig
-from udc_render.synth_config import MAX_GT_FRAMES
-from udc_render.synth_config import DEFAULT_FAR_FIELD_COARSE, DEFAULT_FAR_FIELD_THRESHOLD
+from udc_render.synth_config import DEFAULT_FAR_FIELD_COARSE, DEFAULT_FAR_FIELD_THRESHOLD, MAX_GT_FRAMES
 
 
 class UserError(UdcError):

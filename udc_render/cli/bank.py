@@ -11,8 +11,18 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from udc_render.cli.args import (UserError, add_channel_kernels_argument, add_display_argument, capture_setup,
-                                 field_rank, float_pair, non_negative, odd_size, out_dir, positive)
+from udc_render.cli.args import (
+    UserError,
+    add_channel_kernels_argument,
+    add_display_argument,
+    capture_setup,
+    field_rank,
+    float_pair,
+    non_negative,
+    odd_size,
+    out_dir,
+    positive,
+)
 from udc_render.scene import load_scene
 from udc_render.scene.geometry import sensor_kernel_px
 from udc_render.scene.overrides import with_overrides

@@ -5,8 +5,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from udc_render.cli.args import (UserError, add_display_argument, add_far_field_arguments, add_sensor_arguments, out_dir,
-                                synth_config)
+from udc_render.cli.args import (
+    UserError,
+    add_display_argument,
+    add_far_field_arguments,
+    add_sensor_arguments,
+    out_dir,
+    synth_config,
+)
 from udc_render.io.files import save_json
 
 

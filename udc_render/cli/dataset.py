@@ -16,8 +16,15 @@ import argparse
 import math
 from pathlib import Path
 
-from udc_render.cli.args import (UserError, add_capture_arguments, add_scene_arguments, capture_setup, out_dir,
-                                 positive, scene_from_args)
+from udc_render.cli.args import (
+    UserError,
+    add_capture_arguments,
+    add_scene_arguments,
+    capture_setup,
+    out_dir,
+    positive,
+    scene_from_args,
+)
 from udc_render.dataset.plan import DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M
 from udc_render.scene import Monitor
 

@@ -14,8 +14,16 @@ from tqdm import tqdm
 
 from psf.engine import DEFAULT_FIELD_PHASES, METHODS, PAPER_SENSOR_UM, PRECISIONS, AliasingWarning, UnderSamplingWarning
 from psf.pupil import MASK_RASTERS
-from udc_render.cli.args import (UserError, add_display_argument, float_list, float_pair, non_negative, odd_size,
-                                 out_dir, positive)
+from udc_render.cli.args import (
+    UserError,
+    add_display_argument,
+    float_list,
+    float_pair,
+    non_negative,
+    odd_size,
+    out_dir,
+    positive,
+)
 from udc_render.io.kernels import write_kernel_files
 
 

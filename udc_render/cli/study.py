@@ -3,9 +3,8 @@ error-versus-run-time studies of the approximation knobs, the defocus and bandin
 robustness of a restorer trained on one panel or on randomized panels (restore.studies.robustness)."""
 from __future__ import annotations
 
-from pathlib import Path
-
 import argparse
+from pathlib import Path
 
 from udc_render.cli.args import UserError, out_dir
 from udc_render.studies import gap

@@ -9,8 +9,15 @@ import argparse
 import time
 from pathlib import Path
 
-from udc_render.cli.args import (add_capture_arguments, add_channel_kernels_argument, add_scene_arguments,
-                                 capture_setup, float_pair, out_dir, scene_from_args)
+from udc_render.cli.args import (
+    add_capture_arguments,
+    add_channel_kernels_argument,
+    add_scene_arguments,
+    capture_setup,
+    float_pair,
+    out_dir,
+    scene_from_args,
+)
 from udc_render.io.band_image import save_band_image
 from udc_render.io.capture import write_synthesis
 from udc_render.scene import load_scene

@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
 from udc_render.errors import UdcError
 
 GRID_NM = np.arange(360.0, 831.0, 1.0)

@@ -65,10 +65,19 @@ from pathlib import Path
 from tqdm import tqdm
 
 from udc_render.dataset.executors import Shared, executor
+from udc_render.dataset.plan import (
+    BUILTIN_THEN,
+    DEFAULT_ORIGIN_JITTER_M,
+    DEFAULT_TARGET_JITTER_M,
+    SPLITS,
+    DatasetError,
+    Task,
+    Views,
+    image_list,
+    plan_tasks,
+)
 from udc_render.dataset.randomize import PANEL_NAME, capture_panel
 from udc_render.dataset.randomized import Randomization, plan_panels
-from udc_render.dataset.plan import (BUILTIN_THEN, DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M, SPLITS,
-                                     DatasetError, Task, Views, image_list, plan_tasks)
 from udc_render.dataset.store import check_job, clean_stale, locked, write_manifest
 from udc_render.dataset.threads import parent_blas_threads
 from udc_render.optics.displays import Display

@@ -39,10 +39,29 @@ from tqdm import tqdm
 from psf.cache import cached
 from psf.spectral import channel_kernels
 from udc_render.content import spectra
-from udc_render.dataset.bank import (BANK_FILE, FORMAT_1, BankError, Panel, PanelFar, PanelField, PanelHaze,
-                                     file_sha256, panel_effects, save_panel, write_bank_json)
-from udc_render.dataset.randomize import (PANEL_NAME, as_record, capture_config, capture_display, draw_capture,
-                                         draw_panels, panel_scene, scaled_exposure_s)
+from udc_render.dataset.bank import (
+    BANK_FILE,
+    FORMAT_1,
+    BankError,
+    Panel,
+    PanelFar,
+    PanelField,
+    PanelHaze,
+    file_sha256,
+    panel_effects,
+    save_panel,
+    write_bank_json,
+)
+from udc_render.dataset.randomize import (
+    PANEL_NAME,
+    as_record,
+    capture_config,
+    capture_display,
+    draw_capture,
+    draw_panels,
+    panel_scene,
+    scaled_exposure_s,
+)
 from udc_render.optics import field_basis, field_weights, gamma, live_phases
 from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.pipeline import SynthConfig, auto_exposure_s, sensor_for_scene

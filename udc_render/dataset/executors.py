@@ -18,8 +18,13 @@ from pathlib import Path
 from udc_render.dataset.plan import DatasetError, Task
 from udc_render.dataset.randomized import Randomization, exposed, item_setup, panel_setup, recorded
 from udc_render.dataset.store import TMP_PREFIX, item_record
-from udc_render.dataset.threads import (blas_threads, blas_threads_env, process_age_s, set_worker_threads,
-                                       threads_per_worker)
+from udc_render.dataset.threads import (
+    blas_threads,
+    blas_threads_env,
+    process_age_s,
+    set_worker_threads,
+    threads_per_worker,
+)
 from udc_render.io.capture import write_synthesis
 from udc_render.io.files import current_umask, save_json
 from udc_render.optics.displays import Display

@@ -21,8 +21,17 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from udc_render.dataset.randomize import (CaptureDraw, Distributions, PanelDraw, as_record, capture_config,
-                                          capture_display, draw_capture, panel_scene, scaled_exposure_s)
+from udc_render.dataset.randomize import (
+    CaptureDraw,
+    Distributions,
+    PanelDraw,
+    as_record,
+    capture_config,
+    capture_display,
+    draw_capture,
+    panel_scene,
+    scaled_exposure_s,
+)
 from udc_render.optics.displays import Display
 from udc_render.pipeline import SynthConfig, SynthResult, auto_exposure_s, prepare_kernels, sensor_for_scene
 from udc_render.render import BandImage

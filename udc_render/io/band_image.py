@@ -18,6 +18,7 @@ from udc_render.io.images import write_png
 from udc_render.io.previews import preview_rgb
 from udc_render.render.band_image import BandImage, band_names
 
+
 def save_band_image(b: BandImage, out_dir: str | Path) -> dict:
     """Write the EXR, sidecar and previews; returns the paths written."""
     out = Path(out_dir)

@@ -12,8 +12,15 @@
 from udc_render.optics.apply import OpticsResult, apply_kernels
 from udc_render.optics.bright import BrightPixels
 from udc_render.optics.convolution import OpticsError, band_spectra, convolve_bands, fft_shape
-from udc_render.optics.field import (BLENDS, FieldBasis, convolve_field, field_basis, field_weights, live_phases,
-                                     phase_weights)
+from udc_render.optics.field import (
+    BLENDS,
+    FieldBasis,
+    convolve_field,
+    field_basis,
+    field_weights,
+    live_phases,
+    phase_weights,
+)
 from udc_render.optics.field_power import PowerMap, field_power_map
 
 __all__ = ["BLENDS", "BrightPixels", "FieldBasis", "field_basis", "field_weights", "live_phases", "OpticsError", "OpticsResult", "apply_kernels", "band_spectra", "convolve_bands", "convolve_field", "fft_shape",

@@ -24,9 +24,18 @@ import numpy as np
 import scipy.fft as sfft
 
 from udc_render.optics.bright import BrightPixels, bright_blur, dimmed
+from udc_render.optics.convolution import (
+    OpticsError,
+    _channel_weights,
+    _check_margin,
+    _check_spectra,
+    _kernel_spectrum,
+    _Output,
+    _precision,
+    _workers,
+    fft_shape,
+)
 from udc_render.optics.field_power import PowerMap
-from udc_render.optics.convolution import (OpticsError, _channel_weights, _check_margin, _check_spectra,
-                                           _kernel_spectrum, _Output, _precision, _workers, fft_shape)
 
 BLENDS = ("source", "output")
 

@@ -5,11 +5,12 @@ Only this module and `render` import mitsuba; they are called after `variants.se
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from udc_render.content import spectra
-from udc_render.scene.geometry import CameraGeometry
 from udc_render.scene import HDRRoom, Lens, Room
+from udc_render.scene.geometry import CameraGeometry
 
 
 def spectrum(values: np.ndarray) -> dict:

@@ -5,8 +5,22 @@
     overrides.py  the command-line overrides (spp, noise, seed, bands, image, sensor size, pitch)
     geometry.py   facts derived from a scene: camera pose, render grid, the psf lens
 """
-from udc_render.scene.model import (Bands, Camera, HDRRoom, Lens, MitsubaXML, Monitor, Render, Room, Scene,
-                                    SceneError, Sensor, XMLCamera, RENDER_PATHS, SAMPLERS)
+from udc_render.scene.model import (
+    RENDER_PATHS,
+    SAMPLERS,
+    Bands,
+    Camera,
+    HDRRoom,
+    Lens,
+    MitsubaXML,
+    Monitor,
+    Render,
+    Room,
+    Scene,
+    SceneError,
+    Sensor,
+    XMLCamera,
+)
 from udc_render.scene.parse import load_scene, parse_bands, parse_scene, scenes_dir
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "parse_bands", "scenes_dir", "Monitor", "Room",

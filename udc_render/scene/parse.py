@@ -7,13 +7,30 @@ from __future__ import annotations
 
 import math
 import tomllib
-from importlib import resources
 from dataclasses import replace
+from importlib import resources
 from pathlib import Path
 
-from udc_render.scene.model import (CONTENT_TYPES, FRAMINGS, LENS_MODELS, MITSUBA_RANGE_NM,
-                                    RENDER_PATHS, SAMPLERS, TRANSFERS, Bands, Camera, HDRRoom, Lens, MitsubaXML, Monitor,
-                                    Render, Room, Scene, SceneError, Sensor)
+from udc_render.scene.model import (
+    CONTENT_TYPES,
+    FRAMINGS,
+    LENS_MODELS,
+    MITSUBA_RANGE_NM,
+    RENDER_PATHS,
+    SAMPLERS,
+    TRANSFERS,
+    Bands,
+    Camera,
+    HDRRoom,
+    Lens,
+    MitsubaXML,
+    Monitor,
+    Render,
+    Room,
+    Scene,
+    SceneError,
+    Sensor,
+)
 
 
 def scenes_dir() -> Path:

@@ -24,16 +24,31 @@ Modules: config (SensorConfig), bayer (the RGGB convention, packing, bilinear de
 the one definition the numpy synthesis and the online degradation in torch, restore.degrade_sensor, share),
 capture (the whole chain), frames (the mean of N frames: the averaged ground truth).
 """
-from udc_render.sensor.bayer import (CHANNELS, SITE_COLOUR, SITES, demosaic_bilinear, mosaic_of, pack_rggb, rgb_to_rggb,
-                                     site_colour, unpack_rggb)
+from udc_render.sensor import readout
+from udc_render.sensor.bayer import (
+    CHANNELS,
+    SITE_COLOUR,
+    SITES,
+    demosaic_bilinear,
+    mosaic_of,
+    pack_rggb,
+    rgb_to_rggb,
+    site_colour,
+    unpack_rggb,
+)
 from udc_render.sensor.capture import Capture, capture, capture_electrons
 from udc_render.sensor.config import SensorConfig, SensorError
-from udc_render.sensor import readout
 from udc_render.sensor.defects import DefectConfig, DefectError, apply_defects, defect_levels, defect_map
 from udc_render.sensor.fpn import FpnConfig, FpnError, FpnMaps, fpn_maps, fpn_normals
 from udc_render.sensor.noise import expose, noise_lambdas, sample_brooks, sensor_lambdas
-from udc_render.sensor.radiometry import (band_electron_weights, cos4_map, electrons_per_channel, electrons_rgb,
-                                          electrons_spectral, photon_weights)
+from udc_render.sensor.radiometry import (
+    band_electron_weights,
+    cos4_map,
+    electrons_per_channel,
+    electrons_rgb,
+    electrons_spectral,
+    photon_weights,
+)
 
 __all__ = ["CHANNELS", "SITES", "SITE_COLOUR", "Capture", "DefectConfig", "DefectError", "FpnConfig", "FpnError",
            "FpnMaps", "SensorConfig", "SensorError", "apply_defects", "band_electron_weights", "capture",

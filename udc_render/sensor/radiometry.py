@@ -32,8 +32,8 @@ NEGATIVE_TOLERANCE_REL = 1e-4  # negatives above −1e-4 × max|x| are FFT round
 @functools.lru_cache(maxsize=8)
 def _relative_sensitivity(camera: str) -> tuple[np.ndarray, np.ndarray]:
     """(wavelengths_nm [M], S [3, M]) with max S = 1 over all channels."""
-    from psf.spectral import load_sensitivities
     from psf.engine import PSFError
+    from psf.spectral import load_sensitivities
     try:
         wl, s, _ = load_sensitivities(camera)
     except PSFError as exc:

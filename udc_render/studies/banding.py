@@ -67,10 +67,25 @@ from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
 from udc_render.render import render_scene
 from udc_render.scene import Bands, load_scene
 from udc_render.scene.geometry import psf_lens
-from udc_render.studies.banding_fit import (AXES, COLUMNS, DISPLAYS, HARMONICS, analytic_harmonics, band_series,
-                                           fit_period, flat_profile, green_band_weights, green_sites, harmonic_fit,
-                                           interpolated_harmonics, kernel_otf, noise_sigma_dn, period_formula_um, sinc2,
-                                           site_positions_um)
+from udc_render.studies.banding_fit import (
+    AXES,
+    COLUMNS,
+    DISPLAYS,
+    HARMONICS,
+    analytic_harmonics,
+    band_series,
+    fit_period,
+    flat_profile,
+    green_band_weights,
+    green_sites,
+    harmonic_fit,
+    interpolated_harmonics,
+    kernel_otf,
+    noise_sigma_dn,
+    period_formula_um,
+    sinc2,
+    site_positions_um,
+)
 from udc_render.studies.banding_report import markdown, plot
 from udc_render.studies.report import write_tables
 

@@ -20,7 +20,14 @@ import numpy as np
 
 from udc_render.optics import displays as D
 from udc_render.optics.layers import DefocusGeometry
-from udc_render.pipeline import SynthConfig, capture_views, depth_layers, display_kernels, plan_kernels, sensor_for_scene
+from udc_render.pipeline import (
+    SynthConfig,
+    capture_views,
+    depth_layers,
+    display_kernels,
+    plan_kernels,
+    sensor_for_scene,
+)
 from udc_render.render import BandImage
 from udc_render.scene import Bands, load_scene
 from udc_render.scene.geometry import camera_geometry, psf_lens, render_grid

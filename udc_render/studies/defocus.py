@@ -44,13 +44,30 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from psf import compute_kernels
-from udc_render.studies.defocus_measures import (APERTURE_UM, DIFF_TOL, DISPLAY_SPECS, FREQS_CPP, FULL, GEOM_MIN_PX,
-                                                 GEOM_TOL, PIXEL_UM, QUICK, Config, blur_measures, diffraction_limit,
-                                                 disc_esf_width_px, dof_rows, focus_vergence_per_m, geometric_coc_px,
-                                                 lens_at, lsf, mtf_of_line, object_distance_mm)
+from udc_render.studies.defocus_measures import (
+    APERTURE_UM,
+    DIFF_TOL,
+    DISPLAY_SPECS,
+    FREQS_CPP,
+    FULL,
+    GEOM_MIN_PX,
+    GEOM_TOL,
+    PIXEL_UM,
+    QUICK,
+    Config,
+    blur_measures,
+    diffraction_limit,
+    disc_esf_width_px,
+    dof_rows,
+    focus_vergence_per_m,
+    geometric_coc_px,
+    lens_at,
+    lsf,
+    mtf_of_line,
+    object_distance_mm,
+)
 from udc_render.studies.defocus_report import write_report
 from udc_render.studies.report import load_average
-
 
 # ----------------------------------------------------------------------------------------------
 # Measuring

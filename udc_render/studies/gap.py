@@ -51,16 +51,16 @@ from tqdm import tqdm
 
 from restore.dep import dep_restore
 from restore.metrics import paper_metrics
+from udc_render.io.files import save_text
 from udc_render.metrics import psnr_db
 from udc_render.optics.gamma import display_gamma
 from udc_render.scene.geometry import psf_lens
 from udc_render.scene.overrides import with_overrides
-from udc_render.io.files import save_text
 from udc_render.sensor import pack_rggb, rgb_to_rggb
 from udc_render.streams import seed_sequence, stream
 from udc_render.studies.fingerprint import FIELD, digest, file_digest, stale_note
 from udc_render.studies.gap_effects import DEP_VARIANTS, EFFECTS
-from udc_render.studies.gap_report import PAPER_DEP_DB, write_report
+from udc_render.studies.gap_report import write_report
 
 DEAD_LEAVES = ("pattern:dead_leaves_colour:101", "pattern:dead_leaves_colour:102")
 PHOTOGRAPHS = ("builtin:astronaut",)

@@ -32,8 +32,13 @@ from psf import Lens, compute_kernels, layouts
 from psf.engine import auto_pupil_samples
 from psf.spectral import auto_step_nm, band_kernels
 from udc_render.studies.psf_config import BANDS_NM, FULL, PIXEL_UM, QUICK, WAVELENGTHS_NM, Config
-from udc_render.studies.psf_metrics import (banding_amplitude, basic_errors, compare_field, compare_size,
-                                            compare_with_aux)
+from udc_render.studies.psf_metrics import (
+    banding_amplitude,
+    basic_errors,
+    compare_field,
+    compare_size,
+    compare_with_aux,
+)
 from udc_render.studies.psf_report import write_report
 from udc_render.studies.report import Timed, load_average, timed
 

@@ -7,10 +7,16 @@ from pathlib import Path
 
 import numpy as np
 
-from udc_render.studies.psf_config import (BANDS_NM, COLUMNS, KNOB_TITLES, PIXEL_UM, TOLERANCE_L1,
-                                           WAVELENGTHS_NM, Config)
-from udc_render.studies.report import (annotated_loglog, finish_axes, machine_text, md_table, pyplot, save_plot,
-                                       write_tables)
+from udc_render.studies.psf_config import BANDS_NM, COLUMNS, KNOB_TITLES, PIXEL_UM, TOLERANCE_L1, WAVELENGTHS_NM, Config
+from udc_render.studies.report import (
+    annotated_loglog,
+    finish_axes,
+    machine_text,
+    md_table,
+    pyplot,
+    save_plot,
+    write_tables,
+)
 
 BASE_COLS = [("value", "value"), ("error_L1", "error_L1 (Σ|Δk|)"), ("error_max_rel", "error_max_rel"),
              ("energy_outside", "energy_outside"), ("time_s", "time_s"), ("time_min_s", "time_min_s"),

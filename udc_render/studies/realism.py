@@ -32,9 +32,9 @@ import numpy as np
 from tqdm import tqdm
 
 from psf import Lens, compute_kernels, layouts
+from udc_render.calibration.fit_gains import FIT_EDGES_NM, fit_gains
 from udc_render.io.plots import mtf_lines, pyplot
 from udc_render.optics import displays as D, gamma as G
-from udc_render.calibration.fit_gains import FIT_EDGES_NM, fit_gains
 from udc_render.sensor import rgb_to_rggb
 from udc_render.studies import realism_capture as rc
 from udc_render.studies.realism_banding import banding_row

@@ -17,8 +17,13 @@ from udc_render.pipeline import EXPOSURE_FILL, sensor_for_scene
 from udc_render.scene.geometry import psf_lens, render_grid
 from udc_render.sensor import SensorConfig
 from udc_render.sensor.noise import expose
-from udc_render.studies.realism_paper import (PAPER_BANDING, default_scene, display_label, display_pitch_um,
-                                              visibility_verdict)
+from udc_render.studies.realism_paper import (
+    PAPER_BANDING,
+    default_scene,
+    display_label,
+    display_pitch_um,
+    visibility_verdict,
+)
 
 MID_GREY_CODE = 128
 BAND_GROUP = 3  # band centres per banding wavelength (realism_capture's module doc, c)

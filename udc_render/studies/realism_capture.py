@@ -68,8 +68,15 @@ from udc_render.scene.geometry import psf_lens
 from udc_render.scene.overrides import with_overrides
 from udc_render.sensor import rgb_to_rggb
 from udc_render.studies.realism_banding import banding_row
-from udc_render.studies.realism_paper import (PAPER_DEP, default_scene, dep_verdict, display_label, display_pitch_um,
-                                              gamma_verdict, paper_gamma_rggb)
+from udc_render.studies.realism_paper import (
+    PAPER_DEP,
+    default_scene,
+    dep_verdict,
+    display_label,
+    display_pitch_um,
+    gamma_verdict,
+    paper_gamma_rggb,
+)
 
 IMAGES = ("builtin:astronaut", "builtin:coffee", "builtin:chelsea")
 QUICK_IMAGES = IMAGES[:1]

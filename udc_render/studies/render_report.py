@@ -10,8 +10,17 @@ from udc_render.io.files import save_json
 from udc_render.studies.render_analysis import series_key, series_label
 from udc_render.studies.render_config import COLUMNS, FULL_SENSOR, REPEAT_BELOW_S, Config
 from udc_render.studies.render_recommendations import recommendations, time_cell
-from udc_render.studies.report import (annotated_loglog, finish_axes, fmt_cell, machine_text, md_table,
-                                       pct, pyplot, save_plot, write_tables)
+from udc_render.studies.report import (
+    annotated_loglog,
+    finish_axes,
+    fmt_cell,
+    machine_text,
+    md_table,
+    pct,
+    pyplot,
+    save_plot,
+    write_tables,
+)
 
 RUN_COLS = [("spp", "spp"), ("spp_requested", "requested"), ("seconds", "seconds"), ("cpu_seconds", "CPU s"),
             ("rel_error", "rel_error"), ("rel_error_net", "rel_error_net"), ("noise_rel", "noise_rel"),

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from udc_render.dataset.randomize.distributions import RandomizeError, Distributions, stream
+from udc_render.dataset.randomize.distributions import Distributions, RandomizeError, stream
 from udc_render.dataset.randomize.panels import panel_display
 from udc_render.optics.displays import Display
 from udc_render.scene import Scene

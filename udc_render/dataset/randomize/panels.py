@@ -23,6 +23,7 @@ from psf.micrograph import MicrographLayout
 from udc_render.errors import UdcError
 from udc_render.optics.displays import PAPER_GAIN, TOLED_T, Display, Transmission, load_display, poled_transmission
 
+
 class RandomizeError(UdcError):
     """A bad randomization file or value; one line naming the file, key, value and what is allowed."""
 

@@ -5,8 +5,13 @@
     spread.py     the wide spreads on the sensor (a θ⁻² scatter tail, a ghost's disc) and their convolution
     apply.py      each view's electrons with the stray light (stray_electrons, apply_view, StrayContext)
 """
-from udc_render.optics.stray.apply import (StrayContext, apply_view, stray_electrons, synthesis_stray_light,
-                                          uniform_electrons)
+from udc_render.optics.stray.apply import (
+    StrayContext,
+    apply_view,
+    stray_electrons,
+    synthesis_stray_light,
+    uniform_electrons,
+)
 from udc_render.optics.stray.settings import ON_VALUES, StrayLight, StrayLightError
 from udc_render.optics.stray.spread import Spread, convolve
 
