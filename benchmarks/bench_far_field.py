@@ -48,6 +48,10 @@ OFF = SynthConfig(sensor=SensorConfig(noise="none"), far_field_threshold=None)
 ON = replace(OFF, far_field_threshold=SynthConfig.far_field_threshold)
 
 
+def _shares(a) -> str:
+    return " / ".join(f"{v:.2%}" for v in a)
+
+
 def lost_part() -> list[str]:
     scene = replace(load_scene("monitor"), bands=parse_bands("400:700:100"))
     k = plan_kernels(scene, load_displays("toled,poled"), replace(ON, far_field_threshold=0.0))
@@ -55,8 +59,7 @@ def lost_part() -> list[str]:
              "| view | lost share o | far share added | beyond the acceptance |", "|---|---|---|---|"]
     for name, ks in k.band.items():
         f = k.far[name]
-        fmt = lambda a: " / ".join(f"{v:.2%}" for v in a)
-        lines.append(f"| {name} | {fmt(ks.energy_outside)} | {fmt(f.added)} | {fmt(f.beyond)} |")
+        lines.append(f"| {name} | {_shares(ks.energy_outside)} | {_shares(f.added)} | {_shares(f.beyond)} |")
     return lines + [""]
 
 
@@ -74,7 +77,7 @@ def _electrons(scene, band_image, cfg) -> float:
     kernels = plan_kernels(scene, poled, cfg)
     sensor = replace(sensor_for_scene(cfg.sensor, scene), exposure_s=1.0)
     layers = depth_layers(band_image, scene, kernels.grid, cfg)
-    e = layered_electrons(band_image, layers, lambda l: capture_views(kernels, poled, band_image.edges_nm), sensor, cfg)
+    e = layered_electrons(band_image, layers, lambda _layer: capture_views(kernels, poled, band_image.edges_nm), sensor, cfg)
     return float(e["poled"][0].sum())
 
 
@@ -116,7 +119,7 @@ def time_part(repeats: int) -> list[str]:
         for _ in range(repeats):
             for key, (kernels, sensor, layers, cfg) in runs.items():
                 t0 = time.perf_counter()
-                layered_electrons(b, layers, lambda l: capture_views(kernels, poled, b.edges_nm), sensor, cfg)
+                layered_electrons(b, layers, lambda _layer: capture_views(kernels, poled, b.edges_nm), sensor, cfg)
                 times[key].append(time.perf_counter() - t0)
         off, on = statistics.median(times[None]), statistics.median(times[ON.far_field_threshold])
         kernels, sensor = runs[ON.far_field_threshold][:2]

@@ -62,8 +62,8 @@ def optics_seconds(band_image, scene, displays, cfg, per_layer, layers, bright) 
     sensor = sensor_for_scene(cfg.sensor, scene)
     sensor = replace(sensor, exposure_s=auto_exposure_s(band_image, sensor)[0])
     t0 = time.perf_counter()
-    layered_electrons(band_image, layers, lambda l: capture_views(per_layer[l], displays, band_image.edges_nm), sensor, cfg,
-                      bright)
+    layered_electrons(band_image, layers, lambda i: capture_views(per_layer[i], displays, band_image.edges_nm),
+                      sensor, cfg, bright)
     return time.perf_counter() - t0
 
 

@@ -17,6 +17,11 @@ class LensError(ValueError):
     """Lens parameters out of range (message is one line for the user)."""
 
 
+def _inverse_um(distance_mm: float) -> float:
+    """1 / distance in 1/µm; 0 at infinity."""
+    return 0.0 if math.isinf(distance_mm) else 1.0 / (distance_mm * 1000)
+
+
 @dataclass(frozen=True)
 class Lens:
     """Thin lens with a circular pupil. Defaults are the paper's rig (f = 6 mm, f/1.8), diffraction-limited.
@@ -53,14 +58,12 @@ class Lens:
     @property
     def image_distance_um(self) -> float:
         """Lens-to-sensor distance z_i (µm): the Fraunhofer scale is λ·z_i."""
-        inv_focus = 0.0 if math.isinf(self.focus_distance_mm) else 1.0 / (self.focus_distance_mm * 1000)
-        return 1.0 / (1.0 / self.focal_length_um - inv_focus)
+        return 1.0 / (1.0 / self.focal_length_um - _inverse_um(self.focus_distance_mm))
 
     @property
     def defocus_curvature_per_um(self) -> float:
         """c = 1/z_object - 1/z_focus (1/µm); the pupil phase is π c r² / λ (paraxial defocus)."""
-        inv = lambda mm: 0.0 if math.isinf(mm) else 1.0 / (mm * 1000)
-        return inv(self.object_distance_mm) - inv(self.focus_distance_mm)
+        return _inverse_um(self.object_distance_mm) - _inverse_um(self.focus_distance_mm)
 
     def aperture_area_fraction(self, x_edges_um, y_edges_um) -> np.ndarray:
         """Exactly area-weighted circular aperture on a grid (fraction of each cell, [ny, nx])."""

@@ -44,7 +44,7 @@ def paper_ratio_r(wavelength_nm: float, lens: Lens, pixel_um: float) -> float:
     interpolated linearly in λ, beyond them the nearest one is kept."""
     rig = Lens()
     lam = np.array(sorted(PRINTED_R))
-    ratio = [PRINTED_R[l] / formula_ratio_r(l, rig, PAPER_PIXEL_UM) for l in lam]
+    ratio = [PRINTED_R[w] / formula_ratio_r(w, rig, PAPER_PIXEL_UM) for w in lam]
     return formula_ratio_r(wavelength_nm, lens, pixel_um) * float(np.interp(wavelength_nm, lam, ratio))
 
 

@@ -64,6 +64,11 @@ def lens_grid(lens: Lens, pupil_samples: int) -> PupilGrid:
     return PupilGrid(n, n, d, d, -n * d / 2, -n * d / 2)
 
 
+def _odd_up(v: int) -> int:
+    """v if odd, else v + 1."""
+    return v + 1 - v % 2
+
+
 def display_grid(period_um: tuple[float, float], lens: Lens, pupil_samples: int,
                  margin_um: float = 0.0) -> tuple[PupilGrid, tuple[int, int], tuple[int, int]]:
     """Window of whole display periods covering the aperture (+ margin) on each side of the axis.
@@ -74,8 +79,7 @@ def display_grid(period_um: tuple[float, float], lens: Lens, pupil_samples: int,
     """
     px, py = period_um
     target = lens.aperture_um / pupil_samples
-    odd = lambda v: v + 1 - v % 2
-    nx, ny = odd(max(3, math.ceil(px / target))), odd(max(3, math.ceil(py / target)))
+    nx, ny = (_odd_up(max(3, math.ceil(p / target))) for p in (px, py))
     half = lens.aperture_um / 2 + margin_um
     mx, my = math.ceil(half / px), math.ceil(half / py)
     grid = PupilGrid(2 * mx * nx, 2 * my * ny, px / nx, py / ny, -mx * px, -my * py)

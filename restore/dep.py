@@ -128,13 +128,13 @@ def pad_plane(x: np.ndarray, widths, boundary: str) -> np.ndarray:
     blended to the plane's mean by a raised cosine that reaches it at the outer edge."""
     if boundary != "taper":
         return np.pad(x, widths, mode=boundary)
-    (t, b), (l, r) = np.broadcast_to(np.asarray(widths), (2, 2))
+    (top, bottom), (left, right) = np.broadcast_to(np.asarray(widths), (2, 2))
 
     def ramp(n, lo, hi):
         return np.concatenate([0.5 - 0.5 * np.cos(np.pi * np.arange(lo) / max(lo, 1)), np.ones(n),
                                0.5 - 0.5 * np.cos(np.pi * np.arange(hi, 0, -1) / max(hi, 1))])
     m = x.mean()
-    weight = ramp(x.shape[0], t, b)[:, None] * ramp(x.shape[1], l, r)[None, :]
+    weight = ramp(x.shape[0], top, bottom)[:, None] * ramp(x.shape[1], left, right)[None, :]
     return m + (np.pad(x, widths, mode="symmetric") - m) * weight
 
 

@@ -337,7 +337,7 @@ class DrawLog:
     def __init__(self, out: Path, epochs_done: int):
         self.path = Path(out) / self.FILE
         lines = self.path.read_text().splitlines() if self.path.is_file() else []
-        self.lines = [l for l in lines if l.strip() and json.loads(l)["epoch"] <= epochs_done]
+        self.lines = [ln for ln in lines if ln.strip() and json.loads(ln)["epoch"] <= epochs_done]
 
     def add(self, epoch: int, draws: list[dict]) -> None:
         keys = ("image", "panel", "mode", "y0", "x0", "noise_seed")

@@ -296,8 +296,8 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     bar = tqdm(total=len(displays) + 1, desc="captures", unit="view", disable=not progress, leave=False)
     spectral_views = displays if cfg.form == "spectral" else []
     prints = field_prints(band_image, kernels, spectral_views, base_sensor, cfg)
-    electrons = layered_electrons(band_image, layers, lambda l: capture_views(
-        per_layer[l], spectral_views, band_image.edges_nm, kernels.far, prints), base_sensor, cfg, bright)
+    electrons = layered_electrons(band_image, layers, lambda i: capture_views(
+        per_layer[i], spectral_views, band_image.edges_nm, kernels.far, prints), base_sensor, cfg, bright)
     electrons, stray = synthesis_stray_light(cfg.stray_light, electrons, band_image, base_sensor, cfg.form,
                                              {d.name for d in displays if d.is_glass})
     glass_e, gt_optics = electrons["gt"]
@@ -383,7 +383,7 @@ def display_gamma(d: Display, band_image: BandImage, kernels: Kernels, sensor: S
 def _per_channel_capture(band_image, rgb, d: Display, per_layer: list[Kernels], layers: DepthLayers,
                          cfg: SynthConfig, base_sensor, rng, bright=None):
     gamma, why = display_gamma(d, band_image, per_layer[0], base_sensor)
-    blurred = bin_pixels(per_channel_blur(rgb, layers, lambda l: per_layer[l].channel[d.name].kernels,
+    blurred = bin_pixels(per_channel_blur(rgb, layers, lambda i: per_layer[i].channel[d.name].kernels,
                                           band_image.margin_px, cfg.precision, bright),
                          band_image.pitch_um, base_sensor.pitch_um)
     # DN = gain · (γ/gain) · x · R: the paper's γ includes the display's gain; electrons are γ/gain · x · FW

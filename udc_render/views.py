@@ -213,11 +213,11 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
     mean_bands = band_image.frame(band_image.bands).mean(axis=(1, 2), dtype=np.float64)
     comp, records, far = {}, {}, {}
     behind = np.ones(band_image.bands.shape[1:], np.float32)  # this layer and every farther one
-    for l in reversed(range(layers.count)):  # near to far
-        alpha = layers.alpha(l)
+    for i in reversed(range(layers.count)):  # near to far
+        alpha = layers.alpha(i)
         layer = replace(band_image, bands=band_image.bands * alpha)
         layer_bright = None if bright is None else BrightPixels.of_mask(bright.mask & (alpha > 0))
-        views = views_of_layer(l)
+        views = views_of_layer(i)
         spectra = shared_spectra(layer, views, cfg, layer_bright)
         for v in views:
             far[v.name] = v
@@ -226,7 +226,7 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
             g = np.asarray(records[v.name]["gains"])
             kbar = occluder_kernels(v.kernel_set.kernels, w * g[None] * mean_bands[None]).astype(np.float32)
             cover, cover_behind = silhouette_covers(np.stack([alpha, behind]), kbar, band_image.margin_px, cfg.precision)
-            comp.setdefault(v.name, Compositor()).add(y, cover if l > 0 else None, cover_behind)
+            comp.setdefault(v.name, Compositor()).add(y, cover if i > 0 else None, cover_behind)
         behind -= alpha
         del layer, spectra
     blocks = {}
@@ -253,12 +253,12 @@ def per_channel_blur(rgb: np.ndarray, layers: DepthLayers, kernels_of_layer, mar
         return convolve_bands(rgb, kernels_of_layer(0), margin_px, None, precision, bright=bright)
     comp = Compositor()
     behind = np.ones(rgb.shape[1:], np.float32)
-    for l in reversed(range(layers.count)):
-        alpha = layers.alpha(l)
-        k = kernels_of_layer(l)
+    for i in reversed(range(layers.count)):
+        alpha = layers.alpha(i)
+        k = kernels_of_layer(i)
         lb = None if bright is None else BrightPixels.of_mask(bright.mask & (alpha > 0))
         light = convolve_bands(rgb * alpha, k, margin_px, None, precision, bright=lb).astype(np.float64)
         cover, cover_behind = silhouette_covers(np.stack([alpha, behind]), k, margin_px, precision)
-        comp.add(light, cover if l > 0 else None, cover_behind)
+        comp.add(light, cover if i > 0 else None, cover_behind)
         behind -= alpha
     return comp.result().astype(np.float32)

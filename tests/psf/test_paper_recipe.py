@@ -29,7 +29,7 @@ def test_r_is_the_printed_one_on_the_papers_rig():
     # The formula's r = D ρ / (λ f) from the rig's numbers written out (D 3333 µm, f 6000 µm, ρ 3.1 µm):
     # 2.69, 3.31, 3.83 (docs/PHYSICS.md §2).
     formula = [3333.0 * 3.1 / (lam * 1e-3 * 6000.0) for lam in WAVELENGTHS_NM]
-    np.testing.assert_allclose([formula_ratio_r(l, LENS, 3.1) for l in WAVELENGTHS_NM], formula, rtol=1e-12)
+    np.testing.assert_allclose([formula_ratio_r(lam, LENS, 3.1) for lam in WAVELENGTHS_NM], formula, rtol=1e-12)
     np.testing.assert_allclose(formula, [2.69, 3.31, 3.83], atol=0.006)
     # The printed r are one window of ≈ 3.0 mm, not the aperture's 3333 µm: r λ f / ρ = 2985, 2999, 2996 µm
     # (the module's "as if the sampled window were ≈ 3.0 mm"; printed / formula = 0.896, 0.900, 0.899).

@@ -32,9 +32,9 @@ def test_band_kernel_is_power_weighted_mean_and_converges():
 
 def test_weight_spectrum_shifts_band_towards_its_weight():
     disp = layouts.toled(pitch_um=60.0)
-    blue = band_kernels(disp, Lens(), [(450, 650)], step_nm=20, size_px=63, weight=lambda l: (l < 500) * 1.0 + 1e-9)
+    blue = band_kernels(disp, Lens(), [(450, 650)], step_nm=20, size_px=63, weight=lambda nm: (nm < 500) * 1.0 + 1e-9)
     mono = compute_kernels(disp, Lens(), [475], size_px=63)
-    red = band_kernels(disp, Lens(), [(450, 650)], step_nm=20, size_px=63, weight=lambda l: (l > 600) * 1.0 + 1e-9)
+    red = band_kernels(disp, Lens(), [(450, 650)], step_nm=20, size_px=63, weight=lambda nm: (nm > 600) * 1.0 + 1e-9)
     assert np.abs(blue.kernels - mono.kernels).sum() < np.abs(red.kernels - mono.kernels).sum()
 
 

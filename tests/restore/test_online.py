@@ -81,9 +81,9 @@ def test_online_training_improves_over_its_input(tmp_path, bank):
     identity = np.mean([_psnr(demosaic_bilinear(unpack_rggb(x)) / GAMMA, y) for x, y in val])
     assert restored > identity + 3.0, (restored, identity)
     assert summary["val_psnr_db"] == pytest.approx(restored, abs=0.05)
-    lines = [json.loads(l) for l in (tmp_path / "run" / "online.jsonl").read_text().splitlines()]
-    assert [l["epoch"] for l in lines] == list(range(1, 11)) and all(len(l["crops"]) == 16 for l in lines)
-    crops = np.array([c[:5] for l in lines for c in l["crops"]])
+    lines = [json.loads(ln) for ln in (tmp_path / "run" / "online.jsonl").read_text().splitlines()]
+    assert [ln["epoch"] for ln in lines] == list(range(1, 11)) and all(len(ln["crops"]) == 16 for ln in lines)
+    crops = np.array([c[:5] for ln in lines for c in ln["crops"]])
     assert set(crops[:, 1]) == {0, 1} and (crops[:, 3] % 2 == 0).all() and (crops[:, 4] % 2 == 0).all()
 
 

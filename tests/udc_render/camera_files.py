@@ -106,10 +106,10 @@ class CameraDng:
 
     def linear(self) -> np.ndarray:
         """The oracle: the ActiveArea's table[stored] − black(site) − ΔH(column) − ΔV(row), float64."""
-        t, l, b, r = self.area()
+        y0, x0, y1, x1 = self.area()
         lin = self.stored if self.table is None else self.table[self.stored]
-        black = np.tile(_as_written(self.black), ((b - t) // 2 + 1, (r - l) // 2 + 1))[:b - t, :r - l]
-        out = lin[t:b, l:r].astype(np.float64) - black
+        black = np.tile(_as_written(self.black), ((y1 - y0) // 2 + 1, (x1 - x0) // 2 + 1))[:y1 - y0, :x1 - x0]
+        out = lin[y0:y1, x0:x1].astype(np.float64) - black
         if self.delta_h is not None:
             out -= _as_written(self.delta_h)[None, :]
         if self.delta_v is not None:
@@ -172,13 +172,13 @@ def companding_table(stored_bits: int = 14, white: int = 65000) -> np.ndarray:
 def encode_linear(dng: CameraDng, linear: np.ndarray) -> np.ndarray:
     """The stored codes whose table values lie nearest the wanted linear values above black over the
     ActiveArea (linear + black(site) + ΔH + ΔV), the margins at the black level; the same shape as dng.stored."""
-    t, l, b, r = dng.area()
+    y0, x0, y1, x1 = dng.area()
     want = np.array(linear, np.float64)
     zero = CameraDng(np.zeros_like(dng.stored), dng.cfa, dng.black, dng.delta_v, dng.delta_h, None, dng.white,
                      dng.active, dng.tile)
     want = want - zero.linear()  # + the black of every pixel
     full = np.full(dng.stored.shape, float(np.mean(dng.black)))
-    full[t:b, l:r] = want
+    full[y0:y1, x0:x1] = want
     if dng.table is None:
         return np.clip(np.rint(full), 0, 65535).astype(np.uint16)
     table = dng.table.astype(np.float64)

@@ -14,13 +14,12 @@ import numpy as np
 import pytest
 
 from psf.cache import load
+from tests.udc_render.cornell_box import ORIGIN, TARGET, cbox_xml
+from tests.udc_render.test_dataset import assert_same_files, manifest, one_error_line, tree
 from udc_render.cli import main
 from udc_render.dataset import DEFAULT_ORIGIN_JITTER_M, DEFAULT_TARGET_JITTER_M, Views
 
 pytestmark = pytest.mark.usefixtures("render_cache")
-
-from tests.udc_render.cornell_box import ORIGIN, TARGET, cbox_xml
-from tests.udc_render.test_dataset import assert_same_files, manifest, one_error_line, tree
 
 CBOX = cbox_xml()
 

@@ -191,7 +191,9 @@ def test_layers_match_the_per_pixel_reference_at_the_edge(kernel_cache):
     ring = edge_region(bi.depth_m, 3.0, grid.margin_px, 8)
     for tol in (2.0, 0.5):
         layers = depth_layers(bi, s, grid, replace(cfg, defocus_tolerance_px=tol))
-        views = lambda l: [_views_glass(kernels_at(layers.depths_m[l]))]  # noqa: E731
+
+        def views(layer):
+            return [_views_glass(kernels_at(layers.depths_m[layer]))]
         e = layered_electrons(bi, layers, views, sensor, cfg)["gt"][0]
         err = np.linalg.norm((e - ref)[:, ring]) / np.linalg.norm(ref[:, ring])
         assert err <= 1e-2 * tol, (tol, layers.count, err)  # stated: ≤ 1 % per pixel of tolerance (study capture)
@@ -247,7 +249,8 @@ def test_the_sun_in_frame_synthesises_at_the_default_precision(kernel_cache):
     kernels = plan_kernels(s, displays, cfg)
 
     def electrons(c, bright):
-        views = lambda l: capture_views(kernels, displays, bi.edges_nm)  # noqa: E731
+        def views(_layer):
+            return capture_views(kernels, displays, bi.edges_nm)
         return {k: v[0] for k, v in layered_electrons(bi, layers, views, sensor, c, bright).items()}
 
     bright = bright_pixels(bi, sensor)

@@ -34,13 +34,13 @@ def _colour_png(path, rgb: np.ndarray) -> None:
 def _camera_dng(path, mosaic: np.ndarray, black_dn: float = 64.0) -> CameraDng:
     """mosaic (RGGB, uint16 with `black_dn`) as a camera's DNG: its signal above black on four site levels, row
     and column deltas, through a square-law LinearizationTable, inside margins."""
-    t, l, b, r = MARGIN
+    top, left, bottom, right = MARGIN
     h, w = mosaic.shape
     rng = stream(7, "camera-dng-deltas")
-    dng = CameraDng(np.zeros((h + t + b, w + l + r), np.uint16), cfa=(0, 1, 1, 2),
+    dng = CameraDng(np.zeros((h + top + bottom, w + left + right), np.uint16), cfa=(0, 1, 1, 2),
                     black=((510.0, 515.0), (505.0, 520.0)), delta_v=np.round(rng.uniform(-2, 2, h), 3),
                     delta_h=np.round(rng.uniform(-2, 2, w), 3), table=companding_table(), white=65000,
-                    active=(t, l, t + h, l + w))
+                    active=(top, left, top + h, left + w))
     dng = replace(dng, stored=encode_linear(dng, mosaic.astype(float) - black_dn))
     write_camera_dng(path, dng)
     return dng

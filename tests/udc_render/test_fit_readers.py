@@ -21,10 +21,10 @@ ACTIVE = (3, 5, 67, 97)  # odd top and left: LibRaw's own crop moves them to 4 a
 def _camera_dng(seed: int, tile=(32, 48)) -> CameraDng:
     """A 70 × 100 image of random 14-bit codes, GRBG at the ActiveArea's origin, four black levels, deltas."""
     rng = stream(seed, "camera-dng")
-    t, l, b, r = ACTIVE
+    y0, x0, y1, x1 = ACTIVE
     return CameraDng(rng.integers(0, 1 << 14, (70, 100)).astype(np.uint16), cfa=(1, 0, 2, 1),
-                     black=((60.25, 64.0), (66.5, 70.0)), delta_v=rng.uniform(0, 5, b - t),
-                     delta_h=rng.uniform(-3, 3, r - l), table=companding_table(), white=65000, active=ACTIVE,
+                     black=((60.25, 64.0), (66.5, 70.0)), delta_v=rng.uniform(0, 5, y1 - y0),
+                     delta_h=rng.uniform(-3, 3, x1 - x0), table=companding_table(), white=65000, active=ACTIVE,
                      tile=tile)
 
 

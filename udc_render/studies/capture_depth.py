@@ -77,7 +77,7 @@ def layer_rows(cfg: dict) -> list[dict]:
         for z in layers.depths_m:
             kernels(z)
         t0 = time.perf_counter()
-        e = layered_electrons(bi, layers, lambda l: [View("gt", kernels(layers.depths_m[l]), None)], sensor,
+        e = layered_electrons(bi, layers, lambda i: [View("gt", kernels(layers.depths_m[i]), None)], sensor,
                               NOISELESS)["gt"][0]
         apply_s = time.perf_counter() - t0
         edge = float(np.linalg.norm((e - ref)[:, ring]) / np.linalg.norm(ref[:, ring]))
@@ -119,7 +119,7 @@ def bright_rows(cfg: dict) -> list[dict]:
 
     def electrons(precision, split):
         t0 = time.perf_counter()
-        out = layered_electrons(bi, layers, lambda l: capture_views(kernels, displays, bi.edges_nm), sensor,
+        out = layered_electrons(bi, layers, lambda _layer: capture_views(kernels, displays, bi.edges_nm), sensor,
                                 replace(NOISELESS, precision=precision), bright if split else None)
         return {k: v[0] for k, v in out.items()}, time.perf_counter() - t0
 

@@ -75,6 +75,11 @@ def compare_with_aux(get_ref_kernels, aux_fn):
     return compare
 
 
+def _whole_period_shifts_um(q: int, period) -> np.ndarray:
+    """The q × q shifts (i/q · pitch_x, j/q · pitch_y), [q, q, 2] µm."""
+    return np.stack(np.meshgrid(np.arange(q) / q * period[0], np.arange(q) / q * period[1]), axis=-1)
+
+
 def compare_field(get_ref, p_ref: int):
     """basic_errors of the phase-averaged kernels, and with P phases bilinearly interpolated onto the
     reference's p_ref² shifts: field_kernel_L1_interp = max Σ|k_field − k_field,ref|, banding_err_interp
@@ -85,9 +90,8 @@ def compare_field(get_ref, p_ref: int):
         P = ks.field_kernels.shape[1]
         period = np.asarray(r.params["display"].get("pitch_x_um", np.nan)), \
             np.asarray(r.params["display"].get("pitch_y_um", np.nan))
-        expect = lambda q: np.stack(np.meshgrid(np.arange(q) / q * period[0], np.arange(q) / q * period[1]),
-                                    axis=-1)  # noqa: E731
-        if not (np.allclose(ks.field_shifts_um, expect(P)) and np.allclose(r.field_shifts_um, expect(p_ref))):
+        ours, ref_grid = _whole_period_shifts_um(P, period), _whole_period_shifts_um(p_ref, period)
+        if not (np.allclose(ks.field_shifts_um, ours) and np.allclose(r.field_shifts_um, ref_grid)):
             # The engine sampled shifts that are not whole-period fractions (sensor sees < 1 period):
             # the phase grids are not comparable; keep the averaged-kernel error only.
             return out
