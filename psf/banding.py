@@ -22,8 +22,8 @@ from .errors import PSFError
 from .lens import Lens
 from .propagation import angular_spectrum_tf
 
-__all__ = ["order_autocorrelation", "even_order_autocorrelation", "orders", "disc_quadrant", "PowerSeries", "power_grid",
-           "power_lattice", "banding_profile"]
+__all__ = ["order_autocorrelation", "even_order_autocorrelation", "orders", "disc_quadrant", "PowerSeries",
+           "power_grid", "power_lattice", "banding_profile"]
 
 # PowerSeries.truncated: the bound on the dropped weights, relative to the mean power w_0. 1e-5 keeps
 # 413 × 200 of the T-OLED's 3169 × 1585 half weights at 400 nm (measured error 3.5e-7 of w_0, 1e-4 keeps

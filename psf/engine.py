@@ -47,8 +47,9 @@ from .plan import (
 from .propagation import angular_spectrum_tf, ramp
 
 __all__ = ["METHODS", "PRECISIONS", "DEFAULT_PUPIL_SAMPLES", "DEFAULT_FIELD_PHASES", "ALIAS_GUARD",
-           "WAVELENGTH_RANGE_NM", "MAX_PUPIL_WINDOW_SAMPLES", "MAX_PUPIL_WINDOW_SAMPLES_D0", "PAPER_SENSOR_UM", "KernelSet", "auto_pupil_samples",
-           "field_shifts", "compute_kernels", "PSFError", "AliasingWarning", "UnderSamplingWarning"]
+           "WAVELENGTH_RANGE_NM", "MAX_PUPIL_WINDOW_SAMPLES", "MAX_PUPIL_WINDOW_SAMPLES_D0", "PAPER_SENSOR_UM",
+           "KernelSet", "auto_pupil_samples", "field_shifts", "compute_kernels", "PSFError", "AliasingWarning",
+           "UnderSamplingWarning"]
 
 
 @dataclass
@@ -277,12 +278,13 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
     _field_masks, _one_kernel per distinct phase) ─► _assemble.
     """
     lens = lens or Lens()
-    wl = validate_request(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples,
-                   mask_raster)
+    wl = validate_request(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision,
+                          pupil_samples, mask_raster)
     notes: list = []
     plan = make_plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, method, pupil_samples, precision,
                  pixel_integration, mask_raster, sensor_um, notes)
     check_alias(plan)
     state: dict = {}
-    results = [_wavelength(plan, lam_nm, state, progress) for lam_nm in wl]  # np.float64: keeps float64 products (NEP 50)
+    # lam_nm stays np.float64: it keeps float64 products (NEP 50)
+    results = [_wavelength(plan, lam_nm, state, progress) for lam_nm in wl]
     return _assemble(plan, results, precision, mask_raster, sensor_um, notes)

@@ -86,7 +86,8 @@ def order_kernels(display, lens: Lens | None = None, wavelengths_nm=(450.0, 520.
     z, h = lens.image_distance_um, size_px // 2
     least = ORDER_PIXEL_FACTOR * float(wl.max()) * 1e-3 * z / lens.aperture_um
     if not (pixel_um >= least and math.isfinite(pixel_um)):
-        raise PSFError(f"pixel_um = {pixel_um}: expected ≥ {ORDER_PIXEL_FACTOR:g} λ z / D = {least:.3g} µm (orders as points)")
+        raise PSFError(f"pixel_um = {pixel_um}: expected ≥ {ORDER_PIXEL_FACTOR:g} λ z / D = {least:.3g} µm "
+                       "(orders as points)")
     px, py = (1.0, 1.0) if display is None else display.period_um
     kx, ky, c2, nu2 = _orders(display, float(wl.min()) * 1e-3)  # the coefficients do not depend on λ
     kernels, outside, trans = [], [], []

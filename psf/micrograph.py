@@ -136,7 +136,8 @@ class MicrographLayout:
         h, w = self.image.shape
         kx, ky = np.asarray(kx), np.asarray(ky)
         dft = np.fft.fft2(self.image)[np.ix_(ky % h, kx % w)] / (h * w)
-        return dft * np.outer(np.sinc(ky / h), np.sinc(kx / w)) * np.exp(-1j * np.pi * (ky[:, None] / h + kx[None, :] / w))
+        shift = np.exp(-1j * np.pi * (ky[:, None] / h + kx[None, :] / w))
+        return dft * np.outer(np.sinc(ky / h), np.sinc(kx / w)) * shift
 
     def tile_rotations(self, tiles_x: int, tiles_y: int) -> np.ndarray:
         """Quarter turns (0..3) for every tile, from the recorded seed (all 0 without rotation)."""

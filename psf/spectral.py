@@ -4,8 +4,8 @@ kernels for camera sensitivities.
 A band kernel is the power-weighted mean of monochromatic kernels (midpoint rule, step δλ):
     k_band = Σ_i w(λ_i) T(λ_i) (1 − e_out(λ_i)) k(λ_i)  /  Σ_i w(λ_i) T(λ_i) (1 − e_out(λ_i))
 with T the transmittance and e_out the energy outside the window, so the result is exactly what a
-sensor integrating w(λ) sees. The default step is δλ = λ_lo / S (S the kernel size in pixels): the kernel's outer orders move by
-δλ/λ · S/2 pixels between samples, so this keeps that shift at half a pixel. Measured
+sensor integrating w(λ) sees. The default step is δλ = λ_lo / S (S the kernel size in pixels): the kernel's
+outer orders move by δλ/λ · S/2 pixels between samples, so this keeps that shift at half a pixel. Measured
 (`udc-render study psf`, T-OLED, 100 nm bands, worst band): S = 127 at 3 nm (≈ 400/127) 1.1e-3 L1;
 S = 255 at 3 nm 7.3e-3, at 1.5 nm (≈ 400/255) 3.9e-4.
 """
@@ -37,7 +37,7 @@ def combine(ks: KernelSet, weights: np.ndarray, centres_nm, extra_params: dict) 
     """Collapse K monochromatic kernels into C weighted ones; weights is [C, K] (e.g. S_c(λ)·E(λ)·δλ)."""
     w = np.asarray(weights, dtype=np.float64)
     trans, inside = ks.transmittance, 1.0 - ks.energy_outside
-    ww = w * (trans * inside)[None, :]
+    ww, wt = w * (trans * inside)[None, :], w * trans[None, :]
     if np.any(ww.sum(axis=1) <= 0):
         raise PSFError("a band or channel has zero total weight over the sampled wavelengths")
     kern = np.einsum("ck,kij->cij", ww, ks.kernels.astype(np.float64)) / ww.sum(axis=1)[:, None, None]
@@ -45,11 +45,10 @@ def combine(ks: KernelSet, weights: np.ndarray, centres_nm, extra_params: dict) 
     if ks.field_kernels is not None:
         field_k = np.einsum("ck,kpqij->cpqij", ww, ks.field_kernels.astype(np.float64))
         field_k /= field_k.sum(axis=(-2, -1), keepdims=True)
-        field_p = np.einsum("ck,kpq->cpq", w * trans[None, :], ks.field_power) / (w * trans[None, :]).sum(axis=1)[:, None, None]
+        field_p = np.einsum("ck,kpq->cpq", wt, ks.field_power) / wt.sum(axis=1)[:, None, None]
     series = None
     if ks.field_series is not None:  # linear in the weights, as field_power
-        series = np.einsum("ck,kyx->cyx", w * trans[None, :], ks.field_series) / (w * trans[None, :]).sum(axis=1)[:, None, None]
-    wt = w * trans[None, :]
+        series = np.einsum("ck,kyx->cyx", wt, ks.field_series) / wt.sum(axis=1)[:, None, None]
     params = dict(ks.params, **extra_params, sample_wavelengths_nm=ks.wavelengths_nm.tolist())
     return KernelSet(kern.astype(ks.kernels.dtype), np.asarray(centres_nm, dtype=np.float64), ks.pixel_um,
                      1.0 - ww.sum(axis=1) / wt.sum(axis=1), wt.sum(axis=1) / w.sum(axis=1),
@@ -120,7 +119,8 @@ def load_weight(spec: str = "E"):
     else:
         path = Path(spec)
         if not path.is_file():
-            raise PSFError(f"weight spectrum '{spec}': neither 'E', a colour-science illuminant (e.g. D65) nor a CSV file")
+            raise PSFError(f"weight spectrum '{spec}': neither 'E', a colour-science illuminant (e.g. D65) "
+                           "nor a CSV file")
         try:
             data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
         except ValueError as exc:

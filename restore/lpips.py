@@ -93,9 +93,11 @@ class LPIPS(nn.Module):
 
     def forward(self, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
         if a.shape != b.shape or a.ndim != 4 or a.shape[1] != 3:
-            raise ValueError(f"LPIPS needs two [N, 3, H, W] images of one shape, got {tuple(a.shape)} and {tuple(b.shape)}")
+            raise ValueError(f"LPIPS needs two [N, 3, H, W] images of one shape, got {tuple(a.shape)} and "
+                             f"{tuple(b.shape)}")
         if min(a.shape[2:]) < MIN_SIDE_PX:
-            raise ValueError(f"LPIPS needs images of at least {MIN_SIDE_PX} × {MIN_SIDE_PX} px, got {tuple(a.shape[2:])}")
+            raise ValueError(f"LPIPS needs images of at least {MIN_SIDE_PX} × {MIN_SIDE_PX} px, "
+                             f"got {tuple(a.shape[2:])}")
         fa, fb = self.features(2 * a - 1), self.features(2 * b - 1)
         total = 0
         for head, xa, xb in zip(self.heads, fa, fb):

@@ -200,7 +200,8 @@ class MTCNN:
         ys, ye, xs, xe = ys[:, :, None], ye[:, :, None], xs[:, None, :], xe[:, None, :]
         sums = table[ye, xe] - table[ys, xe] - table[ye, xs] + table[ys, xs]
         crops = sums / ((ye - ys) * (xe - xs))[..., None]
-        return (torch.from_numpy(crops.astype(np.float32)).permute(0, 3, 1, 2) - 127.5) * 0.0078125, torch.from_numpy(ok)
+        scaled = (torch.from_numpy(crops.astype(np.float32)).permute(0, 3, 1, 2) - 127.5) * 0.0078125
+        return scaled, torch.from_numpy(ok)
 
     @torch.no_grad()
     def detect(self, image: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -12,12 +12,11 @@ An epoch is `crops_per_pair` random crops of every training pair. The run folder
     train_summary.json   epochs, steps, plateau, seconds: a finished run (the cap or the plateau reached) is
                      not loaded again, with or without its checkpoint (restore.studies.carry keeps none)
     loss.csv, loss.png   the loss log (mean training loss per epoch, validation PSNR)
-With plateau_db set, training stops at the first validation where the validation PSNR's trend (a line
-fitted through the last two fifths of the steps) changes by less than plateau_db over a fifth of the steps
-(plateau_step); the summary says whether and where, and a finished run's plateau is re-checked from its
-loss.csv, so a run stopped under an older criterion resumes. With autocast 'bf16' the forward pass runs in bfloat16 (train_step).
-Resumed training gives the same weights as an uninterrupted run on the same machine and threads:
-sample order and crops are seeded by (seed, epoch).
+With plateau_db set, training stops at the first validation where the validation PSNR's trend (a line fitted through the
+last two fifths of the steps) changes by less than plateau_db over a fifth of the steps (plateau_step); the summary says
+whether and where, and a finished run's plateau is re-checked from its loss.csv, so a run stopped under an older
+criterion resumes. With autocast 'bf16' the forward pass runs in bfloat16 (train_step). Resumed training gives the same
+weights as an uninterrupted run on the same machine and threads: sample order and crops are seeded by (seed, epoch).
 """
 from __future__ import annotations
 
@@ -310,7 +309,8 @@ def plot_loss(log: list, path: Path) -> None:
 
 
 def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "auto", checkpoint_s: float = 60.0,
-          val_every: int = 10, progress: bool = True, bank: Path | None = None, degrade_workers: int | None = None) -> dict:
+          val_every: int = 10, progress: bool = True, bank: Path | None = None,
+          degrade_workers: int | None = None) -> dict:
     """Train (or resume) in `out`; returns a summary (epochs, final loss, validation PSNR, seconds).
     Nothing is written in `out` before the settings, the run folder and every pair have been checked.
     settings.degrade: the online degradation through the kernel bank in `bank` (restore.online), in degrade_workers
@@ -395,5 +395,6 @@ def load_model(path: Path, device: str = "auto") -> tuple[torch.nn.Module, dict]
     model = build_model(cfg, source=str(path))
     model.load_state_dict(weights)
     dev = pick_device(device)
-    return model.to(dev, memory_format=torch.channels_last).eval(), {"model_config": cfg, "display": state.get("display") or state["settings"]["display"],
-                                  "settings": state["settings"], "device": str(dev)}
+    record = {"model_config": cfg, "display": state.get("display") or state["settings"]["display"],
+              "settings": state["settings"], "device": str(dev)}
+    return model.to(dev, memory_format=torch.channels_last).eval(), record

@@ -12,7 +12,8 @@ BUDGETS = {
     "quick": {"items": (4, 1, 2), "sensor_px": (256, 128), "epochs": {"unet": 2, "resnet": 1},
               "crop_px": {"unet": 64, "resnet": 32}, "crops_per_pair": 1, "batch": 2, "face_sensor_px": (512, 256),
               "heldout_items": 2, "lr": 1e-4, "plateau_db": 0.1, "val_every": 1,
-              "models": {"unet": {"type": "unet", "width": 8}, "resnet": {"type": "resnet", "features": 8, "blocks": 2}},
+              "models": {"unet": {"type": "unet", "width": 8},
+                         "resnet": {"type": "resnet", "features": 8, "blocks": 2}},
               "random_panels": 2},
     # cpu: epoch caps, not targets; each model stops at the 0.1 dB plateau, which needs ≥ 6 validations in the
     # last two fifths, so ≥ 26 epochs at val_every 2. Validation on the central 768-px square (a ResNet validation

@@ -24,7 +24,8 @@ import torch
 from restore.train import TrainError, TrainSettings, save_torch, settings_differ
 from udc_render.io.files import atomic_path
 
-CARRIED = ("train.json", "train_summary.json", "loss.csv", "loss.png", "model.pt")  # model.pt last: it marks a whole copy
+# model.pt last: it marks a whole copy
+CARRIED = ("train.json", "train_summary.json", "loss.csv", "loss.png", "model.pt")
 
 
 def _copy(src: Path, dst: Path) -> None:

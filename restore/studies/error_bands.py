@@ -96,9 +96,10 @@ def markdown(bands: dict[str, np.ndarray], transfer: np.ndarray, edges=OCTAVE_ED
     heads = [f"{a:.3g}–{b:.3g}" for a, b in zip(edges[:-1], edges[1:])]
     lines = ["| method | " + " | ".join(heads) + " | MSE | PSNR (dB) |", "|---" * (len(heads) + 3) + "|"]
     for name, v in bands.items():
-        lines.append(f"| {name} | " + " | ".join(f"{x:.2e}" for x in v) + f" | {v.sum():.2e} | {-10 * np.log10(v.sum()):.2f} |")
-    lines.append("| display mean \\|OTF\\| (green) | " + " | ".join("—" if np.isnan(t) else f"{t:.3f}" for t in transfer)
-                 + " | | |")
+        lines.append(f"| {name} | " + " | ".join(f"{x:.2e}" for x in v)
+                     + f" | {v.sum():.2e} | {-10 * np.log10(v.sum()):.2f} |")
+    lines.append("| display mean \\|OTF\\| (green) | "
+                 + " | ".join("—" if np.isnan(t) else f"{t:.3f}" for t in transfer) + " | | |")
     return "\n".join(lines)
 
 

@@ -29,8 +29,8 @@ def face_chart(width_px: int = 1920, height_px: int = 1080, seed: int = 0, face_
     """(image uint8 [H, W, 3], true boxes [N, 4] x1, y1, x2, y2 in pixels): N = ⌊W/200⌋ ⌊H/200⌋ faces.
 
     Sizes (log-uniform in `face_px`), contrasts (uniform in `contrast`), positions within their cells and
-    the choice of faces depend only on `seed`. `background`: "texture" (0.5 plus Gaussian-smoothed noise per channel, σ 6 px,
-    standard deviation 0.15) or "grey" (0.5).
+    the choice of faces depend only on `seed`. `background`: "texture" (0.5 plus Gaussian-smoothed noise per
+    channel, σ 6 px, standard deviation 0.15) or "grey" (0.5).
     """
     from scipy.ndimage import gaussian_filter
     from skimage import data

@@ -53,7 +53,8 @@ def profile_gaps(data_a: Path, data_b: Path, displays=("toled", "poled"), items:
 
 def main(argv: list[str]) -> None:
     rows = profile_gaps(Path(argv[0]), Path(argv[1]), items=int(argv[2]) if len(argv) > 2 else 3)
-    print("| display | item | PSNR (dB) | without hot pixels (dB) | hot pixels | 8×8 block PSNR (dB) | A/B channel means |")
+    print("| display | item | PSNR (dB) | without hot pixels (dB) | hot pixels | 8×8 block PSNR (dB) | "
+          "A/B channel means |")
     print("|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r['display']} | {r['item']} | {r['psnr_db']:.2f} | {r['psnr_db_without_hot']:.2f} | {r['hot_px']} | "

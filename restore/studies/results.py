@@ -150,8 +150,8 @@ def run_results(out: Path, budget: str = "cpu", write: Path | None = None, progr
     plot_training_curves(out, out / "train" / "training_curves.png")  # drawn once, copied per document
     for doc, fig_dir in targets:
         figures = copy_figures(out, fig_dir)
-        save_text(doc, results_document(results, heldout_results, bands, faces, b, budget, datasets, out, times, figures,
-                                        doc.parent, carry))
+        save_text(doc, results_document(results, heldout_results, bands, faces, b, budget, datasets, out, times,
+                                        figures, doc.parent, carry))
     stale = ship(carry, sorted({row for row, _ in models})) if write and carry else None
     return {"results": results, "heldout": heldout_results, "error_bands": bands, "faces": faces, "times": times,
             "stale_slot": stale}

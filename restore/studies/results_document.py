@@ -79,7 +79,8 @@ def content_counts(data: Path) -> dict[str, dict[str, int]]:
         item = json.loads(line)
         image = item.get("image") or ""
         kind = ("colour dead leaves" if image.startswith("pattern:dead_leaves_colour") else
-                "grey dead leaves" if image.startswith("pattern:dead_leaves") else "charts" if image.startswith("pattern:")
+                "grey dead leaves" if image.startswith("pattern:dead_leaves") else
+                "charts" if image.startswith("pattern:")
                 else "photographs (scikit-image)" if image.startswith("builtin:") else "--images files")
         split = counts.setdefault(item["split"], {})
         split[kind] = split.get(kind, 0) + 1
@@ -135,8 +136,10 @@ def budget_section(out: Path, datasets: dict[str, Path], times: dict) -> list[st
     rows += [("scoring, test split", evaluation_hours(out / "eval"), "sum of the rows' recorded seconds"),
              ("held-out photographs: dataset", dataset_hours(heldout) if (heldout / "timing.jsonl").is_file() else 0.0,
               "sum of the items' recorded seconds"),
-             ("held-out photographs: scoring", evaluation_hours(out / "eval_heldout"), "sum of the rows' recorded seconds"),
-             ("error by spatial frequency", times.get("error_bands_s", 0.0) / 3600, "this invocation (redone each time)"),
+             ("held-out photographs: scoring", evaluation_hours(out / "eval_heldout"),
+              "sum of the rows' recorded seconds"),
+             ("error by spatial frequency", times.get("error_bands_s", 0.0) / 3600,
+              "this invocation (redone each time)"),
              ("faces", times.get("faces_s", 0.0) / 3600, "this invocation (redone each time)")]
     total = sum(h for _, h, _ in rows)
     return ["| stage | machine time (h) | counted from |", "|---|---|---|",
@@ -201,7 +204,8 @@ def training_section(b: dict, budget: str, out: Path) -> list[str]:
             f"{b['crops_per_pair']} random crops per pair and epoch with Bayer-preserving flips, "
             + ("the forward pass in bfloat16 (torch.autocast; weights, loss and Adam in float32; validation and "
                "scoring in float32); " if b.get("autocast") == "bf16" else "") + f"UNet "
-            f"{b['crop_px']['unet']}-px crops, at most {b['epochs']['unet']} epochs; ResNet {b['crop_px']['resnet']}-px "
+            f"{b['crop_px']['unet']}-px crops, at most {b['epochs']['unet']} epochs; "
+            f"ResNet {b['crop_px']['resnet']}-px "
             f"crops, at most {b['epochs']['resnet']} epochs. Each model stops at its plateau: validation PSNR "
             f"(linear, on the central {b.get('val_crop_px') or 'whole'}-px square of the {b['items'][1]} val frames, "
             f"every {b.get('val_every', 10)} epochs) changing by less than {b.get('plateau_db')} dB over a fifth of "
@@ -213,9 +217,9 @@ def training_section(b: dict, budget: str, out: Path) -> list[str]:
             "loss of 0.11 from epoch 8 to 20. At 2e-4 without clipping it spiked at epoch 24 (loss 0.058 → 0.10, "
             "validation −1.6 dB); its gradient norms were 0.09–0.33 with outliers to 0.74, hence the clip at 0.5.", "",
             *random_row_text(b), "", *training_table(out, b), "",
-            f"Wall time is from start to end over the resumed parts; active time is the loss log's, {ACTIVE_TIME_RULE} "
-            "(restore.studies.stage_times.active_seconds): a run paused while another job had the cores, or sharing them, "
-            "stretches a few epochs by up to hours."]
+            "Wall time is from start to end over the resumed parts; active time is the loss log's, "
+            f"{ACTIVE_TIME_RULE} (restore.studies.stage_times.active_seconds): a run paused while another job had "
+            "the cores, or sharing them, stretches a few epochs by up to hours."]
 
 
 def random_row_text(b: dict) -> list[str]:
@@ -234,8 +238,9 @@ def random_row_text(b: dict) -> list[str]:
 def training_table(out: Path, b: dict) -> list[str]:
     """One line per trained model from its train_summary.json and loss.csv: epochs, steps, wall time, whether
     validation PSNR reached the plateau (restore.train.plateau_step) and where, and its trend at the end."""
-    lines = ["| row | display | epochs (cap) | steps | wall time (h) | active time (h) | plateau | last val PSNR (dB) | "
-             "trend at the end (dB per fifth of the steps) |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| row | display | epochs (cap) | steps | wall time (h) | active time (h) | plateau | "
+             "last val PSNR (dB) | trend at the end (dB per fifth of the steps) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for row, _, _ in ROWS:
         for d in DISPLAYS:
             run = run_dir(out, row, d)
