@@ -117,12 +117,11 @@ from udc_render.synth_kernels import (
 from udc_render.views import View, bin_pixels, bright_pixels, field_print, layered_electrons, per_channel_blur
 
 # The settings (synth_config) and the kernels (synth_kernels) are part of the pipeline's public names.
-__all__ = ["CHANNEL_KERNELS", "DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "EXPOSURE_PERCENTILE", "FORMS", "Kernels", "SynthConfig",
-           "SynthError", "SynthResult", "auto_exposure_s", "band_kernel_set", "capture_scene", "capture_views",
-           "check_grid", "compact_kernels", "depth_layers", "display_channel_kernels", "display_gamma",
+__all__ = ["CHANNEL_KERNELS", "DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "EXPOSURE_PERCENTILE", "FORMS",
+           "Kernels", "SynthConfig", "SynthError", "SynthResult", "auto_exposure_s", "band_kernel_set", "capture_scene",
+           "capture_views", "check_grid", "compact_kernels", "depth_layers", "display_channel_kernels", "display_gamma",
            "display_kernels", "gt_noise_seed", "layer_kernels", "noise_seed", "plan_kernels", "prepare_kernels",
-           "scene_object_distance_m",
-           "sensor_for_scene", "store_power_maps", "synthesize"]
+           "scene_object_distance_m", "sensor_for_scene", "store_power_maps", "synthesize"]
 
 
 GT_RECORD = {False: "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, "
@@ -219,15 +218,15 @@ def depth_layers(band_image: BandImage, scene: Scene, grid: RenderGrid, cfg: Syn
     geom = camera_geometry(scene)
     lens = psf_lens(scene)
     g = DefocusGeometry(lens.aperture_um, lens.image_distance_um, geom.focus_distance_m, grid.pitch_um)
-    tol = cfg.defocus_tolerance_px
+    tol, focus_m = cfg.defocus_tolerance_px, geom.focus_distance_m
     if tol is None:
-        return one_layer(geom.focus_distance_m, g, "defocus off (defocus_tolerance_px = None): every pixel in focus")
+        return one_layer(focus_m, g, "defocus off (defocus_tolerance_px = None): every pixel in focus")
     if scene.lens.model == "thinlens":
-        return one_layer(geom.focus_distance_m, g, "thin-lens render: its defocus is in the render, not added again", tol)
+        return one_layer(focus_m, g, "thin-lens render: its defocus is in the render, not added again", tol)
     if isinstance(scene.content, Monitor):
         return one_layer(monitor_distance_m(scene), g, "the monitor's plane", tol)
     if band_image.depth_m is None:
-        return one_layer(geom.focus_distance_m, g, "no depth rendered (render.depth = false): every pixel in focus", tol)
+        return one_layer(focus_m, g, "no depth rendered (render.depth = false): every pixel in focus", tol)
     try:
         return choose_layers(band_image.depth_m, g, tol, grid.kernel_size_px)
     except LayerError as e:
@@ -290,7 +289,8 @@ def synthesize(band_image: BandImage, scene: Scene, displays: list[Display], cfg
     per_layer = layer_kernels(layers, kernels, scene, displays, cfg, progress)
     t0 = time.perf_counter()
     optics_sensor = sensor_for_scene(cfg.sensor, scene)
-    exposure, how = (cfg.exposure_s, "set") if cfg.exposure_s is not None else auto_exposure_s(band_image, optics_sensor)
+    exposure, how = ((cfg.exposure_s, "set") if cfg.exposure_s is not None
+                     else auto_exposure_s(band_image, optics_sensor))
     base_sensor = replace(optics_sensor, exposure_s=float(exposure))
     bright = bright_pixels(band_image, base_sensor) if cfg.bright_split else None
     bar = tqdm(total=len(displays) + 1, desc="captures", unit="view", disable=not progress, leave=False)

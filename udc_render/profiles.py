@@ -148,7 +148,8 @@ def resolve_profile(name: str, cfg: SynthConfig, displays: list[Display], form: 
     record = {"name": p.name, "sets": p.sets(), "options": options,
               "applied": {"form": final_form, "channel_kernels": kernels, "distance_mm": distance,
                           "distance_applies_to": applies_to, "defects": p.sets()["defects"], "fpn": p.sets()["fpn"],
-                          "gt_frames": frames, "stray_light": stray.describe(), "noise": {"noise": sensor.noise, "lambda_source": sensor.lambda_source}}}
+                          "gt_frames": frames, "stray_light": stray.describe(),
+                          "noise": {"noise": sensor.noise, "lambda_source": sensor.lambda_source}}}
     if notes:
         record["notes"] = notes
     return replace(cfg, form=final_form, channel_kernels=kernels, sensor=sensor, defects=p.defects, fpn=p.fpn,
@@ -182,7 +183,8 @@ def describe(record: dict | None) -> str:
                                         f"({d['hot_dark_e_per_s']:g} e-/s), seed {d['seed']}")
     f = a.get("fpn")
     fpn = "none" if f is None else (f"PRNU {f['prnu']:g}, DSNU {f['dsnu_e']:g} e-, rows/columns {f['row_offset_e']:g}/"
-                                    f"{f['column_offset_e']:g} e-, dark {f['dark_current_e_per_s']:g} e-/s, seed {f['seed']}")
+                                    f"{f['column_offset_e']:g} e-, dark {f['dark_current_e_per_s']:g} e-/s, "
+                                    f"seed {f['seed']}")
     mark = {k: " (option)" if k in o else "" for k in ("form", "channel_kernels", "distance_mm", "noise", "gt_frames",
                                                           "stray_light")}
     n = a.get("gt_frames")

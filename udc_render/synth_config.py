@@ -55,7 +55,8 @@ class SynthConfig:
     use_cache: bool = True
     kernel_cache: str | None = None  # kernel cache folder (None: psf.cache's default); how, not what: not recorded
     defects: DefectConfig | None = None  # dead and hot pixels of the sensor (None: none)
-    fpn: FpnConfig | None = None  # fixed-pattern noise of the sensor: PRNU, DSNU, rows/columns, dark current (None: none)
+    # fixed-pattern noise of the sensor: PRNU, DSNU, rows/columns, dark current (None: none)
+    fpn: FpnConfig | None = None
     # Stray light beyond the diffraction model (optics.stray: room light, ghost, lens glare, display haze,
     # the display's own light; each off at 0 or None): the evidence-backed defaults, the paper profile all off
     stray_light: StrayLight = field(default_factory=StrayLight)
@@ -83,7 +84,8 @@ class SynthConfig:
         if self.form not in FORMS:
             raise SynthError(f"form = {self.form!r}: expected one of {', '.join(FORMS)}")
         if self.channel_kernels not in CHANNEL_KERNELS:
-            raise SynthError(f"channel_kernels = {self.channel_kernels!r}: expected one of {', '.join(CHANNEL_KERNELS)}")
+            raise SynthError(f"channel_kernels = {self.channel_kernels!r}: "
+                             f"expected one of {', '.join(CHANNEL_KERNELS)}")
         if self.defects is not None and not isinstance(self.defects, DefectConfig):
             raise SynthError(f"defects = {self.defects!r}: expected a sensor.defects.DefectConfig or None")
         if self.fpn is not None and not isinstance(self.fpn, FpnConfig):
@@ -98,7 +100,8 @@ class SynthConfig:
                              "(the noise-free ground truth)")
         ft = self.far_field_threshold
         if ft is not None and (isinstance(ft, bool) or not isinstance(ft, (int, float)) or not 0 <= ft < 1):
-            raise SynthError(f"far_field_threshold = {ft!r}: expected a lost share from 0 to 1 (exclusive), or None (off)")
+            raise SynthError(f"far_field_threshold = {ft!r}: expected a lost share from 0 to 1 (exclusive), "
+                             "or None (off)")
         fc = self.far_field_coarse
         if isinstance(fc, bool) or not isinstance(fc, int) or fc < 1 or fc % 2 == 0:
             raise SynthError(f"far_field_coarse = {fc!r}: expected an odd whole number of render pixels ≥ 1")
@@ -109,4 +112,5 @@ class SynthConfig:
         tol = self.defocus_tolerance_px
         if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
                                 or not tol >= 0.05):
-            raise SynthError(f"defocus_tolerance_px = {tol!r}: expected a number of pixels ≥ 0.05, or None (no defocus)")
+            raise SynthError(f"defocus_tolerance_px = {tol!r}: expected a number of pixels ≥ 0.05, "
+                             "or None (no defocus)")

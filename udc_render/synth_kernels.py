@@ -168,7 +168,8 @@ def plan_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig, progre
     grid = render_grid(scene)
     z = object_distance_m
     if z is None:
-        z = camera_geometry(scene).focus_distance_m if cfg.defocus_tolerance_px is None else scene_object_distance_m(scene)
+        z = (camera_geometry(scene).focus_distance_m if cfg.defocus_tolerance_px is None
+             else scene_object_distance_m(scene))
     glass = Display("glass", None)
     band, keys = {}, {}
     band["glass"], keys["glass"] = display_kernel_entry(glass, scene, grid, cfg, progress, z)

@@ -225,7 +225,8 @@ def layered_electrons(band_image: BandImage, layers: DepthLayers, views_of_layer
                                          layer_bright)
             g = np.asarray(records[v.name]["gains"])
             kbar = occluder_kernels(v.kernel_set.kernels, w * g[None] * mean_bands[None]).astype(np.float32)
-            cover, cover_behind = silhouette_covers(np.stack([alpha, behind]), kbar, band_image.margin_px, cfg.precision)
+            cover, cover_behind = silhouette_covers(np.stack([alpha, behind]), kbar, band_image.margin_px,
+                                                    cfg.precision)
             comp.setdefault(v.name, Compositor()).add(y, cover if i > 0 else None, cover_behind)
         behind -= alpha
         del layer, spectra
@@ -240,7 +241,8 @@ def _far_electrons(band_image: BandImage, view: View, w: np.ndarray, record: dic
     if view.far_field is None:
         return 0.0
     t = np.ones(len(w[0])) if view.transmission is None else np.asarray(view.transmission, float)
-    record["far_field"] = {**view.far_field.describe(), "layers": "added once, after compositing, from the whole render"}
+    record["far_field"] = {**view.far_field.describe(),
+                           "layers": "added once, after compositing, from the whole render"}
     return far_field_images(band_image.bands, view.far_field, band_image.margin_px,
                             t * np.asarray(view.kernel_set.transmittance, float), w, blocks)
 

@@ -67,7 +67,8 @@ def defocus_tolerance(text):
     except ValueError:
         value = math.nan
     if not (value >= 0.05 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"--defocus-tolerance-px = {text!r}: expected a number of pixels ≥ 0.05 or 'off'")
+        raise argparse.ArgumentTypeError(f"--defocus-tolerance-px = {text!r}: expected a number of pixels ≥ 0.05 "
+                                         "or 'off'")
     return value
 
 
@@ -82,7 +83,8 @@ def gt_frames(text):
 
 
 def far_field_threshold(text):
-    """--far-field-threshold: a lost share from 0 to 1 (exclusive), or 'off' (the light past the window is lost: None)."""
+    """--far-field-threshold: a lost share from 0 to 1 (exclusive), or 'off' (the light past the window is lost:
+    None)."""
     if text == "off":
         return None
     try:
@@ -292,8 +294,8 @@ def add_sensor_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--noise-model", choices=("poisson", "gaussian", "none"),
                    help="sensor noise (udc_render/sensor/noise.py): poisson: Poisson shot noise plus Gaussian read "
                         "noise in electrons; gaussian: its heteroscedastic Gaussian approximation (variance read + "
-                        "shot × signal); none: the noise-free signal, quantised [the profile's: gaussian for paper; else the "
-                        "sensor config's, poisson]")
+                        "shot × signal); none: the noise-free signal, quantised [the profile's: gaussian for paper; "
+                        "else the sensor config's, poisson]")
     p.add_argument("--noise-seed", type=int, default=0, help="seed of the sensor noise [0]")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the kernel cache")
     p.add_argument("--cache-dir", type=Path, help="kernel cache folder [$UDC_RENDER_CACHE or ~/.cache/udc-render/psf]")
@@ -317,7 +319,8 @@ def synth_config(args):
                        far_field_coarse=getattr(args, "far_field_coarse", SynthConfig.far_field_coarse),
                        field_print_sigma=getattr(args, "field_print_sigma", SynthConfig.field_print_sigma),
                        seed=getattr(args, "noise_seed", 0),
-                       use_cache=not getattr(args, "no_cache", False), kernel_cache=None if cache is None else str(cache))
+                       use_cache=not getattr(args, "no_cache", False),
+                       kernel_cache=None if cache is None else str(cache))
 
 
 def capture_setup(args, displays: str | None = None):

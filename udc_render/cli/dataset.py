@@ -35,7 +35,8 @@ def _split(text: str) -> tuple[int, int, int]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"--split must be TRAIN,VAL,TEST counts, got '{text}'") from None
     if len(counts) != 3 or min(counts) < 0 or sum(counts) < 1:
-        raise argparse.ArgumentTypeError(f"--split must be three counts ≥ 0 (TRAIN,VAL,TEST) summing to ≥ 1, got '{text}'")
+        raise argparse.ArgumentTypeError(f"--split must be three counts ≥ 0 (TRAIN,VAL,TEST) summing to ≥ 1, "
+                                         f"got '{text}'")
     return counts
 
 
@@ -71,7 +72,8 @@ def register(sub) -> None:
     p.add_argument("--count", type=positive("--count", int), help="number of items [the sum of --split]")
     p.add_argument("--split", type=_split, help="TRAIN,VAL,TEST item counts, assigned in id order [all train]")
     p.add_argument("--out", type=Path, default=Path("out/dataset"), help="output folder [out/dataset]")
-    p.add_argument("--shard-size", type=positive("--shard-size", int), default=1000, help="items per shard folder [1000]")
+    p.add_argument("--shard-size", type=positive("--shard-size", int), default=1000,
+                   help="items per shard folder [1000]")
     run_on = p.add_mutually_exclusive_group()
     run_on.add_argument("--workers", type=positive("--workers", int), default=1,
                         help="1: in this process; N > 1: a local pool of N processes [1]")
@@ -137,12 +139,14 @@ def dataset_job(args):
     if isinstance(scene.content, Monitor):
         if args.images is None and not args.builtin:
             raise UserError(f"udc-render dataset: one of the arguments --images --builtin is required: item i of the "
-                            f"monitor scene {scene.source} shows image i (a 3D scene, --scene room|hdr|FILE, needs neither)")
+                            f"monitor scene {scene.source} shows image i (a 3D scene, --scene room|hdr|FILE, "
+                            "needs neither)")
         if jitters:
             raise UserError(f"udc-render dataset: {jitters[0]} is for a 3D scene; the monitor scene {scene.source} "
                             f"changes its image per item (--images, --builtin)")
     elif args.images is not None or args.builtin:
-        raise UserError(f"udc-render dataset: {'--images' if args.images is not None else '--builtin'} is for a monitor "
+        which = '--images' if args.images is not None else '--builtin'
+        raise UserError(f"udc-render dataset: {which} is for a monitor "
                         f"scene; the {scene.content_type} scene {scene.source} makes item i a view of it from a "
                         f"jittered camera pose (--pose-jitter-m, --target-jitter-m)")
     return DatasetJob(scene, displays, cfg, out=out_dir(args.out), split=split, images_dir=args.images,
@@ -166,7 +170,8 @@ def run(args) -> int:
     print(describe(cfg.profile))
     if job.randomize is not None:
         r = job.randomize
-        print(f"randomized ({r.dists.source}, seed {r.seed}): {len(r.panels)} panel{'s' if len(r.panels) > 1 else ''} drawn once (job.json); each item's "
+        print(f"randomized ({r.dists.source}, seed {r.seed}): {len(r.panels)} "
+              f"panel{'s' if len(r.panels) > 1 else ''} drawn once (job.json); each item's "
               "panel, read noise, defect pixels, fixed-pattern noise and exposure drawn in its capture.json")
     print(f"{s['complete']}/{s['count']} items in {s['out']} ({s['made']} made now{rate}, "
           f"{s['count'] - s['made']} already there{stale}); manifest.jsonl, job.json, timing.jsonl")

@@ -10,8 +10,9 @@ from udc_render.cli.train import set_threads
 def register(sub) -> None:
     e = sub.add_parser("evaluate", help="score a restorer on a dataset split: PSNR, SSIM, LPIPS, MACs, ms/MP")
     e.add_argument("--data", type=Path, required=True, help="a folder written by `udc-render dataset`")
-    e.add_argument("--model", required=True, help="input (the degraded capture), dep (DeP with the paper's computed PSF, as the paper ran it), "
-                                                "dep_exact (DeP with the camera-weighted exact kernels), or a model.pt/checkpoint.pt")
+    e.add_argument("--model", required=True,
+                   help="input (the degraded capture), dep (DeP with the paper's computed PSF, as the paper ran it), "
+                        "dep_exact (DeP with the camera-weighted exact kernels), or a model.pt/checkpoint.pt")
     e.add_argument("--out", type=Path, required=True, help="results folder (rows of several runs are merged)")
     e.add_argument("--split", default="test", choices=("train", "val", "test"),
                    help="the dataset split to score: train, val (validation) or test [test]")

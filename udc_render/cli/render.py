@@ -22,7 +22,8 @@ def run(args) -> int:
     written = save_band_image(band_image, out)
     m = band_image.meta
     noise = f", relative noise {m['noise_rel']:.2e}" if m["noise_rel"] is not None else ""
-    print(f"rendered {scene.source} via {m['render_path']} ({m['variant'] or m['backend']}): {band_image.bands.shape[0]} bands, "
+    print(f"rendered {scene.source} via {m['render_path']} ({m['variant'] or m['backend']}): "
+          f"{band_image.bands.shape[0]} bands, "
           f"{band_image.bands.shape[2]}x{band_image.bands.shape[1]} px (margin {band_image.margin_px}), "
           f"{m['spp']} spp{noise}, {m['seconds']:.1f} s")
     print("wrote " + ", ".join(written.values()))

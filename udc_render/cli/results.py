@@ -14,12 +14,13 @@ def register(sub) -> None:
                                        "→ RESULTS.md (resumable)")
     p.add_argument("--out", type=Path, default=Path("out/results"), help="work folder [out/results]")
     p.add_argument("--budget", choices=tuple(BUDGETS), default="cpu",
-                   help="cpu (2048 × 1024, 150/20/30 items per profile: hours on 2 cores; resumable), quick (a smoke run), "
-                        "paper (400 epochs; a GPU) [cpu]")
+                   help="cpu (2048 × 1024, 150/20/30 items per profile: hours on 2 cores; resumable), "
+                        "quick (a smoke run), paper (400 epochs; a GPU) [cpu]")
     p.add_argument("--write", type=Path, help="also write the document here (e.g. RESULTS.md)")
-    p.add_argument("--carry", type=Path, help="keep each finished model here (float16 weights, a folder git can "
-                                              "track) and bring it back into a fresh --out (restore.studies.carry) "
-                                              "[cpu: the shipped slot, restore/trained/shipped.json; other budgets: none]")
+    p.add_argument("--carry", type=Path,
+                   help="keep each finished model here (float16 weights, a folder git can track) and bring it back "
+                        "into a fresh --out (restore.studies.carry) "
+                        "[cpu: the shipped slot, restore/trained/shipped.json; other budgets: none]")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.set_defaults(run=run)
 

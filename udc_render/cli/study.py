@@ -43,7 +43,8 @@ def image_files(text: str) -> tuple[str, ...]:
 
 
 def register(sub) -> None:
-    s = sub.add_parser("study", help="error-versus-run-time studies of the approximation knobs; defocus and banding studies")
+    s = sub.add_parser("study",
+                       help="error-versus-run-time studies of the approximation knobs; defocus and banding studies")
     s.set_defaults(run=run)
     s.add_argument("what", choices=tuple(STUDIES),
                    help="the study: " + "; ".join(f"{name}: {what}" for name, what in STUDIES.items()))

@@ -1,7 +1,9 @@
 """`udc-render synth` (one scene through one or more displays) and `udc-render demo` (the main job).
 
     udc-render synth SCENE --display toled[,poled,PATH] [--profile physical|paper] [--distance-mm D] --out DIR
-    udc-render demo [--out DIR] [--profile physical|paper] [--channel-kernels paper|camera]   (default profile: physical)
+    udc-render demo [--out DIR] [--profile physical|paper] [--channel-kernels paper|camera]
+
+The default profile is physical.
 """
 from __future__ import annotations
 

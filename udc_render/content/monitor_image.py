@@ -117,7 +117,8 @@ def read_code_values(spec: str, base: Path | None = None) -> np.ndarray:
         try:
             a = _read_png16(path) if _is_png16(path) else _read_any(path)
         except Exception as e:  # the readers raise many kinds for unreadable files
-            raise DisplayImageError(f"content.image = {spec!r}: cannot read {path} as an image ({type(e).__name__})") from None
+            raise DisplayImageError(f"content.image = {spec!r}: cannot read {path} as an image "
+                                    f"({type(e).__name__})") from None
     a = np.asarray(a)
     if a.ndim == 2:
         a = np.repeat(a[..., None], 3, -1)

@@ -87,8 +87,8 @@ from udc_render.scene.geometry import camera_geometry
 
 JOB_VERSION = 2  # 2: raw.dng replaces raw.png and packed.tiff; previews optional
 
-__all__ = ["DatasetError", "DatasetJob", "Randomization", "Task", "Views", "run_dataset", "SPLITS", "DEFAULT_ORIGIN_JITTER_M",
-           "DEFAULT_TARGET_JITTER_M"]
+__all__ = ["DatasetError", "DatasetJob", "Randomization", "Task", "Views", "run_dataset", "SPLITS",
+           "DEFAULT_ORIGIN_JITTER_M", "DEFAULT_TARGET_JITTER_M"]
 
 
 @dataclass(frozen=True)

@@ -52,4 +52,5 @@ def load_band_image(out_dir: str | Path) -> BandImage:
     bands = np.stack([ch[n] for n in band_names(edges)])
     return BandImage(bands=bands, edges_nm=edges, pitch_um=meta["pitch_um"], margin_px=meta["margin_px"],
                      depth_m=ch.get("depth_m"), meta=meta,
-                     primaries_matrix=None if meta.get("band_matrix") is None else np.asarray(meta["band_matrix"], float))
+                     primaries_matrix=(None if meta.get("band_matrix") is None
+                                       else np.asarray(meta["band_matrix"], float)))

@@ -84,7 +84,8 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True, p
         d.mkdir(exist_ok=True)
         s = cap.params["sensor"]
         save_dng(d / "raw.dng", cap.mosaic_dn, s["camera"], s["black_level_dn"], s["white_level_dn"])
-        rgb = demosaic_bilinear(cap.mosaic_dn.astype(np.float64) - s["black_level_dn"]) / (s["white_level_dn"] - s["black_level_dn"])
+        rgb = (demosaic_bilinear(cap.mosaic_dn.astype(np.float64) - s["black_level_dn"])
+               / (s["white_level_dn"] - s["black_level_dn"]))
         if previews or side_by_side:
             images[name] = preview_srgb(rgb, balance)
         if previews:
@@ -100,7 +101,8 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True, p
 
 
 def summary_markdown(summary: dict) -> str:
-    lines = ["| view | mean R | mean Gr | mean Gb | mean B | PSNR vs GT, paper (dB) | PSNR vs GT, srgb (dB) | saturated |",
+    lines = ["| view | mean R | mean Gr | mean Gb | mean B | PSNR vs GT, paper (dB) | PSNR vs GT, srgb (dB) "
+             "| saturated |",
              "|---|---|---|---|---|---|---|---|"]
     for name, v in summary["views"].items():
         m = v["mean_level"]

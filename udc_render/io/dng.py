@@ -61,7 +61,8 @@ def checker_responses(camera: str) -> tuple[np.ndarray, np.ndarray]:
     """(camera RGB [N + 1, 3], XYZ [N + 1, 3]) of the 24 ColorChecker patches (colour-science 'ColorChecker
     N Ohta') under D65, then of D65 itself (reflectance 1), in 1 nm bands over 360–830 nm:
     c = Σ_k q_k L̄_k Δλ (q: photon_weights, the sensor's quantum efficiency per joule), XYZ = Σ_k x̄_k L̄_k Δλ
-    (x̄_k: band means of the CIE 1931 2° CMFs), L = reflectance × D65, L̄ the band means. Units are arbitrary (only ratios matter)."""
+    (x̄_k: band means of the CIE 1931 2° CMFs), L = reflectance × D65, L̄ the band means. Units are arbitrary
+    (only ratios matter)."""
     import colour
     patches = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
     d65 = spectra.illuminant("D65")

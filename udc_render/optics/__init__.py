@@ -23,5 +23,6 @@ from udc_render.optics.field import (
 )
 from udc_render.optics.field_power import PowerMap, field_power_map
 
-__all__ = ["BLENDS", "BrightPixels", "FieldBasis", "field_basis", "field_weights", "live_phases", "OpticsError", "OpticsResult", "apply_kernels", "band_spectra", "convolve_bands", "convolve_field", "fft_shape",
+__all__ = ["BLENDS", "BrightPixels", "FieldBasis", "field_basis", "field_weights", "live_phases", "OpticsError",
+           "OpticsResult", "apply_kernels", "band_spectra", "convolve_bands", "convolve_field", "fft_shape",
            "phase_weights", "PowerMap", "field_power_map"]

@@ -7,7 +7,8 @@
   given a far field (optics.far_field), laid on the sensor at a coarse pitch within the lens's acceptance.
 - Glass (no display): pass the bare-lens KernelSet (transmittance 1) and transmission None (T = 1).
 - d = 0 (or no field kernels): one kernel per band (optics.convolution); d > 0: field phases blended
-  (optics.field) with the exact transmitted power at every pixel (optics.field_power); very bright pixels convolved apart in float64 (optics.bright).
+  (optics.field) with the exact transmitted power at every pixel (optics.field_power); very bright pixels
+  convolved apart in float64 (optics.bright).
 """
 from __future__ import annotations
 
@@ -137,7 +138,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     has_field = kernel_set.field_kernels is not None or field_basis is not None
     use_field = field and has_field and d_mm > 0
     if not use_field:
-        why = ("field kernels disabled" if has_field and not field else "d = 0 or no field kernels: one kernel per band")
+        why = ("field kernels disabled" if has_field and not field
+               else "d = 0 or no field kernels: one kernel per band")
         applied.update(model="field-independent", skipped=[f"field-dependent blur ({why})"])
         if through_planes:
             images = convolve_primaries(primaries, kernel_set.kernels, m, gains, channel_weights, precision, workers)

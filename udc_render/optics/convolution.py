@@ -182,7 +182,8 @@ def convolve_bands(bands: np.ndarray, kernels: np.ndarray, margin_px: int, gains
     workers = _workers(workers)
     bands = np.asarray(bands)
     kernels = np.asarray(kernels)
-    if bands.ndim != 3 or kernels.ndim != 3 or kernels.shape[0] != bands.shape[0] or kernels.shape[1] != kernels.shape[2]:
+    if (bands.ndim != 3 or kernels.ndim != 3 or kernels.shape[0] != bands.shape[0]
+            or kernels.shape[1] != kernels.shape[2]):
         raise OpticsError(f"need bands [K, H, W] and kernels [K, S, S] with the same K, got "
                           f"{bands.shape} and {kernels.shape}")
     K, H, W = bands.shape

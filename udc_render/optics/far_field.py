@@ -118,7 +118,8 @@ def make_far_field(core, far, coarse: int, acceptance: float, threshold: float) 
     js, agg = _blocks(core.size_px, coarse)
     sf, p = far.size_px, far.size_px // 2
     if js[-1] >= p:
-        raise FarFieldError(f"far kernels of {sf} px of {far.pixel_um:g} µm do not reach past the {core.size_px}-px core")
+        raise FarFieldError(f"far kernels of {sf} px of {far.pixel_um:g} µm do not reach past the "
+                            f"{core.size_px}-px core")
     full = agg.sum(axis=1) == coarse
     inside = np.outer(full, full)
     u = (np.arange(sf) - p) * far.pixel_um

@@ -8,10 +8,10 @@ phases q (KernelSet.field_*):
     blend='source' (default):  y = g · Σ_q k_q ⊗ (w_q · P_q · x)      (the PSF belongs to the source point)
     blend='output'          :  y = g · Σ_q w_q · P_q · (k_q ⊗ x)      (weights at the output pixel)
 
-With the exact series of the kernel set (optics.field_power, the default), P_q is replaced by the exact
-power m(s(x)) at each pixel's own shift. w_q(x) are bilinear (tensor-product linear) interpolation weights in phase, periodic over the display
-period when the phases span a whole period, clamped at the end phases when they span only the part
-of the display the sensor sees (psf.engine.field_shifts). 'source' conserves energy exactly
+With the exact series of the kernel set (optics.field_power, the default), P_q is replaced by the exact power
+m(s(x)) at each pixel's own shift. w_q(x) are bilinear (tensor-product linear) interpolation weights in phase,
+periodic over the display period when the phases span a whole period, clamped at the end phases when they span
+only the part of the display the sensor sees (psf.engine.field_shifts). 'source' conserves energy exactly
 (Σ y = g · Σ x · P(s(x))); a flat field then shows the banding profile smoothed by the PSF.
 'output' gives a flat field exactly the interpolated P(s(x)).
 """
@@ -78,8 +78,8 @@ def _axis_is_periodic(shifts: np.ndarray, period_um: float) -> bool:
 
 def phase_basis(kernels: np.ndarray, rank: int) -> tuple[np.ndarray, np.ndarray, float]:
     """Rank-r basis of n phase kernels [n, S, S]: k_q ≈ Σ_r c_qr B_r (truncated SVD through the n × n Gram
-    matrix M Mᵀ = U Σ² Uᵀ; B = Σ⁻¹ Uᵀ M, c = U Σ, each row of c then scaled so that k̃_q has k_q's sum (1 for field kernels):
-    the truncation changes the kernels' shape, not their power, which would print its own bands: T-OLED
+    matrix M Mᵀ = U Σ² Uᵀ; B = Σ⁻¹ Uᵀ M, c = U Σ, each row of c then scaled so that k̃_q has k_q's sum (1 for field
+    kernels): the truncation changes the kernels' shape, not their power, which would print its own bands: T-OLED
     at d = 9.6 mm, rank 2, first harmonic 1.15× without the scaling, tests/udc_render/test_field_power.py).
     Returns (B [r, S, S], c [n, r], the Frobenius error of the k̃_q over the kernels' norm)."""
     n, S = kernels.shape[0], kernels.shape[-1]
@@ -144,7 +144,8 @@ def live_phases(weights_y: np.ndarray, weights_x: np.ndarray) -> tuple:
 
 def field_basis(field_kernels: np.ndarray, live: tuple, rank: int) -> FieldBasis:
     """phase_basis of every band's live phase kernels (stored in the kernels' dtype)."""
-    parts = [phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank) for k in range(field_kernels.shape[0])]
+    parts = [phase_basis(np.stack([field_kernels[k, j, i] for j, i in live]), rank)
+             for k in range(field_kernels.shape[0])]
     return FieldBasis(int(rank), tuple(live), [b.astype(field_kernels.dtype) for b, _, _ in parts],
                       [c for _, c, _ in parts], [r for _, _, r in parts])
 
@@ -201,7 +202,8 @@ def convolve_field(bands: np.ndarray, field_kernels: np.ndarray, field_power: np
     shape = fft_shape((H, W), S, m)
     cw = _channel_weights(channel_weights, K)
     if cw is not None and blend != "source":
-        raise OpticsError("channel_weights need blend='source' (blend 'output' weights each band after its inverse FFT)")
+        raise OpticsError("channel_weights need blend='source' "
+                          "(blend 'output' weights each band after its inverse FFT)")
     wy = weights_y.astype(dtype)
     wx = weights_x.astype(dtype)
     live = live_phases(wy, wx)
@@ -290,5 +292,6 @@ def field_weights(kernel_set, shape_hw, pitch_um: float, distance_mm: float, ima
     wy = phase_weights((np.arange(H) - (H - 1) / 2) * pitch_um, sy, distance_mm * 1000, z, py, per_y)
     d_um = distance_mm * 1000
     return wy, wx, {"phases": [int(sy.size), int(sx.size)], "interpolation": "bilinear in phase",
-                    "periodic": [per_y, per_x], "banding_period_px": [z * py / d_um / pitch_um, z * px / d_um / pitch_um],
+                    "periodic": [per_y, per_x],
+                    "banding_period_px": [z * py / d_um / pitch_um, z * px / d_um / pitch_um],
                     "image_distance_um": z, "period_um": [px, py]}

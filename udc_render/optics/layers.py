@@ -91,7 +91,8 @@ class DepthLayers:
                   (np.bincount(self.labels.ravel(), minlength=self.count) / self.labels.size).tolist())
         return {"count": self.count, "depths_m": list(self.depths_m), "blur_diameter_px": list(self.beta_px),
                 "pixel_share": shares, "tolerance_px": self.tolerance_px, "reason": self.reason,
-                "compositing": "layered occlusion, Hasinoff & Kutulakos 2007, normalised as Ikoma et al. 2021 (optics.layers)"}
+                "compositing": "layered occlusion, Hasinoff & Kutulakos 2007, normalised as Ikoma et al. 2021 "
+                               "(optics.layers)"}
 
 
 def one_layer(depth_m: float, geometry: DefocusGeometry, reason: str, tolerance_px: float | None = None) -> DepthLayers:

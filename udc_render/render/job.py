@@ -17,11 +17,11 @@ margin of ``margin_px`` on every side; the sensor frame is ``bands[:, m:-m, m:-m
 
 Samples: ``spp`` split into equal passes with seeds from SeedSequence([seed, group, pass]), each pass
 drawn by ``render.sampler`` (a Mitsuba sampler; its count rounded up as the sampler requires, and
-recorded as rendered). Every pass is an independent randomisation (its own seed), so the
-spread between passes measures the image's own Monte Carlo noise even for correlated samplers (relative RMS ‖σ‖₂/‖x‖₂ over
-all bands and pixels, x the noise-free image), recorded as ``noise_rel``. With a
-noise target, two pilot passes at ``PILOT_SPP`` estimate the noise and spp = ⌈pilot·(σ/target)²⌉
-(the 1/√N law of independent samples: conservative for samplers that converge faster).
+recorded as rendered). Every pass is an independent randomisation (its own seed), so the spread between
+passes measures the image's own Monte Carlo noise even for correlated samplers (relative RMS ‖σ‖₂/‖x‖₂
+over all bands and pixels, x the noise-free image), recorded as ``noise_rel``. With a noise target, two
+pilot passes at ``PILOT_SPP`` estimate the noise and spp = ⌈pilot·(σ/target)²⌉ (the 1/√N law of
+independent samples: conservative for samplers that converge faster).
 """
 from __future__ import annotations
 
@@ -47,7 +47,8 @@ from udc_render.scene.geometry import CameraGeometry, axial_depth_m, camera_geom
 
 PILOT_SPP = 4
 MAX_SPP = 1 << 14
-PASS_SPP = {"rgb_matrix": 64, "spectral": 8}  # largest pass; progress ticks once per pass (a 3D pass is ~1 min at full size)
+# largest pass; progress ticks once per pass (a 3D pass is ~1 min at full size)
+PASS_SPP = {"rgb_matrix": 64, "spectral": 8}
 
 
 def analytic_applies(scene: Scene) -> bool:
@@ -79,10 +80,10 @@ def pass_seed(seed: int, group: int, pass_index: int, pilot: bool = False) -> in
 
 def pass_statistics(passes: np.ndarray, matrix: np.ndarray | None = None) -> tuple[np.ndarray, float, float]:
     """Mean of P independent passes [P, C, H, W] (float32), and over all band values the sums
-    Σ σ² (variance of the mean) and Σ x̄², for the relative noise ‖σ‖₂/‖x‖₂ = sqrt(Σσ²/(Σx̄² − Σσ²))
-    (x the noise-free image; the norm of the study's relative error). With `matrix` [C, K] the bands are x_k = Σ_c M_ck w_c of
-    the rendered channels w (the rgb path), and both sums follow exactly from the C × C covariance
-    and Gram matrices summed over pixels."""
+    Σ σ² (variance of the mean) and Σ x̄², for the relative noise ‖σ‖₂/‖x‖₂ = sqrt(Σσ²/(Σx̄² − Σσ²)) (x the
+    noise-free image; the norm of the study's relative error). With `matrix` [C, K] the bands are
+    x_k = Σ_c M_ck w_c of the rendered channels w (the rgb path), and both sums follow exactly from the C × C
+    covariance and Gram matrices summed over pixels."""
     p = passes.shape[0]
     mean = passes.mean(0, dtype=np.float64)
     flat = mean.reshape(mean.shape[0], -1)
@@ -207,7 +208,8 @@ def monitor_content(scene: Scene, geom: CameraGeometry) -> tuple[np.ndarray, np.
     m = scene.content
     try:
         drive, how = panel_drive(m.image, *m.resolution_px, m.transfer, _base(scene))
-        primaries, prim_desc = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, _base(scene), m.white_point)
+        primaries, prim_desc = spectra.monitor_primaries(m.primaries, m.peak_luminance_cd_m2, _base(scene),
+                                                         m.white_point)
     except (DisplayImageError, spectra.SpectrumError) as e:
         raise RenderError(f"{scene.source}: {e}") from None
     matrix = spectra.band_means(primaries, np.asarray(scene.bands.edges_nm))  # [3, K]
@@ -248,9 +250,10 @@ def _grid_meta(scene: Scene, geom: CameraGeometry, edges: np.ndarray, depth) -> 
             "units": "band-mean radiance, W sr^-1 m^-2 nm^-1, pixel-area mean (box filter)",
             "camera": geom.describe(), "lens": vars(scene.lens), "sensor": vars(scene.sensor),
             "supersample": r.supersample, "margin_um": r.margin_um,
-            "depth": "axial distance along the optical axis, m, at pixel centres; inf = no surface" if depth is not None
-            else ("not rendered: the monitor is a plane at camera.focus_distance_m" if isinstance(scene.content, Monitor)
-                  else "not rendered")}
+            "depth": "axial distance along the optical axis, m, at pixel centres; inf = no surface"
+            if depth is not None
+            else ("not rendered: the monitor is a plane at camera.focus_distance_m"
+                  if isinstance(scene.content, Monitor) else "not rendered")}
 
 
 def render_analytic(scene: Scene) -> BandImage:
@@ -267,7 +270,8 @@ def render_analytic(scene: Scene) -> BandImage:
         "scene": scene.source, "content": scene.content_type, "render_path": "analytic", "variant": None,
         "backend": "numpy", "backend_reason": "exact pixel-area means of the panel (render.analytic); no Monte Carlo",
         "spp": None, "passes": 0, "spp_per_pass": None, "seed": r.seed, "sampler": None,
-        "spp_from_noise_target": r.noise, "pilot_noise_rel": None, "pilot_spp": None, "noise_rel": 0.0, "max_depth": None, "bands_per_render": None,
+        "spp_from_noise_target": r.noise, "pilot_noise_rel": None, "pilot_spp": None, "noise_rel": 0.0,
+        "max_depth": None, "bands_per_render": None,
         **_grid_meta(scene, g, edges, depth), "seconds": None, **content_meta}
     image = BandImage.of_primaries(rgb, matrix, edges, g.pitch_um, g.margin_px, depth, meta)
     meta["seconds"] = round(time.perf_counter() - t0, 3)
@@ -288,8 +292,9 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
         spp, pilot = estimate_spp(job, r.noise, r.seed)
     n_pass, pass_spp = _passes(spp, path)
     pass_spp = job.sample_count(pass_spp)
-    bar = tqdm(total=n_pass * len(job.groups), desc=f"render ({path}, {job.backend.variant('rgb' if path == 'rgb_matrix' else 'spectral')})",
-               unit="pass", disable=not progress, leave=False)
+    variant = job.backend.variant("rgb" if path == "rgb_matrix" else "spectral")
+    bar = tqdm(total=n_pass * len(job.groups), desc=f"render ({path}, {variant})", unit="pass",
+               disable=not progress, leave=False)
     means, noise = job.render_all(pass_spp, n_pass, r.seed, bar=bar)
     bar.close()
     planes = means[0] if path == "rgb_matrix" else None  # the drive-weighted RGB: bands Σ_c M_ck r_c (of_primaries)
@@ -300,12 +305,13 @@ def render_scene(scene: Scene, progress: bool = True) -> BandImage:
     g = job.geom
     meta = {
         "scene": job.scene.source, "content": job.scene.content_type, "render_path": path,
-        "variant": job.backend.variant("rgb" if path == "rgb_matrix" else "spectral"),
+        "variant": variant,
         "backend": job.backend.kind, "backend_reason": job.backend.reason,
         "spp": n_pass * pass_spp, "passes": n_pass, "spp_per_pass": pass_spp, "seed": r.seed, "sampler": r.sampler,
         "pass_seeds": "SeedSequence([seed, group, pass]).generate_state(1)[0]",
         "spp_from_noise_target": r.noise, "pilot_noise_rel": pilot, "pilot_spp": 2 * PILOT_SPP if pilot else None,
-        "noise_rel": noise, "max_depth": job.max_depth, "bands_per_render": r.bands_per_render if path == "spectral" else None,
+        "noise_rel": noise, "max_depth": job.max_depth,
+        "bands_per_render": r.bands_per_render if path == "spectral" else None,
         **_grid_meta(job.scene, g, job.edges, depth), "seconds": None, **job.meta,
     }
     meta["seconds"] = round(time.perf_counter() - t0, 3)

@@ -27,10 +27,12 @@ def box_response(lo_nm: float, hi_nm: float) -> dict:
 
 def sensor(mi, geom: CameraGeometry, lens: Lens, film: dict, sampler: dict) -> dict:
     d = {"type": "perspective", "fov": geom.fov_x_deg, "fov_axis": "x",
-         "to_world": mi.ScalarTransform4f().look_at(origin=list(geom.origin_m), target=list(geom.target_m), up=list(geom.up)),
+         "to_world": mi.ScalarTransform4f().look_at(origin=list(geom.origin_m), target=list(geom.target_m),
+                                                    up=list(geom.up)),
          "film": film, "sampler": sampler}
     if lens.model == "thinlens":
-        d.update(type="thinlens", aperture_radius=lens.aperture_mm * 1e-3 / 2, focus_distance=min(geom.focus_distance_m, 1e9))
+        d.update(type="thinlens", aperture_radius=lens.aperture_mm * 1e-3 / 2,
+                 focus_distance=min(geom.focus_distance_m, 1e9))
     return d
 
 
@@ -64,7 +66,8 @@ def monitor_shape(mi, size_m: tuple[float, float], drive: np.ndarray, primaries:
     `drive` [3, rows, cols] linear drive levels; each panel pixel is a uniform square (nearest
     lookup). With `primaries` None (RGB variant) the emitted RGB is the drive itself; with
     primaries [3, G] (spectral variant) the radiance is Σ_c drive_c · primary_c(λ)."""
-    bitmap = mi.Bitmap(np.ascontiguousarray(drive.transpose(1, 2, 0)[::-1], dtype=np.float32))  # uv origin at the bottom
+    # rows flipped: the uv origin is at the bottom
+    bitmap = mi.Bitmap(np.ascontiguousarray(drive.transpose(1, 2, 0)[::-1], dtype=np.float32))
     tex = {"type": "bitmap", "bitmap": bitmap, "raw": True, "filter_type": "nearest", "wrap_mode": "clamp"}
     if primaries is not None:
         register_panel_texture(mi)
@@ -206,18 +209,21 @@ def hdr_room(mi, content: HDRRoom, camera_origin_m) -> dict:
     d = {"type": "scene", **_shell(mi, WINDOW_M), **_objects(mi)}
     for name in [k for k in d if k.startswith("chart_")]:  # the chart would cover the window
         del d[name]
-    d["sky"] = {"type": "constant", "radiance": spectrum(spectra.scaled_to_luminance(spectra.illuminant("D65"), content.sky_luminance_cd_m2))}
+    sky = spectra.scaled_to_luminance(spectra.illuminant("D65"), content.sky_luminance_cd_m2)
+    d["sky"] = {"type": "constant", "radiance": spectrum(sky)}
     sun_dir = np.subtract(SUN_SEEN_AT_M, camera_origin_m)
     sun_dir /= np.linalg.norm(sun_dir)
     dist = 1000.0
     sun = spectra.scaled_to_luminance(spectra.illuminant("D55"), content.sun_luminance_cd_m2)
-    d["sun"] = _sphere(np.asarray(camera_origin_m) + dist * sun_dir, dist * math.tan(math.radians(SUN_ANGULAR_DIAMETER_DEG / 2)),
+    d["sun"] = _sphere(np.asarray(camera_origin_m) + dist * sun_dir,
+                       dist * math.tan(math.radians(SUN_ANGULAR_DIAMETER_DEG / 2)),
                        emitter={"type": "area", "radiance": spectrum(sun)})
     lamp = spectrum(spectra.scaled_to_luminance(spectra.illuminant("A"), content.lamp_luminance_cd_m2))
     d["lamp_left"] = _sphere((-1.0, 1.25, -1.5), 0.02, emitter={"type": "area", "radiance": lamp})
     d["lamp_right"] = _sphere((1.0, 0.75, -0.9), 0.02, emitter={"type": "area", "radiance": lamp})
     if content.room_light_luminance_cd_m2 > 0:
+        light = spectra.scaled_to_luminance(spectra.illuminant("A"), content.room_light_luminance_cd_m2)
         d["ceiling_light"] = _rect(mi, (0.0, ROOM_Y[1] - 0.01, 0.5), (1.2, 1.2), [([1, 0, 0], 90)],
-                                   emitter={"type": "area", "radiance": spectrum(spectra.scaled_to_luminance(spectra.illuminant("A"), content.room_light_luminance_cd_m2))})
+                                   emitter={"type": "area", "radiance": spectrum(light)})
     return d
 

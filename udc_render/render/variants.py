@@ -70,7 +70,8 @@ def probe(libllvm: str, timeout_s: float = 120.0) -> bool:
         st = os.stat(libllvm)
     except OSError:
         return False
-    key = f"{os.path.realpath(libllvm)}|{st.st_size}|{int(st.st_mtime)}|mitsuba {version('mitsuba')}|drjit {version('drjit')}"
+    key = (f"{os.path.realpath(libllvm)}|{st.st_size}|{int(st.st_mtime)}"
+           f"|mitsuba {version('mitsuba')}|drjit {version('drjit')}")
     cache = cache_dir() / "llvm_probe.json"
     try:
         known = json.loads(cache.read_text())

@@ -81,7 +81,8 @@ def resolve_xml_camera(scene: Scene) -> Scene:
     where = f"{scene.source}: content.use_xml_camera = true: {xml}"
     if not loaded.sensors():
         raise RenderError(f"{scene.source}: content.use_xml_camera = true but {xml} has no sensor: expected a "
-                          f"<sensor type=\"perspective\"> (or thinlens), or use_xml_camera = false with camera.origin_m")
+                          "<sensor type=\"perspective\"> (or thinlens), or use_xml_camera = false with "
+                          "camera.origin_m")
     sensor = loaded.sensors()[0]
     cls = sensor.class_name()
     element = f"<sensor type=\"{SUPPORTED.get(cls) or OTHER_SENSORS.get(cls) or cls}\" id=\"{sensor.id()}\">"
@@ -122,7 +123,8 @@ def resolve_xml_camera(scene: Scene) -> Scene:
     record = XMLCamera(file=str(xml), sensor=SUPPORTED[cls], sensor_id=sensor.id(), origin_m=_vec(origin),
                        target_m=_vec(target), up=_vec(up), focus_distance_m=float(focus), focus_from=focus_from,
                        xml_fov_x_deg=fov, xml_aperture_radius_m=aperture)
-    return replace(scene, camera=replace(scene.camera, origin_m=record.origin_m, target_m=record.target_m, up=record.up),
+    return replace(scene,
+                   camera=replace(scene.camera, origin_m=record.origin_m, target_m=record.target_m, up=record.up),
                    lens=replace(scene.lens, focus_distance_m=record.focus_distance_m),
                    content=replace(content, xml_camera=record))
 
@@ -151,7 +153,8 @@ def _lookat_target(xml: Path, origin: np.ndarray, forward: np.ndarray) -> np.nda
     if len(t) != 1 or len(t[0]) != 1 or t[0][0].tag != "lookat":
         return None
     try:
-        o, g = (np.array([float(x) for x in t[0][0].get(k, "").replace(",", " ").split()]) for k in ("origin", "target"))
+        o, g = (np.array([float(x) for x in t[0][0].get(k, "").replace(",", " ").split()])
+                for k in ("origin", "target"))
     except ValueError:  # $parameters and the like
         return None
     if o.shape != (3,) or g.shape != (3,) or not np.linalg.norm(g - o) > 0:

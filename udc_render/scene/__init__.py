@@ -24,4 +24,5 @@ from udc_render.scene.model import (
 from udc_render.scene.parse import load_scene, parse_bands, parse_scene, scenes_dir
 
 __all__ = ["Scene", "SceneError", "load_scene", "parse_scene", "parse_bands", "scenes_dir", "Monitor", "Room",
-           "HDRRoom", "MitsubaXML", "XMLCamera", "Camera", "Lens", "Sensor", "Bands", "Render", "RENDER_PATHS", "SAMPLERS"]
+           "HDRRoom", "MitsubaXML", "XMLCamera", "Camera", "Lens", "Sensor", "Bands", "Render", "RENDER_PATHS",
+           "SAMPLERS"]

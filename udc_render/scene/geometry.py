@@ -58,7 +58,8 @@ def camera_geometry(scene: Scene) -> CameraGeometry:
         if scene.camera.origin_m is None:
             how = (" (a Mitsuba XML scene's own camera: resolve it first with udc_render.render.resolve_xml_camera)"
                    if getattr(scene.content, "use_xml_camera", False) else "")
-            raise SceneError(f"{scene.source}: camera.origin_m is required for content.type = {scene.content_type}{how}")
+            raise SceneError(f"{scene.source}: camera.origin_m is required for content.type = "
+                             f"{scene.content_type}{how}")
         origin, target, up = scene.camera.origin_m, scene.camera.target_m, scene.camera.up
         dist = float(np.linalg.norm(np.subtract(target, origin)))
     focus = lens.focus_distance_m or dist
@@ -69,9 +70,10 @@ def camera_geometry(scene: Scene) -> CameraGeometry:
     height = (s.height_px + 2 * margin_sensor_px) * r.supersample
     pitch = s.pitch_um / r.supersample
     fov_x = 2 * math.degrees(math.atan(width * pitch / 2 / v_um))
-    return CameraGeometry(origin_m=tuple(map(float, origin)), target_m=tuple(map(float, target)), up=tuple(map(float, up)),
-                          focus_distance_m=float(focus), image_distance_um=v_um, pitch_um=pitch,
-                          margin_px=margin_sensor_px * r.supersample, width_px=width, height_px=height, fov_x_deg=fov_x)
+    return CameraGeometry(origin_m=tuple(map(float, origin)), target_m=tuple(map(float, target)),
+                          up=tuple(map(float, up)), focus_distance_m=float(focus), image_distance_um=v_um,
+                          pitch_um=pitch, margin_px=margin_sensor_px * r.supersample, width_px=width,
+                          height_px=height, fov_x_deg=fov_x)
 
 
 def axial_depth_m(geom: CameraGeometry, position_m: np.ndarray) -> np.ndarray:

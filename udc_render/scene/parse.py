@@ -100,8 +100,8 @@ class _Table:
 
 
 _CONTENT_KEYS = {
-    "monitor": ("type", "image", "diagonal_in", "resolution_px", "peak_luminance_cd_m2", "primaries", "white_point", "transfer",
-                "framing"),
+    "monitor": ("type", "image", "diagonal_in", "resolution_px", "peak_luminance_cd_m2", "primaries", "white_point",
+                "transfer", "framing"),
     "room": ("type", "light_luminance_cd_m2", "illuminant"),
     "hdr": ("type", "sun_luminance_cd_m2", "sky_luminance_cd_m2", "lamp_luminance_cd_m2", "room_light_luminance_cd_m2"),
     "mitsuba_xml": ("type", "file", "use_xml_camera"),
@@ -134,8 +134,8 @@ def _content(data, source: str):
         import colour
         if illuminant not in colour.SDS_ILLUMINANTS:
             t.fail("illuminant", illuminant, "a colour-science illuminant such as D65, A, D50, FL2")
-        return Room(light_luminance_cd_m2=t.number("light_luminance_cd_m2", d.light_luminance_cd_m2, 0, 1e10, lo_open=True),
-                    illuminant=illuminant)
+        return Room(light_luminance_cd_m2=t.number("light_luminance_cd_m2", d.light_luminance_cd_m2, 0, 1e10,
+                                                   lo_open=True), illuminant=illuminant)
     if kind == "hdr":
         d = HDRRoom()
         return HDRRoom(**{k: t.number(k, getattr(d, k), 0, 1e12) for k in _CONTENT_KEYS["hdr"][1:]})
@@ -177,7 +177,8 @@ def parse_scene(data: dict, source: str) -> Scene:
                 focus_distance_m=t.number("focus_distance_m", d.focus_distance_m, 0, 1e9, lo_open=True, optional=True),
                 model=t.string("model", d.model, LENS_MODELS), zernike_waves=_zernike(t, d.zernike_waves))
     if lens.focus_distance_m is not None and lens.focus_distance_m * 1e3 <= lens.focal_length_mm:
-        t.fail("focus_distance_m", lens.focus_distance_m, f"a distance beyond the focal length ({lens.focal_length_mm} mm)")
+        t.fail("focus_distance_m", lens.focus_distance_m,
+               f"a distance beyond the focal length ({lens.focal_length_mm} mm)")
 
     t = _Table(source, "sensor", data.get("sensor", {}), ("width_px", "height_px", "pitch_um"))
     d = Sensor()
@@ -215,8 +216,10 @@ def parse_scene(data: dict, source: str) -> Scene:
         t.fail("path", render.path, "\"auto\", \"rgb_matrix\" or \"spectral\": \"analytic\" needs monitor content "
                                     "and lens.model = \"pinhole\"")
     if render.path == "rgb_matrix" and not isinstance(content, Monitor):
-        t.fail("path", render.path, "\"spectral\" or \"auto\" for content other than the monitor (its transport depends on wavelength)")
-    needs_pose = isinstance(content, (Room, HDRRoom)) or (isinstance(content, MitsubaXML) and not content.use_xml_camera)
+        t.fail("path", render.path,
+               "\"spectral\" or \"auto\" for content other than the monitor (its transport depends on wavelength)")
+    needs_pose = (isinstance(content, (Room, HDRRoom))
+                  or (isinstance(content, MitsubaXML) and not content.use_xml_camera))
     if camera.origin_m is None and needs_pose:
         raise SceneError(f"{source}: camera.origin_m = None: expected the camera position in metres "
                          f"for content.type = {data['content']['type']}")

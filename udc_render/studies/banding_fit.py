@@ -18,7 +18,8 @@ GREEN = 1  # camera channel index (R, G, B) of the Gr sites
 GR_SITE = (0, 1)  # RGGB: Gr at even rows, odd columns
 HARMONICS = 3
 COLUMNS = ["axis", "display", "distance_mm", "field_phases", "field_power", "field_rank",
-           "period_formula_um", "period_formula_px", "period_fit_um", "period_error_rel", "harmonic_order", "analytic_order", "periods_in_frame",
+           "period_formula_um", "period_formula_px", "period_fit_um", "period_error_rel", "harmonic_order",
+           "analytic_order", "periods_in_frame",
            "a1_measured_rel", "a1_analytic_rel", "psf_mtf", "a1_expected_rel", "a1_interpolated_rel",
            "ratio_measured_analytic", "ratio_measured_expected", "ratio_measured_interpolated", "sinc2_interp",
            "mean_dn", "a1_dn", "sigma_dn", "rows_averaged", "snr_pixel", "snr_averaged", "regime", "visible_pixel",

@@ -30,7 +30,8 @@ def markdown(rows: list[dict], ranges: list[dict], rig, cfg: dict, cost: dict, e
     lines = ["# Banding of a flat field against the display-to-lens distance", "",
              f"Monitor rig showing `pattern:white` (framing fill, the panel's spectrum extended over the render "
              f"margin), {w} × {h} px of {rig.pitch_um:g} µm, {k} bands of {cfg['step_nm']:g} nm, default synthesis "
-             f"(blend 'source', field rank {DEFAULT_RANK}, Poisson + read noise; stray light off), auto exposure {rig.exposure_s * 1e3:.3g} ms. "
+             f"(blend 'source', field rank {DEFAULT_RANK}, Poisson + read noise; stray light off), "
+             f"auto exposure {rig.exposure_s * 1e3:.3g} ms. "
              f"z_i = {rig.z_i_um:.1f} µm (bands along y: the sensor turned to {h} × {w} px, framed anew). "
              "Measured on the green (Gr) sites: the mean across the bands (column mean for x) of clean_dn / glass, "
              f"least-squares fit of a sinusoid + {HARMONICS - 1} harmonics with the period free (FFT start, bounded "

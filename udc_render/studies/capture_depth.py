@@ -132,7 +132,9 @@ def bright_rows(cfg: dict) -> list[dict]:
             rows.append({"study": "bright", "display": name,
                          "setting": f"{precision}{', sun apart' if split else ''}"
                                     f"{' (default)' if split and precision == 'float32' else ''}",
-                         "reference": "float64, sun apart", "rel_error": float(np.max(np.abs(e[view] - ref[view]) / noise)),
+                         "reference": "float64, sun apart",
+                         "rel_error": float(np.max(np.abs(e[view] - ref[view]) / noise)),
                          "kernel_s": round(kernel_s, 3), "apply_s": round(apply_s, 3),
-                         "metric": f"max abs Δe over the noise ({0 if bright is None else int(bright.mask.sum())} px apart)"})
+                         "metric": f"max abs Δe over the noise "
+                                   f"({0 if bright is None else int(bright.mask.sum())} px apart)"})
     return rows

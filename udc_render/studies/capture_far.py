@@ -3,11 +3,11 @@
     udc-render study far_field --out DIR [--quick]
 
 Rig: the paper's (scenes/monitor.toml, astronaut, 2048 × 1024 px of 1.55 µm, the default margin's 513-px core
-window; the far field needs the whole frame to land where it does on the paper's sensor), bands of 50 nm,
-d = 0, noise off, exposure 0.03 s (`study capture`'s; nothing clips). Errors against a reference with the far field everywhere: the relative
-L2 of the noise-free RAW (each display's; the ground truth's image for 'gt') and the relative error of the
-frame's total light. kernel_s: the far kernels (psf.far, cache off); apply_s: synthesize() with the kernels
-given (optics + sensor of glass and the display).
+window; the far field needs the whole frame to land where it does on the paper's sensor), bands of 50 nm, d = 0,
+noise off, exposure 0.03 s (`study capture`'s; nothing clips). Errors against a reference with the far field
+everywhere: the relative L2 of the noise-free RAW (each display's; the ground truth's image for 'gt') and the
+relative error of the frame's total light. kernel_s: the far kernels (psf.far, cache off); apply_s: synthesize()
+with the kernels given (optics + sensor of glass and the display).
 
 - ``threshold``: the lost share above which a view's band gets its far field (off, 0.02 … 0.0001) against 0
   (every band of every view, the bare lens's too), at the default coarse factor.

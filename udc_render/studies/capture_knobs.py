@@ -26,7 +26,8 @@ Knobs, each against its own reference:
   depth layers against a per-pixel reference, and the sun in frame with and without its float64 split.
 
 Outputs: study_capture.csv, study_capture.md (tables and the defaults they justify), study_capture.png.
-``quick``: 128 × 64 px of 6.2 µm, fewer settings (a smoke run, 5 min on 2 cores: every kernel is computed with the cache off).
+``quick``: 128 × 64 px of 6.2 µm, fewer settings (a smoke run, 5 min on 2 cores: every kernel is computed with
+the cache off).
 """
 from __future__ import annotations
 

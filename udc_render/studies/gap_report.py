@@ -88,7 +88,8 @@ def plot(summary: list[dict], path: Path) -> None:
     ax.axvline(0, color="k", lw=0.8)
     ax.set_yticks(np.arange(len(names)) + 0.4 - h / 2, names, fontsize=8)
     ax.invert_yaxis()
-    ax.set(xlabel="DeP PSNR − the bare base's (DeP candidates: − the shipped profile's) (dB, paper protocol)", title="What each effect does to DeP (paper PSF)")
+    ax.set(xlabel="DeP PSNR − the bare base's (DeP candidates: − the shipped profile's) (dB, paper protocol)",
+           title="What each effect does to DeP (paper PSF)")
     ax.grid(True, axis="x", alpha=0.3)
     ax.legend(fontsize=7, loc="lower left")
     save_plot(fig, path)
@@ -96,8 +97,8 @@ def plot(summary: list[dict], path: Path) -> None:
 
 def effects_table() -> list[str]:
     rows = ([{"name": e.name, "on": "yes" if e.default_on else "no", "evidence": e.evidence} for e in EFFECTS]
-            + [{"name": f"DeP: {v.name}", "on": "", "evidence": v.evidence + ("" if v.available() else " (not installed: "
-                                                                                "not run)")} for v in DEP_VARIANTS])
+            + [{"name": f"DeP: {v.name}", "on": "",
+                "evidence": v.evidence + ("" if v.available() else " (not installed: not run)")} for v in DEP_VARIANTS])
     return md_table(rows, [("name", "effect"), ("on", "on in physical"), ("evidence", "evidence for its size")])
 
 

@@ -203,7 +203,8 @@ def capture_rows(display: Display, images: tuple[str, ...] | None = None, quick:
         raise ValueError("capture_rows: the display is glass (γ = 1, nothing to restore): give a display")
     images = tuple(images or (QUICK_IMAGES if quick else IMAGES))
     scene = scene or default_scene()
-    base = {"display": label or display_label(display), "pitch_um": display_pitch_um(display) if pitch_um is None else pitch_um}
+    base = {"display": label or display_label(display),
+            "pitch_um": display_pitch_um(display) if pitch_um is None else pitch_um}
     bar = tqdm(total=len(images) + 2, desc=f"realism capture {base['display']}", unit="step", disable=not progress)
     t0 = time.perf_counter()
     gamma = measure_gamma(display, quick_rig)

@@ -201,7 +201,8 @@ def monitor_full(rows: list[dict], sweep: list[dict]) -> dict | None:
         series.setdefault(series_key(r), []).append(r)
         twin = next((s for s in sweep if series_key(s) == series_key(r) and s["spp_requested"] == r["spp_requested"]),
                     None)
-        r["error_full_over_study"] = r["rel_error_net"] / twin["rel_error_net"] if twin and twin["rel_error_net"] else None
+        r["error_full_over_study"] = (r["rel_error_net"] / twin["rel_error_net"]
+                                      if twin and twin["rel_error_net"] else None)
     fits = {k: fit_line(k, rs, 1.0, MONITOR_TARGETS) for k, rs in series.items()}
     ref = next((r for r in rows if r["role"] == "reference" and r["path"] == "analytic"
                 and r["sensor_px"] == f"{FULL_SENSOR[0]}x{FULL_SENSOR[1]}"), None)
@@ -372,8 +373,8 @@ def analyse(rows: list[dict], scenes: dict[str, Scene]) -> dict:
     if full:
         rec["monitor_exact"] = {k: v for k, v in full.items() if k != "fits"} | {"full_frame": True}
     else:  # the study's size
-        ref = next((r for r in rows if r["role"] == "reference" and r["scene"] == "monitor" and r["path"] == "analytic"),
-                   None)
+        ref = next((r for r in rows
+                    if r["role"] == "reference" and r["scene"] == "monitor" and r["path"] == "analytic"), None)
         rec["monitor_exact"] = {"table": tables["monitor"], "analytic_seconds": ref["seconds"] if ref else None,
                                 "sensor_px": [int(v) for v in ref["sensor_px"].split("x")] if ref else None,
                                 "full_frame": False}
@@ -387,7 +388,8 @@ def analyse(rows: list[dict], scenes: dict[str, Scene]) -> dict:
         smp = rec["sampler"]["recommended"]
         line = fits.get(("room", "spectral", bpr0, smp))
         if smp and line and line["band"].get("c") and line["xyz"].get("c"):
-            rec["room"]["with_sampler"] = room_with_sampler(line, check("room", smp), rec["room"], scenes["room"].render)
+            rec["room"]["with_sampler"] = room_with_sampler(line, check("room", smp), rec["room"],
+                                                           scenes["room"].render)
     return {"fits": {series_label(k): v for k, v in fits.items()},
             "full_fits": {series_label(k): v for k, v in full["fits"].items()} if full else {},
             "samplers": tables, "checks": checks, "honesty": honesty(rows), "recommend": rec,

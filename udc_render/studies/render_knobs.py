@@ -189,8 +189,8 @@ def plan(cfg: Config, scenes: dict[str, Scene]) -> list[Run]:
     runs.append(Run("room", "spectral", cfg.room_ref_bpr, 2, "warmup"))
     runs += [Run("room", "spectral", cfg.room_ref_bpr, cfg.room_ref_spp // 2, "reference", seed=s) for s in (1, 2)]
     bpr0 = scenes["room"].render.bands_per_render
-    lines = [(bpr, "independent") for bpr in cfg.room_bpr] + [(bpr0, s) for s in cfg.samplers
-                                                             if (bpr0, s) not in {(b, "independent") for b in cfg.room_bpr}]
+    lines = [(bpr, "independent") for bpr in cfg.room_bpr]
+    lines += [(bpr0, s) for s in cfg.samplers if (bpr0, s) not in {(b, "independent") for b in cfg.room_bpr}]
     for bpr, smp in lines:
         g = n_groups(k, bpr)
         spps = [budget_spp(b, g) for b in cfg.room_budgets]

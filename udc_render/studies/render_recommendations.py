@@ -39,8 +39,8 @@ def _sampler_text(an: dict) -> list[str]:
         return []
     out = [f"- **Sampler of the Monte Carlo paths: {s['recommended']}** (render.sampler). Rule: the smallest "
            "geometric mean, over the room's targets (per band and XYZ), of the CPU time to reach the target "
-           "relative to the fastest sampler — the room (3D, spectral) is where Monte Carlo is needed; the monitor alone "
-           f"renders exactly by default. Room: {_ratios_text(s['score_room'])}."]
+           "relative to the fastest sampler — the room (3D, spectral) is where Monte Carlo is needed; "
+           f"the monitor alone renders exactly by default. Room: {_ratios_text(s['score_room'])}."]
     if s.get("score_monitor"):
         mon = "monitor_full" if "monitor_full" in tabs else "monitor"
         out.append(f"- Monitor through Mitsuba (rgb_matrix: a thin lens, or `path = \"rgb_matrix\"`): fastest "

@@ -236,7 +236,8 @@ def plot(rows: list[dict], path: Path, cfg: Config) -> None:
     full frame, the room per band and on XYZ."""
     plt = pyplot()
     panels = [("monitor", "sweep", "rel_error_net", "monitor, study size: per-band error"),
-              ("monitor", "full", "rel_error_net", f"monitor, full {FULL_SENSOR[0]} × {FULL_SENSOR[1]}: per-band error"),
+              ("monitor", "full", "rel_error_net",
+               f"monitor, full {FULL_SENSOR[0]} × {FULL_SENSOR[1]}: per-band error"),
               ("room", "sweep", "rel_error_net", "room: per-band error"),
               ("room", "sweep", "rel_error_xyz_net", "room: XYZ error")]
     panels = [p for p in panels if any(r["scene"] == p[0] and r["role"] == p[1] for r in rows)]

@@ -240,7 +240,8 @@ def _check_together(dists: dict, where: str) -> None:
     top = max(dists["display.toled.open_fraction"].support)
     slit = min(dists["display.toled.slit_height_fraction"].support)
     if top > slit:
-        raise RandomizeError(f"{where}: display.toled.open_fraction = {dists['display.toled.open_fraction'].describe()!r}"
+        raise RandomizeError(f"{where}: display.toled.open_fraction = "
+                             f"{dists['display.toled.open_fraction'].describe()!r}"
                              f": expected at most the smallest display.toled.slit_height_fraction ({slit:g}): the "
                              "slit is as wide as the open area needs")
     if "file" in dists["display.family"].support and "" in dists["display.file.path"].support:

@@ -124,7 +124,8 @@ def file_display(values: dict, distance_mm: float, seed: int, source: str) -> Di
     top = float(np.max(t(T_CHECK_NM)))
     if top > 1.0 + 1e-12:
         raise RandomizeError(f"display.file.transmission_scale = {values['transmission_scale']:g}: puts the T(λ) of "
-                             f"{path} at {top:.3g}: expected T ≤ 1 (at most {1.0 / (top / values['transmission_scale']):.3g})")
+                             f"{path} at {top:.3g}: expected T ≤ 1 "
+                             f"(at most {1.0 / (top / values['transmission_scale']):.3g})")
     layout = with_disorder(scaled_layout(base.layout, values["length_scale"]), values, seed, path)
     return Display(PANEL_NAME, layout, t, base.gain, float(distance_mm), source=f"{source}; {base.name} from {path}")
 
