@@ -82,7 +82,8 @@ def optics_cases(repeats: int) -> list[dict]:
 
     cases = [("naive per-band fftconvolve", "float64", naive)]
     for prec in ("float32", "float64"):
-        cases += [("3 kernels (per-channel form)", prec, lambda p=prec: convolve_bands(rgb, flat.kernels[:3], M, None, p)),
+        cases += [("3 kernels (per-channel form)", prec,
+                   lambda p=prec: convolve_bands(rgb, flat.kernels[:3], M, None, p)),
                   ("30 band kernels (d = 0)", prec, lambda p=prec: apply_kernels(bi, flat, None, p)),
                   ("field-varying, 30 bands x 16 phases", prec,
                    lambda p=prec: apply_kernels(bi, field, None, p, period_um=(60.0, 60.0)))]
@@ -117,7 +118,8 @@ def dataset_cases(count: int) -> list[dict]:
             rows.append({"case": f"dataset, {workers} worker(s), {count} items", "precision": "float32",
                          "seconds": round(t, 2), "items/min": round(60 * count / t, 2),
                          "captures/min": round(3 * 60 * count / t, 2)})
-            print(f"dataset {workers} worker(s): {t:.1f} s for {count} items, {60 * count / t:.2f} items/min", flush=True)
+            print(f"dataset {workers} worker(s): {t:.1f} s for {count} items, {60 * count / t:.2f} items/min",
+                  flush=True)
     return rows
 
 

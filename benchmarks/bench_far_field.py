@@ -77,7 +77,8 @@ def _electrons(scene, band_image, cfg) -> float:
     kernels = plan_kernels(scene, poled, cfg)
     sensor = replace(sensor_for_scene(cfg.sensor, scene), exposure_s=1.0)
     layers = depth_layers(band_image, scene, kernels.grid, cfg)
-    e = layered_electrons(band_image, layers, lambda _layer: capture_views(kernels, poled, band_image.edges_nm), sensor, cfg)
+    e = layered_electrons(band_image, layers, lambda _layer: capture_views(kernels, poled, band_image.edges_nm),
+                          sensor, cfg)
     return float(e["poled"][0].sum())
 
 
@@ -97,7 +98,8 @@ def invariant_part(bands: str) -> list[str]:
             for margin in (396.0, 1200.0):
                 off, on = totals[kind, margin]
                 ref_off, ref_on = totals[kind, 1200.0]
-                lines.append(f"| {kind} | {margin:g} | {off:.6g} ({off / ref_off - 1:+.2%}) | {on:.6g} ({on / ref_on - 1:+.2%}) |")
+                lines.append(f"| {kind} | {margin:g} | {off:.6g} ({off / ref_off - 1:+.2%}) "
+                             f"| {on:.6g} ({on / ref_on - 1:+.2%}) |")
     return lines + ["", "(in brackets: against margin 1200 µm)", ""]
 
 
@@ -112,7 +114,8 @@ def time_part(repeats: int) -> list[str]:
         runs = {}
         for cfg in (OFF, ON):
             kernels = plan_kernels(scene, poled, cfg)
-            sensor = replace(sensor_for_scene(cfg.sensor, scene), exposure_s=auto_exposure_s(b, sensor_for_scene(cfg.sensor, scene))[0])
+            sensor = sensor_for_scene(cfg.sensor, scene)
+            sensor = replace(sensor, exposure_s=auto_exposure_s(b, sensor)[0])
             layers = depth_layers(b, scene, kernels.grid, cfg)
             runs[cfg.far_field_threshold] = (kernels, sensor, layers, cfg)
         times = {k: [] for k in runs}

@@ -13,11 +13,11 @@ its kernels (worker_kernels: loading, and whatever it computes), then per image 
 """
 from __future__ import annotations
 
+import argparse
 import os
+import time
 
 os.environ.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")  # before numpy loads
-import argparse  # noqa: E402
-import time  # noqa: E402
 
 CPU_START = time.process_time()
 

@@ -68,7 +68,8 @@ def optics_seconds(band_image, scene, displays, cfg, per_layer, layers, bright) 
 
 
 def bench(name: str, spp: int, repeats: int, cache_dir: str | None, tolerance_px: float) -> dict:
-    scene, bi, displays, cfg, per_layer, base_off, layers, render_s, kernel_s = setup(name, spp, cache_dir, tolerance_px)
+    scene, bi, displays, cfg, per_layer, base_off, layers, render_s, kernel_s = setup(name, spp, cache_dir,
+                                                                                      tolerance_px)
     off = replace(cfg, defocus_tolerance_px=None)
     single = depth_layers(bi, scene, base_off.grid, off)
     sensor = sensor_for_scene(cfg.sensor, scene)
@@ -78,7 +79,8 @@ def bench(name: str, spp: int, repeats: int, cache_dir: str | None, tolerance_px
         t_layers.append(optics_seconds(bi, scene, displays, cfg, per_layer, layers, bright))
         t_single.append(optics_seconds(bi, scene, displays, off, [base_off], single, bright))
     d = layers.describe()
-    return {"scene": name, "tolerance_px": tolerance_px, "layers": layers.count, "blur_px": d["blur_diameter_px"], "share": d["pixel_share"],
+    return {"scene": name, "tolerance_px": tolerance_px, "layers": layers.count, "blur_px": d["blur_diameter_px"],
+            "share": d["pixel_share"],
             "bright_px": 0 if bright is None else int(bright.mask.sum()), "layered_s": statistics.median(t_layers),
             "single_s": statistics.median(t_single), "render_s": render_s, "kernel_s": kernel_s}
 
@@ -88,10 +90,12 @@ def table(rows: list[dict], repeats: int) -> str:
              f"Physical profile (ground truth, T-OLED and P-OLED at d = 2 mm, 30 bands), median of {repeats} "
              "interleaved rounds of views.layered_electrons; `kernels s` is every kernel these runs needed "
              "(the layers' included; cold or cached as the cache was). Target: layered ≤ 3 × one layer.", "",
-             "| scene | tolerance px | layers | blur diameters (px) | pixel share | bright px | one layer s | layered s | ratio | kernels s |",
+             "| scene | tolerance px | layers | blur diameters (px) | pixel share | bright px | one layer s "
+             "| layered s | ratio | kernels s |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['scene']} | {r['tolerance_px']:g} | {r['layers']} | {', '.join(f'{b:.2f}' for b in r['blur_px'])} | "
+        lines.append(f"| {r['scene']} | {r['tolerance_px']:g} | {r['layers']} | "
+                     f"{', '.join(f'{b:.2f}' for b in r['blur_px'])} | "
                      f"{', '.join(f'{s:.2f}' for s in r['share'])} | {r['bright_px']} | {r['single_s']:.2f} | "
                      f"{r['layered_s']:.2f} | {r['layered_s'] / r['single_s']:.2f} | {r['kernel_s']:.0f} |")
     return "\n".join(lines) + "\n"
@@ -107,7 +111,8 @@ def main() -> None:
                     help="defocus tolerances to time (each its own render of the scene)")
     ap.add_argument("--out", type=Path, default=Path("out/bench/layers.md"))
     args = ap.parse_args()
-    rows = [bench(n, args.spp, args.repeats, args.cache_dir, t) for n in args.scenes.split(",") for t in args.tolerance_px]
+    rows = [bench(n, args.spp, args.repeats, args.cache_dir, t)
+            for n in args.scenes.split(",") for t in args.tolerance_px]
     text = table(rows, args.repeats)
     print(text)
     args.out.parent.mkdir(parents=True, exist_ok=True)

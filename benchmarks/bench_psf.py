@@ -284,8 +284,8 @@ def check_and_time_compute_kernels(args, ref_n) -> list[dict]:
     n_def = compute_kernels(display, LENS, WL_SET[:1], PIXEL_UM, SIZE).params["pupil_samples"]
     p = Pupil("toled", n_def)
     if peer_available("hcipy"):
-        calls += [(f"hcipy {sub}×{sub} sub-samples, binned", lambda sub=sub: peer_hcipy_binned(p, WL_SET, "float32", sub))
-                  for sub in (3, 7)]
+        calls += [(f"hcipy {sub}×{sub} sub-samples, binned",
+                   lambda sub=sub: peer_hcipy_binned(p, WL_SET, "float32", sub)) for sub in (3, 7)]
     secs, outs = timed_interleaved([c for _, c in calls], args.repeats)
     rows = []
     for (label, _), sec, k in zip(calls, secs, outs):

@@ -82,7 +82,8 @@ def main() -> None:
     for r in rows:
         r["wall_ratio_vs_fixed"] = r["wall_s"] / rows[0]["wall_s"]
     head = (f"bench_randomize: {a.count} items, sensor {a.sensor_px} px, {a.workers} worker(s), fixed display "
-            f"{a.display}, {a.panels} panels; {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at the end\n\n")
+            f"{a.display}, {a.panels} panels; {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} "
+            "at the end\n\n")
     save_text(a.out / "bench_randomize.md", head + table(rows))
     save_text(a.out / "bench_randomize.csv", csv_text([{c: r.get(c) for c in COLUMNS} for r in rows], COLUMNS))
     print(head + table(rows))

@@ -138,7 +138,8 @@ def measure(mosaic: np.ndarray, sensor: SensorConfig, folder: Path, repeats: int
 
 def markdown(rows: list[dict], mosaic: np.ndarray, gain: float, repeats: int) -> str:
     raw_bytes = mosaic.nbytes
-    lines = [f"Capture {mosaic.shape[1]} × {mosaic.shape[0]} uint16 ({raw_bytes / 1e6:.2f} MB in memory), gain {gain:g}; "
+    lines = [f"Capture {mosaic.shape[1]} × {mosaic.shape[0]} uint16 ({raw_bytes / 1e6:.2f} MB in memory), "
+             f"gain {gain:g}; "
              f"medians of {repeats} repeats, ms.", "",
              "| form | MB | of raw | write | read (tifffile) | read (rawpy) | to packed [4, H/2, W/2] |",
              "|---|---|---|---|---|---|---|"]

@@ -192,7 +192,8 @@ def ratios(rows: list[dict], study: dict | None) -> list[str]:
                          f"{', scaled' if b['scaled'] else ''}).")
     rgb, spec = find("monitor", "rgb_matrix", "llvm", 16), find("monitor", "spectral", "llvm")
     if rgb and spec:
-        lines.append(f"- monitor, equal spp (llvm, {rgb['sensor_px'].replace('x', '×')}): spectral ({spec['bands_per_render']} bands per render) "
+        lines.append(f"- monitor, equal spp (llvm, {rgb['sensor_px'].replace('x', '×')}): "
+                     f"spectral ({spec['bands_per_render']} bands per render) "
                      f"/ rgb_matrix time per spp = {rgb['grid_mpx_spp_per_s'] / spec['grid_mpx_spp_per_s']:.0f}× "
                      f"({spec['seconds'] / spec['spp']:.1f} s vs {rgb['seconds'] / rgb['spp']:.2f} s per spp, set-up "
                      "included).")

@@ -96,7 +96,8 @@ def main() -> int:
     rows = model_cases(size, args.repeats) + (dep_cases(size, args.repeats) if args.dep else [])
     machine = {"python": platform.python_version(), "torch": torch.__version__, "cpus": os.cpu_count(),
                "load_avg_1min_start": round(load0, 2), "load_avg_1min_end": round(os.getloadavg()[0], 2),
-               "run_s": round(time.perf_counter() - t0, 1), "input": [1, 4, *size], "output_mpx": 4 * size[0] * size[1] / 1e6}
+               "run_s": round(time.perf_counter() - t0, 1), "input": [1, 4, *size],
+               "output_mpx": 4 * size[0] * size[1] / 1e6}
     cols = ["method", "layout", "threads", "ms", "ms_per_mpx", "speed-up vs contiguous 1 thread", "time / UNet"]
     md = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     md += ["| " + " | ".join("" if r.get(c) is None else str(r[c]) for c in cols) + " |" for r in rows]

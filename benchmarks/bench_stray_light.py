@@ -29,7 +29,8 @@ from udc_render.sensor import SensorConfig, mosaic_of
 
 OFF = StrayLight.off()
 EFFECTS = {
-    "a. room light on the screen (500 lx, R 0.044)": replace(OFF, room_illuminance_lux=ON_VALUES["room_illuminance_lux"]),
+    "a. room light on the screen (500 lx, R 0.044)":
+        replace(OFF, room_illuminance_lux=ON_VALUES["room_illuminance_lux"]),
     "b. ghost (R_lens 0.005 × R_under 0.08, 2 mm disc)": replace(OFF, lens_reflectance=ON_VALUES["lens_reflectance"]),
     "c. lens veiling glare 0.02 (θ⁻², ≥ 1°)": replace(OFF, lens_glare=ON_VALUES["lens_glare"]),
     "d. haze, P-OLED 0.015 (θ⁻², ≥ 2.5°; the default)": replace(OFF, haze=StrayLight().haze),
@@ -74,7 +75,8 @@ def table(rows: list[dict], distance_mm) -> str:
              "moved = Σ|e_on − e_off| / Σ e_off, net = Σ(e_on − e_off) / Σ e_off over the noise-free RGGB mosaic; "
              "each effect alone at its on-value.", "",
              "| effect | view | moved | net | s |", "|---|---|---|---|---|"]
-    lines += [f"| {r['effect']} | {r['view']} | {r['moved']:.2e} | {r['net']:+.2e} | {r['seconds']:.2f} |" for r in rows]
+    lines += [f"| {r['effect']} | {r['view']} | {r['moved']:.2e} | {r['net']:+.2e} | {r['seconds']:.2f} |"
+              for r in rows]
     return "\n".join(lines) + "\n"
 
 
