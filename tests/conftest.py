@@ -237,7 +237,8 @@ def write_pairs(root, splits=(("train", 6), ("val", 1), ("test", 2)), size_px=(6
                 blurred = uniform_filter1d(gt, blur_px, axis=2, mode="nearest")
                 raw = np.clip(gamma * mosaic_of(blurred) + rng.normal(0, noise, (h, w)), 0, 1)
                 (root / folder / d).mkdir()
-                save_dng(root / folder / d / "raw.dng", np.round(raw * 65535).astype(np.uint16), "Nikon 5100 (NPL)", 0, 65535)
+                save_dng(root / folder / d / "raw.dng", np.round(raw * 65535).astype(np.uint16), "Nikon 5100 (NPL)",
+                         0, 65535)
                 (root / folder / d / "capture.json").write_text(json.dumps(
                     {"sensor": {"black_level_dn": 0, "white_level_dn": 65535, "pitch_um": 1.55,
                                 "camera": "Nikon 5100 (NPL)"}}))

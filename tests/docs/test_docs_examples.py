@@ -74,7 +74,8 @@ def _run_udc(argv, env, kernel_cache, where):
         full = {**os.environ, "UDC_RENDER_CACHE": str(kernel_cache), **env}
         proc = subprocess.run([sys.executable, "-m", "udc_render.cli", *argv], env=full,
                               capture_output=True, text=True, timeout=600)
-        assert proc.returncode == 0, f"{where}: `udc-render {' '.join(argv)}` exits {proc.returncode}\n{proc.stderr[-3000:]}"
+        assert proc.returncode == 0, \
+            f"{where}: `udc-render {' '.join(argv)}` exits {proc.returncode}\n{proc.stderr[-3000:]}"
         return
     from udc_render.cli import main
     try:

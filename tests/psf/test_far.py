@@ -85,7 +85,8 @@ def test_airy_wing_against_its_closed_form():
     for R in (200.0, 600.0):
         v = math.pi * LENS.aperture_um * R / (lam * LENS.image_distance_um)
         inside_box = a[r > R].sum()
-        past_box = 2 * lam * LENS.image_distance_um / (math.pi ** 2 * LENS.aperture_um * size * rho / math.sqrt(math.pi))
+        past_box = (2 * lam * LENS.image_distance_um
+                    / (math.pi ** 2 * LENS.aperture_um * size * rho / math.sqrt(math.pi)))
         assert inside_box + past_box == pytest.approx(j0(v) ** 2 + j1(v) ** 2, rel=0.01), R
     assert a.min() >= 0 and a.sum() < 1
 

@@ -330,7 +330,8 @@ def test_micrograph_rasters_conserve_power(tmp_path):
 
 def test_micrograph_of_the_toled_cell_gives_the_toled_kernels(tmp_path):
     # A 60 × 60 px, 1 µm/px binary picture of the T-OLED cell (opening x ∈ [23, 37], y ∈ [3, 57])
-    # has the same Fourier series as layouts.toled(pitch_um=60.0), hence the same engine output (measured 9e-16 of peak).
+    # has the same Fourier series as layouts.toled(pitch_um=60.0), hence the same engine output (measured 9e-16 of
+    # peak).
     img = np.zeros((60, 60), np.uint8)
     img[3:57, 23:37] = 255
     p = tmp_path / "toled.png"

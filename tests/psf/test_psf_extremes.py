@@ -43,8 +43,8 @@ def _sane(ks, tol=1e-12):
 # ---------------------------------------------------------------------------------------------
 
 def test_distance_zero_is_the_principal_plane_model():
-    ks = compute_kernels(layouts.toled(pitch_um=60.0), LENS, [450.0, 640.0], size_px=63, distance_mm=0.0, field_phases=4,
-                         pupil_samples=256, precision="float64")
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), LENS, [450.0, 640.0], size_px=63, distance_mm=0.0,
+                         field_phases=4, pupil_samples=256, precision="float64")
     _sane(ks)
     assert ks.field_kernels is None and ks.field_power is None
     assert ks.params["model"] == "principal-plane" and ks.params["field_phases"] == 1
@@ -195,7 +195,8 @@ def test_bare_lens_alias_warning():
 # precision
 # ---------------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("layout", [None, layouts.toled(pitch_um=60.0), layouts.poled()], ids=["bare", "toled", "poled"])
+@pytest.mark.parametrize("layout", [None, layouts.toled(pitch_um=60.0), layouts.poled()],
+                         ids=["bare", "toled", "poled"])
 def test_float32_matches_float64(layout):
     # complex64 FFTs and products: measured max difference 5.6e-7 (bare), 3.7e-7 (T-OLED), 5.0e-7 (P-OLED) of
     # the peak at N = 1024, energy_outside within 6e-7 (when written); 2.9e-7, 1.6e-7, 1.3e-7 and 3.2e-7 on the
@@ -348,11 +349,11 @@ def test_bad_lens_raises_one_line_lens_error(kwargs):
 
 
 def test_huge_aperture_keeps_only_the_zero_order_in_a_small_window():
-    # f/0.5 (D = 12 mm, the limit of a lens in air): the Airy core (0.32 µm) sits inside the centre pixel and the first order
-    # (λz/p = 52 µm = 16.8 px) lies outside a 31-px window, so the window holds the zero order:
-    # |c0|² of the transmitted (propagating) power T, i.e. f² / T ≈ f (docs/PHYSICS.md §6), up to the
-    # Airy tails of the other orders (in) and of the zero order (out): ~2λN/(π² r) ≈ 1e-3 at r = 46 µm.
-    # Measured at f/0.5: 0.21218 against 0.21096 (1.2e-3; at the former f/0.3, now refused, 7e-4).
+    # f/0.5 (D = 12 mm, the limit of a lens in air): the Airy core (0.32 µm) sits inside the centre pixel and the first
+    # order (λz/p = 52 µm = 16.8 px) lies outside a 31-px window, so the window holds the zero order: |c0|² of the
+    # transmitted (propagating) power T, i.e. f² / T ≈ f (docs/PHYSICS.md §6), up to the Airy tails of the other orders
+    # (in) and of the zero order (out): ~2λN/(π² r) ≈ 1e-3 at r = 46 µm. Measured at f/0.5: 0.21218 against 0.21096
+    # (1.2e-3; at the former f/0.3, now refused, 7e-4).
     lens = Lens(aperture_um=12000.0)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # 1024 samples stay alias-free for a 31-px window

@@ -48,14 +48,16 @@ def test_pupil_phase_rms_equals_the_coefficients(terms):
     rms_waves = math.sqrt(np.sum(area * (w_um - mean) ** 2) / area.sum()) / (zernike.REFERENCE_NM * 1e-3)
     assert rms_waves == pytest.approx(zernike.rms_waves(terms), rel=1e-4)  # measured ≤ 2.4e-5 (the grey edge)
     lam_um = 0.45
-    np.testing.assert_allclose(lens.pupil_phase(g.x_um, g.y_um, lam_um), np.exp(2j * math.pi * w_um / lam_um), atol=1e-12)
+    np.testing.assert_allclose(lens.pupil_phase(g.x_um, g.y_um, lam_um), np.exp(2j * math.pi * w_um / lam_um),
+                               atol=1e-12)
 
 
 def _strehl_engine(terms, lam_nm=550.0):
     """The centre value of the point-sampled kernel (× the window's share of the power) over the
     diffraction-limited one's."""
     def centre(lens):
-        k = compute_kernels(None, lens, [lam_nm], pixel_um=0.5, size_px=63, pixel_integration=False, precision="float64")
+        k = compute_kernels(None, lens, [lam_nm], pixel_um=0.5, size_px=63, pixel_integration=False,
+                            precision="float64")
         return k.kernels[0, 31, 31] * (1 - k.energy_outside[0])
     return centre(Lens(zernike_waves=terms)) / centre(Lens())
 

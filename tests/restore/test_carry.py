@@ -32,7 +32,8 @@ def test_a_carried_model_comes_back_finished_and_is_not_trained_again(tmp_path):
     assert 0 < np.abs(a - b).max() < 1e-2 * np.abs(a).max()  # float16 weights: rounded, not a different model
 
     keep(tmp_path / "fresh", tmp_path / "carry" / "unet_blur")  # idempotent: the same bytes
-    assert (tmp_path / "fresh" / "model.pt").read_bytes() == (tmp_path / "carry" / "unet_blur" / "model.pt").read_bytes()
+    carried = tmp_path / "carry" / "unet_blur" / "model.pt"
+    assert (tmp_path / "fresh" / "model.pt").read_bytes() == carried.read_bytes()
     assert not bring_back(tmp_path / "carry" / "unet_blur", tmp_path / "run", s)  # a begun run keeps its own files
 
 
@@ -79,7 +80,8 @@ def test_a_bf16_budget_with_models_to_train_is_refused_before_any_dataset(tmp_pa
     from restore.studies.budgets import shipped_folder
     from restore.studies.results import check_precision, models_to_train, run_results
     monkeypatch.setattr(restore.precision, "bf16_native", lambda device: False)
-    with pytest.raises(PrecisionError, match=r"--budget cpu: 8 models to train \(unet_toled, unet_poled, .+\) in bfloat16"):
+    with pytest.raises(PrecisionError,
+                       match=r"--budget cpu: 8 models to train \(unet_toled, unet_poled, .+\) in bfloat16"):
         run_results(tmp_path / "out", "cpu", carry=None, progress=False)
     assert not (tmp_path / "out").exists()
     assert models_to_train(tmp_path / "out", shipped_folder()) == []

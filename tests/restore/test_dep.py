@@ -25,7 +25,8 @@ def toled():
     import skimage.data
 
     from psf import Lens, compute_kernels, layouts
-    k3 = compute_kernels(layouts.toled(pitch_um=60.0), Lens(), wavelengths_nm=[640, 520, 450], pixel_um=3.1, size_px=65).kernels
+    k3 = compute_kernels(layouts.toled(pitch_um=60.0), Lens(), wavelengths_nm=[640, 520, 450], pixel_um=3.1,
+                         size_px=65).kernels
     k4 = k3[[0, 1, 1, 2]].astype(np.float64)
     m = k4.shape[-1] // 2
     img = (skimage.data.astronaut()[40:40 + 2 * (H + 2 * m), :2 * (W + 2 * m)] / 255.0) ** 2.2 * 0.8

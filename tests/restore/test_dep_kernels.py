@@ -64,7 +64,8 @@ def test_the_papers_kernels_are_for_the_diffraction_limited_lens(data, tmp_path)
     (pair.folder / "synth.json").write_text(json.dumps(synth))
     np.testing.assert_array_equal(known_kernels_rggb(pair, KERNEL_PX, source="paper"),
                                   known_kernels_rggb(base, KERNEL_PX, source="paper"))
-    moved = np.abs(known_kernels_rggb(pair, KERNEL_PX, source="exact") - known_kernels_rggb(base, KERNEL_PX, source="exact"))
+    moved = np.abs(known_kernels_rggb(pair, KERNEL_PX, source="exact")
+                   - known_kernels_rggb(base, KERNEL_PX, source="exact"))
     assert moved.sum(axis=(1, 2)).min() > 1e-3
 
 

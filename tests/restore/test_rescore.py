@@ -25,6 +25,7 @@ def test_the_time_spent_sums_items_and_rows_over_resumes(tmp_path):
     import json
 
     from restore.studies.rescore import spent_seconds
-    (tmp_path / "timing.jsonl").write_text("".join(json.dumps({"item": i, "seconds": s}) + "\n" for i, s in ((1, 60.0), (2, 30.0))))
+    (tmp_path / "timing.jsonl").write_text("".join(json.dumps({"item": i, "seconds": s}) + "\n"
+                                                   for i, s in ((1, 60.0), (2, 30.0))))
     (tmp_path / "row_seconds.json").write_text(json.dumps({"input": 10.0, "dep": 20.0}))
     assert spent_seconds(tmp_path, tmp_path) == 120.0

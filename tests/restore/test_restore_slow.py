@@ -39,7 +39,8 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     assert "| test | " in doc  # the content table per split
     # two training lines, a row in each protocol's table, one in the level table, one held out, one per display in
     # the error bands
-    assert doc.count("| unet_syn |") == 8 and doc.count("| unet_random |") == 8 and "## Where the error lies (spatial frequency)" in doc
+    assert doc.count("| unet_syn |") == 8 and doc.count("| unet_random |") == 8
+    assert "## Where the error lies (spatial frequency)" in doc
     assert "## Level and structure (test split, paper protocol)" in doc and "| input | " in doc.split("## Level")[1]
     assert (tmp_path / "res" / "figures" / "error_bands_poled.png").is_file()
     assert set(r["heldout"]["methods"]) == set(methods) and "## Held-out photographs (a content check)" in doc
@@ -47,7 +48,8 @@ def test_results_quick_budget_runs_every_stage(tmp_path):
     faces = {(row["condition"], row["display"]) for row in r["faces"]["rows"]}
     assert {("unet", "poled"), ("resnet", "toled"), ("unet ×k", "toled"), ("resnet ×k", "poled")} <= faces
     assert all(k > 0 for k in r["faces"]["level_gain"].values()) and "A `×k` row restores" in doc
-    row_seconds = {ev: json.loads((tmp_path / "res" / ev / "row_seconds.json").read_text()) for ev in ("eval", "eval_heldout")}
+    row_seconds = {ev: json.loads((tmp_path / "res" / ev / "row_seconds.json").read_text())
+                   for ev in ("eval", "eval_heldout")}
     assert all(set(s) == set(methods) and min(s.values()) > 0 for s in row_seconds.values())
     assert "## Machine time" in doc and "| scoring, test split |" in doc
     # the paper dataset is made after every row on the physical captures (budgets.TRAIN_ORDER)

@@ -90,7 +90,8 @@ def test_machine_time_is_summed_from_what_each_stage_recorded(tmp_path):
     lines = budget_section(out, datasets, {"error_bands_s": 720.0, "faces_s": 1080.0})  # 0.2 h and 0.3 h
     text = "\n".join(lines)
     assert "| dataset, physical profile | 1.00 |" in text and "| dataset, paper profile | 2.00 |" in text
-    assert "| training, 2 models | 2.20 |" in text  # 0.7 h active (720 + 720 + 1.5 × 720 s) and 1.5 h and "| scoring, test split | 1.00 |" in text
+    assert "| training, 2 models | 2.20 |" in text  # 0.7 h active (720 + 720 + 1.5 × 720 s) and 1.5 h
+    assert "| scoring, test split | 1.00 |" in text
     assert "| held-out photographs: dataset | 0.00 |" in text  # not made: nothing counted
     assert "| **total** | **6.70** |" in text and "this run took 0.84 of it" in text
 

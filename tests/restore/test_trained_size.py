@@ -26,7 +26,8 @@ BANK_RECORD_BYTES = 400_000
 
 def tracked() -> list[Path]:
     try:
-        out = subprocess.run(["git", "ls-files", "restore/trained"], cwd=ROOT, capture_output=True, text=True, check=True)
+        out = subprocess.run(["git", "ls-files", "restore/trained"], cwd=ROOT, capture_output=True, text=True,
+                             check=True)
     except (OSError, subprocess.CalledProcessError):
         pytest.skip("not a git checkout")
     return [ROOT / line for line in out.stdout.splitlines() if (ROOT / line).is_file()]
@@ -39,7 +40,8 @@ def test_shipped_weights_are_bounded():
         if rel.parts == (SHIPPED_FILE,):
             continue
         sizes[rel.parts[0]] = sizes.get(rel.parts[0], 0) + p.stat().st_size
-    assert set(sizes) <= set(SLOTS), f"restore/trained holds {sorted(set(sizes) - set(SLOTS))}; allowed: {sorted(SLOTS)}"
+    assert set(sizes) <= set(SLOTS), \
+        f"restore/trained holds {sorted(set(sizes) - set(SLOTS))}; allowed: {sorted(SLOTS)}"
     for folder, total in sizes.items():
         assert total <= MAX_TOTAL_MB * 1e6, f"restore/trained/{folder} holds {total / 1e6:.1f} MB > {MAX_TOTAL_MB} MB"
 

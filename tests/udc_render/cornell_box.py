@@ -10,7 +10,8 @@ SENSOR = """  <sensor type="{type}" id="cam">{extra}
     <film type="hdrfilm"><integer name="width" value="64"/><integer name="height" value="32"/></film>
   </sensor>
 """
-LOOKAT = '<lookat origin="{}" target="{}" up="{}"/>'.format(*(", ".join(f"{v:g}" for v in p) for p in (ORIGIN, TARGET, UP)))
+LOOKAT = '<lookat origin="{}" target="{}" up="{}"/>'.format(
+    *(", ".join(f"{v:g}" for v in p) for p in (ORIGIN, TARGET, UP)))
 
 
 def wall(name, rgb, transform):

@@ -77,7 +77,8 @@ def test_layout_manifest_job_and_timing(reference):
         folder = reference / e["folder"]
         assert e["displays"] == ["glass", "toled"]
         assert e["files"] == sorted(p.relative_to(folder).as_posix() for p in folder.rglob("*") if p.is_file())
-        assert {"gt.exr", "item.json", "synth.json", "glass/raw.dng", "toled/raw.dng", "toled/capture.json"} <= set(e["files"])
+        assert {"gt.exr", "item.json", "synth.json", "glass/raw.dng", "toled/raw.dng",
+                "toled/capture.json"} <= set(e["files"])
         assert not any(f.endswith(("preview.png", "raw.png", "packed.tiff")) for f in e["files"])  # previews off
         record = json.loads((folder / "item.json").read_text())
         assert record == {k: v for k, v in e.items() if k != "files"}

@@ -158,8 +158,8 @@ def test_glass_uses_bare_aperture_with_unit_transmission():
 @pytest.fixture(scope="module")
 def toled_d1():
     """T-OLED 1 mm in front of the pupil, 8 × 8 field phases, 15 px kernels at 12.4 µm (~4 s)."""
-    return compute_kernels(layouts.toled(pitch_um=60.0), wavelengths_nm=[520.0], pixel_um=PITCH, size_px=15, distance_mm=1.0,
-                           field_phases=8, pupil_samples=256, precision="float64")
+    return compute_kernels(layouts.toled(pitch_um=60.0), wavelengths_nm=[520.0], pixel_um=PITCH, size_px=15,
+                           distance_mm=1.0, field_phases=8, pupil_samples=256, precision="float64")
 
 
 def flat_field(ks, frame=(33, 256), margin=7):
@@ -267,8 +267,8 @@ def test_field_source_blend_conserves_energy(toled_d1):
 
 
 def test_no_banding_at_zero_distance():
-    ks = compute_kernels(layouts.toled(pitch_um=60.0), wavelengths_nm=[520.0], pixel_um=PITCH, size_px=15, distance_mm=0.0,
-                         pupil_samples=256)
+    ks = compute_kernels(layouts.toled(pitch_um=60.0), wavelengths_nm=[520.0], pixel_um=PITCH, size_px=15,
+                         distance_mm=0.0, pupil_samples=256)
     assert ks.field_kernels is None
     r = apply_kernels(flat_field(ks), ks)
     assert r.applied["model"] == "field-independent"

@@ -52,7 +52,8 @@ def test_the_profiles_set_what_they_say():
     assert (cfg.sensor.noise, cfg.sensor.lambda_source) == ("gaussian", "sensor")  # the paper's noise (l.178)
     assert cfg.profile["applied"]["noise"] == {"noise": "gaussian", "lambda_source": "sensor"}
     assert _setup()[0].sensor.noise == "poisson"  # physical: the sensor config's
-    assert f"profile physical: form spectral, display-to-lens distance {PHYSICAL_DISTANCE_MM:g} mm" in describe(_setup()[0].profile)
+    assert (f"profile physical: form spectral, display-to-lens distance {PHYSICAL_DISTANCE_MM:g} mm"
+            in describe(_setup()[0].profile))
 
 
 def test_explicit_options_override_the_profile():
@@ -119,8 +120,9 @@ def _differing(a: dict, b: dict) -> set[str]:
 def test_profiles_differ_only_where_they_say(scene, tmp_path):
     """One scene synthesised under each profile: synth.json differs in form, channel kernels, defects, fixed-pattern
     noise, the far field the spectral form adds, the ground truth's optics (the spectral form's
-    monitor planes) and the profile record alone (the job's sensor record also in the noise); each capture.json's display record only in the distance (glass: not at all); the
-    physical captures carry the defect and FPN records, the paper's none. The same goes for a dataset's job.json."""
+    monitor planes) and the profile record alone (the job's sensor record also in the noise); each capture.json's
+    display record only in the distance (glass: not at all); the physical captures carry the defect and FPN records,
+    the paper's none. The same goes for a dataset's job.json."""
     out = {}
     for name in ("paper", "physical"):
         out[name] = tmp_path / name

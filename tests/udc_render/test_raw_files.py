@@ -88,7 +88,8 @@ def test_color_matrix_fits_the_checker():
     back = np.linalg.solve(m, cam.T).T  # XYZ from camera RGB, scaled so that D65 has Y = 1 (as a developer does)
     xyz_back = back[:-1] / back[-1, 1]
     wp = colour.XYZ_to_xy(white)
-    de = colour.delta_E(colour.XYZ_to_Lab(xyz[:-1] / xyz[-1, 1], wp), colour.XYZ_to_Lab(xyz_back, wp), method="CIE 2000")
+    de = colour.delta_E(colour.XYZ_to_Lab(xyz[:-1] / xyz[-1, 1], wp), colour.XYZ_to_Lab(xyz_back, wp),
+                        method="CIE 2000")
     assert de.mean() < 2 and de.max() < 4
     assert color_matrix_fit("Sigma SDMerill (NPL)")[1] < 0.04  # 0.029
 

@@ -47,7 +47,8 @@ def test_toled_preset_keeps_low_frequencies_and_loses_the_mid_band():
     low, mid = realism.band_ratio(obs, realism.LOW_DECADE), realism.band_ratio(obs, realism.MID_THIRD)
     assert low >= realism.LOW_OVER_MID * mid and mid < 0.5
     old = realism.observe(realism.Config("toled", (("pitch_um", 60.0),)), 255)  # the old preset fails
-    assert realism.band_ratio(old, realism.LOW_DECADE) < realism.LOW_OVER_MID * realism.band_ratio(old, realism.MID_THIRD)
+    assert (realism.band_ratio(old, realism.LOW_DECADE)
+            < realism.LOW_OVER_MID * realism.band_ratio(old, realism.MID_THIRD))
 
 
 def test_poled_preset_has_no_mtf_null_below_nyquist():

@@ -25,7 +25,8 @@ from udc_render.scene import Camera, geometry as rig, parse_scene
 pytestmark = pytest.mark.usefixtures("render_cache")
 
 SMALL = dict(sensor_px=(64, 32), pitch_um=49.6)  # 32 × 1.55 µm: the paper's field of view on 64 × 32 px
-Z_MAX = 4.5  # |z| bound on Monte Carlo tests: two-sided p = 6.8e-6 per value, < 1e-3 over the ≤ 100 values a test checks
+# |z| bound on Monte Carlo tests: two-sided p = 6.8e-6 per value, < 1e-3 over the ≤ 100 values a test checks
+Z_MAX = 4.5
 
 
 def scene_of(udc, tmp_path, **kw):
@@ -682,7 +683,8 @@ def test_analytic_path_is_refused_where_it_is_not_exact(udc, tmp_path):
     from udc_render.render import RenderError
     from udc_render.scene import SceneError
     with pytest.raises(SceneError, match="analytic"):
-        parse_scene({**udc.monitor_doc(render={"path": "analytic"}), "lens": {"model": "thinlens"}}, str(tmp_path / "t.toml"))
+        parse_scene({**udc.monitor_doc(render={"path": "analytic"}), "lens": {"model": "thinlens"}},
+                    str(tmp_path / "t.toml"))
     s = scene_of(udc, tmp_path, **SMALL)
     with pytest.raises(RenderError, match="analytic"):
         render_scene(replace(s, lens=replace(s.lens, model="thinlens")).with_render(path="analytic"), progress=False)

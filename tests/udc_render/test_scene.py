@@ -188,7 +188,8 @@ def test_monitor_framing_puts_its_edges_on_the_frame_edges(udc, framing, sensor_
         assert np.all(inset < tol) and np.max(inset) > -tol
     # thin lens: magnification v/u, u = f (1 + 1/m)
     mag = g.image_distance_um / (rig.monitor_distance_m(s) * 1e6)
-    assert mag == pytest.approx(s.lens.focal_length_mm * 1e-3 / (rig.monitor_distance_m(s) - s.lens.focal_length_mm * 1e-3), rel=1e-12)
+    f_m = s.lens.focal_length_mm * 1e-3
+    assert mag == pytest.approx(f_m / (rig.monitor_distance_m(s) - f_m), rel=1e-12)
 
 
 def test_render_grid_margin_supersampling_and_field_of_view(udc):
@@ -197,7 +198,8 @@ def test_render_grid_margin_supersampling_and_field_of_view(udc):
     assert (g.margin_px, g.width_px, g.height_px, g.pitch_um) == (3, 106, 56, 10.0)  # ceil(25 / 10) = 3
     ss = rig.camera_geometry(s.with_render(supersample=3))
     assert (ss.margin_px, ss.width_px, ss.height_px) == (9, 318, 168) and ss.pitch_um == pytest.approx(10 / 3)
-    assert math.tan(math.radians(g.fov_x_deg) / 2) == pytest.approx(g.width_px * g.pitch_um / 2 / g.image_distance_um, rel=1e-12)
+    assert math.tan(math.radians(g.fov_x_deg) / 2) == pytest.approx(g.width_px * g.pitch_um / 2 / g.image_distance_um,
+                                                                    rel=1e-12)
     # the same world point lands on the same physical sensor point at either sampling
     p = np.array([0.05, -0.03, 0.0])
     np.testing.assert_allclose(rig.projection_px(ss, p), 3 * rig.projection_px(g, p), rtol=1e-12)
@@ -281,7 +283,8 @@ def test_scaled_spectra_illuminants_and_primaries_from_csv(tmp_path):
     csv.write_text("wavelength_nm,r,g,b\n400,0,0,1\n500,0,1,1\n600,1,1,0\n700,1,0,0\n")
     prim, desc = spectra.monitor_primaries("prim.csv", 100.0, base=tmp_path)
     assert desc.startswith("CSV:") and float(spectra.luminance_cd_m2(prim.sum(0))) == pytest.approx(100.0, rel=1e-12)
-    np.testing.assert_allclose(prim[0][spectra.GRID_NM == 650], prim[0][spectra.GRID_NM == 700], rtol=1e-12)  # linear interp
+    # linear interpolation
+    np.testing.assert_allclose(prim[0][spectra.GRID_NM == 650], prim[0][spectra.GRID_NM == 700], rtol=1e-12)
     assert np.all(prim[:, (spectra.GRID_NM < 400) | (spectra.GRID_NM > 700)] == 0)  # zero outside the table
     csv.write_text("wavelength_nm,r,g,b\n600,1,1,1\n500,1,1,1\n")
     with pytest.raises(spectra.SpectrumError, match="must increase"):
@@ -361,7 +364,8 @@ def _png16(path, a):
     def chunk(tag, data):
         return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
     ihdr = struct.pack(">IIBBBBB", w, h, 16, 2 if a.ndim == 3 else 0, 0, 0, 0)
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(raw))
+                     + chunk(b"IEND", b""))
 
 
 def test_read_code_values_from_files(tmp_path):

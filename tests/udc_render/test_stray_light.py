@@ -157,7 +157,8 @@ def test_haze_moves_its_fraction_and_leaves_a_point_its_core():
 def test_ghost_adds_the_reflectance_product_where_its_disc_fits():
     """A uniform field: the ghost adds R_lens · R_under of it wherever its disc lies inside the frame."""
     e = np.full((3, 256, 256), 100.0)
-    stray = replace(OFF, lens_reflectance=0.01, underside_reflectance={"glass": 0.08, "toled": 0.3}, ghost_blur_um=200.0)
+    stray = replace(OFF, lens_reflectance=0.01, underside_reflectance={"glass": 0.08, "toled": 0.3},
+                    ghost_blur_um=200.0)
     out, rec = apply_view(stray, e, "toled", False, np.ones(3), _ctx((256, 256), pitch_um=6.2))
     assert rec["ghost"]["reflectance_product"] == pytest.approx(0.003)
     assert out[:, 128, 128] == pytest.approx(100.0 * 1.003, rel=1e-9)
@@ -268,7 +269,8 @@ def test_finite_at_zero_and_huge_values():
 
 
 @pytest.mark.parametrize("changes, key", [
-    ({"room_illuminance_lux": -1.0}, "room_illuminance_lux"), ({"room_illuminance_lux": float("nan")}, "room_illuminance_lux"),
+    ({"room_illuminance_lux": -1.0}, "room_illuminance_lux"),
+    ({"room_illuminance_lux": float("nan")}, "room_illuminance_lux"),
     ({"screen_reflectance": 1.5}, "screen_reflectance"), ({"lens_reflectance": 1.0}, "lens_reflectance"),
     ({"lens_glare": True}, "lens_glare"), ({"haze": {"poled": 1.0}}, "haze"), ({"haze": {"poled": -0.1}}, "haze"),
     ({"haze": {"": 0.1}}, "haze"), ({"haze": "poled"}, "haze"), ({"ghost_blur_um": 0.0}, "ghost_blur_um"),
@@ -318,7 +320,8 @@ def test_stray_light_option_wins_over_the_profile():
     from udc_render.cli import build_parser
     from udc_render.cli.args import capture_setup
     from udc_render.profiles import describe
-    cfg, _ = capture_setup(build_parser().parse_args(["synth", "monitor", "--display", "poled", "--stray-light", "off"]))
+    cfg, _ = capture_setup(build_parser().parse_args(["synth", "monitor", "--display", "poled",
+                                                      "--stray-light", "off"]))
     assert cfg.stray_light.is_off() and cfg.profile["options"]["stray_light"] == "off"
     assert "stray light: none (option)" in describe(cfg.profile)
     cfg, _ = capture_setup(build_parser().parse_args(["synth", "monitor", "--profile", "paper", "--stray-light",

@@ -114,7 +114,8 @@ def test_display_file_round_trip(tmp_path):
     ('[display]\nlayout = {type = "toled", pitch = 3}\n', "display.layout.pitch = 3"),
     ('[display]\nlayout = {type = "toled"}\ngain = -1\n', "display.gain = -1"),
     ('[display]\nlayout = {type = "toled", open_fraction = 0.95}\n', "open_fraction"),
-    ('[display]\nlayout = {type = "toled"}\ntransmission = {type = "flat", value = 2}\n', "display.transmission.value = 2"),
+    ('[display]\nlayout = {type = "toled"}\ntransmission = {type = "flat", value = 2}\n',
+     "display.transmission.value = 2"),
     ('[display]\nlayout = {type = "toled"}\ntransmission = {type = "csv", file = "nope.csv"}\n', "nope.csv"),
     ('[display]\nlayout = {type = "micrograph", file = "nope.png"}\n', "display.layout.file = 'nope.png'"),
     ('[screen]\n', "screen"),
@@ -347,9 +348,11 @@ def test_deps_known_gamma_is_the_gamma_that_made_the_capture(udc, tmp_path, rend
         assert main(["synth", str(scene), "--display", "toled,poled", "--noise-model", "none", "--form", form,
                      "--distance-mm", "0", "--far-field-threshold", "off", "--stray-light", "off", "--quiet",
                      "--out", str(out)]) == 0
-        glass = pack_rggb(_centre(read_dng_mosaic(out / "glass" / "raw.dng").mosaic_dn.astype(float))).reshape(4, -1).mean(1)
+        mosaic = read_dng_mosaic(out / "glass" / "raw.dng").mosaic_dn.astype(float)
+        glass = pack_rggb(_centre(mosaic)).reshape(4, -1).mean(1)
         for name in ("toled", "poled"):
-            level = pack_rggb(_centre(read_dng_mosaic(out / name / "raw.dng").mosaic_dn.astype(float))).reshape(4, -1).mean(1)
+            mosaic = read_dng_mosaic(out / name / "raw.dng").mosaic_dn.astype(float)
+            level = pack_rggb(_centre(mosaic)).reshape(4, -1).mean(1)
             known = known_gamma_rggb(Pair(0, "test", out, name, "white"))
             assert level / glass == pytest.approx(known, rel=3e-3), (form, name)  # measured ≤ 0.14 %
             if form == "per_channel":

@@ -85,7 +85,8 @@ def test_stored_power_maps_are_made_once_and_give_the_same_bytes(small, monkeypa
     K = band_image.bands.shape[0]
     assert len(calls) == K
     stored = store_power_maps(compact, scene)
-    assert set(stored.power_maps) == {"toled"} and stored.power_maps["toled"].maps.shape == (K,) + band_image.bands.shape[1:]
+    assert set(stored.power_maps) == {"toled"}
+    assert stored.power_maps["toled"].maps.shape == (K,) + band_image.bands.shape[1:]
     assert len(calls) == 2 * K
     for _ in range(2):
         again = synthesize(band_image, scene, displays, cfg, kernels=stored)

@@ -91,7 +91,8 @@ def test_synth_renders_the_xml_scene_from_its_own_camera(tmp_path, capsys):
 
 MIRRORED = '<scale x="-1"/>' + LOOKAT
 REFUSED = {  # name: (write_scene arguments, fragments of the one line besides the scene and XML file names)
-    "ortho": (dict(type="orthographic", extra=""), ['<sensor type="orthographic" id="cam">', "perspective or thinlens"]),
+    "ortho": (dict(type="orthographic", extra=""),
+              ['<sensor type="orthographic" id="cam">', "perspective or thinlens"]),
     "nosensor": (dict(sensor=False), ["content.use_xml_camera", "no sensor"]),
     "mirrored": (dict(transform=MIRRORED), ['<sensor type="perspective" id="cam">', "to_world", "not a rigid pose",
                                             "lookat"]),
