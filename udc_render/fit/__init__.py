@@ -23,18 +23,19 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from psf import Lens, MicrographLayout
 from udc_render.fit.flat import CHECK_RATIO, fit_flat
-from udc_render.fit.hdr import merge_psf
+from udc_render.fit.cfa import converged
+from udc_render.fit.hdr import colour_gains, merge_psf
 from udc_render.fit.inputs import FitError, read_frame, read_frames
 from udc_render.fit.noise import fit_noise, sensor_toml
 from udc_render.fit.photometry import Optics
-from udc_render.fit.psf_fit import fit_psf, orders_table, refuse_synthesis, synthesis_check, trade_offs
+from udc_render.fit.psf_fit import first_lattice, fit_psf, orders_table, refuse_synthesis, synthesis_check, trade_offs
 from udc_render.fit.report import display_toml, pm, write_all, write_tile
 from udc_render.fit.white import fit_white
 from udc_render.io.files import save_text
@@ -179,7 +180,15 @@ def run_fit(spec: FitSpec, out: Path, progress=None) -> dict:
         noise = fit_noise(spec.noise_frames, spec.black_dn, spec.saturation_dn)
     say("reading the PSF exposures")
     frames = read_frames(spec.psf, spec.black_dn, spec.saturation_dn)
-    plane = merge_psf(frames, spec.wavelength_nm, spec.camera, noise.dn_per_e() if noise else None)
+    dn_per_e = noise.dn_per_e() if noise else None
+    plane, cfa = merge_psf(frames, spec.wavelength_nm, spec.camera, dn_per_e), None
+    if frames[0].kind == "cfa":  # balanced by the orders themselves (fit.cfa)
+        say("CFA sites' response from the orders")
+        locate = lambda p: first_lattice(p, optics, spec.family, spec.micrograph, spec.window_px)  # noqa: E731
+        plane, cfa, passes = converged(frames, frames[0].colour_map(), spec.wavelength_nm, spec.camera, dn_per_e,
+                                       locate, optics)
+        cfa = cfa and replace(cfa, guess=tuple(float(g) for g in colour_gains(spec.wavelength_nm, spec.camera)),
+                              passes=passes)
     psf = fit_psf(plane, optics, spec.family, spec.micrograph, spec.window_px, say)
     layout_table, layout = _file_layout(spec, psf.chosen, out)
     say("synthesis check")
@@ -216,6 +225,8 @@ def run_fit(spec: FitSpec, out: Path, progress=None) -> dict:
               [f"warning: the {psf.chosen.family.name} opening's {t} trade off: the orders measure a combination "
                "better than each (fit.json: psf.correlation)" for t in trade_offs(psf.chosen)],
               "written": written + ["fit.json", "fit.md", "fit.png"]}
+    if cfa:
+        result["psf"]["cfa_response"] = cfa.record()
     if flat:
         result["flat"] = _flat_record(flat)
     if white:

@@ -3,8 +3,9 @@
 
 Per exposure i (d: DN above the black level):
 - the plane: a grey image as it is; a colour image's channel with the most signal; a CFA mosaic with every
-  site divided by its colour's response at the laser's wavelength (relative to the strongest, G_c, from
-  --camera's sensitivities), so every pixel measures the same irradiance;
+  site divided by its colour's response at the laser's wavelength (relative to the strongest, G_c: first
+  --camera's sensitivities, then the response the orders measure, fit.cfa), so every pixel measures the same
+  irradiance;
 - saturated pixels (and their neighbours) and hot pixels (inputs.hot_pixels) are masked;
 - a residual offset b_i, the median of the frame's dark border, is subtracted (a black level given wrong,
   stray light), and the read noise σ_r (per CFA site) is its border's robust σ;
@@ -185,15 +186,20 @@ def _merge(exposures: list[Exposure], factors: list[float]):
     return np.where(usable, num / safe, 0.0), np.where(usable, 1.0 / safe, np.inf), usable
 
 
-def merge_psf(frames: list[Frame], wavelength_nm: float, camera: str, dn_per_e: float | None = None) -> Plane:
+def merge_psf(frames: list[Frame], wavelength_nm: float, camera: str, dn_per_e: float | None = None,
+              site_gains=None) -> Plane:
     """The exposures and their HDR merge (module doc). dn_per_e: κ (DN per electron, the same in every
-    exposure: they differ by their time) from --noise-frames, used when the exposures cannot measure it."""
+    exposure: they differ by their time) from --noise-frames, used when the exposures cannot measure it;
+    site_gains: a CFA's (R, G, B) response measured from the orders (fit.cfa.SiteGains) in place of --camera's."""
     notes = [n for f in frames for n in f.notes]
     channel = _channel(frames) if frames[0].kind == "rgb" else 0
     if frames[0].kind == "rgb":
         notes.append(f"colour images: the {COLOURS[channel]} channel (the most signal) is fitted")
     gains = colour_gains(wavelength_nm, camera) if frames[0].kind == "cfa" else np.ones(3)
-    if frames[0].kind == "cfa":
+    if frames[0].kind == "cfa" and site_gains is not None:
+        gains = np.asarray(site_gains.gains)
+        notes.append(site_gains.note())
+    elif frames[0].kind == "cfa":
         notes.append(f"CFA sites balanced by {camera}'s response at {wavelength_nm:g} nm: R/G/B "
                      f"{gains[0]:.3f}/{gains[1]:.3f}/{gains[2]:.3f}")
     parts = [_prepare(f, channel, gains) for f in frames]

@@ -83,10 +83,11 @@ def airy_pixels(dx: np.ndarray, dy: np.ndarray, lens: Lens, wavelength_nm: float
 
 
 def measure(value, var, usable, xy, index, radius_px, lens: Lens, wavelength_nm: float, pixel_um: float,
-            read_var=None, shot_per_dn=None) -> Orders:
+            read_var=None, shot_per_dn=None, sites=None) -> Orders:
     """The matched-filter power of every order at window positions xy [N, 2] (module doc). value, var,
     usable: the window's arrays [S, S] (centre pixel at (0, 0)); read_var, shot_per_dn: σ_r² and κ / G per pixel
-    (None: 0)."""
+    (None: 0); sites: the pixels the filter is restricted to (one CFA colour's, fit.cfa; None: every pixel), the
+    template's share asked of the usable ones counted among them."""
     size = value.shape[0]
     half = size // 2
     r = int(math.ceil(radius_px))
@@ -99,6 +100,8 @@ def measure(value, var, usable, xy, index, radius_px, lens: Lens, wavelength_nm:
     dy = iy - half - xy[:, 1, None, None]
     disc = np.hypot(dx, dy) <= radius_px
     t = np.where(disc, airy_pixels(dx, dy, lens, wavelength_nm, pixel_um), 0.0)
+    if sites is not None:
+        t = np.where(sites[iy, ix], t, 0.0)
     tt_full = t * t
     d, ok = value[iy, ix], usable[iy, ix]
     t = np.where(ok, t, 0.0)

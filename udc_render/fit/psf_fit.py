@@ -6,10 +6,13 @@ T-OLED's weak y orders beside the zeroth, 6e-4 of the pitch: 8 σ of a good meas
 is rendered where the measurement's lattice is (synthetic.psf_image: the engine's kernel at the fitted
 pitch, shape, origin and rotation, times the fitted vignetting) and centroided at the same pixels; its centroids
 minus its known orders' positions are each peak's bias, taken off before the lattice is solved again
-(lattice.centroid_bias).
+(lattice.centroid_bias). The orders' powers are then measured again where the debiased lattice puts them and
+the opening fitted again from its minima (a matched filter 0.06 px off an order loses 1 % of its power: on one
+axis only, a bias of the shape), and the lattice debiased with that fit.
 
 Auto: every family whose visible lattice matches the peaks' (lattice.cell_basis) is fitted; the lowest
-χ²/dof wins. A family is refused when its residual is far above the noise: χ²/dof over the rows with signal
+χ²/dof wins, and its last fit is made once more with the σ of the profile likelihood and the search again at
+the engine's δ (_settled; the others' would be wasted). A family is refused when its residual is far above the noise: χ²/dof over the rows with signal
 > CHI2_MAX and the noise-weighted RMS of their relative residuals > REL_RMS_MAX (orders' powers off by more
 than 20 % on average); when the orders do not determine its opening (fewer rows with signal than parameters
 + 2, a shape parameter's σ above SHAPE_REL_SIGMA_MAX of its value, or another minimum that fits as well:
@@ -152,6 +155,22 @@ def _debiased(fam: Family, fit: FamilyFit, lattice, pitch, geometry: Geometry, o
     bias = lat_mod.centroid_bias(model * field_map(fit, size), lattice, e_model, geometry.origin)
     bias = np.where(np.isfinite(bias), bias, 0.0)  # a peak where the model has no light: as measured
     return lat_mod.solve_lattice(lattice.xy - bias, lattice.sigma, lattice.index, m)
+
+
+def first_lattice(plane: Plane, optics: Optics, family_name: str, micrograph=None, window_px: int = 511):
+    """(window, lattice, index basis, aperture radius px) of the first family whose lattice matches the peaks
+    (no opening fitted: where the orders are, for fit.cfa); None when none does (fit_psf then says why)."""
+    window = lat_mod.spot_window(plane.value, plane.clipped, window_px)
+    peaks = lat_mod.find_peaks(plane.value, plane.var, plane.usable, plane.clipped, window)
+    visible = lat_mod.visible_basis(peaks)
+    names = ("toled", "poled") + (("micrograph",) if micrograph else ()) if family_name == "auto" else (family_name,)
+    for fam in (f for name in names for f in family(name, micrograph)):
+        m = fam.index_basis()
+        e0 = lat_mod.cell_basis(visible, m)
+        if e0 is not None:
+            lattice, _ = lat_mod.fit_lattice(peaks, e0, m, lat_mod.light_centre(plane.value, plane.usable, window))
+            return window, lattice, m, aperture_px(lattice.spacing_px)
+    return None
 
 
 def fit_psf(plane: Plane, optics: Optics, family_name: str, micrograph=None, window_px: int = 511,
