@@ -83,9 +83,12 @@ def _rawpy_read(path: Path) -> np.ndarray:
 def forms(sensor: SensorConfig) -> dict:
     """name ──► (suffix, write(path, mosaic), read(path) ──► stored array, stored as mosaic?, rawpy?)."""
     levels = (sensor.black_level_dn, sensor.white_level_dn)
-    dng = lambda compression, level: lambda p, m: save_dng(p, m, CAMERA, *levels, compression=compression,  # noqa: E731
-                                                           compression_level=level)
-    tiff = lambda level: lambda p, m: _tiff_write(p, pack_rggb(m), level)  # noqa: E731
+
+    def dng(compression, level):
+        return lambda p, m: save_dng(p, m, CAMERA, *levels, compression=compression, compression_level=level)
+
+    def tiff(level):
+        return lambda p, m: _tiff_write(p, pack_rggb(m), level)
     return {"DNG, uncompressed": (".dng", dng(None, None), lambda p: read_dng_mosaic(p).mosaic_dn, True, True),
             "DNG, deflate (8), level 6": (".dng", dng(8, 6), lambda p: read_dng_mosaic(p).mosaic_dn, True, True),
             "packed TIFF, zlib level 1": (".tiff", tiff(1), _tiff_read, False, False),

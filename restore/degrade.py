@@ -277,9 +277,8 @@ class Degrader:
                 if order == list(range(len(order))):
                     return self._degrade(x, indices, crops, generators, draws, captures, sources)
                 x = x.to(self.device)[host_to(torch.tensor(order), self.device)]
-                pick = lambda seq: [seq[b] for b in order]  # noqa: E731
-                dn = self._degrade(x, pick(indices), pick(crops), pick(generators), pick(draws), pick(captures),
-                                   pick(sources))
+                picked = ([seq[b] for b in order] for seq in (indices, crops, generators, draws, captures, sources))
+                dn = self._degrade(x, *picked)
                 return dn[host_to(torch.from_numpy(np.argsort(order)), self.device)]
             return torch.cat([self._degrade(x[b:b + 1], indices[b:b + 1], crops[b:b + 1], generators[b:b + 1],
                                             draws[b:b + 1], captures[b:b + 1], sources[b:b + 1])
@@ -337,7 +336,8 @@ class Degrader:
 
     def _cos4(self, h: int, w: int, frame_hw, origin_yx, s) -> torch.Tensor:
         """cos⁴θ [h, w] of the crop's pixels, r from the frame's centre (sensor.radiometry.cos4_map)."""
-        at = lambda n, start, size: (torch.arange(n, device=self.device, dtype=torch.float64)  # noqa: E731
-                                     + start + 0.5 - size / 2) * s.pitch_um
+
+        def at(n, start, size):
+            return (torch.arange(n, device=self.device, dtype=torch.float64) + start + 0.5 - size / 2) * s.pitch_um
         yy, xx = at(h, origin_yx[0], frame_hw[0]), at(w, origin_yx[1], frame_hw[1])
         return (1.0 / (1.0 + (yy[:, None] ** 2 + xx[None, :] ** 2) / s.focal_length_um ** 2) ** 2).to(self.dtype)

@@ -167,9 +167,9 @@ def expose_batch(e: torch.Tensor, panels: list[Panel], maps: FrameMaps, crops: l
         return _expose_alike(e, panels, maps, crops, generators, draws)
     out = torch.empty_like(e)
     for members in groups.values():
-        pick = lambda seq: [seq[b] for b in members]  # noqa: E731
         idx = host_to(torch.tensor(members), e.device)
-        out[idx] = _expose_alike(e[idx], pick(panels), maps, pick(crops), pick(generators), pick(draws))
+        p, c, g, d = ([seq[b] for b in members] for seq in (panels, crops, generators, draws))
+        out[idx] = _expose_alike(e[idx], p, maps, c, g, d)
     return out
 
 

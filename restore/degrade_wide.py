@@ -89,6 +89,13 @@ def _fft_conv(x: torch.Tensor, spectrum: torch.Tensor, shape) -> torch.Tensor:
     return torch.fft.irfft2(torch.fft.rfft2(x, s=shape) * spectrum, s=shape)
 
 
+def _nbytes(v) -> int:
+    """Bytes of a tensor, or of the tensors in a (nested) tuple."""
+    if isinstance(v, torch.Tensor):
+        return v.numel() * v.element_size()
+    return sum(_nbytes(u) for u in v if isinstance(u, (torch.Tensor, tuple)))
+
+
 class WideLight:
     """The far field and veil of crops through a bank's panels on one device and precision (module doc)."""
 
@@ -110,6 +117,10 @@ class WideLight:
         """([far [3, h, w] or None], [veil [3, h, w] or None]) of crops through panels[indices] at crops (frame_hw,
         origin_yx), from their sources (WideSource), in the blur's units (the veil with cos⁴; γ not applied)."""
         far, veil = [], []
+
+        def at(rows, cols, a):  # rows · a · colsᵀ on the device
+            return (host_to(torch.from_numpy(rows), self.device, self.dtype) @ a
+                    @ host_to(torch.from_numpy(cols), self.device, self.dtype).T)
         for i, (frame_hw, origin), src in zip(indices, crops, sources):
             p = self.panels[i]
             if src is None or tuple(src.frame.shape[1:]) != tuple(frame_hw):
@@ -117,8 +128,6 @@ class WideLight:
                                  f"frame of {frame_hw[0]} × {frame_hw[1]} px (sources)")
             maps = self._frame_maps(i, src)
             (y0, x0), (h, w) = origin, size_hw
-            at = lambda rows, cols, a: (host_to(torch.from_numpy(rows), self.device, self.dtype) @ a  # noqa: E731
-                                        @ host_to(torch.from_numpy(cols), self.device, self.dtype).T)
             f = None if maps[0] is None else at(maps[0][1][y0:y0 + h], maps[0][2][x0:x0 + w], maps[0][0])
             v = None if maps[1] is None else at(maps[1][1][y0:y0 + h], maps[1][2][x0:x0 + w], maps[1][0])
             far.append(None if f is None else dihedral(f * src.brightness, src.mode))
@@ -141,9 +150,7 @@ class WideLight:
             self._maps.move_to_end(key)
             return self._maps[key]
         self._maps[key] = value = make()
-        size = lambda v: v.numel() * v.element_size() if isinstance(v, torch.Tensor) else sum(  # noqa: E731
-            size(u) for u in v if isinstance(u, (torch.Tensor, tuple)))
-        while len(self._maps) > 1 and sum(size(v) for v in self._maps.values()) > self.budget_bytes:
+        while len(self._maps) > 1 and sum(_nbytes(v) for v in self._maps.values()) > self.budget_bytes:
             self._maps.popitem(last=False)
         return value
 

@@ -52,6 +52,10 @@ def _jitter(name: str):
     return parse
 
 
+def _xyz_text(v) -> str:
+    return ",".join(f"{x:g}" for x in v)
+
+
 def register(sub) -> None:
     p = sub.add_parser("dataset", help="many capture pairs: one monitor image or one view of a 3D scene per item "
                                        "through every display (sharded, resumable, parallel)")
@@ -62,13 +66,12 @@ def register(sub) -> None:
     src.add_argument("--builtin", action="store_true",
                      help="a monitor scene: scikit-image's samples and the procedural charts, then dead leaves in "
                           "the colours of those photographs (pattern:dead_leaves_colour), a new seed per item")
-    xyz = lambda v: ",".join(f"{x:g}" for x in v)  # noqa: E731
     p.add_argument("--pose-jitter-m", type=_jitter("--pose-jitter-m"),
                    help="a 3D scene: item i > 0 moves the camera origin by up to ± X,Y,Z metres (uniform, per world "
-                        f"axis; item 0 is the scene's own pose) [{xyz(DEFAULT_ORIGIN_JITTER_M)}]")
+                        f"axis; item 0 is the scene's own pose) [{_xyz_text(DEFAULT_ORIGIN_JITTER_M)}]")
     p.add_argument("--target-jitter-m", type=_jitter("--target-jitter-m"),
                    help="a 3D scene: item i > 0 moves the camera target by up to ± X,Y,Z metres; the focus distance "
-                        f"stays the scene's own pose's [{xyz(DEFAULT_TARGET_JITTER_M)}]")
+                        f"stays the scene's own pose's [{_xyz_text(DEFAULT_TARGET_JITTER_M)}]")
     p.add_argument("--count", type=positive("--count", int), help="number of items [the sum of --split]")
     p.add_argument("--split", type=_split, help="TRAIN,VAL,TEST item counts, assigned in id order [all train]")
     p.add_argument("--out", type=Path, default=Path("out/dataset"), help="output folder [out/dataset]")

@@ -67,7 +67,9 @@ def checker_responses(camera: str) -> tuple[np.ndarray, np.ndarray]:
     patches = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
     d65 = spectra.illuminant("D65")
     radiance = np.stack([spectra.colourchecker(n) * d65 for n in patches] + [d65])
-    band = lambda s: 0.5 * (s[..., 1:] + s[..., :-1])  # noqa: E731  mean over [λ_k, λ_k + 1 nm]
+
+    def band(s):  # mean over [λ_k, λ_k + 1 nm]
+        return 0.5 * (s[..., 1:] + s[..., :-1])
     cam = band(radiance) @ photon_weights(spectra.GRID_NM, camera).T
     xyz = band(radiance) @ band(spectra.cmfs()).T
     return cam, xyz

@@ -59,8 +59,8 @@ def photon_weights(edges_nm, camera: str = "Nikon 5100 (NPL)", peak_qe: float = 
         x = np.unique(np.concatenate([[a_in, b_in], wl[(wl > a_in) & (wl < b_in)]]))
         lo, hi, mid = x[:-1], x[1:], 0.5 * (x[:-1] + x[1:])
         for c in range(3):
-            f = lambda z: np.interp(z, wl, s[c], left=0.0, right=0.0) * z  # noqa: E731
-            out[c, k] = np.sum((hi - lo) / 6 * (f(lo) + 4 * f(mid) + f(hi))) / (b - a)
+            f_lo, f_mid, f_hi = (np.interp(z, wl, s[c], left=0.0, right=0.0) * z for z in (lo, mid, hi))
+            out[c, k] = np.sum((hi - lo) / 6 * (f_lo + 4 * f_mid + f_hi)) / (b - a)
     return out * peak_qe * 1e-9 / (H_PLANCK_J_S * C_LIGHT_M_S)
 
 

@@ -234,6 +234,11 @@ def dof_interval(vergences_per_m, values, focus_per_m: float, threshold: float) 
     return walk(-1), walk(+1)
 
 
+def _distance_mm(vergence_per_m: float) -> float:
+    """object_distance_mm of a vergence; NaN (no crossing) stays NaN."""
+    return object_distance_mm(vergence_per_m) if not math.isnan(vergence_per_m) else math.nan
+
+
 def dof_rows(rows: list[dict], cfg: Config) -> list[dict]:
     """One row per display and wavelength: in-focus reference MTF, the relative and absolute DoF
     (distances and vergence widths), and the geometric DoF."""
@@ -249,8 +254,8 @@ def dof_rows(rows: list[dict], cfg: Config) -> list[dict]:
                    "geom_near_mm": object_distance_mm(near_g), "geom_width_per_m": near_g - far_g}
             for name, thr in (("rel", REL_LEVEL * m0), ("abs", ABS_MTF)):
                 far, near = dof_interval(vs, ms, v_f, thr)
-                dist = lambda v: object_distance_mm(v) if not math.isnan(v) else math.nan  # noqa: E731
-                row.update({f"{name}_threshold": thr, f"{name}_far_mm": dist(far), f"{name}_near_mm": dist(near),
+                row.update({f"{name}_threshold": thr, f"{name}_far_mm": _distance_mm(far),
+                            f"{name}_near_mm": _distance_mm(near),
                             f"{name}_width_per_m": near - far})
             out.append(row)
     return out
@@ -267,7 +272,9 @@ def blur_measures(kernel: np.ndarray) -> dict:
     orientation-averaged MTF; the peak (energy in the brightest pixel)."""
     lx, ly = lsf(kernel, "x"), lsf(kernel, "y")
     wx, wy = esf_width_px(lx), esf_width_px(ly)
-    at = lambda line: float(mtf_of_line(line, [F_REF_CPP])[0])  # noqa: E731
+
+    def at(line):
+        return float(mtf_of_line(line, [F_REF_CPP])[0])
     return {"esf_width_x_px": wx, "esf_width_y_px": wy, "esf_width_px": (wx + wy) / 2,
             "disc_equiv_px": equivalent_disc_px((wx + wy) / 2), "mtf_ref_x": at(lx), "mtf_ref_y": at(ly),
             "mtf_ref": band_mtf(kernel, F_REF_CPP - F_BAND_CPP, F_REF_CPP + F_BAND_CPP),

@@ -226,7 +226,9 @@ def plot_summary(result: dict, path: Path) -> None:
 
 def plot_dof_bars(ax, dof: list[dict], v_f: float) -> None:
     """Horizontal bars over vergence: each display's relative and absolute DoF, and the geometric one."""
-    inv = lambda z: 0.0 if math.isinf(z) else 1000.0 / z  # noqa: E731
+
+    def inv(z):
+        return 0.0 if math.isinf(z) else 1000.0 / z
     labels, y = [], 0
     for r in dof:
         for kind, hatch in (("rel", ""), ("abs", "//")):

@@ -69,7 +69,9 @@ def apply_view(stray: StrayLight, e: np.ndarray, display: str, glass: bool, gain
     """(electrons with the stray light, record) of one view: display its name ('glass' for the ground
     truth), glass whether it is the glass (no emission), gains its band gains (module doc, a → c)."""
     total = float(e.sum())
-    share = (lambda x: float(x.sum()) / total if total > 0 else 0.0)  # noqa: E731
+
+    def share(x) -> float:
+        return float(x.sum()) / total if total > 0 else 0.0
     rec: dict = {}
     if stray.room_on:
         if ctx.monitor:

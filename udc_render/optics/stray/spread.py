@@ -132,7 +132,9 @@ def spread_back(cells: np.ndarray, b: int) -> np.ndarray:
     if b == 1:
         return cells
     c, h, w = cells.shape
-    at = lambda n: np.clip((np.arange(n * b) + 0.5) / b - 0.5, 0, n - 1)  # noqa: E731  fine centres in cell units
+
+    def at(n):  # fine centres in cell units
+        return np.clip((np.arange(n * b) + 0.5) / b - 0.5, 0, n - 1)
     y, x = at(h), at(w)
     y0, x0 = np.minimum(y.astype(int), h - 2 if h > 1 else 0), np.minimum(x.astype(int), w - 2 if w > 1 else 0)
     fy, fx = (y - y0)[:, None], (x - x0)[None, :]
