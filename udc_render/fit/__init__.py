@@ -207,8 +207,9 @@ def run_fit(spec: FitSpec, out: Path, progress=None) -> dict:
         white = fit_white(read_frame(spec.white[0], spec.black_dn, spec.saturation_dn),
                           read_frame(spec.white[1], spec.black_dn, spec.saturation_dn), layout, optics.lens,
                           np.arange(lo, hi + step / 2, step), spec.pixel_um, spec.camera, spec.white_gain)
-    header = (f"fitted by udc-render fit from {', '.join(Path(p).name for p in spec.psf)} (fit.json: every value ± σ)\n"
-              "the display's rotation against the camera is not a display-file key (fit.json: psf.lattice.rotation_deg)")
+    header = (f"fitted by udc-render fit from {', '.join(Path(p).name for p in spec.psf)} (fit.json: every value "
+              "± σ)\nthe display's rotation against the camera is not a display-file key (fit.json: "
+              "psf.lattice.rotation_deg)")
     save_text(out / "display.toml", display_toml(spec.name, layout_table, flat.distance_mm if flat else None,
                                                   spec.white_gain if white else None,
                                                   _transmission_table(white) if white else None, header))
@@ -219,7 +220,8 @@ def run_fit(spec: FitSpec, out: Path, progress=None) -> dict:
     result = {"display": {"name": spec.name, "file": "display.toml", "layout": layout_table},
               "inputs": {"psf": [str(p) for p in spec.psf], "optics": f"λ {spec.wavelength_nm:g} nm, pixel "
                          f"{spec.pixel_um:g} um, f {spec.focal_length_mm:g} mm, f/{spec.f_number:g}",
-                         "camera": spec.camera, "black_dn": frames[0].black_dn, "saturation_dn": frames[0].saturation_dn},
+                         "camera": spec.camera, "black_dn": frames[0].black_dn,
+                         "saturation_dn": frames[0].saturation_dn},
               "psf": _psf_record(psf, spec), "synthesis_check": check,
               "notes": list(plane.notes) + (list(flat.notes) if flat else []) + list(spec.notes) +
               [f"warning: the {psf.chosen.family.name} opening's {t} trade off: the orders measure a combination "

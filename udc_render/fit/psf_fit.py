@@ -10,15 +10,15 @@ minus its known orders' positions are each peak's bias, taken off before the lat
 the opening fitted again from its minima (a matched filter 0.06 px off an order loses 1 % of its power: on one
 axis only, a bias of the shape), and the lattice debiased with that fit.
 
-Auto: every family whose visible lattice matches the peaks' (lattice.cell_basis) is fitted; the lowest
-χ²/dof wins, and its last fit is made once more with the σ of the profile likelihood and the search again at
-the engine's δ (_settled; the others' would be wasted). A family is refused when its residual is far above the noise: χ²/dof over the rows with signal
-> CHI2_MAX and the noise-weighted RMS of their relative residuals > REL_RMS_MAX (orders' powers off by more
-than 20 % on average); when the orders do not determine its opening (fewer rows with signal than parameters
-+ 2, a shape parameter's σ above SHAPE_REL_SIGMA_MAX of its value, or another minimum that fits as well:
-refine); and when the synthesis with the written display file misses the measured orders' powers by more
-than SYNTHESIS_MAX × what the noise alone gives (refuse_synthesis). Shape parameters that trade off
-(|correlation| > CORRELATED) are named in a note.
+Auto: every family whose visible lattice matches the peaks' (lattice.cell_basis) is fitted; the lowest χ²/dof wins,
+and its last fit is made once more with the σ of the profile likelihood and the search again at the engine's δ
+(_settled; the others' would be wasted). A family is refused when its residual is far above the noise: χ²/dof over
+the rows with signal > CHI2_MAX and the noise-weighted RMS of their relative residuals > REL_RMS_MAX (orders' powers
+off by more than 20 % on average); when the orders do not determine its opening (fewer rows with signal than
+parameters + 2, a shape parameter's σ above SHAPE_REL_SIGMA_MAX of its value, or another minimum that fits as well:
+refine); and when the synthesis with the written display file misses the measured orders' powers by more than
+SYNTHESIS_MAX × what the noise alone gives (refuse_synthesis). Shape parameters that trade off (|correlation| >
+CORRELATED) are named in a note.
 """
 from __future__ import annotations
 
