@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from psf import layouts
-from udc_render.fit import FitSpec, run_fit
-from udc_render.fit import synthetic as S
+from udc_render.fit import FitSpec, run_fit, synthetic as S
 from udc_render.fit.cfa import MAX_PASSES, converged
 from udc_render.fit.inputs import read_frames
 from udc_render.fit.psf_fit import first_lattice

@@ -29,8 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from psf import Lens, MicrographLayout
-from udc_render.fit.flat import CHECK_RATIO, fit_flat
 from udc_render.fit.cfa import converged
+from udc_render.fit.flat import CHECK_RATIO, fit_flat
 from udc_render.fit.hdr import colour_gains, merge_psf
 from udc_render.fit.inputs import FitError, read_frame, read_frames
 from udc_render.fit.noise import fit_noise, sensor_toml
@@ -184,7 +184,9 @@ def run_fit(spec: FitSpec, out: Path, progress=None) -> dict:
     plane, cfa = merge_psf(frames, spec.wavelength_nm, spec.camera, dn_per_e), None
     if frames[0].kind == "cfa":  # balanced by the orders themselves (fit.cfa)
         say("CFA sites' response from the orders")
-        locate = lambda p: first_lattice(p, optics, spec.family, spec.micrograph, spec.window_px)  # noqa: E731
+
+        def locate(p):
+            return first_lattice(p, optics, spec.family, spec.micrograph, spec.window_px)
         plane, cfa, passes = converged(frames, frames[0].colour_map(), spec.wavelength_nm, spec.camera, dn_per_e,
                                        locate, optics)
         cfa = cfa and replace(cfa, guess=tuple(float(g) for g in colour_gains(spec.wavelength_nm, spec.camera)),

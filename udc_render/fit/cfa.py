@@ -52,7 +52,9 @@ class SiteGains:
                 "how": "matched filter on each colour's sites (fit.cfa)"}
 
     def note(self) -> str:
-        fmt = lambda v: "/".join(f"{x:.3f}" for x in v)  # noqa: E731
+
+        def fmt(v):
+            return "/".join(f"{x:.3f}" for x in v)
         kept = [COLOURS[c] for c, n in enumerate(self.orders) if n == 0]
         return (f"CFA sites balanced by the orders: R/G/B response {fmt(self.gains)} ± {fmt(self.sigma)} (fit.json: "
                 "psf.cfa_response)" + (f"; {', '.join(kept)} kept at the guess (too few orders)" if kept else ""))

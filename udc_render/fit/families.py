@@ -130,7 +130,9 @@ def integer_basis(vectors: np.ndarray) -> np.ndarray | None:
 def _reduce_int(basis: np.ndarray, metric: np.ndarray) -> np.ndarray:
     """Lagrange–Gauss reduction of an integer basis (columns) under the quadratic form `metric`."""
     a, b = basis[:, 0].copy(), basis[:, 1].copy()
-    dot = lambda u, v: float(u @ metric @ v)  # noqa: E731
+
+    def dot(u, v):
+        return float(u @ metric @ v)
     for _ in range(100):
         if dot(b, b) < dot(a, a):
             a, b = b, a

@@ -164,7 +164,9 @@ def _shot_gain(parts: list[dict], factors: list[float], pairs) -> float | None:
     if not delta:
         return None
     delta, base, u = np.abs(np.concatenate(delta)), np.concatenate(base), np.concatenate(u)
-    score = lambda k: float(np.median(delta / np.sqrt(base + k * u))) - 0.6745  # noqa: E731
+
+    def score(k):
+        return float(np.median(delta / np.sqrt(base + k * u))) - 0.6745
     lo, hi = -12.0, 12.0
     if score(math.exp(lo)) <= 0:
         return None

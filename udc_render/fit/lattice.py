@@ -89,8 +89,7 @@ def _centroids(v, var, bad, ys, xs, radius):
     """Iterated centroids in a soft disc (weights clip(radius + ½ − distance, 0, 1)) around integer peaks."""
     r = int(math.ceil(radius)) + 2
     off = np.arange(-r, r + 1)
-    pad = lambda a, c: np.pad(a, r, constant_values=c)  # noqa: E731
-    vp, varp, badp = pad(v, 0.0), pad(var, np.inf), pad(bad, True)
+    vp, varp, badp = (np.pad(a, r, constant_values=c) for a, c in ((v, 0.0), (var, np.inf), (bad, True)))
     iy, ix = ys[:, None, None] + r + off[None, :, None], xs[:, None, None] + r + off[None, None, :]
     pv, pvar, pbad = vp[iy, ix], varp[iy, ix], badp[iy, ix]
     gy, gx = np.broadcast_arrays(off[:, None] + 0.0, off[None, :] + 0.0)

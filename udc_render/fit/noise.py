@@ -199,7 +199,9 @@ def fit_series(groups: list[list[Frame]], where: str) -> NoiseFit:
 def sensor_toml(fit: NoiseFit, source: str) -> str:
     """sensor.toml: the Gaussian model with the measured λ (SensorConfig keys; --sensor-config); the same values
     as fit.json (a λ held at 0 is 0 in both)."""
-    arr = lambda a: "[" + ", ".join(f"{float(v):.6g}" for v in a) + "]"  # noqa: E731
+
+    def arr(a):
+        return "[" + ", ".join(f"{float(v):.6g}" for v in a) + "]"
     white = min(int(round(fit.white_dn)), 2 ** fit.bits - 1)
     return (f"# fitted by udc-render fit from {fit.frames} frames in {fit.series} series of {source}\n"
             f"# channels {', '.join(CHANNEL_NAMES)}; var = lambda_read + lambda_shot * w, "

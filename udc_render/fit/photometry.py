@@ -124,7 +124,9 @@ def measure_exposures(exposures, window, xy, index, radius_px, optics: "Optics",
     rows = [measure(window.crop(e.d), window.crop(e.var), window.crop(e.usable), xy, index, radius_px, optics.lens,
                     optics.wavelength_nm, optics.pixel_um, window.crop(e.sigma) ** 2, dn_per_e / window.crop(e.gain))
             for e in exposures]
-    cat = lambda name: np.concatenate([getattr(r, name) for r in rows])  # noqa: E731
+
+    def cat(name):
+        return np.concatenate([getattr(r, name) for r in rows])
     return Orders(cat("index"), cat("xy"), cat("power"), cat("sigma"), cat("measured"),
                   np.repeat(np.arange(len(rows)), len(index)), cat("shot"), cat("floor"))
 

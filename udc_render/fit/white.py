@@ -121,7 +121,9 @@ def measure_gamma(glass: Frame, display: Frame) -> WhiteSquare:
     cols_r = slice(c0 + (c1 - c0) // 4, c1 - (c1 - c0) // 4 + 1)
     region[rows_r, cols_r] = True
     gamma, sigma, n = np.zeros(4), np.zeros(4), []
-    raw = lambda f, c: f.dn[..., (0, 1, 1, 2)[c]] if f.kind == "rgb" else f.dn  # noqa: E731
+
+    def raw(f, c):
+        return f.dn[..., (0, 1, 1, 2)[c]] if f.kind == "rgb" else f.dn
     for c, mask in enumerate(channels(glass)):
         sel = region & mask
         for f in (glass, display):
