@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from psf import layouts
-from udc_render.fit import FitSpec
-from udc_render.fit import synthetic as S
+from udc_render.fit import FitSpec, synthetic as S
 from udc_render.fit.hdr import merge_psf
 from udc_render.fit.inputs import Frame
 from udc_render.fit.psf_fit import fit_psf

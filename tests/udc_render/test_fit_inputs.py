@@ -11,9 +11,7 @@ import pytest
 import tifffile
 
 from psf import Lens, compute_kernels, layouts
-from udc_render.fit import families as F
-from udc_render.fit import hdr, inputs, lattice, photometry
-from udc_render.fit import synthetic as S
+from udc_render.fit import families as F, hdr, inputs, lattice, photometry, synthetic as S
 from udc_render.fit.inputs import FitError
 from udc_render.io.dng import save_dng
 from udc_render.sensor import SensorConfig, sensor_lambdas
