@@ -19,7 +19,7 @@ LAYERS = [
     ("udc_render.scene", "udc_render.scenes", "udc_render.content", "udc_render.render", "udc_render.optics",
      "udc_render.sensor", "udc_render.io", "udc_render.views", "udc_render.synth_config", "udc_render.synth_kernels",
      "udc_render.pipeline", "udc_render.dataset",
-     "udc_render.profiles", "udc_render.description"),
+     "udc_render.profiles", "udc_render.description", "udc_render.design"),
     ("restore",),
     ("udc_render.studies", "udc_render.calibration", "udc_render.fit", "restore.studies"),
     ("udc_render.cli",),
