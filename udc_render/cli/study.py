@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from udc_render.cli.args import UserError, out_dir
+from udc_render.cli.args import UserError, add_display_argument, out_dir, positive
 from udc_render.studies import gap
 
 STUDIES = {
@@ -18,6 +18,8 @@ STUDIES = {
     "banding": "the bands a display a distance d in front of the lens prints on a flat field",
     "gap": "the size of each effect beyond the paper's model (each on and off), and what it does to DeP",
     "far_field": "the far field's threshold and coarse factor (the light past the kernel window)",
+    "layout": "a display's pixel layout scored for restorability: UPC's ring statistics in their sampling and on the "
+              "exact kernels, the Wiener error under the sensor's noise, the open area (--display)",
     "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
                   "held-out and out-of-family panels (trains both: minutes with --quick, hours without)",
 }
@@ -54,11 +56,25 @@ def register(sub) -> None:
     s.add_argument("--images", type=image_files, default=(),
                    help="gap only: image files (comma-separated, or a folder searched for .png/.jpg/.tif) scored "
                         "beside the dead leaves, e.g. DIV2K's validation photographs [none]")
+    add_display_argument(s, "layout only: the display whose layout is scored", default="toled",
+                         micrograph="pixels of --micrograph-pixel-um, amplitude values")
+    s.add_argument("--micrograph-pixel-um", type=positive("--micrograph-pixel-um"), default=1.0,
+                   help="layout only: a micrograph's pixel size in µm [1]")
+    s.add_argument("--tile-seed", type=int, default=0, help="layout only: seed of the turned tiling's D4 draws [0]")
+    s.add_argument("--frame", choices=("as_given", "edge"), default="as_given",
+                   help="layout only: UPC's 21 × 21 cell as the layout frames it, or with its first open column "
+                        "moved to the tile's edge [as_given]")
 
 
 def run(args) -> int:
     if args.images and args.what != "gap":
         raise UserError(f"--images {','.join(map(str, args.images))}: only `study gap` takes images")
+    if args.what != "layout" and args.display != "toled":
+        raise UserError(f"--display {args.display}: only `study layout` takes a display")
+    if args.what != "layout" and args.frame != "as_given":
+        raise UserError(f"--frame {args.frame}: only `study layout` takes a framing")
+    if args.what == "layout":
+        return _layout(args)
     out = out_dir(args.out)
     if args.what == "gap":
         gap.run_study(out, quick=args.quick, images=args.images)
@@ -83,4 +99,19 @@ def run(args) -> int:
     run_study(out, quick=args.quick)
     name = f"study_{args.what}"
     print(f"wrote {out}/{name}.csv, {name}.md, {name}.png")
+    return 0
+
+
+def _layout(args) -> int:
+    """`study layout`: the display loaded and the output folder checked first, then the scores written."""
+    from udc_render.optics.displays import load_display
+    from udc_render.studies.layout import layout_cell, score_layout
+    from udc_render.studies.layout_report import write
+    display = load_display(args.display, pixel_um=args.micrograph_pixel_um)
+    if display.layout is None:
+        raise UserError(f"--display {args.display}: glass has no pixel layout to score")
+    layout_cell(display.layout)  # a tile the study cannot take is refused before the folder is made
+    out = out_dir(args.out)
+    names = write(score_layout(display.name, display.layout, args.tile_seed, args.frame, args.quick), out)
+    print(f"wrote {out}/" + f", {out}/".join(names))
     return 0

@@ -29,7 +29,7 @@ from udc_render.errors import UdcError
 from udc_render.streams import stream
 
 __all__ = ["DesignError", "CellGrid", "cell_grid", "raster_matrix", "tile_transforms", "tiled_mask", "kernels",
-           "preset_cell"]
+           "preset_cell", "transform_tile"]
 
 
 class DesignError(UdcError):
@@ -92,7 +92,8 @@ def tile_transforms(tiles: int, seed: int | None, flips: bool = True) -> np.ndar
     return stream(seed, "layout", "tiles").integers(0, 8 if flips else 4, size=(tiles, tiles))
 
 
-def _transform(t: torch.Tensor, k: int) -> torch.Tensor:
+def transform_tile(t: torch.Tensor, k: int) -> torch.Tensor:
+    """D4 element k of a square tile: np.rot90(·, k % 4), mirrored left-right first when k ≥ 4."""
     return torch.rot90(torch.flip(t, (1,)) if k >= 4 else t, k % 4, (0, 1))
 
 
@@ -103,7 +104,7 @@ def tiled_mask(cell: torch.Tensor, grid: CellGrid, transforms: np.ndarray | None
     if transforms is None or not np.any(transforms):
         mask = amp.repeat(grid.tiles, grid.tiles)
     else:
-        variants = {k: _transform(amp, int(k)) for k in np.unique(transforms)}
+        variants = {k: transform_tile(amp, int(k)) for k in np.unique(transforms)}
         mask = torch.cat([torch.cat([variants[k] for k in row], dim=1) for row in transforms], dim=0)
     return mask[grid.rows, grid.cols]
 

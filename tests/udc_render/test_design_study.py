@@ -1,0 +1,57 @@
+"""`udc-render study layout` (udc_render.studies.layout): its outputs on a small micrograph, its refusals."""
+from __future__ import annotations
+
+import json
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+
+from psf import layouts
+from udc_render import cli
+from udc_render.studies.layout import upc_cell
+
+
+def test_upc_cell_keeps_the_open_area_and_frames_at_the_edge():
+    cell = layouts.toled(pitch_um=317.0).cell_raster(159, 159)[0]
+    small = upc_cell(cell)
+    assert small.shape == (21, 21) and abs(small.mean() - cell.mean()) < 1e-12
+    edge = upc_cell(cell, "edge")
+    assert edge[:, 0].sum() > 0 and edge[:, -1].sum() == 0 and abs(edge.sum() - small.sum()) < 1e-12
+
+
+def test_study_layout_writes_its_tables_and_figures(tmp_path, capsys):
+    tile = np.zeros((21, 21), np.uint8)
+    tile[1:20, 0:5] = 255
+    iio.imwrite(tmp_path / "slit.png", tile)
+    out = tmp_path / "study"
+    rc = cli.main(["study", "layout", "--display", str(tmp_path / "slit.png"), "--micrograph-pixel-um", "8",
+                   "--quick", "--out", str(out)])
+    assert rc == 0
+    doc = json.loads((out / "study_layout.json").read_text())
+    assert abs(doc["open_fraction"] - 95 / 441) < 1e-12
+    rep, turned = doc["upc"]["repeated"], doc["upc"]["turned"]
+    # a turned tiling lifts the ring minima of a slit framed at the edge (measured 0.10 against 0.01)
+    assert all(t > 5 * r for t, r in zip(turned["mean_of_ring_minima"], rep["mean_of_ring_minima"]))
+    assert all(len(c) == 147 for c in rep["ring_minima"])
+    assert all(p > 0 for p in doc["restorability"]["turned"]["wiener_psnr_db"])
+    assert "| UPC-compatible | turned |" in (out / "study_layout.md").read_text()
+    assert (out / "study_layout_mtf.png").stat().st_size > 0 and (out / "study_layout_rings.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--display", "glass"], "glass has no pixel layout"),
+    (["--display", "missing.png"], "no such file"),
+])
+def test_study_layout_refuses_in_one_line(tmp_path, capsys, argv, says):
+    out = tmp_path / "never"
+    assert cli.main(["study", "layout", *argv, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert says in err and len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_non_square_micrograph_is_refused(tmp_path, capsys):
+    iio.imwrite(tmp_path / "wide.png", np.full((10, 20), 255, np.uint8))
+    assert cli.main(["study", "layout", "--display", str(tmp_path / "wide.png"), "--quick",
+                     "--out", str(tmp_path / "o")]) == 2
+    assert "square tile" in capsys.readouterr().err and not (tmp_path / "o").exists()

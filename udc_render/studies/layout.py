@@ -1,0 +1,119 @@
+"""`udc-render study layout`: score a display's pixel layout for restorability (issue 48).
+
+For one layout (a preset, a display file or a micrograph), tiled plainly and with every tile turned and
+mirrored at random (the 8 elements of D4, udc_render.design.torch_psf.tile_transforms):
+- UPC's ring statistics in their sampling (udc_render.design.upc): the layout's cell resampled to 21 × 21 and
+  taken as 168 µm, their optics (f = 10 mm, a 4 mm disc, 610 / 530 / 470 nm);
+- the same statistics on the project's exact kernels (udc_render.design.torch_psf, equal to psf.compute_kernels)
+  with the same optics, 2 µm pixels, 295 px;
+- the Wiener restorability (udc_render.design.metrics) on the exact kernels of the paper's rig (psf.Lens(),
+  3.1 µm, 255 px, 640 / 520 / 450 nm) under the sensor's noise, with the layout's open area as transmission;
+- the open area and power transmittance.
+Not here (issue 48, named in docs/guides/design.md): the banding at d, the restored PSNR by DeP and a UNet.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from psf.lens import Lens
+from psf.micrograph import MicrographLayout
+from udc_render.design import metrics, torch_psf as tp, upc
+from udc_render.sensor.config import SensorConfig
+
+__all__ = ["UPC_LENS", "FRAMES", "LayoutScores", "layout_cell", "upc_cell", "score_layout"]
+
+UPC_LENS = Lens(focal_length_um=upc.FOCAL_UM, aperture_um=upc.APERTURE_UM)
+UPC_PIXEL_UM = 2.0
+UPC_KERNEL_PX = 295
+RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)  # R, G, B
+RIG_KERNEL_PX = 255
+RINGS = 147  # k = 0 … 146, UPC's
+FRAMES = ("as_given", "edge")
+TILINGS = ("repeated", "turned")
+
+
+@dataclass(frozen=True)
+class LayoutScores:
+    """Every figure of one study: per tiling, the UPC-mode and exact ring summaries (metrics.ring_summary) and
+    the rig's restorability (metrics.restorability); the kernels' MTF maps (green) for the figures."""
+    name: str
+    open_fraction: float
+    power_transmittance: float
+    period_um: float
+    frame: str
+    seed: int
+    upc: dict
+    exact: dict
+    restorability: dict
+    mtf_maps: dict
+    seconds: float
+
+
+def _cell_px(period_um: float, pixel_um: float) -> int:
+    return max(3, int(round(period_um / pixel_um)))
+
+
+def layout_cell(layout, pixel_um: float = 2.0) -> tuple[np.ndarray, float]:
+    """(amplitude cell [c, c], its pixel in µm): a micrograph's own image, a preset's exact area-weighted raster
+    on ≈ pixel_um squares (psf.layouts.PeriodicLayout.cell_raster)."""
+    if isinstance(layout, MicrographLayout):
+        h, w = layout.image.shape
+        if h != w:
+            raise tp.DesignError(f"micrograph {layout.path}: the layout study needs a square tile, got {w} × {h} px")
+        return np.asarray(layout.image, np.float64), layout.pixel_um
+    c = _cell_px(layout.pitch_x_um, pixel_um)
+    return tp.preset_cell(layout, c), layout.pitch_x_um / c
+
+
+def upc_cell(cell: np.ndarray, frame: str = "as_given") -> np.ndarray:
+    """The cell resampled (area-weighted) to UPC's 21 × 21; frame 'edge' rolls its first open column to column 0
+    (the framing that reproduces their turned T-OLED, docs/guides/design.md)."""
+    c = cell.shape[0]
+    edges_in, edges_out = np.linspace(0, 1, c + 1), np.linspace(0, 1, upc.CELL_PX + 1)
+    w = np.clip(np.minimum(edges_out[1:, None], edges_in[None, 1:])
+                - np.maximum(edges_out[:-1, None], edges_in[None, :-1]), 0, None) * upc.CELL_PX
+    out = w @ cell @ w.T
+    if frame == "edge":
+        out = np.roll(out, -int(np.argmax(out.sum(axis=0) > 1e-9 * out.sum())), axis=1)
+    return out
+
+
+def _centre_mtf(kernel: np.ndarray) -> np.ndarray:
+    return metrics.mtf(kernel).astype(np.float32)
+
+
+def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quick: bool = False,
+                 sensor: SensorConfig | None = None, progress=None) -> LayoutScores:
+    """The study's figures for one layout (module doc); quick: 63-px kernels from 256 pupil samples."""
+    if frame not in FRAMES:
+        raise tp.DesignError(f"--frame {frame}: expected one of {', '.join(FRAMES)}")
+    start = time.perf_counter()
+    cell, cell_um = layout_cell(layout)
+    small = torch.tensor(upc_cell(cell, frame))
+    big = torch.tensor(cell)
+    pupil = 256 if quick else None
+    upc_grid = tp.cell_grid(cell.shape[0], cell_um, UPC_LENS, upc.WAVELENGTHS_NM, UPC_PIXEL_UM,
+                            63 if quick else UPC_KERNEL_PX, pupil)
+    rig_grid = tp.cell_grid(cell.shape[0], cell_um, Lens(), RIG_WAVELENGTHS_NM, 3.1, 63 if quick else RIG_KERNEL_PX,
+                            pupil)
+    trans = float(layout.power_transmittance)
+    out = {"upc": {}, "exact": {}, "restorability": {}, "mtf_maps": {}}
+    with torch.no_grad():
+        for tiling in TILINGS:
+            s = seed if tiling == "turned" else None
+            p = upc.psf(small, tp.tile_transforms(upc.tiles_for(upc.grid_sizes()[0]), s)).numpy()
+            out["upc"][tiling] = metrics.ring_summary(p, RINGS)
+            k = tp.kernels(big, upc_grid, tp.tile_transforms(upc_grid.tiles, s)).numpy()
+            out["exact"][tiling] = metrics.ring_summary(k, min(RINGS, upc_grid.size_px // 2))
+            r = tp.kernels(big, rig_grid, tp.tile_transforms(rig_grid.tiles, s)).numpy()
+            out["restorability"][tiling] = metrics.restorability(r, trans, sensor)
+            out["mtf_maps"][tiling] = {"upc": _centre_mtf(p[1]), "exact": _centre_mtf(k[1])}
+            if progress:
+                progress(1)
+    return LayoutScores(name, float(getattr(layout, "open_fraction", trans)), trans, float(cell.shape[0] * cell_um),
+                        frame, int(seed), out["upc"], out["exact"], out["restorability"], out["mtf_maps"],
+                        time.perf_counter() - start)

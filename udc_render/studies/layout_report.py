@@ -1,0 +1,94 @@
+"""The layout study's outputs: study_layout.json, study_layout.md, study_layout_mtf.png, study_layout_rings.png
+(udc_render.studies.layout), written atomically (udc_render.io.files)."""
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from udc_render.design import upc
+from udc_render.io.files import save_figure, save_json, save_text
+from udc_render.studies.layout import TILINGS, LayoutScores
+
+__all__ = ["THEIRS", "markdown", "write"]
+
+# Yang & Sankaranarayanan's saved mtf_radial.mat (design/upc_layout_metric.md): means over k = 1…146, R / G / B.
+THEIRS = {"repeated": {"mean_of_ring_means": (0.144, 0.156, 0.147), "mean_of_ring_minima": (0.0098, 0.0120, 0.0132)},
+          "turned": {"mean_of_ring_means": (0.140, 0.143, 0.146), "mean_of_ring_minima": (0.107, 0.109, 0.113)}}
+
+
+def _rgb(v) -> str:
+    return " / ".join(f"{x:.4f}" for x in v)
+
+
+def markdown(s: LayoutScores) -> str:
+    """The study's tables: ring statistics in both modes (UPC's T-OLED numbers beside them), restorability."""
+    lines = [f"# Layout study: {s.name}", "",
+             f"Open area {s.open_fraction:.4f}, power transmittance {s.power_transmittance:.4f}, cell "
+             f"{s.period_um:.1f} µm; turned tilings: seed {s.seed} (D4 per tile); UPC cell framing: {s.frame}; "
+             f"{s.seconds:.1f} s.", "",
+             "## Ring statistics of the MTF (R / G / B; means over k = 1…146)", "",
+             "| mode | tiling | mean of ring means | mean of ring minima |", "|---|---|---|---|"]
+    for mode, table in (("UPC-compatible", s.upc), ("exact kernels, UPC's optics", s.exact)):
+        for tiling in TILINGS:
+            t = table[tiling]
+            lines.append(f"| {mode} | {tiling} | {_rgb(t['mean_of_ring_means'])} | {_rgb(t['mean_of_ring_minima'])} |")
+    for tiling in TILINGS:
+        t = THEIRS[tiling]
+        lines.append(f"| UPC's saved T-OLED | {tiling} | {_rgb(t['mean_of_ring_means'])} | "
+                     f"{_rgb(t['mean_of_ring_minima'])} |")
+    lines += ["", "## Wiener restorability on the paper's rig (PSNR in dB, R / G / B; 640 / 520 / 450 nm)", "",
+              "| tiling | Wiener PSNR | MSE |", "|---|---|---|"]
+    for tiling in TILINGS:
+        r = s.restorability[tiling]
+        lines.append(f"| {tiling} | {' / '.join(f'{v:.2f}' for v in r['wiener_psnr_db'])} | "
+                     f"{' / '.join(f'{v:.3g}' for v in r['wiener_mse'])} |")
+    r = s.restorability["repeated"]
+    lines += ["", f"Scene mean {r['mean_level']} of the full well, RMS contrast {r['rms_contrast']}, power spectrum "
+              f"∝ 1/f²; noise: shot + read {r['read_noise_e']} e⁻ at a full well of {r['full_well_e']:.0f} e⁻ "
+              f"(variance {r['noise_variance']:.3g} full wells²).", ""]
+    return "\n".join(lines)
+
+
+def _figures(s: LayoutScores, out: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(2, 2, figsize=(9, 8.5))
+    for i, tiling in enumerate(TILINGS):
+        for j, mode in enumerate(("upc", "exact")):
+            m = s.mtf_maps[tiling][mode]
+            im = axes[i, j].imshow(np.log10(np.maximum(m, 1e-4)), vmin=-3, vmax=0, cmap="magma")
+            axes[i, j].set_title(f"{'UPC mode' if mode == 'upc' else 'exact kernels'}, {tiling} (G)")
+            axes[i, j].set_xticks([])
+            axes[i, j].set_yticks([])
+    fig.colorbar(im, ax=axes, shrink=0.6, label="log10 MTF")
+    save_figure(fig, out / "study_layout_mtf.png")
+    plt.close(fig)
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    for ax, (mode, table) in zip(axes, (("UPC mode", s.upc), ("exact kernels", s.exact))):
+        for tiling, colour in zip(TILINGS, ("C0", "C3")):
+            t = table[tiling]
+            k = np.arange(len(t["ring_means"][1]))
+            ax.plot(k[1:], t["ring_means"][1][1:], colour, label=f"{tiling}: ring mean")
+            ax.plot(k[1:], t["ring_minima"][1][1:], colour, ls="--", label=f"{tiling}: ring minimum")
+        ax.set_yscale("log")
+        ax.set_xlabel("ring radius k (FFT bins)")
+        ax.set_title(f"{s.name}, {mode} (G)")
+        ax.legend(fontsize=8)
+    save_figure(fig, out / "study_layout_rings.png")
+    plt.close(fig)
+
+
+def write(s: LayoutScores, out: Path) -> list[str]:
+    """Write the JSON (every figure and curve, without the MTF maps), the Markdown and the figures."""
+    doc = {k: v for k, v in asdict(s).items() if k != "mtf_maps"}
+    doc["upc_parameters"] = {"cell_px": upc.CELL_PX, "pupil_um": upc.PUPIL_UM, "focal_um": upc.FOCAL_UM,
+                             "aperture_um": upc.APERTURE_UM, "wavelengths_nm": upc.WAVELENGTHS_NM,
+                             "grid_sizes": upc.grid_sizes(), "crop_px": upc.CROP_PX, "box_px": upc.BOX_PX}
+    doc["theirs_toled"] = THEIRS
+    save_json(out / "study_layout.json", doc)
+    save_text(out / "study_layout.md", markdown(s))
+    _figures(s, out)
+    return ["study_layout.json", "study_layout.md", "study_layout_mtf.png", "study_layout_rings.png"]
