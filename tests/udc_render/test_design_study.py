@@ -9,14 +9,14 @@ import pytest
 
 from psf import layouts
 from udc_render import cli
-from udc_render.studies.layout import upc_cell
+from udc_render.studies.layout import frame_cell, upc_cell
 
 
 def test_upc_cell_keeps_the_open_area_and_frames_at_the_edge():
     cell = layouts.toled(pitch_um=317.0).cell_raster(159, 159)[0]
     small = upc_cell(cell)
     assert small.shape == (21, 21) and abs(small.mean() - cell.mean()) < 1e-12
-    edge = upc_cell(cell, "edge")
+    edge = upc_cell(frame_cell(cell, "edge"))
     assert edge[:, 0].sum() > 0 and edge[:, -1].sum() == 0 and abs(edge.sum() - small.sum()) < 1e-12
 
 

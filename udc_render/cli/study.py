@@ -62,8 +62,8 @@ def register(sub) -> None:
                    help="layout only: a micrograph's pixel size in µm [1]")
     s.add_argument("--tile-seed", type=int, default=0, help="layout only: seed of the turned tiling's D4 draws [0]")
     s.add_argument("--frame", choices=("as_given", "edge"), default="as_given",
-                   help="layout only: UPC's 21 × 21 cell as the layout frames it, or with its first open column "
-                        "moved to the tile's edge [as_given]")
+                   help="layout only: the cell as the layout frames it, or with its first open column moved to the "
+                        "tile's edge, where a turn about the tile's centre moves the opening [as_given]")
 
 
 def run(args) -> int:

@@ -2,8 +2,9 @@
 
 For one layout (a preset, a display file or a micrograph), tiled plainly and with every tile turned and
 mirrored at random (the 8 elements of D4, udc_render.design.torch_psf.tile_transforms):
-- UPC's ring statistics in their sampling (udc_render.design.upc): the layout's cell resampled to 21 × 21 and
-  taken as 168 µm, their optics (f = 10 mm, a 4 mm disc, 610 / 530 / 470 nm);
+- UPC's ring statistics in their sampling (udc_render.design.upc): the layout's cell (framed as given, or with
+  its opening at the tile's edge: frame_cell) resampled to 21 × 21 and taken as 168 µm, their optics (f = 10 mm,
+  a 4 mm disc, 610 / 530 / 470 nm);
 - the same statistics on the project's exact kernels (udc_render.design.torch_psf, equal to psf.compute_kernels)
   with the same optics, 2 µm pixels, 295 px;
 - the Wiener restorability (udc_render.design.metrics) on the exact kernels of the paper's rig (psf.Lens(),
@@ -24,7 +25,7 @@ from psf.micrograph import MicrographLayout
 from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.sensor.config import SensorConfig
 
-__all__ = ["UPC_LENS", "FRAMES", "LayoutScores", "layout_cell", "upc_cell", "score_layout"]
+__all__ = ["UPC_LENS", "FRAMES", "LayoutScores", "layout_cell", "frame_cell", "upc_cell", "score_layout"]
 
 UPC_LENS = Lens(focal_length_um=upc.FOCAL_UM, aperture_um=upc.APERTURE_UM)
 UPC_PIXEL_UM = 2.0
@@ -69,17 +70,21 @@ def layout_cell(layout, pixel_um: float = 2.0) -> tuple[np.ndarray, float]:
     return tp.preset_cell(layout, c), layout.pitch_x_um / c
 
 
-def upc_cell(cell: np.ndarray, frame: str = "as_given") -> np.ndarray:
-    """The cell resampled (area-weighted) to UPC's 21 × 21; frame 'edge' rolls its first open column to column 0
-    (the framing that reproduces their turned T-OLED, docs/guides/design.md)."""
+def frame_cell(cell: np.ndarray, frame: str = "as_given") -> np.ndarray:
+    """The cell as given, or ('edge') rolled so that its first open column is column 0: the framing of the tile
+    that D4 turns about its centre, which reproduces UPC's turned T-OLED (docs/guides/design.md)."""
+    if frame == "as_given":
+        return cell
+    return np.roll(cell, -int(np.argmax(cell.sum(axis=0) > 1e-9 * cell.sum())), axis=1)
+
+
+def upc_cell(cell: np.ndarray) -> np.ndarray:
+    """The cell resampled (exact area weighting of its squares) to UPC's 21 × 21."""
     c = cell.shape[0]
     edges_in, edges_out = np.linspace(0, 1, c + 1), np.linspace(0, 1, upc.CELL_PX + 1)
     w = np.clip(np.minimum(edges_out[1:, None], edges_in[None, 1:])
                 - np.maximum(edges_out[:-1, None], edges_in[None, :-1]), 0, None) * upc.CELL_PX
-    out = w @ cell @ w.T
-    if frame == "edge":
-        out = np.roll(out, -int(np.argmax(out.sum(axis=0) > 1e-9 * out.sum())), axis=1)
-    return out
+    return w @ cell @ w.T
 
 
 def _centre_mtf(kernel: np.ndarray) -> np.ndarray:
@@ -93,7 +98,8 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
         raise tp.DesignError(f"--frame {frame}: expected one of {', '.join(FRAMES)}")
     start = time.perf_counter()
     cell, cell_um = layout_cell(layout)
-    small = torch.tensor(upc_cell(cell, frame))
+    cell = frame_cell(cell, frame)
+    small = torch.tensor(upc_cell(cell))
     big = torch.tensor(cell)
     pupil = 256 if quick else None
     upc_grid = tp.cell_grid(cell.shape[0], cell_um, UPC_LENS, upc.WAVELENGTHS_NM, UPC_PIXEL_UM,

@@ -26,7 +26,7 @@ def markdown(s: LayoutScores) -> str:
     """The study's tables: ring statistics in both modes (UPC's T-OLED numbers beside them), restorability."""
     lines = [f"# Layout study: {s.name}", "",
              f"Open area {s.open_fraction:.4f}, power transmittance {s.power_transmittance:.4f}, cell "
-             f"{s.period_um:.1f} µm; turned tilings: seed {s.seed} (D4 per tile); UPC cell framing: {s.frame}; "
+             f"{s.period_um:.1f} µm; turned tilings: seed {s.seed} (D4 per tile); cell framing: {s.frame}; "
              f"{s.seconds:.1f} s.", "",
              "## Ring statistics of the MTF (R / G / B; means over k = 1…146)", "",
              "| mode | tiling | mean of ring means | mean of ring minima |", "|---|---|---|---|"]
