@@ -64,6 +64,7 @@ def _psnr(a, b):
     return 10 * math.log10(1 / np.mean((np.clip(a, 0, 1) - np.clip(b, 0, 1)) ** 2))
 
 
+@pytest.mark.slow  # ~28 s; the mechanism: test_resumed_online_training_continues_identically
 def test_online_training_improves_over_its_input(tmp_path, bank):
     """40 Adam steps of a width-8 UNet on 32-px crops degraded on the fly (no capture on disk): on the validation
     images, degraded once through the panels, it beats the input (bilinear demosaic / γ) by > 3 dB, and its

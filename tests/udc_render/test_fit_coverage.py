@@ -55,6 +55,7 @@ def within_two_sigma(pulls: list[dict]) -> dict:
     return {k: float(np.mean([abs(p[k]) <= 2 for p in pulls])) for k in KEYS}
 
 
+@pytest.mark.slow  # ~35 s; the round trips' 3 σ checks are the fast suite's
 def test_fast_pentile_trials_hold_the_truth_within_two_sigma():
     """5 fixed pentile trials: 21 of the 25 parameters within ±2 σ, none beyond ±4 σ."""
     pulls = np.array([[p[k] for k in KEYS] for p in (trial("poled", seed, 255) for seed in range(5))])

@@ -145,6 +145,7 @@ def test_a_pentile_at_another_pitch_from_two_12_bit_exposures(tmp_path, capsys):
     assert set(psf["correlation"]) == {"open_fraction × small_to_large"}
 
 
+@pytest.mark.slow  # ~22 s; the refusal far above the noise: test_fit_roundtrip's wrong family
 def test_a_lattice_of_circular_holes_gives_its_lattice_and_no_family(tmp_path, capsys):
     """One circular hole per 120 µm cell (the Airy form; no family has it): the lattice comes back (pitch within
     0.05 % and 3 σ, the rotation within 3 σ), and `fit` refuses the families in one line, by how far they miss."""
