@@ -19,6 +19,7 @@ COMMANDS = {
     "train": ["train", "--data", "DATA", "--model", "unet"],
     "evaluate": ["evaluate", "--data", "DATA", "--model", "input"],
     "bank": ["bank"],
+    "study": ["study", "layout", "--quick"],
 }
 ALLOWED = "glass (or none), toled, poled, a display file (.toml) or a micrograph image (.png/.tif/.tiff/.exr)"
 
@@ -54,7 +55,7 @@ def test_every_command_with_display_is_covered():
     ("toled,nowhere.png", "--display = 'nowhere.png': no such file; expected " + ALLOWED),
 ])
 def test_a_missing_display_file_is_the_same_one_line_everywhere(command, value, says, tmp_path, capsys):
-    if command in ("psf", "train", "calibrate") and "," in value:
+    if command in ("psf", "train", "calibrate", "study") and "," in value:
         value = value.split(",")[1]  # one display; the error names the item either way
     argv = [str(tmp_path) if a == "DATA" else a for a in COMMANDS[command]]
     assert main([*argv, "--display", str(value), "--out", str(tmp_path / "o")]) == 2

@@ -29,11 +29,11 @@ from psf.engine import PSFError
 from psf.layouts import LayoutError
 from psf.lens import LensError
 from udc_render import __version__
-from udc_render.cli import bank, calibrate, dataset, evaluate, fit, psf, render, results, study, synth, train
+from udc_render.cli import bank, calibrate, dataset, design, evaluate, fit, psf, render, results, study, synth, train
 from udc_render.cli.args import Parser
 from udc_render.errors import UdcError
 
-COMMANDS = (psf, render, synth, dataset, bank, calibrate, fit, study, train, evaluate, results)
+COMMANDS = (psf, render, synth, dataset, bank, calibrate, fit, study, design, train, evaluate, results)
 USER_ERRORS = (UdcError, PSFError, LayoutError, LensError)
 
 

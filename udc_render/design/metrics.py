@@ -58,10 +58,11 @@ def natural_spectrum(size: int, variance: float) -> np.ndarray:
     return s * variance / s.mean()
 
 
-def wiener_mse(h: np.ndarray, signal: np.ndarray, noise: float, transmission: float = 1.0) -> float:
-    """Mean over the DFT grid of S N / (T² |H|² S + N) (module doc): h, signal [L, L] in fft2's order."""
-    s = np.asarray(signal, np.float64)
-    return float(np.mean(s * noise / (transmission ** 2 * np.abs(h) ** 2 * s + noise)))
+def wiener_mse(h, signal, noise, transmission=1.0):
+    """Mean over the DFT grid of S N / (T² |H|² S + N) (module doc): h, signal [L, L] in fft2's order; numpy
+    arrays or torch tensors (the designer's objective), the result of the same kind."""
+    v = signal * noise / (transmission ** 2 * abs(h) ** 2 * signal + noise)
+    return v.mean()
 
 
 def noise_variance(sensor: SensorConfig, mean_level: float, transmission: float) -> float:
@@ -79,7 +80,8 @@ def restorability(kernels: np.ndarray, transmission: float, sensor: SensorConfig
     size = kernels.shape[-1]
     signal = natural_spectrum(size, (contrast * mean_level) ** 2)
     noise = noise_variance(sensor, mean_level, transmission)
-    mses = [wiener_mse(np.fft.fft2(np.fft.ifftshift(k / k.sum())), signal, noise, transmission) for k in kernels]
+    mses = [float(wiener_mse(np.fft.fft2(np.fft.ifftshift(k / k.sum())), signal, noise, transmission))
+            for k in kernels]
     return {"wiener_mse": mses, "wiener_psnr_db": [float(-10 * np.log10(v)) for v in mses],
             "noise_variance": noise, "mean_level": mean_level, "rms_contrast": contrast,
             "full_well_e": sensor.full_well_e, "read_noise_e": sensor.read_noise_e}

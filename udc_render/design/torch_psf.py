@@ -29,7 +29,7 @@ from udc_render.errors import UdcError
 from udc_render.streams import stream
 
 __all__ = ["DesignError", "CellGrid", "cell_grid", "raster_matrix", "tile_transforms", "tiled_mask", "kernels",
-           "preset_cell", "transform_tile"]
+           "preset_cell", "transform_tile", "tile"]
 
 
 class DesignError(UdcError):
@@ -84,12 +84,12 @@ def raster_matrix(n: int, c: int) -> np.ndarray:
     return (np.sinc(k / c) * np.cos(2 * np.pi * k * phase)).sum(axis=-1) / c
 
 
-def tile_transforms(tiles: int, seed: int | None, flips: bool = True) -> np.ndarray:
+def tile_transforms(tiles: int, seed: int | None, flips: bool = True, keys: tuple = ()) -> np.ndarray:
     """[tiles, tiles] D4 transforms (module doc): zeros for a plain tiling (seed None), else uniform over the
-    8 (flips) or the 4 quarter-turns, from udc_render.streams.stream(seed, 'layout', 'tiles')."""
+    8 (flips) or the 4 quarter-turns, from udc_render.streams.stream(seed, 'layout', 'tiles', *keys)."""
     if seed is None:
         return np.zeros((tiles, tiles), dtype=int)
-    return stream(seed, "layout", "tiles").integers(0, 8 if flips else 4, size=(tiles, tiles))
+    return stream(seed, "layout", "tiles", *keys).integers(0, 8 if flips else 4, size=(tiles, tiles))
 
 
 def transform_tile(t: torch.Tensor, k: int) -> torch.Tensor:
@@ -101,12 +101,18 @@ def tiled_mask(cell: torch.Tensor, grid: CellGrid, transforms: np.ndarray | None
     """The amplitude over the aperture crop: the cell's raster tiled (each tile transformed), cropped."""
     b = torch.as_tensor(raster_matrix(grid.n, grid.cell_px), dtype=cell.dtype, device=cell.device)
     amp = b @ cell @ b.T
-    if transforms is None or not np.any(transforms):
-        mask = amp.repeat(grid.tiles, grid.tiles)
-    else:
-        variants = {k: transform_tile(amp, int(k)) for k in np.unique(transforms)}
-        mask = torch.cat([torch.cat([variants[k] for k in row], dim=1) for row in transforms], dim=0)
+    plain = transforms is None or not np.any(transforms)
+    mask = amp.repeat(grid.tiles, grid.tiles) if plain else tile(amp, transforms)
     return mask[grid.rows, grid.cols]
+
+
+def tile(t: torch.Tensor, transforms: np.ndarray) -> torch.Tensor:
+    """The square tile t [n, n] tiled as transforms [R, C] (D4 elements, transform_tile): [R n, C n], one gather."""
+    variants = torch.stack([transform_tile(t, k) for k in range(8)])
+    rows, cols = transforms.shape
+    n = t.shape[0]
+    picked = variants[torch.as_tensor(transforms, device=t.device).reshape(-1)].reshape(rows, cols, n, n)
+    return picked.permute(0, 2, 1, 3).reshape(rows * n, cols * n)
 
 
 def _mft_matrices(grid: CellGrid, lags: int, lam_um: float, dtype, device) -> tuple[torch.Tensor, torch.Tensor]:

@@ -20,7 +20,7 @@ import math
 import numpy as np
 import torch
 
-from udc_render.design.torch_psf import DesignError, transform_tile
+from udc_render.design.torch_psf import DesignError, tile
 
 __all__ = ["WAVELENGTHS_NM", "CELL_PX", "PUPIL_UM", "FOCAL_UM", "APERTURE_UM", "CROP_PX", "BOX_PX", "grid_sizes",
            "display", "psf"]
@@ -55,8 +55,7 @@ def display(cell: torch.Tensor, m: int, transforms: np.ndarray | None = None) ->
         return cell.repeat(n, n)[:m, :m]
     if transforms.shape != (n, n):
         raise DesignError(f"tile transforms: expected {n} × {n}, got {transforms.shape}")
-    variants = {k: transform_tile(cell, int(k)) for k in np.unique(transforms)}
-    return torch.cat([torch.cat([variants[k] for k in row], dim=1) for row in transforms], dim=0)[:m, :m]
+    return tile(cell, transforms)[:m, :m]
 
 
 def _disc(m: int, dtype, device) -> torch.Tensor:

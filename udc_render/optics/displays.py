@@ -227,7 +227,7 @@ def load_displays(specs: str, distance_mm: float | None = None) -> list[Display]
 
 _LAYOUT_KEYS = {"toled": ("pitch_um", "open_fraction", "slit_height_fraction"),
                 "poled": ("pitch_um", "open_fraction", "small_to_large"),
-                "micrograph": ("file", "pixel_um", "values")}
+                "micrograph": ("file", "pixel_um", "values", "tile_rotation", "tile_seed")}
 _TOP_KEYS = ("name", "layout", "distance_mm", "gain", "transmission")
 
 
@@ -289,7 +289,13 @@ def parse_display(data: dict, path: Path) -> Display:
             values = lay.get("values", "amplitude")
             if values not in ("amplitude", "intensity"):
                 _fail(path, p + "values", values, "amplitude or intensity")
-            layout = MicrographLayout.load(fp, _number(path, lay, "pixel_um", p, 0, 1e4, 1.0, lo_open=True), values)
+            rotation, seed = lay.get("tile_rotation", False), lay.get("tile_seed", 0)
+            if not isinstance(rotation, bool):
+                _fail(path, p + "tile_rotation", rotation, "true or false")
+            if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+                _fail(path, p + "tile_seed", seed, "a non-negative integer")
+            layout = MicrographLayout.load(fp, _number(path, lay, "pixel_um", p, 0, 1e4, 1.0, lo_open=True), values,
+                                           rotation, seed)
         else:
             factory = layouts.toled if kind == "toled" else layouts.poled
             kw = {k: _number(path, lay, k, p, 0, 1e4, lo_open=True) for k in _LAYOUT_KEYS[kind] if k in lay}

@@ -1,0 +1,49 @@
+"""`udc-render design --out DIR`: optimise a display cell for restorability (udc_render.design.optimise) and
+write it as a display file every command takes; the same command resumes an interrupted run."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from udc_render.cli.args import out_dir, positive
+
+
+def register(sub) -> None:
+    from udc_render.design.optimise import DEFAULT_FEATURE_UM, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
+    p = sub.add_parser("design", help="optimise a display pixel cell for restorability; writes a display file")
+    p.set_defaults(run=run)
+    p.add_argument("--cell-um", type=positive("--cell-um"), default=168.0,
+                   help="the cell's side in µm, a multiple of --feature-um [168: UPC's cell]")
+    p.add_argument("--feature-um", type=positive("--feature-um"), default=DEFAULT_FEATURE_UM,
+                   help=f"the minimum feature size in µm: the design's squares; ≥ {LITHOGRAPHY_UM} (LTPS "
+                        f"lithography) [{DEFAULT_FEATURE_UM:g}: UPC's pupil sampling]")
+    p.add_argument("--open-area", type=float, default=0.20, help="the open area, a fraction in (0, 1) [0.20]")
+    p.add_argument("--tiling", choices=TILINGS, default="turned",
+                   help="repeated: the cell tiled as it is; turned: each tile turned and mirrored at random "
+                        "(a fresh D4 draw per step) [turned]")
+    p.add_argument("--objective", choices=OBJECTIVES, default="wiener",
+                   help="wiener: the Wiener estimate's expected error under the sensor's noise; upc: UPC's "
+                        "Wiener-response term (lowest 30 %% of |H|²/(|H|² + 0.015)) [wiener]")
+    p.add_argument("--steps", type=positive("--steps", int), default=150, help="Adam steps [150]")
+    p.add_argument("--lr", type=positive("--lr"), default=0.1, help="Adam's learning rate [0.1]")
+    p.add_argument("--seed", type=int, default=0, help="seed of the initial cell and the tilings [0]")
+    p.add_argument("--pupil-samples", type=positive("--pupil-samples", int), default=512,
+                   help="pupil samples across the aperture of the objective's kernels [512]")
+    p.add_argument("--kernel-px", type=positive("--kernel-px", int), default=127,
+                   help="the objective's kernel size in 3.1 µm pixels, odd [127]")
+    p.add_argument("--device", default="cpu", help="torch device, e.g. cuda [cpu]")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--out", type=Path, default=Path("out/design"),
+                   help="output folder: design.toml, cell.png, design.json, design_loss.png [out/design]")
+
+
+def run(args) -> int:
+    from udc_render.design.job import run_design
+    from udc_render.design.optimise import DesignConfig
+    config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
+                          args.lr, args.seed, args.pupil_samples, args.kernel_px)
+    out = out_dir(args.out)
+    doc = run_design(config, out, args.device, args.quiet)
+    f = doc["final"]
+    print(f"open area {f['open_area']:.4f} ({doc['open_squares']} of {doc['cell_px']}² squares), objective "
+          f"{f['objective']:.4g}; wrote {out}/design.toml, cell.png, design.json, design_loss.png")
+    return 0
