@@ -32,14 +32,13 @@ import imageio.v3 as iio
 import numpy as np
 import torch
 
-from restore.captures import captured_panel
-from restore.conditioning import description_tensors
+from restore.conditioning import crop_description, description_tensors
 from restore.data import DataError
 from restore.degrade import Degrader
 from restore.online import CleanImage, OnlineBatches, checked_image, clean_images
 from udc_render.dataset.bank import Bank, read_bank
 from udc_render.description import PanelDescription
-from udc_render.description.make import describe_panel, with_sensor
+from udc_render.description.make import describe_panel
 
 __all__ = ["OnlineDegradation", "load_clean_images", "srgb_to_linear"]
 
@@ -99,11 +98,9 @@ class OnlineDegradation(torch.utils.data.IterableDataset):
         self.epoch, self.batch_index = int(state["epoch"]), int(state["batch"])
 
     def description(self, draw: dict) -> PanelDescription:
-        """The description of a crop's draw: its panel's, with its own drawn sensor under capture draws."""
-        base = self.descriptions[draw["panel"]]
-        if "capture" not in draw:
-            return base
-        return with_sensor(base, captured_panel(self.batches.bank.panels[draw["panel"]], draw["capture"]).sensor)
+        """The description of a crop's draw: its panel's, with its own drawn sensor under capture draws (restore.
+        conditioning.crop_description, what `udc-render train` gives a model that needs it)."""
+        return crop_description(self.descriptions, self.batches.bank, draw)
 
     def __iter__(self):
         b, dev = self.batches.batch, self.batches.degrader.device

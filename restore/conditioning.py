@@ -27,6 +27,7 @@ without a description it needs, or with one made for another sensor or frame, is
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -78,8 +79,10 @@ def empty_description_tensors(batch: int, kernel_px: int, device=None) -> dict[s
 
 
 def spec_kernel_px(model) -> int:
-    """The kernel window of the descriptions a model was made for (its description_spec; else the default)."""
-    return int((getattr(model, "description_spec", None) or {}).get("kernel_px", DESCRIPTION_KERNEL_PX))
+    """The kernel window of the descriptions a model was made for (its description_spec; else its kernel_px, else the
+    default)."""
+    own = getattr(model, "kernel_px", DESCRIPTION_KERNEL_PX)
+    return int((getattr(model, "description_spec", None) or {}).get("kernel_px", own))
 
 
 def evaluation_description(spec: str, pair, kernel_px: int | None = None) -> PanelDescription:
@@ -124,3 +127,73 @@ def predict_described(model, packed: np.ndarray, description: PanelDescription, 
         x = torch.from_numpy(np.ascontiguousarray(packed, np.float32))[None].to(device)
         return model(x.to(memory_format=torch.channels_last), description_tensors([description], device))[0] \
             .float().cpu().numpy()
+
+
+def bank_descriptions(bank, kernel_px: int = DESCRIPTION_KERNEL_PX) -> list[PanelDescription]:
+    """Each panel's description of a bank (describe_panel) on the frame its bank.json names (frame_px), in a
+    kernel_px window."""
+    from udc_render.description.make import describe_panel
+    frame = bank.settings.get("frame_px")
+    if frame is None:
+        raise DataError(f"--bank {bank.folder}: its bank.json names no frame_px: a model that needs the panel's "
+                        "description needs the sensor frame its panels were made for")
+    return [describe_panel(p, (int(frame[0]), int(frame[1])), kernel_px) for p in bank.panels]
+
+
+def crop_description(descriptions: list[PanelDescription], bank, draw: dict) -> PanelDescription:
+    """The description of an online crop's draw (restore.online): its panel's, with the crop's own drawn sensor
+    under capture draws (restore.captures)."""
+    from restore.captures import captured_panel
+    from udc_render.description.make import with_sensor
+    base = descriptions[draw["panel"]]
+    if "capture" not in draw:
+        return base
+    return with_sensor(base, captured_panel(bank.panels[draw["panel"]], draw["capture"]).sensor)
+
+
+def described_spec(descriptions: list[PanelDescription]) -> dict:
+    """The DescriptionSpec the descriptions share, as a JSON dict (a model's description_spec); refused in one line
+    when two differ (check_spec)."""
+    for d in descriptions[1:]:
+        check_spec(descriptions[0].spec(), d, who=f"panel {descriptions[0].name!r} of the same bank")
+    return json.loads(json.dumps(asdict(descriptions[0].spec())))
+
+
+def check_description_source(model_config: dict, degrade: dict | None) -> None:
+    """Refuse, in one line, training a model that needs the panel's description on a dataset's captures: only the
+    online degradation's crops carry one (their bank panel's)."""
+    from restore.models import MODELS
+    if degrade is None and needs_description(MODELS.get(model_config.get("type"))):
+        raise DescriptionError(f"--model {model_config['type']}: it restores with the panel's description, which "
+                               "training gives only with the online degradation: use --degrade online --bank DIR")
+
+
+class DescribedBatches:
+    """Online training batches (restore.online.OnlineBatches) with each crop's description: epoch(e) gives (draws,
+    batches of (x, y, description_tensors of the crops' crop_description)), on the batches' device."""
+
+    def __init__(self, batches, descriptions: list[PanelDescription]):
+        self.batches, self.descriptions = batches, descriptions
+        self.images, self.count, self.record = batches.images, batches.count, batches.record
+
+    def epoch(self, epoch: int):
+        draws = self.batches.epoch_draws(epoch)
+        return draws, self._described(draws)
+
+    def _described(self, draws: list[dict]):
+        b, dev, bank = self.batches.batch, self.batches.degrader.device, self.batches.bank
+        for i, (x, y) in enumerate(self.batches.batches_of(draws)):
+            chunk = draws[i * b:(i + 1) * b]
+            yield x, y, description_tensors([crop_description(self.descriptions, bank, d) for d in chunk], dev)
+
+
+def described_training(model, data, val_count: int) -> tuple[object, list | None]:
+    """(the training batches, the validation images' descriptions or None): for a model that needs the panel's
+    description, its online batches as DescribedBatches, validation image j's description that of panel j mod N
+    (restore.online.validation_pairs degrades it so), in the model's kernel window (spec_kernel_px), and its
+    description_spec set to the bank's; else as given."""
+    if not needs_description(model):
+        return data, None
+    descriptions = bank_descriptions(data.bank, spec_kernel_px(model))
+    model.set_description_spec(described_spec(descriptions))
+    return DescribedBatches(data, descriptions), [descriptions[j % len(descriptions)] for j in range(val_count)]

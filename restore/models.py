@@ -3,6 +3,7 @@
 - `UNet`: the paper's baseline (Zhou et al. 2021, §4 "UNet"): the SID UNet (Chen et al. 2018,
   "Learning to See in the Dark") with its encoder split into two sub-encoders.
 - `ResNet`: EDSR (Lim et al. 2017) with 16 residual blocks of 64 features, no batch norm.
+- `WienerUNet` ('wiener-unet', restore/models_conditioned.py): conditioned on the panel's description.
 
 A config is a dict whose `type` picks the model in `MODELS` and whose other keys are its keyword
 arguments (`build_model`); `model_config(model)` gives back the config a model was built from, so a
@@ -10,6 +11,7 @@ checkpoint can store how to rebuild it. Parameter and MAC counts: restore/counti
 """
 from __future__ import annotations
 
+import importlib
 import types
 import typing
 from pathlib import Path
@@ -168,6 +170,15 @@ class ResNet(nn.Module):
 
 
 MODELS: dict[str, type[nn.Module]] = {UNet.TYPE: UNet, ResNet.TYPE: ResNet}
+
+
+def _register_conditioned() -> None:
+    """The restorers conditioned on the panel's description: restore.models_conditioned builds on this module's
+    blocks and adds its models to MODELS (imported once the blocks exist, whichever module is imported first)."""
+    importlib.import_module("restore.models_conditioned")
+
+
+_register_conditioned()
 UNET_CONFIG = {"type": "unet", "in_channels": 4, "out_channels": 3, "width": 32, "depth": 5, "sub_encoders": 2,
                "second_encoder_levels": 4, "negative_slope": 0.2}
 """The paper's baseline: 8.933 M parameters, 124.08 G MACs at 4 × 512 × 1024 (paper: 8.93 M, 124.36 G)."""

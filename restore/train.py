@@ -17,16 +17,16 @@ last two fifths of the steps) changes by less than plateau_db over a fifth of th
 whether and where, and a finished run's plateau is re-checked from its loss.csv, so a run stopped under an older
 criterion resumes. With autocast 'bf16' the forward pass runs in bfloat16 (train_step). Resumed training gives the same
 weights as an uninterrupted run on the same machine and threads: sample order and crops are seeded by (seed, epoch).
+A model that needs the panel's description (restore.conditioning) trains only online: each crop's batch carries its
+bank panel's description, validation image j that of panel j mod N, and the model records the bank's DescriptionSpec.
+The run folder's files are written and read by restore.checkpoints.
 """
 from __future__ import annotations
 
-import csv
 import hashlib
-import io
 import json
 import math
 import time
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -35,24 +35,29 @@ import torch
 from tqdm import tqdm
 
 from restore.augment import pair_dataset
+from restore.checkpoints import (
+    LOG_COLUMNS as LOG_COLUMNS,  # the run's files (re-exported: their old home)
+    TrainError,
+    checkpoint_errors as checkpoint_errors,
+    load_model as load_model,
+    pick_device,
+    read_log,
+    resume,
+    save_checkpoint,
+    save_torch,
+)
+from restore.conditioning import check_description_source, described_training, predict_described
 from restore.data import PairBatches, largest_crop_px, list_pairs, load_pair, read_manifest
 from restore.losses import loss_fn
 from restore.models import build_model, model_config
 from restore.online import DrawLog, online_data
 from restore.precision import check_autocast
-from udc_render.errors import UdcError
-from udc_render.io.files import atomic_path, csv_text, save_figure, save_json, save_text
-from udc_render.io.plots import pyplot
+from udc_render.io.files import save_json
 from udc_render.metrics import psnr_db
 
-LOG_COLUMNS = ["epoch", "step", "lr", "loss", "val_psnr_db", "seconds"]
 PLATEAU_WINDOW = 0.2  # the change is measured over a fifth of the steps
 PLATEAU_FIT_WINDOW = 0.4  # from a line fitted through the validations of the last two fifths
 PLATEAU_MIN_VALIDATIONS = 6  # validations inside the fitted window before a plateau can be declared
-
-
-class TrainError(UdcError):
-    """Training settings or a run folder that cannot be used; one line."""
 
 
 @dataclass(frozen=True)
@@ -93,15 +98,6 @@ def data_fingerprint(data_dir: Path) -> str:
     """sha256 of the dataset's manifest: which items, splits and displays (not where the folder is)."""
     read_manifest(data_dir)  # a clear error when it is not a dataset folder
     return hashlib.sha256((Path(data_dir) / "manifest.jsonl").read_bytes()).hexdigest()[:16]
-
-
-def pick_device(name: str = "auto") -> torch.device:
-    """'auto': the GPU when one is present, else the CPU."""
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise TrainError(f"--device = {name!r}: no CUDA GPU here (use auto or cpu)")
-    return torch.device(name)
 
 
 def learning_rate(settings: TrainSettings, epoch: int) -> float:
@@ -146,27 +142,24 @@ def trend_db_per_fifth(vals: list[tuple[float, float]], fit_window: float = PLAT
     return float(np.polyfit(window[:, 0], window[:, 1], 1)[0] * PLATEAU_WINDOW * step)
 
 
-def read_log(path: Path) -> list[dict]:
-    """The loss log of a loss.csv (LOG_COLUMNS; an empty cell is None)."""
-    with open(path, newline="") as f:
-        return [{k: (float(v) if v != "" else None) for k, v in row.items()} for row in csv.DictReader(f)]
-
-
-def predict(model: torch.nn.Module, packed: np.ndarray, device: torch.device) -> np.ndarray:
+def predict(model: torch.nn.Module, packed: np.ndarray, device: torch.device, description=None) -> np.ndarray:
     """[3, H, W] float32 restored image of one packed RAW [4, H/2, W/2] (channels_last: 1.4–1.5× faster
-    inference on the CPU, benchmarks/README.md)."""
+    inference on the CPU, benchmarks/README.md); a model that needs it is given the panel's `description`."""
+    if description is not None:
+        return predict_described(model, packed, description, device)
     with torch.inference_mode():
         x = torch.from_numpy(np.ascontiguousarray(packed, np.float32))[None].to(device)
         x = x.to(memory_format=torch.channels_last)
         return model(x)[0].float().cpu().numpy()
 
 
-def train_step(model, opt, x: torch.Tensor, y: torch.Tensor, loss_of, settings: TrainSettings) -> float:
-    """One Adam step on the batch (x, y), already on the model's device in channels_last: the forward in
-    bfloat16 when settings.autocast is 'bf16' (the loss on its output widened to float32), the gradient's
-    norm clipped to settings.clip_grad_norm; returns the loss."""
+def train_step(model, opt, x: torch.Tensor, y: torch.Tensor, loss_of, settings: TrainSettings, *description) -> float:
+    """One Adam step on the batch (x, y), already on the model's device in channels_last (and the crops'
+    description tensors, for a model that needs them): the forward in bfloat16 when settings.autocast is 'bf16'
+    (the loss on its output widened to float32), the gradient's norm clipped to settings.clip_grad_norm; returns
+    the loss."""
     with torch.autocast(x.device.type, dtype=torch.bfloat16, enabled=settings.autocast == "bf16"):
-        out = model(x)
+        out = model(x, *description)
     loss = loss_of(out.float(), y)
     opt.zero_grad(set_to_none=True)
     loss.backward()
@@ -176,14 +169,14 @@ def train_step(model, opt, x: torch.Tensor, y: torch.Tensor, loss_of, settings: 
     return loss.item()
 
 
-def validation_psnr(model, pairs, device) -> float | None:
+def validation_psnr(model, pairs, device, descriptions: list | None = None) -> float | None:
     """Mean PSNR (dB, linear units clipped to [0, 1], whole frame) over the validation pairs
-    [(packed, gt), ...] (load_pair)."""
+    [(packed, gt), ...] (load_pair), each restored with its description where `descriptions` are given."""
     if not pairs:
         return None
     model.eval()
-    vals = [psnr_db(np.clip(predict(model, packed, device), 0, 1), np.clip(gt, 0, 1), peak=1.0)
-            for packed, gt in pairs]
+    vals = [psnr_db(np.clip(predict(model, packed, device, d), 0, 1), np.clip(gt, 0, 1), peak=1.0)
+            for (packed, gt), d in zip(pairs, descriptions or [None] * len(pairs))]
     model.train()
     return float(np.mean(vals))
 
@@ -249,65 +242,6 @@ def centre_crop(packed: np.ndarray, gt: np.ndarray, crop_px: int) -> tuple[np.nd
     return packed[:, y:y + half, x:x + half], gt[:, 2 * y:2 * y + crop_px, 2 * x:2 * x + crop_px]
 
 
-@contextmanager
-def checkpoint_errors(path: Path, advice: str):
-    """Any failure while reading `path` or loading it into a model (a truncated or damaged file,
-    another program's file) as one TrainError line ending in `advice`."""
-    try:
-        yield
-    except Exception as exc:
-        reason = str(exc).partition("\n")[0].split(". ")[0]
-        raise TrainError(f"{path}: damaged, truncated or not a udc-render checkpoint "
-                         f"({type(exc).__name__}: {reason}); {advice}") from None
-
-
-def _resume(path: Path, model, opt, dev) -> tuple[int, int, list]:
-    """(epochs done, steps, log) of the checkpoint at `path`, its state loaded into model and opt;
-    (0, 0, []) when there is none."""
-    if not path.is_file():
-        return 0, 0, []
-    with checkpoint_errors(path, "delete it to train from the start, or use another --out"):
-        state = torch.load(path, map_location=dev, weights_only=False)
-        model.load_state_dict(state["model"])
-        opt.load_state_dict(state["optimizer"])
-        return state["epoch"], state["step"], state["log"]
-
-
-def _save_checkpoint(out: Path, model, opt, epoch: int, step: int, log: list, settings: TrainSettings) -> None:
-    state = {"model": model.state_dict(), "optimizer": opt.state_dict(), "epoch": epoch, "step": step, "log": log,
-             "model_config": model_config(model), "settings": asdict(settings)}
-    save_torch(out / "checkpoint.pt", state)
-    save_text(out / "loss.csv", csv_text(log, LOG_COLUMNS))
-    plot_loss(log, out / "loss.png")
-
-
-def save_torch(path: Path, obj) -> None:
-    """torch.save, atomically, through memory: the zip's records are named 'archive/…' rather than after the
-    temporary file, so the same object always gives the same bytes."""
-    buf = io.BytesIO()
-    torch.save(obj, buf)
-    with atomic_path(path, ".pt") as tmp:
-        Path(tmp).write_bytes(buf.getvalue())
-
-
-def plot_loss(log: list, path: Path) -> None:
-    plt = pyplot()
-    if not log:
-        return
-    fig, ax = plt.subplots(figsize=(6, 3.5))
-    ax.semilogy([r["epoch"] for r in log], [r["loss"] for r in log], label="training loss")
-    ax.set_xlabel("epoch")
-    ax.set_ylabel("loss")
-    val = [(r["epoch"], r["val_psnr_db"]) for r in log if r.get("val_psnr_db") is not None]
-    if val:
-        ax2 = ax.twinx()
-        ax2.plot(*zip(*val), "o-", color="C1", label="validation PSNR")
-        ax2.set_ylabel("validation PSNR (dB)")
-    ax.set_title("training log")
-    save_figure(fig, path)
-    plt.close(fig)
-
-
 def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "auto", checkpoint_s: float = 60.0,
           val_every: int = 10, progress: bool = True, bank: Path | None = None,
           degrade_workers: int | None = None) -> dict:
@@ -321,6 +255,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     if settings.autocast not in AUTOCASTS:
         raise TrainError(f"autocast = {settings.autocast!r}: expected one of {', '.join(map(str, AUTOCASTS))}")
     loss_of = loss_fn(settings.loss)
+    check_description_source(settings.model, settings.degrade)
     _check_run_folder(out, settings)
     if (done := finished_summary(out, settings)) is not None:
         return done
@@ -329,9 +264,10 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     data, val_pairs = _training_data(data_dir, settings, dev, bank, degrade_workers)
     torch.manual_seed(settings.seed)
     model = build_model(settings.model).to(dev, memory_format=torch.channels_last)  # 1.07× (bench_train)
+    data, val_descriptions = described_training(model, data, len(val_pairs))  # restore.conditioning
     opt = torch.optim.Adam(model.parameters(), lr=settings.lr, betas=(0.9, 0.999), eps=1e-8)
     save_json(out / "train.json", asdict(settings))  # everything above checked: the run folder is used now
-    start_epoch, step, log = _resume(out / "checkpoint.pt", model, opt, dev)
+    start_epoch, step, log = resume(out / "checkpoint.pt", model, opt, dev)
     draw_log = DrawLog(out, start_epoch) if settings.degrade is not None else None
     t_start, t_ckpt = time.perf_counter() - (log[-1]["seconds"] if log else 0.0), time.perf_counter()  # cumulative
     model.train()
@@ -345,17 +281,18 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
             group["lr"] = learning_rate(settings, epoch)
         draws, batches = data.epoch(epoch)
         losses = []
-        for x, y in batches:
+        for x, y, *description in batches:  # the crops' descriptions, for a model that needs them
             x = x.to(dev, memory_format=torch.channels_last)
             y = y.to(dev, memory_format=torch.channels_last)
-            losses.append(train_step(model, opt, x, y, loss_of, settings))
+            losses.append(train_step(model, opt, x, y, loss_of, settings, *description))
             step += 1
         if not all(math.isfinite(v) for v in losses):
             raise TrainError(f"epoch {epoch + 1}: the loss is not finite ({losses[-1]}); lower the learning rate")
         if draw_log is not None:
             draw_log.add(epoch, draws)
         last = epoch + 1 == settings.epochs
-        val = validation_psnr(model, val_pairs, dev) if (last or (epoch + 1) % val_every == 0) else None
+        validate = last or (epoch + 1) % val_every == 0
+        val = validation_psnr(model, val_pairs, dev, val_descriptions) if validate else None
         log.append({"epoch": epoch + 1, "step": step, "lr": learning_rate(settings, epoch),
                     "loss": float(np.mean(losses)), "val_psnr_db": val,
                     "seconds": round(time.perf_counter() - t_start, 2)})
@@ -363,7 +300,7 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
         if val is not None and settings.plateau_db is not None:
             plateau = plateau_step(log, settings.plateau_db)
         if last or plateau is not None or time.perf_counter() - t_ckpt >= checkpoint_s:
-            _save_checkpoint(out, model, opt, epoch + 1, step, log, settings)
+            save_checkpoint(out, model, opt, epoch + 1, step, log, settings)
             if draw_log is not None:
                 draw_log.save()
             t_ckpt = time.perf_counter()
@@ -382,19 +319,3 @@ def train(data_dir: Path, out: Path, settings: TrainSettings, device: str = "aut
     return summary
 
 
-def load_model(path: Path, device: str = "auto") -> tuple[torch.nn.Module, dict]:
-    """(model in eval mode, its record) from model.pt or checkpoint.pt."""
-    path = Path(path)
-    if not path.is_file():
-        raise TrainError(f"--model = {str(path)!r}: no such checkpoint file (expected model.pt or checkpoint.pt "
-                         "from `udc-render train`, or dep)")
-    with checkpoint_errors(path, "expected model.pt or checkpoint.pt from `udc-render train`"):
-        state = torch.load(path, map_location="cpu", weights_only=False)
-        cfg = state["model_config"]
-        weights = state["state_dict"] if "state_dict" in state else state["model"]
-    model = build_model(cfg, source=str(path))
-    model.load_state_dict(weights)
-    dev = pick_device(device)
-    record = {"model_config": cfg, "display": state.get("display") or state["settings"]["display"],
-              "settings": state["settings"], "device": str(dev)}
-    return model.to(dev, memory_format=torch.channels_last).eval(), record
