@@ -3,6 +3,7 @@ features, its dependence on the description, its counts, and its training online
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import pytest
 import torch
@@ -10,7 +11,7 @@ import torch.nn.functional as F
 
 from restore.conditioning import description_tensors
 from restore.counting import count_macs, count_parameters, mac_breakdown
-from restore.models import build_model
+from restore.models import UNET_CONFIG, build_model
 from restore.models_conditioned import NSR_FLOOR, WIENER_UNET_CONFIG, WienerFeatures, WienerUNet
 from restore.train import TrainSettings, load_model, train
 from tests.conftest import write_pairs
@@ -214,3 +215,16 @@ def test_refused_in_one_line_on_a_datasets_captures_or_a_bank_without_its_frame(
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and words in err, err
     assert not (tmp_path / "run" / "train.json").exists()
+
+
+def test_the_train_guides_counts_are_the_models():
+    """docs/guides/train.md's table of wiener-unet's parameters and MACs at 1 × 4 × 512 × 1024 is the code's."""
+    text = (Path(__file__).parents[2] / "docs" / "guides" / "train.md").read_text()
+    rows = {"the defaults": WIENER_UNET_CONFIG}
+    rows.update({f"`fine_extra_width = {e}`": {**WIENER_UNET_CONFIG, "fine_extra_width": e} for e in (16, 0)})
+    rows["the paper's UNet, for comparison"] = UNET_CONFIG
+    for label, cfg in rows.items():
+        with torch.device("meta"):
+            params = count_parameters(build_model(cfg))
+        row = f"| {label} | {params:,} | {count_macs(cfg) / 1e9:.1f} G |"
+        assert row in text, row
