@@ -37,7 +37,9 @@ exclude_patterns = ["_build", "Thumbs.db", ".DS_Store",
                     "figures/gap/study_gap.md",
                     # bench_field_knobs.py's table beside its PNG (the guide's synth.md and concepts/defaults.md
                     # quote it)
-                    "figures/field_knobs.md"]
+                    "figures/field_knobs.md",
+                    # the layout study's own reports (guides/design.md quotes their tables)
+                    "figures/design/**/study_layout.md"]
 templates_path = ["_templates"]
 
 # MyST: the project's Markdown is included as is (docs/*.md, RESULTS.md, scenes/README.md,

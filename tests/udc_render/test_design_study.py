@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
@@ -55,3 +56,18 @@ def test_a_non_square_micrograph_is_refused(tmp_path, capsys):
     assert cli.main(["study", "layout", "--display", str(tmp_path / "wide.png"), "--quick",
                      "--out", str(tmp_path / "o")]) == 2
     assert "square tile" in capsys.readouterr().err and not (tmp_path / "o").exists()
+
+
+def test_the_design_guide_prints_the_committed_runs_numbers():
+    """docs/guides/design.md's table of the designed cell and the edge-framed T-OLED are the committed JSONs'."""
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8")
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+    figures = root / "docs" / "figures" / "design"
+    for first, folder in (("designed (19.95 %)", "study_design"),
+                          ("T-OLED 20 %, slit at the edge", "study_toled168_20_edge")):
+        doc = json.loads((figures / folder / "study_layout.json").read_text())
+        upc_min = " / ".join(f"{v:.3f}".lstrip("0") for v in doc["upc"]["turned"]["mean_of_ring_minima"])
+        exact_min = " / ".join(f"{v:.3f}".lstrip("0") for v in doc["exact"]["turned"]["mean_of_ring_minima"])
+        psnr = " / ".join(f"{v:.1f}" for v in doc["restorability"]["turned"]["wiener_psnr_db"])
+        assert upc_min in rows[first] and exact_min in rows[first] and psnr in rows[first], rows[first]
