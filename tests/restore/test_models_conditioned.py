@@ -5,22 +5,26 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
 
-from restore.conditioning import description_tensors
+from restore.conditioning import bank_descriptions, description_tensors
 from restore.counting import count_macs, count_parameters, mac_breakdown
+from restore.degrade import Degrader
 from restore.models import UNET_CONFIG, build_model
 from restore.models_conditioned import NSR_FLOOR, WIENER_UNET_CONFIG, WienerFeatures, WienerUNet
+from restore.online import OnlineBatches, clean_images
 from restore.train import TrainSettings, load_model, train
 from tests.conftest import write_pairs
 from tests.restore.test_augment import with_display_records
 from tests.restore.test_online import _blur_panel
 from tests.restore.test_train import train_interrupted_at_epoch_2
 from udc_render.cli import main
-from udc_render.dataset.bank import read_bank, save_panel, write_bank_json
+from udc_render.dataset.bank import Panel, read_bank, save_panel, write_bank_json
 from udc_render.description.make import dataset_rig, describe_display, describe_panel
+from udc_render.sensor import SensorConfig, mosaic_of, pack_rggb
 
 K = 129
 TINY = {"type": "wiener-unet", "width": 4, "depth": 2, "fine_levels": 1, "fine_extra_width": 4,
@@ -76,6 +80,28 @@ def test_wiener_features_of_a_noiseless_capture_recover_the_image():
     assert NSR_FLOOR <= 1e-4 and out.shape == image.shape
     assert (out - image)[..., 16:-16, 16:-16].abs().max() < 1e-3
     assert (out - image).abs().mean() < 0.1 * (capture - image).abs().mean()
+
+
+def test_the_wiener_features_invert_the_online_degradation_with_the_banks_description(tmp_path):
+    """The conventions agree end to end: a noiseless crop degraded by restore.online through a panel whose kernel is
+    0.75 δ + 0.25 δ two sensor pixels down and right (one packed pixel: packed_window keeps it exact), γ 0.5, is
+    deconvolved with describe_panel's description (restore.conditioning.bank_descriptions) to the clean crop's
+    planes: within 5e-4 beyond 8 px of the edge (measured 1.0e-4; the scene beyond the crop is not the mirror, and
+    the inverse filter decays by 1/3 a pixel), against the input ÷ γ's mean error of 0.020."""
+    k = np.zeros((3, 9, 9), np.float32)
+    k[:, 4, 4], k[:, 6, 6] = 0.75, 0.25
+    sensor = SensorConfig(form="per_channel", gain=2.0, gamma_rggb=(0.25,) * 4, exposure_s=0.03, noise="none")
+    out = tmp_path / "bank"
+    write_bank_json(out, {"frame_px": [96, 64]}, [save_panel(out, 0, Panel("diagonal", k, 1.55, (0.5,) * 3, sensor,
+                                                                            None, None, None, {"brightness": 1.0}))], 1)
+    bank = read_bank(out)
+    data = write_pairs(tmp_path / "pairs", splits=(("train", 1),), size_px=(64, 96))
+    batches = OnlineBatches(clean_images(data, "train"), bank, Degrader(bank.panels), 64, 1, seed=0, workers=0)
+    x, y = batches.sample(dict(batches.draw(0, 0), mode=0))
+    planes = WienerFeatures(0)(x[None], description_tensors(bank_descriptions(bank, 9)))[0]
+    clean = torch.from_numpy(pack_rggb(mosaic_of(y.numpy())))
+    assert (planes - clean)[:, 8:-8, 8:-8].abs().max() < 5e-4
+    assert (x / 0.5 - clean).abs().mean() > 0.01
 
 
 def test_the_output_depends_on_the_kernels_and_is_equivariant_under_the_batchs_order():
