@@ -59,6 +59,7 @@ def test_the_designed_display_files_are_displays(tmp_path):
     plain, turned = load_display(str(tmp_path / "design.toml")), load_display(str(tmp_path / "design_turned.toml"))
     assert plain.layout.image.shape == (5, 5) and plain.layout.pixel_um == 8.0 and not plain.layout.random_rotation
     assert turned.layout.random_rotation and abs(plain.layout.open_fraction - doc["open_squares"] / 25) < 1e-15
+    assert abs(plain.gain - round(25 / doc["open_squares"], 3)) < 1e-12
     assert json.loads((tmp_path / "design.json").read_text())["cell_px"] == 5
     assert (tmp_path / "design_loss.png").stat().st_size > 0
     bad = tmp_path / "bad.toml"

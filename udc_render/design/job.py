@@ -3,8 +3,8 @@ CHECKPOINT_STEPS steps and at the end), a progress bar, and what it writes:
 
     design_state.pt   the checkpoint (settings, θ, Adam, losses): the same command resumes it
     cell.png          the designed cell, 0 / 255 (one pixel per feature square)
-    design.toml       a display file of the cell repeated ([display.layout] type = "micrograph"): every command
-                      takes it (psf, synth, dataset, bank, train, study layout)
+    design.toml       a display file of the cell repeated ([display.layout] type = "micrograph", gain 1 / open
+                      area): every command takes it (psf, synth, dataset, bank, train, study layout)
     design_turned.toml  with --tiling turned: the cell with the engine's random quarter-turns per tile
                       (tile_rotation; the engine turns without mirroring, the optimiser drew the 8 D4 elements)
     design.json       the settings, the final cell's scores, the loss curve
@@ -33,10 +33,11 @@ def _save_state(designer: Designer, path: Path) -> None:
         torch.save(designer.state(), tmp)
 
 
-def _display_toml(name: str, image: str, pixel_um: float, turned: bool, seed: int) -> str:
+def _display_toml(name: str, image: str, pixel_um: float, open_area: float, turned: bool, seed: int) -> str:
+    """A display file of the cell; its gain 1 / open area brings the capture's mean level back to glass's."""
     turns = f"tile_rotation = true\ntile_seed = {seed}\n" if turned else ""
-    return (f'[display]\nname = "{name}"\n\n[display.layout]\ntype = "micrograph"\nfile = "{image}"\n'
-            f'pixel_um = {pixel_um!r}\nvalues = "amplitude"\n{turns}')
+    return (f'[display]\nname = "{name}"\ngain = {round(1.0 / open_area, 3)!r}\n\n[display.layout]\n'
+            f'type = "micrograph"\nfile = "{image}"\npixel_um = {pixel_um!r}\nvalues = "amplitude"\n{turns}')
 
 
 def _loss_figure(losses: list, out: Path) -> None:
@@ -61,10 +62,11 @@ def _write(designer: Designer, out: Path) -> dict:
         _, scores = designer.objective(torch.tensor(cell, device=designer.device), designer.transforms(None))
     with atomic_path(out / "cell.png") as tmp:
         iio.imwrite(tmp, (cell * 255).astype(np.uint8), extension=".png")
-    save_text(out / "design.toml", _display_toml("design", "cell.png", cfg.feature_um, False, cfg.seed))
+    open_area = float(cell.mean())
+    save_text(out / "design.toml", _display_toml("design", "cell.png", cfg.feature_um, open_area, False, cfg.seed))
     if cfg.tiling == "turned":
-        save_text(out / "design_turned.toml", _display_toml("design_turned", "cell.png", cfg.feature_um, True,
-                                                            cfg.seed))
+        save_text(out / "design_turned.toml", _display_toml("design_turned", "cell.png", cfg.feature_um, open_area,
+                                                            True, cfg.seed))
     doc = {"config": asdict(cfg), "final": scores, "open_squares": int(cell.sum()), "cell_px": cfg.cell_px,
            "losses": designer.losses}
     save_json(out / "design.json", doc)
