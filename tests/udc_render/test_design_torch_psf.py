@@ -54,6 +54,19 @@ def test_kernels_equal_the_engines_float32():
     assert np.abs(got - ref).max() < 1e-6 * ref.max()
 
 
+@pytest.mark.parametrize("rotate, bound", [(True, 1e-12), (False, 0.01)])
+def test_window_fraction_is_the_engines(rotate, bound):
+    """1 − energy_outside. Turned tiles: the engine's raster sum κ Σ|m|² A, the same formula (measured 2e-15).
+    Plain tiling: the engine takes the exact power series instead; the raster's differs by 0.38 % here
+    (0.2–1.3 % over three cells at 256 pupil samples; bound 1 %, set after measuring)."""
+    cell = np.random.default_rng(1).random((7, 7))
+    lay = MicrographLayout("cell", 9.0, random_rotation=rotate, seed=3, image=cell)
+    ks = compute_kernels(lay, LENS, WL, size_px=63, pupil_samples=256, precision="float64")
+    grid = tp.cell_grid(7, 9.0, LENS, WL, 3.1, 63, 256)
+    _, inside = tp.kernels_and_window(torch.tensor(cell), grid, lay.tile_rotations(grid.tiles, grid.tiles))
+    assert np.abs(inside.numpy() / (1 - ks.energy_outside) - 1).max() < bound
+
+
 def test_gradient_is_the_finite_difference():
     cell = torch.tensor(np.random.default_rng(2).random((5, 5)), dtype=torch.float64, requires_grad=True)
     grid = tp.cell_grid(5, 9.0, LENS, (520.0,), 3.1, 15, 64)

@@ -73,15 +73,17 @@ def noise_variance(sensor: SensorConfig, mean_level: float, transmission: float)
     return (transmission * mean_level * fw + sensor.read_noise_e ** 2) / fw ** 2
 
 
-def restorability(kernels: np.ndarray, transmission: float, sensor: SensorConfig | None = None,
+def restorability(kernels: np.ndarray, transmission, sensor: SensorConfig | None = None,
                   mean_level: float = MEAN_LEVEL, contrast: float = RMS_CONTRAST) -> dict:
-    """Per channel: the Wiener estimate's PSNR (dB) and MSE on the kernel's own grid (module doc)."""
+    """Per channel: the Wiener estimate's PSNR (dB) and MSE on the kernel's own grid (module doc); transmission
+    one number or one per kernel (e.g. the open area × the fraction of the light inside the window)."""
     sensor = sensor or SensorConfig()
     size = kernels.shape[-1]
     signal = natural_spectrum(size, (contrast * mean_level) ** 2)
-    noise = noise_variance(sensor, mean_level, transmission)
-    mses = [float(wiener_mse(np.fft.fft2(np.fft.ifftshift(k / k.sum())), signal, noise, transmission))
-            for k in kernels]
+    trans = np.broadcast_to(np.asarray(transmission, np.float64), (len(kernels),))
+    noise = [noise_variance(sensor, mean_level, t) for t in trans]
+    mses = [float(wiener_mse(np.fft.fft2(np.fft.ifftshift(k / k.sum())), signal, n, t))
+            for k, n, t in zip(kernels, noise, trans)]
     return {"wiener_mse": mses, "wiener_psnr_db": [float(-10 * np.log10(v)) for v in mses],
-            "noise_variance": noise, "mean_level": mean_level, "rms_contrast": contrast,
-            "full_well_e": sensor.full_well_e, "read_noise_e": sensor.read_noise_e}
+            "transmission": trans.tolist(), "noise_variance": noise, "mean_level": mean_level,
+            "rms_contrast": contrast, "full_well_e": sensor.full_well_e, "read_noise_e": sensor.read_noise_e}

@@ -29,7 +29,7 @@ from udc_render.errors import UdcError
 from udc_render.streams import stream
 
 __all__ = ["DesignError", "CellGrid", "cell_grid", "raster_matrix", "tile_transforms", "tiled_mask", "kernels",
-           "preset_cell", "transform_tile", "tile"]
+           "kernels_and_window", "preset_cell", "transform_tile", "tile"]
 
 
 class DesignError(UdcError):
@@ -128,21 +128,35 @@ def _mft_matrices(grid: CellGrid, lags: int, lam_um: float, dtype, device) -> tu
 
 def kernels(cell: torch.Tensor, grid: CellGrid, transforms: np.ndarray | None = None) -> torch.Tensor:
     """[K, S, S] unit-sum kernels at grid.wavelengths_nm of the cell's amplitudes [c, c] (module doc)."""
+    return kernels_and_window(cell, grid, transforms)[0]
+
+
+def kernels_and_window(cell: torch.Tensor, grid: CellGrid, transforms: np.ndarray | None = None
+                       ) -> tuple[torch.Tensor, torch.Tensor]:
+    """(the unit-sum kernels [K, S, S], the fraction [K] of the transmitted power inside the window: the
+    engine's 1 − energy_outside). Window power (ρ/λz)² δ⁴ Σ_j K_j over the transmitted power κ δ² Σ |m|² A (mask m, the
+    aperture's area fraction A: the engine's raster sum, psf.engine._wavelength), κ the cell's mean |a|² over its
+    raster's (psf.pupil.tile_mask: the power the band-limited raster cannot carry)."""
     if cell.shape != (grid.cell_px, grid.cell_px):
         raise DesignError(f"cell: expected shape {(grid.cell_px, grid.cell_px)}, got {tuple(cell.shape)}")
     aperture = torch.as_tensor(grid.aperture, dtype=cell.dtype, device=cell.device)
-    g = tiled_mask(cell, grid, transforms) * aperture
+    mask = tiled_mask(cell, grid, transforms)
+    g = mask * aperture
     ny, nx = g.shape
     power = torch.fft.fft2(g, s=(2 * ny, 2 * nx)).abs() ** 2
     r = torch.fft.ifft2(power).real  # lag Δ at index Δ mod 2n
     r = torch.roll(r, (ny - 1, nx - 1), (0, 1))[: 2 * ny - 1, : 2 * nx - 1]
-    out = []
+    b = torch.as_tensor(raster_matrix(grid.n, grid.cell_px), dtype=cell.dtype, device=cell.device)
+    kappa = (cell ** 2).mean() / ((b @ cell @ b.T) ** 2).mean()
+    out, inside = [], []
     for lam_nm in grid.wavelengths_nm:
         cy, sy = _mft_matrices(grid, ny, lam_nm * 1e-3, cell.dtype, cell.device)
         cx, sx = (cy, sy) if nx == ny else _mft_matrices(grid, nx, lam_nm * 1e-3, cell.dtype, cell.device)
         k = cy @ r @ cx.T - sy @ r @ sx.T
+        scale = (grid.pixel_um * grid.step_um / (lam_nm * 1e-3 * grid.image_distance_um)) ** 2
+        inside.append(k.sum() * scale / (kappa * (mask ** 2 * aperture).sum()))
         out.append(k / k.sum())
-    return torch.stack(out)
+    return torch.stack(out), torch.stack(inside)
 
 
 def preset_cell(layout, cell_px: int) -> np.ndarray:

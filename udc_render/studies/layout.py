@@ -8,7 +8,8 @@ mirrored at random (the 8 elements of D4, udc_render.design.torch_psf.tile_trans
 - the same statistics on the project's exact kernels (udc_render.design.torch_psf, equal to psf.compute_kernels)
   with the same optics, 2 µm pixels, 295 px;
 - the Wiener restorability (udc_render.design.metrics) on the exact kernels of the paper's rig (psf.Lens(),
-  3.1 µm, 255 px, 640 / 520 / 450 nm) under the sensor's noise, with the layout's open area as transmission;
+  3.1 µm, 255 px, 640 / 520 / 450 nm) under the sensor's noise, with the layout's open area as transmission,
+  and again with only the light inside the kernel's window (open area × window fraction: the rest is lost);
 - the open area and power transmittance.
 Not here (issue 48, named in docs/guides/design.md): the banding at d, the restored PSNR by DeP and a UNet.
 """
@@ -115,8 +116,10 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
             out["upc"][tiling] = metrics.ring_summary(p, RINGS)
             k = tp.kernels(big, upc_grid, tp.tile_transforms(upc_grid.tiles, s)).numpy()
             out["exact"][tiling] = metrics.ring_summary(k, min(RINGS, upc_grid.size_px // 2))
-            r = tp.kernels(big, rig_grid, tp.tile_transforms(rig_grid.tiles, s)).numpy()
+            r, inside = (v.numpy() for v in tp.kernels_and_window(big, rig_grid, tp.tile_transforms(rig_grid.tiles, s)))
             out["restorability"][tiling] = metrics.restorability(r, trans, sensor)
+            out["restorability"][tiling]["window_fraction"] = inside.tolist()
+            out["restorability"][tiling]["window"] = metrics.restorability(r, trans * inside, sensor)
             out["mtf_maps"][tiling] = {"upc": _centre_mtf(p[1]), "exact": _centre_mtf(k[1])}
             if progress:
                 progress(1)

@@ -39,15 +39,17 @@ def markdown(s: LayoutScores) -> str:
         lines.append(f"| UPC's saved T-OLED | {tiling} | {_rgb(t['mean_of_ring_means'])} | "
                      f"{_rgb(t['mean_of_ring_minima'])} |")
     lines += ["", "## Wiener restorability on the paper's rig (PSNR in dB, R / G / B; 640 / 520 / 450 nm)", "",
-              "| tiling | Wiener PSNR | MSE |", "|---|---|---|"]
+              "| tiling | Wiener PSNR | light inside the 255-px window | Wiener PSNR, the light outside lost |",
+              "|---|---|---|---|"]
     for tiling in TILINGS:
         r = s.restorability[tiling]
         lines.append(f"| {tiling} | {' / '.join(f'{v:.2f}' for v in r['wiener_psnr_db'])} | "
-                     f"{' / '.join(f'{v:.3g}' for v in r['wiener_mse'])} |")
+                     f"{' / '.join(f'{v:.3f}' for v in r['window_fraction'])} | "
+                     f"{' / '.join(f'{v:.2f}' for v in r['window']['wiener_psnr_db'])} |")
     r = s.restorability["repeated"]
     lines += ["", f"Scene mean {r['mean_level']} of the full well, RMS contrast {r['rms_contrast']}, power spectrum "
               f"∝ 1/f²; noise: shot + read {r['read_noise_e']} e⁻ at a full well of {r['full_well_e']:.0f} e⁻ "
-              f"(variance {r['noise_variance']:.3g} full wells²).", ""]
+              f"(variance {r['noise_variance'][0]:.3g} full wells² in R).", ""]
     return "\n".join(lines)
 
 
