@@ -1,8 +1,8 @@
 """Every command example in the docs parses with the CLI's own parser and runs (docs/about.md).
 
-Fast suite: every udc-render command of every example is parsed by udc_render.cli.build_parser; the
-`run` and `tiny` examples and the python blocks run, page by page, in a temporary folder with a kernel
-cache shared by the session; `help` and `slow` examples run `udc-render COMMAND --help`.
+Fast suite: every udc-render command of every example is parsed by udc_render.cli.build_parser; the `run` and `tiny`
+examples and the python blocks run, page by page (those of HEAVY_PAGES in the slow suite), in a temporary folder
+with a kernel cache shared by the session; `help` and `slow` examples run `udc-render COMMAND --help`.
 `pytest -m slow tests/docs/test_docs_examples.py` runs the `slow` examples in full.
 """
 from __future__ import annotations
@@ -106,7 +106,7 @@ def _run_page(path, modes, tmp_path, monkeypatch, kernel_cache):
         if ex.mode in ("setup", "shell"):
             continue
         if ex.mode not in modes:
-            if ex.mode in ("help", "slow"):
+            if ex.mode in ("help", "slow") or not modes:
                 for c in _udc_commands(ex):
                     _help(c, kernel_cache, ex.where)
             continue
@@ -118,14 +118,30 @@ def _run_page(path, modes, tmp_path, monkeypatch, kernel_cache):
             _run_udc(c.argv + extra, c.env, kernel_cache, ex.where)
 
 
+# Pages whose run/tiny examples run in the slow suite only (30–70 s each on the 2-core machine: CI's 20 minutes);
+# the fast suite parses their every command (test_command_parses) and prints each command's help. Beside each, the
+# fast tests that run the same commands.
+HEAVY_PAGES = {
+    "docs/guides/psf.md": "tests/udc_render/test_cli.py, test_cli_display.py",
+    "docs/guides/randomize.md": "tests/udc_render/test_dataset_randomize.py, test_randomize.py",
+    "docs/guides/fit.md": "tests/udc_render/test_fit_oracles.py, test_fit_roundtrip.py (through the command)",
+    "docs/concepts/profiles.md": "tests/udc_render/test_profiles.py",
+    "docs/troubleshooting.md": "tests/udc_render/test_cli.py (one-line errors)",
+    "docs/guides/train.md": "tests/restore/test_train.py, test_models_conditioned.py",
+}
 FAST_PAGES = [p for p in PAGES if any(e.mode in ("run", "tiny", "help", "slow") for e in EXAMPLES if e.path == p)]
-SLOW_PAGES = [p for p in PAGES if any(e.mode == "slow" for e in EXAMPLES if e.path == p)]
+SLOW_PAGES = [p for p in PAGES if any(e.mode == "slow" for e in EXAMPLES if e.path == p) or _page_id(p) in HEAVY_PAGES]
+
+
+def test_heavy_pages_are_pages():
+    assert set(HEAVY_PAGES) <= {_page_id(p) for p in PAGES}
 
 
 @pytest.mark.parametrize("path", FAST_PAGES, ids=_page_id)
 def test_page_examples_run(path, tmp_path, monkeypatch, kernel_cache):
-    """A page's run/tiny examples and python blocks run in order; help and slow ones print their help."""
-    _run_page(path, FAST, tmp_path, monkeypatch, kernel_cache)
+    """A page's run/tiny examples and python blocks run in order; help and slow ones print their help (a heavy
+    page's run/tiny ones too: HEAVY_PAGES)."""
+    _run_page(path, () if _page_id(path) in HEAVY_PAGES else FAST, tmp_path, monkeypatch, kernel_cache)
 
 
 @pytest.mark.slow

@@ -61,6 +61,7 @@ def test_time_to_a_target_interpolates_the_measured_runs_and_extrapolates_the_lo
     assert t["seconds"] == pytest.approx(1 + 25.6, rel=1e-6)
 
 
+@pytest.mark.slow  # ~18 s; its pieces: the three tests above
 def test_quick_study_writes_csv_table_plot_and_error_falls_with_spp(tmp_path):
     # about 15 s with Dr.Jit's kernel cache warm, 30 s cold, on 2 cores
     rows = sr.run_study(tmp_path, quick=True, progress=False)
