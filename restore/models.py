@@ -93,28 +93,39 @@ class UNet(nn.Module):
         self.to_rgb = nn.Sequential(nn.Conv2d(ch[0], 4 * out_channels, 1), nn.PixelShuffle(2))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        h, w = x.shape[-2:]
-        m = 2 ** (len(self.encoder) - 1)
-        ph, pw = -h % m, -w % m
-        if ph or pw:
-            x = F.pad(x, (0, pw, 0, ph), mode="reflect" if ph < h and pw < w else "replicate")
-        levels = len(self.residual_encoder)
-        skips, a, b = [], x, x
-        for i, block in enumerate(self.encoder):
-            if i:
-                a = F.max_pool2d(a, 2)
-                if i <= levels:
-                    b = F.max_pool2d(b, 2)
-                if i == levels:                     # the second encoder stopped: add its pooled output
-                    a = a + b
-            a = block(a)
-            if i < levels:
-                b = self.residual_encoder[i](b)
-            skips.append(a + b if i < levels else a)
-        y = skips.pop()
-        for i in reversed(range(len(self.up))):
-            y = self.decoder[i](torch.cat([self.up[i](y), skips[i]], dim=1))
-        return self.to_rgb(y)[..., :2 * h, :2 * w]
+        return unet_pass(self, x)
+
+
+def _as_is(kind: str, i: int, a: torch.Tensor) -> torch.Tensor:
+    return a
+
+
+def unet_pass(net: nn.Module, x: torch.Tensor, after=_as_is) -> torch.Tensor:
+    """UNet's pass (class doc) over net's encoder, residual_encoder, up, decoder and to_rgb; after(kind, i, a):
+    each encoder ('encoder', i) and decoder ('decoder', i) level's output goes through it (restore.
+    models_conditioned.WienerUNet's FiLM; the UNet's own: as it is)."""
+    h, w = x.shape[-2:]
+    m = 2 ** (len(net.encoder) - 1)
+    ph, pw = -h % m, -w % m
+    if ph or pw:
+        x = F.pad(x, (0, pw, 0, ph), mode="reflect" if ph < h and pw < w else "replicate")
+    levels = len(net.residual_encoder)
+    skips, a, b = [], x, x
+    for i, block in enumerate(net.encoder):
+        if i:
+            a = F.max_pool2d(a, 2)
+            if i <= levels:
+                b = F.max_pool2d(b, 2)
+            if i == levels:                     # the second encoder stopped: add its pooled output
+                a = a + b
+        a = after("encoder", i, block(a))
+        if i < levels:
+            b = net.residual_encoder[i](b)
+        skips.append(a + b if i < levels else a)
+    y = skips.pop()
+    for i in reversed(range(len(net.up))):
+        y = after("decoder", i, net.decoder[i](torch.cat([net.up[i](y), skips[i]], dim=1)))
+    return net.to_rgb(y)[..., :2 * h, :2 * w]
 
 
 class _ResidualBlock(nn.Module):

@@ -36,7 +36,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from restore.models import MODELS, _conv_block, _require
+from restore.models import MODELS, _conv_block, _require, unet_pass
 from udc_render.description import DESCRIPTION_KERNEL_PX
 
 KERNEL_OF_CHANNEL = (0, 1, 1, 2)  # packed R, Gr, Gb, B → the description's kernels R, G, B
@@ -204,34 +204,12 @@ class WienerUNet(nn.Module):
         return scaled if self.wiener is None else torch.cat([scaled, self.wiener(x, description).to(x.dtype)], 1)
 
     def forward(self, x: torch.Tensor, description: dict) -> torch.Tensor:
-        h, w = x.shape[-2:]
         code = None if self.codes is None else self.codes(description)
-        z = self.inputs(x, description)
-        m = 2 ** (len(self.encoder) - 1)
-        ph, pw = -h % m, -w % m
-        if ph or pw:
-            z = F.pad(z, (0, pw, 0, ph), mode="reflect" if ph < h and pw < w else "replicate")
-        levels = len(self.residual_encoder)
-        skips, a, b = [], z, z
-        for i, block in enumerate(self.encoder):
-            if i:
-                a = F.max_pool2d(a, 2)
-                if i <= levels:
-                    b = F.max_pool2d(b, 2)
-                if i == levels:  # the second encoder stopped: add its pooled output
-                    a = a + b
-            a = self._film(self.film_encoder, i, block(a), code)
-            if i < levels:
-                b = self.residual_encoder[i](b)
-            skips.append(a + b if i < levels else a)
-        y = skips.pop()
-        for i in reversed(range(len(self.up))):
-            y = self._film(self.film_decoder, i, self.decoder[i](torch.cat([self.up[i](y), skips[i]], 1)), code)
-        return self.to_rgb(y)[..., :2 * h, :2 * w]
 
-    @staticmethod
-    def _film(films, i: int, a: torch.Tensor, code) -> torch.Tensor:
-        return a if films is None else films[i](a, code)
+        def film(kind: str, i: int, a: torch.Tensor) -> torch.Tensor:
+            films = self.film_encoder if kind == "encoder" else self.film_decoder
+            return a if films is None else films[i](a, code)
+        return unet_pass(self, self.inputs(x, description), film)
 
 
 MODELS[WienerUNet.TYPE] = WienerUNet
