@@ -75,3 +75,15 @@ def test_function_level_imports_save_a_real_cost():
                 light.add((module_name(path), base))
     bad = sorted(f"{m}: {t}" for m, t in light)
     assert not bad, "imported inside a function, but light (move it to the top):\n" + "\n".join(bad)
+
+
+def test_the_cli_reads_its_options_without_the_heavy_modules():
+    """Every command's options are read at start: the parser loads no HEAVY module (torch alone costs ~1 s, and
+    4.5 s CPU on a loaded machine; the design command's constants live in design.options for this). scipy.fft
+    (175 ms) is the exception: the psf command's defaults come from psf.engine, which transforms at its top."""
+    import subprocess
+    import sys
+    code = ("import sys; from udc_render.cli import build_parser; build_parser(); "
+            f"print(sorted(m for m in {sorted(set(HEAVY) - {'scipy.fft'})!r} if m in sys.modules))")
+    loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    assert loaded == "[]", f"the CLI's parser imports {loaded}"

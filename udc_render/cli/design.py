@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 
 from udc_render.cli.args import out_dir, positive
+from udc_render.design.options import DEFAULT_FEATURE_UM, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
 
 
 def register(sub) -> None:
-    from udc_render.design.optimise import DEFAULT_FEATURE_UM, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
     p = sub.add_parser("design", help="optimise a display pixel cell for restorability; writes a display file")
     p.set_defaults(run=run)
     p.add_argument("--cell-um", type=positive("--cell-um"), default=168.0,

@@ -27,19 +27,16 @@ import torch
 
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp
+from udc_render.design.options import DEFAULT_FEATURE_UM, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
 
 __all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "DesignConfig", "Designer", "project"]
 
-LITHOGRAPHY_UM = 1.5
-DEFAULT_FEATURE_UM = 8.0
 BETA_MAX = 32.0
 OPEN_WEIGHT = 10.0
 ADAM_BETAS = (0.9, 0.999)
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
-OBJECTIVES = ("wiener", "upc")
-TILINGS = ("repeated", "turned")
 
 
 @dataclass(frozen=True)
