@@ -61,6 +61,8 @@ def register(sub) -> None:
     s.add_argument("--micrograph-pixel-um", type=positive("--micrograph-pixel-um"), default=1.0,
                    help="layout only: a micrograph's pixel size in µm [1]")
     s.add_argument("--tile-seed", type=int, default=0, help="layout only: seed of the turned tiling's D4 draws [0]")
+    s.add_argument("--distance-mm", type=positive("--distance-mm"), default=2.0,
+                   help="layout only: the display-to-lens distance d of the banding figures, mm [2]")
     s.add_argument("--frame", choices=("as_given", "edge"), default="as_given",
                    help="layout only: the cell as the layout frames it, or with its first open column moved to the "
                         "tile's edge, where a turn about the tile's centre moves the opening [as_given]")
@@ -73,6 +75,8 @@ def run(args) -> int:
         raise UserError(f"--display {args.display}: only `study layout` takes a display")
     if args.what != "layout" and args.frame != "as_given":
         raise UserError(f"--frame {args.frame}: only `study layout` takes a framing")
+    if args.what != "layout" and args.distance_mm != 2.0:
+        raise UserError(f"--distance-mm {args.distance_mm}: only `study layout` takes a distance")
     if args.what == "layout":
         return _layout(args)
     out = out_dir(args.out)
@@ -112,6 +116,8 @@ def _layout(args) -> int:
         raise UserError(f"--display {args.display}: glass has no pixel layout to score")
     layout_cell(display.layout)  # a tile the study cannot take is refused before the folder is made
     out = out_dir(args.out)
-    names = write(score_layout(display.name, display.layout, args.tile_seed, args.frame, args.quick), out)
+    scores = score_layout(display.name, display.layout, args.tile_seed, args.frame, args.quick,
+                          distance_mm=args.distance_mm)
+    names = write(scores, out)
     print(f"wrote {out}/" + f", {out}/".join(names))
     return 0

@@ -10,8 +10,10 @@ mirrored at random (the 8 elements of D4, udc_render.design.torch_psf.tile_trans
 - the Wiener restorability (udc_render.design.metrics) on the exact kernels of the paper's rig (psf.Lens(),
   3.1 µm, 255 px, 640 / 520 / 450 nm) under the sensor's noise, with the layout's open area as transmission,
   and again with only the light inside the kernel's window (open area × window fraction: the rest is lost);
+- the banding at the display-to-lens distance d (udc_render.studies.layout_banding: the exact power series of the
+  layout repeated on the rig's lens; a turned tiling has no period);
 - the open area and power transmittance.
-Not here (issue 48, named in docs/guides/design.md): the banding at d, the restored PSNR by DeP and a UNet.
+Not here (issue 48, named in docs/guides/design.md): the restored PSNR by DeP and a UNet.
 """
 from __future__ import annotations
 
@@ -25,6 +27,7 @@ from psf.lens import Lens
 from psf.micrograph import MicrographLayout
 from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.sensor.config import SensorConfig
+from udc_render.studies.layout_banding import DEFAULT_DISTANCE_MM, layout_banding
 
 __all__ = ["UPC_LENS", "FRAMES", "LayoutScores", "layout_cell", "frame_cell", "upc_cell", "score_layout"]
 
@@ -41,7 +44,8 @@ TILINGS = ("repeated", "turned")
 @dataclass(frozen=True)
 class LayoutScores:
     """Every figure of one study: per tiling, the UPC-mode and exact ring summaries (metrics.ring_summary) and
-    the rig's restorability (metrics.restorability); the kernels' MTF maps (green) for the figures."""
+    the rig's restorability (metrics.restorability); the banding at d of the repeated tiling (layout_banding);
+    the kernels' MTF maps (green) for the figures."""
     name: str
     open_fraction: float
     power_transmittance: float
@@ -53,6 +57,7 @@ class LayoutScores:
     restorability: dict
     mtf_maps: dict
     seconds: float
+    banding: dict
 
 
 def _cell_px(period_um: float, pixel_um: float) -> int:
@@ -93,8 +98,11 @@ def _centre_mtf(kernel: np.ndarray) -> np.ndarray:
 
 
 def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quick: bool = False,
-                 sensor: SensorConfig | None = None, progress=None) -> LayoutScores:
+                 sensor: SensorConfig | None = None, progress=None,
+                 distance_mm: float = DEFAULT_DISTANCE_MM) -> LayoutScores:
     """The study's figures for one layout (module doc); quick: 63-px kernels from 256 pupil samples."""
+    if not distance_mm > 0:
+        raise tp.DesignError(f"--distance-mm {distance_mm}: expected a distance > 0 mm")
     if frame not in FRAMES:
         raise tp.DesignError(f"--frame {frame}: expected one of {', '.join(FRAMES)}")
     start = time.perf_counter()
@@ -121,8 +129,10 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
             out["restorability"][tiling]["window_fraction"] = inside.tolist()
             out["restorability"][tiling]["window"] = metrics.restorability(r, trans * inside, sensor)
             out["mtf_maps"][tiling] = {"upc": _centre_mtf(p[1]), "exact": _centre_mtf(k[1])}
+            if tiling == "repeated":
+                banding = layout_banding(layout, Lens(), RIG_WAVELENGTHS_NM, distance_mm, r, rig_grid.pixel_um)
             if progress:
                 progress(1)
     return LayoutScores(name, float(getattr(layout, "open_fraction", trans)), trans, float(cell.shape[0] * cell_um),
                         frame, int(seed), out["upc"], out["exact"], out["restorability"], out["mtf_maps"],
-                        time.perf_counter() - start)
+                        time.perf_counter() - start, banding)

@@ -46,11 +46,28 @@ def markdown(s: LayoutScores) -> str:
         lines.append(f"| {tiling} | {' / '.join(f'{v:.2f}' for v in r['wiener_psnr_db'])} | "
                      f"{' / '.join(f'{v:.3f}' for v in r['window_fraction'])} | "
                      f"{' / '.join(f'{v:.2f}' for v in r['window']['wiener_psnr_db'])} |")
+    lines += _banding_lines(s.banding)
     r = s.restorability["repeated"]
     lines += ["", f"Scene mean {r['mean_level']} of the full well, RMS contrast {r['rms_contrast']}, power spectrum "
               f"∝ 1/f²; noise: shot + read {r['read_noise_e']} e⁻ at a full well of {r['full_well_e']:.0f} e⁻ "
               f"(variance {r['noise_variance'][0]:.3g} full wells² in R).", ""]
     return "\n".join(lines)
+
+
+def _banding_lines(b: dict) -> list[str]:
+    """The banding table (udc_render.studies.layout_banding): per channel, the strongest band along x and y."""
+    lines = ["", f"## Banding at d = {b['distance_mm']:g} mm, the layout repeated (the rig's lens; bands of "
+             f"{b['band_period_um'][0]:.0f} × {b['band_period_um'][1]:.0f} µm / h on the sensor)", "",
+             "| λ (nm) | along x: h, amplitude | along y: h, amplitude | peak-to-peak | strongest after the PSF |",
+             "|---|---|---|---|---|"]
+    for i, wl in enumerate(b["wavelengths_nm"]):
+        after = f"{b['after_psf'][i]:.2e}" if "after_psf" in b else ""
+        lines.append(f"| {wl:.0f} | {b['order_x'][i]}, {b['amplitude_x'][i]:.2e} | {b['order_y'][i]}, "
+                     f"{b['amplitude_y'][i]:.2e} | {b['peak_to_peak'][i]:.2e} | {after} |")
+    lines += ["", "Amplitude 2|w_h|/w_0 of the strongest harmonic h of the exact power series P(s) (the banding "
+              "study's A1, relative to the mean); peak-to-peak of P over one period of shifts. A turned tiling has "
+              "no period: not computed."]
+    return lines
 
 
 def _figures(s: LayoutScores, out: Path) -> None:
