@@ -144,3 +144,18 @@ def test_profiles_average_sixteen_frames():
         assert cfg.gt_frames is None and cfg.profile["options"]["gt_frames"] == "ideal"
         cfg, _ = resolve_profile(name, SynthConfig(), [D.preset("glass")], gt_frames=4)
         assert cfg.gt_frames == 4
+
+
+def test_frames_drawn_one_by_one_are_expose_frames_bit_for_bit():
+    """The frame-by-frame pixels take expose's draws and arithmetic (Poisson counts, then the read noise's normals,
+    every frame): the same bits as the mean of n expose frames on the zero-padded [2, 2⌈m/4⌉] layout, at the
+    clips (0, the full well, the white level) too."""
+    from udc_render.sensor.noise import expose
+    s = replace(SensorConfig(), gain=1.0)
+    e = np.random.default_rng(1).exponential(20.0, 4001)
+    e[:8] = [0.0, 1e9, s.full_well_e, 4e4, 0.1, 80.0, 1e-9, 2e5]
+    grid = np.zeros(4004)
+    grid[:e.size] = e
+    rng = np.random.default_rng(5)
+    want = sum(expose(grid.reshape(2, -1), s, rng)[0].astype(np.float64) for _ in range(16)).ravel()[:e.size] / 16
+    assert np.array_equal(_frame_by_frame(e, s, 16, np.random.default_rng(5)), want)
