@@ -1,4 +1,5 @@
-"""`udc-render study {psf,render,capture,far_field,realism,defocus,banding,gap,robustness} --out DIR [--quick]`:
+"""`udc-render study {psf,render,capture,far_field,realism,defocus,banding,gap,robustness,layout,design}
+--out DIR [--quick]`:
 error-versus-run-time studies of the approximation knobs, the defocus and banding studies users run, and the
 robustness of a restorer trained on one panel or on randomized panels (restore.studies.robustness)."""
 from __future__ import annotations
@@ -20,6 +21,8 @@ STUDIES = {
     "far_field": "the far field's threshold and coarse factor (the light past the kernel window)",
     "layout": "a display's pixel layout scored for restorability: UPC's ring statistics in their sampling and on the "
               "exact kernels, the Wiener error under the sensor's noise, the open area (--display)",
+    "design": "the layout designer's knobs (the torch PSF's pupil samples, the optimiser's steps): error against "
+              "CPU time",
     "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
                   "held-out and out-of-family panels (trains both: minutes with --quick, hours without)",
 }
@@ -94,6 +97,8 @@ def run(args) -> int:
         from udc_render.studies.capture_knobs import run_study
     elif args.what == "far_field":
         from udc_render.studies.capture_far import run_study
+    elif args.what == "design":
+        from udc_render.studies.design_knobs import run_study
     elif args.what == "robustness":
         from restore.studies.robustness import run_study
     elif args.what == "render":

@@ -1,0 +1,132 @@
+"""`udc-render study design`: error against run time of the design's knobs (issue 48).
+
+    udc-render study design --out DIR [--quick]
+
+(a) The torch PSF's sampling: pupil samples across the aperture (udc_render.design.torch_psf.cell_grid's
+pupil_samples; the engine's n samples per cell follow), on the optimiser's rig (psf.Lens(), 3.1 µm pixels, 127 px,
+640 / 520 / 450 nm), turned tilings (seed 0, D4), for two 168 µm cells of 8 µm squares at 20 % open area: the
+T-OLED's slit (the preset's raster, framed at the tile's edge) and a scatter of 88 open squares (udc_render.streams;
+the kind of cell the designer makes). Against the finest setting: the error of the Wiener PSNR (dB, the largest
+over R, G, B; udc_render.design.metrics.restorability, the transmission the cell's open area) and the relative
+error of the mean of ring means and of ring minima (the largest over channels; metrics.ring_summary). Cost: CPU
+seconds (time.process_time, all threads) of the kernels, and of kernels plus the gradient to the cell (what one
+optimiser step pays for its PSF).
+(b) The optimiser's steps: `udc-render design` runs (udc_render.design.optimise.DesignConfig's defaults) of
+increasing steps, each's final binary cell scored as design.json's 'final' (the mean Wiener MSE over channels on
+the final tiling, and its PSNR), with the run's CPU seconds; and 0 steps, the initial cell projected: a random
+scatter of the open squares, the baseline the optimiser has to beat.
+
+Outputs: study_design.json (every figure), study_design.csv (one row per setting), study_design.md,
+study_design.png (error against CPU time; objective against steps). quick: a 96 µm cell, 31-px kernels, three
+settings and runs of 2 and 4 steps from 128 pupil samples (a smoke run).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from psf import layouts
+from psf.lens import Lens
+from udc_render.design import metrics, torch_psf as tp
+from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer
+from udc_render.streams import stream
+from udc_render.studies.layout import frame_cell
+
+__all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "run_study"]
+
+FULL = {"cell_um": 168.0, "kernel_px": 127, "samples": (128, 256, 384, 512, 768, 1024, 2048),
+        "steps": (10, 20, 40, 80), "design_pupil_samples": DesignConfig().pupil_samples}
+QUICK = {"cell_um": 96.0, "kernel_px": 31, "samples": (64, 128, 256), "steps": (2, 4), "design_pupil_samples": 128}
+FEATURE_UM = 8.0
+OPEN = 0.20
+SEED = 0
+
+
+def cells(cell_um: float) -> dict:
+    """{name: amplitude cell [c, c]} of 8 µm squares at OPEN: the T-OLED's slit at the tile's edge, a scatter."""
+    c = round(cell_um / FEATURE_UM)
+    slit = frame_cell(tp.preset_cell(layouts.toled(pitch_um=cell_um, open_fraction=OPEN), c), "edge")
+    flat = np.zeros(c * c)
+    flat[stream(SEED, "study", "design", "scatter").permutation(c * c)[: round(OPEN * c * c)]] = 1.0
+    return {"toled_edge": slit, "scatter": flat.reshape(c, c)}
+
+
+def _timed(fn):
+    start = time.process_time()
+    value = fn()
+    return value, time.process_time() - start
+
+
+def _scores(cell: np.ndarray, grid) -> tuple[dict, float, float]:
+    """(restorability and ring summary of the turned kernels, CPU s forward, CPU s forward + gradient)."""
+    transforms = tp.tile_transforms(grid.tiles, SEED)
+    with torch.no_grad():
+        k, forward_s = _timed(lambda: tp.kernels(torch.tensor(cell), grid, transforms).numpy())
+    x = torch.tensor(cell, requires_grad=True)
+    _, grad_s = _timed(lambda: tp.kernels(x, grid, transforms).sum().backward())
+    rings = metrics.ring_summary(k, grid.size_px // 2)
+    psnr = metrics.restorability(k, float(np.mean(cell)))["wiener_psnr_db"]  # open area: squares area-weighted
+    return {"psnr_db": psnr, "ring_means": rings["mean_of_ring_means"],
+            "ring_minima": rings["mean_of_ring_minima"]}, forward_s, grad_s
+
+
+def sampling_rows(cfg: dict, progress=None) -> list[dict]:
+    """Part (a): one row per cell and pupil-sample setting, errors against the cell's finest setting."""
+    rows = []
+    for name, cell in cells(cfg["cell_um"]).items():
+        found = []
+        for i, samples in enumerate(cfg["samples"]):
+            grid = tp.cell_grid(cell.shape[0], FEATURE_UM, Lens(), RIG_WAVELENGTHS_NM, 3.1, cfg["kernel_px"], samples)
+            if i == 0:
+                _scores(cell, grid)  # untimed: torch's first calls at a size pay set-up costs
+            s, forward_s, grad_s = _scores(cell, grid)
+            found.append({"part": "sampling", "cell": name, "pupil_samples": samples, "samples_per_cell": grid.n,
+                          **s, "cpu_s": forward_s, "cpu_gradient_s": grad_s})
+            if progress:
+                progress(1)
+        ref = found[-1]
+        for r in found:
+            r["error_psnr_db"] = float(np.max(np.abs(np.subtract(r["psnr_db"], ref["psnr_db"]))))
+            for key in ("ring_means", "ring_minima"):
+                r[f"error_{key}_rel"] = float(np.max(np.abs(np.divide(r[key], ref[key]) - 1)))
+        rows += found
+    return rows
+
+
+def steps_rows(cfg: dict, progress=None) -> list[dict]:
+    """Part (b): one design run per step count, its final binary cell's objective (design.json's 'final'); 0 steps:
+    the initial cell projected (a random scatter of the open squares)."""
+    base = DesignConfig(cell_um=cfg["cell_um"], kernel_px=cfg["kernel_px"], pupil_samples=cfg["design_pupil_samples"])
+    rows = []
+    for steps in (0, *cfg["steps"]):
+        designer = Designer(replace(base, steps=max(steps, 1)))
+        start = time.process_time()
+        while designer.step_done < steps:
+            designer.step()
+        cell = designer.final_cell()
+        with torch.no_grad():
+            _, final = designer.objective(torch.tensor(cell), designer.transforms(None))
+        rows.append({"part": "steps", "steps": steps, "objective": final["objective"],
+                     "psnr_db": float(-10 * np.log10(final["objective"])), "open_area": final["open_area"],
+                     "cpu_s": time.process_time() - start, "pupil_samples": base.pupil_samples})
+        if progress:
+            progress(1)
+    return rows
+
+
+def run_study(out: Path, quick: bool = False) -> dict:
+    """Both parts, written to out (udc_render.studies.design_knobs_report)."""
+    from tqdm import tqdm
+
+    from udc_render.studies.design_knobs_report import write
+    cfg = QUICK if quick else FULL
+    with tqdm(total=2 * len(cfg["samples"]) + len(cfg["steps"]) + 1, desc="study design") as bar:
+        doc = {"config": {**cfg, "feature_um": FEATURE_UM, "open_fraction": OPEN, "seed": SEED,
+                          "wavelengths_nm": RIG_WAVELENGTHS_NM, "threads": torch.get_num_threads()},
+               "sampling": sampling_rows(cfg, bar.update), "steps": steps_rows(cfg, bar.update)}
+    write(doc, out)
+    return doc

@@ -1,0 +1,94 @@
+"""The design-knob study's outputs (udc_render.studies.design_knobs): study_design.json, .csv, .md and .png,
+written atomically (udc_render.io.files)."""
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+from udc_render.io.files import save_figure, save_json, save_text
+
+__all__ = ["COLUMNS", "markdown", "write"]
+
+COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "psnr_db", "error_psnr_db",
+           "error_ring_means_rel", "error_ring_minima_rel", "objective", "open_area", "cpu_s", "cpu_gradient_s"]
+
+
+def _cell(v) -> str:
+    if isinstance(v, list):
+        return " / ".join(f"{x:.4g}" for x in v)
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def _csv(rows: list[dict]) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, COLUMNS, extrasaction="ignore", lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow({k: _cell(r[k]) if k in r else "" for k in COLUMNS})
+    return buf.getvalue()
+
+
+def markdown(doc: dict) -> str:
+    c = doc["config"]
+    lines = ["# Error against run time of the design's knobs", "",
+             f"Cells of {c['cell_um']:g} µm in {c['feature_um']:g} µm squares, {c['open_fraction']:.0%} open, turned "
+             f"tilings (seed {c['seed']}); the rig's kernels at {c['kernel_px']} px of 3.1 µm, "
+             f"{' / '.join(f'{w:g}' for w in c['wavelengths_nm'])} nm; {c['threads']} torch threads.", "",
+             "## The torch PSF's pupil samples (errors against the finest setting)", "",
+             "| cell | pupil samples | samples per cell | Wiener PSNR (dB) | PSNR error (dB) | ring means error | "
+             "ring minima error | CPU s | CPU s with the gradient |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in doc["sampling"]:
+        lines.append(f"| {r['cell']} | {r['pupil_samples']} | {r['samples_per_cell']} | {_cell(r['psnr_db'])} | "
+                     f"{r['error_psnr_db']:.2g} | {r['error_ring_means_rel']:.2g} | {r['error_ring_minima_rel']:.2g} | "
+                     f"{r['cpu_s']:.2f} | {r['cpu_gradient_s']:.2f} |")
+    lines += ["", "## The optimiser's steps (each a run of its own; the final binary cell on the final tiling; 0: the "
+              "initial cell projected, a random scatter)", "",
+              "| steps | objective (mean Wiener MSE) | its PSNR (dB) | open area | CPU s |", "|---|---|---|---|---|"]
+    for r in doc["steps"]:
+        lines.append(f"| {r['steps']} | {r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | "
+                     f"{r['cpu_s']:.0f} |")
+    return "\n".join(lines) + "\n"
+
+
+def _figure(doc: dict, out: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullFormatter
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4))
+    for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
+        rows = [r for r in doc["sampling"] if r["cell"] == name][:-1]  # the reference has no error
+        t = [r["cpu_gradient_s"] for r in rows]
+        a.loglog(t, [max(r["error_psnr_db"], 1e-6) for r in rows], "o-", color=colour, label=f"{name}: PSNR (dB)")
+        a.loglog(t, [max(r["error_ring_minima_rel"], 1e-6) for r in rows], "s--", color=colour,
+                 label=f"{name}: ring minima (rel.)")
+        for r in rows:
+            a.annotate(str(r["pupil_samples"]), (r["cpu_gradient_s"], max(r["error_psnr_db"], 1e-6)), fontsize=7)
+    a.set_xlabel("CPU s, kernels and gradient")
+    a.set_ylabel("error against the finest setting")
+    a.set_title("torch PSF: pupil samples")
+    a.legend(fontsize=7)
+    steps = [r for r in doc["steps"] if r["steps"] > 0]
+    b.plot([r["steps"] for r in steps], [r["psnr_db"] for r in steps], "o-", label="designed")
+    if doc["steps"][0]["steps"] == 0:
+        b.axhline(doc["steps"][0]["psnr_db"], color="0.5", ls="--", label="0 steps: the initial random scatter")
+    b.legend(fontsize=7)
+    for r in steps:
+        b.annotate(f"{r['cpu_s']:.0f} s", (r["steps"], r["psnr_db"]), fontsize=7)
+    b.set_xscale("log")
+    for axis in (a.xaxis, b.xaxis):
+        axis.set_minor_formatter(NullFormatter())
+    b.set_xlabel("optimiser steps (CPU s beside each)")
+    b.set_ylabel("final cell: Wiener PSNR (dB, mean MSE over R, G, B)")
+    b.set_title("design: steps")
+    save_figure(fig, out / "study_design.png")
+    plt.close(fig)
+
+
+def write(doc: dict, out: Path) -> list[str]:
+    save_json(out / "study_design.json", doc)
+    save_text(out / "study_design.csv", _csv(doc["sampling"] + doc["steps"]))
+    save_text(out / "study_design.md", markdown(doc))
+    _figure(doc, out)
+    return ["study_design.json", "study_design.csv", "study_design.md", "study_design.png"]
