@@ -13,7 +13,9 @@ mirrored at random (the 8 elements of D4, udc_render.design.torch_psf.tile_trans
 - the banding at the display-to-lens distance d (udc_render.studies.layout_banding: the exact power series of the
   layout repeated on the rig's lens; a turned tiling has no period);
 - the open area and power transmittance.
-Not here (issue 48, named in docs/guides/design.md): the restored PSNR by DeP and a UNet.
+Not here (issue 48, named in docs/guides/design.md): the restored PSNR by DeP and a UNet, the banding of a turned
+tiling (it has no period). The error against run time of the design's knobs is `study design`
+(udc_render.studies.design_knobs).
 """
 from __future__ import annotations
 
