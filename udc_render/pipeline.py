@@ -112,6 +112,7 @@ from udc_render.synth_kernels import (
     plan_kernels,
     prepare_kernels,
     scene_object_distance_m,
+    store_field_planes,
     store_power_maps,
 )
 from udc_render.views import View, bin_pixels, bright_pixels, field_print, layered_electrons, per_channel_blur
@@ -121,7 +122,8 @@ __all__ = ["CHANNEL_KERNELS", "DEFAULT_DEFOCUS_TOLERANCE_PX", "EXPOSURE_FILL", "
            "Kernels", "SynthConfig", "SynthError", "SynthResult", "auto_exposure_s", "band_kernel_set", "capture_scene",
            "capture_views", "check_grid", "compact_kernels", "depth_layers", "display_channel_kernels", "display_gamma",
            "display_kernels", "gt_noise_seed", "layer_kernels", "noise_seed", "plan_kernels", "prepare_kernels",
-           "scene_object_distance_m", "sensor_for_scene", "store_power_maps", "synthesize"]
+           "scene_object_distance_m", "sensor_for_scene", "store_field_planes", "store_power_maps",
+           "synthesize"]
 
 
 GT_RECORD = {False: "linear camera RGB through glass (bare-lens kernels), no noise, no mosaic, no defect pixels, "
@@ -260,7 +262,7 @@ def capture_views(kernels: Kernels, displays: list[Display], edges_nm, far: dict
         if not (d.is_glass and np.all(t == 1)):
             out.append(View(d.name, kernels.band[d.name], t, kernels.field_bases.get(d.name), far.get(d.name),
                             kernels.power_maps.get(d.name), prints.get(d.name),
-                            partial(kernel_spectra, kernels, d.name)))
+                            partial(kernel_spectra, kernels, d.name), kernels.field_planes.get(d.name)))
     return out
 
 

@@ -6,6 +6,7 @@ import math
 from dataclasses import dataclass, field
 
 from udc_render.errors import UdcError
+from udc_render.optics.field_planes import MAX_RANK as PLANES_MAX_RANK
 from udc_render.optics.stray import StrayLight
 from udc_render.sensor import DefectConfig, FpnConfig, SensorConfig
 from udc_render.sensor.frames import MAX_FRAMES as MAX_GT_FRAMES
@@ -73,6 +74,11 @@ class SynthConfig:
     # pixel (Poisson noise only; None: always blended). 0.25: on the paper's frame at 2 mm the P-OLED's blend is left
     # out (bound 0.11 σ; measured at most 0.004 σ), the T-OLED's kept (bound 19 σ); benchmarks/bench_field_knobs.py
     field_print_sigma: float | None = 0.25
+    # d > 0, a monitor through its three planes: the rank-r field blend's K·r weight maps replaced by their first J
+    # shared maps (optics.field_planes: 3J forward FFTs where K·r are made; dataset workers, kernels from
+    # prepare_kernels); None: the band path. 4: on the paper's frame at 2 mm the T-OLED's electrons move by at most
+    # 0.07 σ of the read noise against the band path, at 1/8 of its time (benchmarks/bench_field_knobs.py --planes)
+    field_planes_rank: int | None = 4
     # The ground truth as the paper took it (l.235): the mean of N glass captures at gain 1 (sensor.frames:
     # temporal noise σ/√N, quantised, saturating); None: the ideal noise-free ground truth (pipeline module doc)
     gt_frames: int | None = None
@@ -109,6 +115,10 @@ class SynthConfig:
         if fp is not None and (isinstance(fp, bool) or not isinstance(fp, (int, float)) or not 0 <= fp < math.inf):
             raise SynthError(f"field_print_sigma = {fp!r}: expected a number of read-noise σ ≥ 0, or None "
                              "(always blend)")
+        jr = self.field_planes_rank
+        if jr is not None and (isinstance(jr, bool) or not isinstance(jr, int) or not 1 <= jr <= PLANES_MAX_RANK):
+            raise SynthError(f"field_planes_rank = {jr!r}: expected a whole number from 1 to {PLANES_MAX_RANK}, or "
+                             "None (the band path)")
         tol = self.defocus_tolerance_px
         if tol is not None and (isinstance(tol, bool) or not isinstance(tol, (int, float)) or not math.isfinite(tol)
                                 or not tol >= 0.05):

@@ -24,6 +24,7 @@ from udc_render.optics.convolution import kernel_spectra as spectra_of
 from udc_render.optics.displays import Display
 from udc_render.optics.far_field import FarField, acceptance_um, far_window_px, make_far_field
 from udc_render.optics.field import phase_spread_l1
+from udc_render.optics.field_planes import MAX_RANK as PLANES_MAX_RANK, PlaneBasis, plane_basis
 from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import RenderGrid, camera_geometry, monitor_distance_m, psf_lens, render_grid
 from udc_render.synth_config import SynthConfig, SynthError
@@ -41,6 +42,7 @@ class Kernels:
     channel: dict[str, KernelSet] = field(default_factory=dict)
     field_bases: dict[str, FieldBasis] = field(default_factory=dict)  # compact_kernels: rank-r phase bases
     power_maps: dict[str, PowerMap] = field(default_factory=dict)  # store_power_maps: exact power, made once
+    field_planes: dict[str, PlaneBasis] = field(default_factory=dict)  # store_field_planes: a monitor's blend
     object_distance_m: float = math.nan  # the distance the kernels are focused for (scene_object_distance_m)
     far: dict[str, FarField] = field(default_factory=dict)  # spectral form: the light past the window (far_field)
     keys: dict[str, str] = field(default_factory=dict)  # the band kernel sets' cache keys (none without the cache)
@@ -238,12 +240,37 @@ def store_power_maps(kernels: Kernels, scene: Scene, cache_dir: str | None = Non
     return replace(kernels, power_maps=maps)
 
 
+def store_field_planes(kernels: Kernels, scene: Scene, cfg: SynthConfig) -> Kernels:
+    """The kernels with each d > 0 set's weight maps in one shared basis on the scene's render grid
+    (optics.field_planes.plane_basis: 45-55 CPU-s for 120 maps of 2558 × 1534 px), from the kernel cache when
+    kernels.keys names the set. Only where a capture can use them: a monitor (its three planes), the spectral
+    form, blend 'source', compacted bases (compact_kernels), cfg.field_planes_rank set, and a cache key (without
+    the cache every worker would make them again, at more than they save over a few items); else unchanged."""
+    if (cfg.field_planes_rank is None or not isinstance(scene.content, Monitor) or cfg.form != "spectral"
+            or cfg.blend != "source"):
+        return kernels
+    cam = camera_geometry(scene)
+    shape, pitch, out = (cam.height_px, cam.width_px), kernels.grid.pitch_um, {}
+    for name, basis in kernels.field_bases.items():
+        if kernels.keys.get(name) is None:
+            continue
+        ks = kernels.band[name]
+        wy, wx, _ = field_weights(ks, shape, pitch, ks.distance_mm)
+        pm = kernels.power_maps.get(name)
+        arrays = cached_arrays("field-planes-1", (kernels.keys.get(name),), lambda: plane_basis(
+            basis, ks.field_power, pm, wy, wx).arrays(), cfg.kernel_cache, shape=list(shape), pitch_um=pitch,
+            rank=basis.rank, live=basis.live, exact_power=pm is not None, max_rank=PLANES_MAX_RANK)
+        out[name] = PlaneBasis.from_arrays(arrays)
+    return replace(kernels, field_planes=out)
+
+
 def prepare_kernels(scene: Scene, displays: list[Display], cfg: SynthConfig) -> Kernels:
-    """Every kernel product a dataset worker keeps: plan_kernels, compact_kernels and store_power_maps, through
-    the kernel cache (a dataset's parent makes them there once; its workers load them); the kernels' spectra go
-    there too when first used (cache_spectra)."""
+    """Every kernel product a dataset worker keeps: plan_kernels, compact_kernels, store_power_maps and
+    store_field_planes, through the kernel cache (a dataset's parent makes them there once; its workers load
+    them); the kernels' spectra go there too when first used (cache_spectra)."""
     kernels = compact_kernels(plan_kernels(scene, displays, cfg), scene, cfg)
-    return replace(store_power_maps(kernels, scene, cfg.kernel_cache), cache_spectra=True)
+    kernels = store_field_planes(store_power_maps(kernels, scene, cfg.kernel_cache), scene, cfg)
+    return replace(kernels, cache_spectra=True)
 
 
 def kernel_spectra(kernels: Kernels, name: str, blends: bool, shape, precision: str):

@@ -22,6 +22,7 @@ import numpy as np
 from udc_render.optics import BrightPixels, FieldBasis, PowerMap, apply_kernels, band_spectra, convolve_bands, fft_shape
 from udc_render.optics.apply import far_field_images
 from udc_render.optics.far_field import FarField
+from udc_render.optics.field_planes import PlaneBasis
 from udc_render.optics.field_power import power_deviation
 from udc_render.optics.layers import Compositor, DepthLayers, occluder_kernels
 from udc_render.optics.primaries import Primaries, plane_spectra
@@ -50,6 +51,7 @@ class View:
     power_map: PowerMap | None = None  # d > 0: the exact-power map made once (synth_kernels.store_power_maps)
     field_print: dict | None = None  # d > 0: field_print's verdict; 'prints' False: the mean kernel, no field blend
     spectra: Callable | None = None  # (blends, FFT shape, precision) -> its kernels' spectra or None (kernel_spectra)
+    field_planes: PlaneBasis | None = None  # d > 0: its blend's weight maps in one basis (store_field_planes)
 
     @property
     def blends(self) -> bool:
@@ -130,7 +132,9 @@ def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectr
                  and (cfg.blend == "source" or not blends) else None)
     kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=view.field_basis if blends else None,
               bright=bright, far_field=view.far_field, power_map=view.power_map if blends else None, field=blends,
-              kernel_spectra=spectra_k, far_blocks=far_blocks, primaries=primaries)
+              kernel_spectra=spectra_k, far_blocks=far_blocks, primaries=primaries,
+              field_planes=(view.field_planes, cfg.field_planes_rank) if blends and view.field_planes is not None
+              and cfg.field_planes_rank is not None else None)
     if cfg.blend == "source":
         optics = apply_kernels(band_image, view.kernel_set, view.transmission, cfg.precision, channel_weights=w,
                                spectra=spectra, **kw)

@@ -83,7 +83,8 @@ def test_cached_kernel_spectra_give_the_same_bytes(small, tmp_path, monkeypatch)
     on first use: the same bytes as spectra made per call, and a second synthesis makes none."""
     from udc_render.optics import convolution, field
     scene, band_image, _ = small
-    cfg = replace(CFG, use_cache=True, kernel_cache=str(tmp_path), field_print_sigma=None)
+    cfg = replace(CFG, use_cache=True, kernel_cache=str(tmp_path), field_print_sigma=None,
+                  field_planes_rank=None)  # the band path's spectra (test_field_planes: the planes')
     worker = prepare_kernels(scene, DISPLAYS, cfg)
     assert worker.cache_spectra
     per_call = synthesize(band_image, scene, DISPLAYS, cfg, kernels=replace(worker, cache_spectra=False))

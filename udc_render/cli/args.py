@@ -110,6 +110,18 @@ def field_print_sigma(text):
     return value
 
 
+def field_planes_rank(text):
+    """--field-planes-rank: a whole number from 1 to optics.field_planes.MAX_RANK, or 'off' (the band path: None)."""
+    from udc_render.optics.field_planes import MAX_RANK
+    if text == "off":
+        return None
+    value = int(text) if text.isdigit() else 0
+    if not 1 <= value <= MAX_RANK:
+        raise argparse.ArgumentTypeError(f"--field-planes-rank = {text!r}: expected a whole number from 1 to "
+                                         f"{MAX_RANK} or 'off'")
+    return value
+
+
 def far_field_coarse(text):
     """--far-field-coarse: an odd whole number of render pixels per coarse pixel."""
     if not (text.isdigit() and int(text) >= 1 and int(text) % 2 == 1):
@@ -269,6 +281,10 @@ def add_capture_arguments(p: argparse.ArgumentParser) -> None:
                    help="d > 0: leave a display's field blend out (its mean kernel and power) when it can change no "
                         "pixel by more than this many σ of the read noise (udc_render/views.py field_print), or "
                         "'off' (always blend) [0.25]")
+    p.add_argument("--field-planes-rank", type=field_planes_rank, default=argparse.SUPPRESS,
+                   help="d > 0, a monitor's dataset items: the field blend through the monitor's 3 planes with this "
+                        "many shared weight maps (3 FFTs each, in place of one per band and rank; "
+                        "udc_render/optics/field_planes.py), or 'off' (the band path) [4]")
     p.add_argument("--precision", choices=("float32", "float64"), default="float32",
                    help="the optics' FFT convolutions: float32: single precision (default); float64: double "
                         "precision [float32]")
@@ -318,6 +334,7 @@ def synth_config(args):
                        far_field_threshold=getattr(args, "far_field_threshold", SynthConfig.far_field_threshold),
                        far_field_coarse=getattr(args, "far_field_coarse", SynthConfig.far_field_coarse),
                        field_print_sigma=getattr(args, "field_print_sigma", SynthConfig.field_print_sigma),
+                       field_planes_rank=getattr(args, "field_planes_rank", SynthConfig.field_planes_rank),
                        seed=getattr(args, "noise_seed", 0),
                        use_cache=not getattr(args, "no_cache", False),
                        kernel_cache=None if cache is None else str(cache))

@@ -266,9 +266,10 @@ def make_panel(spec: PanelSpec, kernel_px: int) -> Panel:
 
 def bank_settings(scene: Scene, cfg: SynthConfig, kernel_px: int, specs: list[PanelSpec], extra: dict) -> dict:
     """What decides the bank's panels, as plain JSON values (a re-run with other settings is refused)."""
-    # field_print_sigma leaves a dataset item's faint field blend out; a bank's panels keep every blend: not theirs
+    # field_print_sigma leaves a dataset item's faint field blend out, field_planes_rank takes a monitor item's blend
+    # through its planes; a bank's panels keep every blend on their own crops: not theirs
     synth = {k: v for k, v in asdict(cfg).items()
-             if k not in ("use_cache", "kernel_cache", "stray_light", "field_print_sigma")}
+             if k not in ("use_cache", "kernel_cache", "stray_light", "field_print_sigma", "field_planes_rank")}
     stray = cfg.stray_light
     if stray.room_on or stray.lens_reflectance or stray.lens_glare or stray.emission_on:
         raise BankError(f"stray light {stray.describe()}: a bank applies the display's haze only; switch the room "

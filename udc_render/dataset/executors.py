@@ -65,7 +65,7 @@ def worker_kernels(shared: Shared, panel: int | None = None) -> Kernels:
     without the kernel cache (--no-cache) the kernels themselves (raw.dng differed between 1 and 2 workers),
     and the rank-r bases' residual, which capture.json records (field_rank_kernel_residual differed in its
     last digits with 31-px kernels over 16 phases)."""
-    from udc_render.pipeline import compact_kernels, plan_kernels, store_power_maps
+    from udc_render.pipeline import compact_kernels, plan_kernels, store_field_planes, store_power_maps
     key = (str(shared.out), panel)
     if key not in _WORKER_KERNELS:
         for old in [k for k in _WORKER_KERNELS if k[0] != key[0]]:  # another job's
@@ -76,7 +76,7 @@ def worker_kernels(shared: Shared, panel: int | None = None) -> Kernels:
             panel_setup(shared.scene, shared.displays[0], shared.randomize.panels[panel])
         with blas_threads(shared.blas_threads):
             kernels = compact_kernels(plan_kernels(scene, displays, shared.cfg), scene, shared.cfg)
-            kernels = store_power_maps(kernels, scene, shared.cfg.kernel_cache)
+            kernels = store_field_planes(store_power_maps(kernels, scene, shared.cfg.kernel_cache), scene, shared.cfg)
             _WORKER_KERNELS[key] = replace(kernels, cache_spectra=True)  # their spectra: made once, into the cache
     return _WORKER_KERNELS[key]
 

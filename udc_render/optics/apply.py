@@ -20,6 +20,7 @@ from udc_render.optics.bright import BrightPixels
 from udc_render.optics.convolution import OpticsError, _check_margin, _precision, convolve_bands, fft_shape
 from udc_render.optics.far_field import FarField, far_light
 from udc_render.optics.field import FieldBasis, convolve_field, field_weights
+from udc_render.optics.field_planes import convolve_field_planes, planes_bound
 from udc_render.optics.field_power import PowerMap, field_power_map, stored_or_fresh
 from udc_render.optics.primaries import Primaries, convolve_primaries, far_light_primaries
 
@@ -75,6 +76,25 @@ def far_field_images(bands: np.ndarray, far_field: FarField, margin_px: int, far
     return far_light(bands, far_field, margin_px, w, blocks)
 
 
+def _field_through_planes(primaries: Primaries, field_planes: tuple, basis: FieldBasis, gains, channel_weights,
+                          margin_px: int, precision: str, workers, applied: dict) -> tuple[np.ndarray, float]:
+    """The rank-r blend through the planes at J shared maps (optics.field_planes), its record in applied."""
+    pb, J = field_planes
+    J = min(int(J), pb.maps.shape[0])
+    images = convolve_field_planes(primaries.planes, primaries.matrix, pb, basis, gains, channel_weights, margin_px,
+                                   J, precision, workers)
+    peaks = np.abs(primaries.planes).reshape(primaries.planes.shape[0], -1).max(axis=1)
+    bound = planes_bound(pb, np.asarray(channel_weights, float), gains, primaries.matrix, peaks)
+    tail = pb.values.clip(0.0)
+    applied["field_planes"] = {
+        "maps": J, "forward_ffts": 3 * J, "stored_maps": int(pb.maps.shape[0]),
+        "map_residual": float(np.sqrt(tail[J:].sum() / tail.sum())) if tail.sum() > 0 else 0.0,
+        "bound_e": float(bound[J]),
+        "rule": "the K·r weight maps in one basis through the monitor's 3 planes (optics.field_planes); map_residual: "
+                "the weighted maps' relative Frobenius residual; bound_e: a bound on any pixel's change"}
+    return images, max(basis.residuals)
+
+
 def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "float32", workers: int | None = None,
                   blend: str = "source", field: bool = True, distance_mm: float | None = None,
                   image_distance_um: float | None = None, period_um=None,
@@ -82,7 +102,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
                   field_basis: FieldBasis | None = None, bright: BrightPixels | None = None,
                   far_field: FarField | None = None, power_map: PowerMap | None = None,
                   kernel_spectra=None, far_blocks: dict | None = None,
-                  primaries: Primaries | None = None) -> OpticsResult:
+                  primaries: Primaries | None = None, field_planes: tuple | None = None) -> OpticsResult:
     """Sensor irradiance per band from a udc_render.render.BandImage and a psf.KernelSet.
 
     y_k = T(λ_k) · transmittance_k · (1 − energy_outside_k) · (x_k ⊗ k_k), frame cropped (optics.convolution).
@@ -101,6 +121,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     far_blocks: a dict that keeps the far field's block means of these bands for the next call (far_light).
     primaries: the band image's three planes (optics.primaries; with channel_weights, no bright pixels): the
     field-independent blur and the far field through them (the same numbers, another round-off).
+    field_planes: (PlaneBasis, J) of this set's field_basis on this grid: with primaries, the rank-r 'source' blend
+    through the planes at the first J shared weight maps (optics.field_planes; the J and its bounds recorded).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
     bands = np.asarray(band_image.bands)
@@ -150,9 +172,15 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         wy, wx, geometry = field_weights(kernel_set, (H, W), pitch, d_mm, image_distance_um, period_um)
         power_map = stored_or_fresh(power_map, field_power_map(kernel_set, (H, W), pitch, d_mm,
                                                                geometry["image_distance_um"], geometry["period_um"]))
-        images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
-                                          gains, blend, precision, workers, field_rank, channel_weights, field_basis,
-                                          bright, power_map, kernel_spectra)
+        planes_ok = (through_planes and field_planes is not None and blend == "source" and field_basis is not None
+                     and field_rank is not None)
+        if planes_ok:
+            images, residual = _field_through_planes(primaries, field_planes, field_basis, gains, channel_weights, m,
+                                                     precision, workers, applied)
+        else:
+            images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
+                                              gains, blend, precision, workers, field_rank, channel_weights,
+                                              field_basis, bright, power_map, kernel_spectra)
         applied["field_power"] = ("exact series at each pixel's shift (optics.field_power)" if power_map is not None
                                   else "the phases' powers, interpolated (the kernel set has no field_series)")
         if field_rank is not None:
@@ -165,8 +193,10 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
                far_field_images(bands, far_field, m, far_gains, channel_weights, far_blocks))
         images = images + far.astype(images.dtype)
         applied["far_field"] = far_field.describe()
-    if through_planes and (far_field is not None or not use_field):
-        what = "the far field" if use_field else "the blur" + (" and the far field" if far_field is not None else "")
+    blur_planes = not use_field or "field_planes" in applied
+    if through_planes and (far_field is not None or blur_planes):
+        what = ("the blur" if blur_planes else "") + (" and " if blur_planes and far_field is not None else "") + (
+            "the far field" if far_field is not None else "")
         applied["primaries"] = (f"{what} through the monitor's 3 planes (bands Σ_c M_ck r_c): each channel's kernels "
                                 "summed per plane (optics.primaries)")
     return OpticsResult(np.ascontiguousarray(images, dtype=np.float32), pitch, wl.copy(), gains, t, applied)
