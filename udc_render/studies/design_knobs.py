@@ -28,12 +28,14 @@ from pathlib import Path
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from psf import layouts
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer
 from udc_render.streams import stream
+from udc_render.studies.design_knobs_report import write
 from udc_render.studies.layout import frame_cell
 
 __all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "run_study"]
@@ -120,9 +122,6 @@ def steps_rows(cfg: dict, progress=None) -> list[dict]:
 
 def run_study(out: Path, quick: bool = False) -> dict:
     """Both parts, written to out (udc_render.studies.design_knobs_report)."""
-    from tqdm import tqdm
-
-    from udc_render.studies.design_knobs_report import write
     cfg = QUICK if quick else FULL
     with tqdm(total=2 * len(cfg["samples"]) + len(cfg["steps"]) + 1, desc="study design") as bar:
         doc = {"config": {**cfg, "feature_um": FEATURE_UM, "open_fraction": OPEN, "seed": SEED,
