@@ -2,6 +2,7 @@
 
 - `UNet`: the paper's baseline (Zhou et al. 2021, §4 "UNet"): the SID UNet (Chen et al. 2018,
   "Learning to See in the Dark") with its encoder split into two sub-encoders.
+- `WideFineUNet` ('unet-wide-fine'): the same, wider at its two finest levels only (the capacity study).
 - `ResNet`: EDSR (Lim et al. 2017) with 16 residual blocks of 64 features, no batch norm.
 - `WienerUNet` ('wiener-unet', restore/models_conditioned.py): conditioned on the panel's description.
 
@@ -83,17 +84,51 @@ class UNet(nn.Module):
                        "depth": depth, "sub_encoders": sub_encoders, "negative_slope": negative_slope}
         if second_encoder_levels is not None:
             self.config["second_encoder_levels"] = second_encoder_levels
-        ch = [width * 2 ** i for i in range(depth)]
-        cin = [in_channels] + ch[:-1]
-        self.encoder = nn.ModuleList(_conv_block(cin[i], ch[i], negative_slope) for i in range(depth))
-        self.residual_encoder = nn.ModuleList(_conv_block(cin[i], ch[i], negative_slope)
-                                              for i in range(second_encoder_levels or 0))
-        self.up = nn.ModuleList(nn.ConvTranspose2d(ch[i + 1], ch[i], 2, stride=2) for i in range(depth - 1))
-        self.decoder = nn.ModuleList(_conv_block(2 * ch[i], ch[i], negative_slope) for i in range(depth - 1))
-        self.to_rgb = nn.Sequential(nn.Conv2d(ch[0], 4 * out_channels, 1), nn.PixelShuffle(2))
+        unet_levels(self, in_channels, out_channels, self.level_widths(width, depth), second_encoder_levels or 0,
+                    negative_slope)
+
+    def level_widths(self, width: int, depth: int) -> list[int]:
+        """The channels of each level: width · 2^i."""
+        return [width * 2 ** i for i in range(depth)]
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return unet_pass(self, x)
+
+
+def unet_levels(net: nn.Module, in_channels: int, out_channels: int, ch: list[int], second_levels: int,
+                negative_slope: float) -> None:
+    """net's encoder, residual_encoder (its first `second_levels` levels), up, decoder and to_rgb for level widths
+    `ch` (UNet's class doc), registered in that order."""
+    depth, cin = len(ch), [in_channels] + ch[:-1]
+    net.encoder = nn.ModuleList(_conv_block(cin[i], ch[i], negative_slope) for i in range(depth))
+    net.residual_encoder = nn.ModuleList(_conv_block(cin[i], ch[i], negative_slope) for i in range(second_levels))
+    net.up = nn.ModuleList(nn.ConvTranspose2d(ch[i + 1], ch[i], 2, stride=2) for i in range(depth - 1))
+    net.decoder = nn.ModuleList(_conv_block(2 * ch[i], ch[i], negative_slope) for i in range(depth - 1))
+    net.to_rgb = nn.Sequential(nn.Conv2d(ch[0], 4 * out_channels, 1), nn.PixelShuffle(2))
+
+
+class WideFineUNet(UNet):
+    """The paper's UNet (UNet) with its `fine_levels` finest levels `fine_extra_width` channels wider, every other
+    level, the sub-encoders and the pass unchanged: capacity where the T-OLED's lost band (1/16–1/8 cycle/px) is
+    carried, and nowhere else (issue 47, item 1; the blind twin of wiener-unet's backbone). Its defaults, levels
+    64/96/128/256/512: 9.485 M parameters, 242.93 G MACs at 4 × 512 × 1024 (the paper's UNet: 8.933 M, 124.08 G):
+    1.06× the parameters, 1.96× the arithmetic, nearly all of it at the packed scale."""
+
+    TYPE = "unet-wide-fine"
+
+    def __init__(self, in_channels: int = 4, out_channels: int = 3, width: int = 32, depth: int = 5,
+                 fine_levels: int = 2, fine_extra_width: int = 32, sub_encoders: int = 2,
+                 second_encoder_levels: int | None = None, negative_slope: float = 0.2):
+        _require(0 <= fine_levels <= depth, "fine_levels", fine_levels, f"0 to depth = {depth}")
+        _require(fine_extra_width >= 0, "fine_extra_width", fine_extra_width, "an integer >= 0")
+        self.fine_levels, self.fine_extra_width = fine_levels, fine_extra_width
+        super().__init__(in_channels, out_channels, width, depth, sub_encoders, second_encoder_levels, negative_slope)
+        self.config.update(type=self.TYPE, fine_levels=fine_levels, fine_extra_width=fine_extra_width)
+
+    def level_widths(self, width: int, depth: int) -> list[int]:
+        """width · 2^i, plus fine_extra_width at the fine_levels finest levels."""
+        return [c + (self.fine_extra_width if i < self.fine_levels else 0)
+                for i, c in enumerate(super().level_widths(width, depth))]
 
 
 def _as_is(kind: str, i: int, a: torch.Tensor) -> torch.Tensor:
@@ -180,7 +215,7 @@ class ResNet(nn.Module):
         return self.tail(h + self.body(h))
 
 
-MODELS: dict[str, type[nn.Module]] = {UNet.TYPE: UNet, ResNet.TYPE: ResNet}
+MODELS: dict[str, type[nn.Module]] = {UNet.TYPE: UNet, ResNet.TYPE: ResNet, WideFineUNet.TYPE: WideFineUNet}
 
 
 def _register_conditioned() -> None:
@@ -196,6 +231,8 @@ UNET_CONFIG = {"type": "unet", "in_channels": 4, "out_channels": 3, "width": 32,
 UNET_SINGLE_ENCODER_CONFIG = {"type": "unet", "in_channels": 4, "out_channels": 3, "width": 32, "depth": 5,
                               "sub_encoders": 1, "negative_slope": 0.2}
 """The paper's "Single Encoder" ablation (the SID UNet): 7.761 M, 96.91 G (paper: 7.76 M, 97.09 G)."""
+UNET_WIDE_FINE_CONFIG = dict(UNET_CONFIG, type="unet-wide-fine", fine_levels=2, fine_extra_width=32)
+"""The capacity study's UNet (restore.studies.capacity): the paper's, its two finest levels 32 channels wider."""
 RESNET_CONFIG = {"type": "resnet", "in_channels": 4, "out_channels": 3, "features": 64, "blocks": 16,
                  "res_scale": 1.0, "tail": "edsr"}
 """The paper's ResNet (EDSR 16 × 64): 1.370 M, 719.94 G (paper: 1.37 M, 721.76 G)."""

@@ -1,7 +1,7 @@
-"""`udc-render train --data DIR --model {unet,resnet,wiener-unet} --display D --out RUN`: train a restorer on a
-dataset's pairs; `--degrade online --bank DIR`: on crops of clean images degraded on the fly through a kernel bank's
-panels (restore/online.py; wiener-unet, which is given each crop's panel description, trains only so). torch is
-imported when the command runs, not when the command line is built."""
+"""`udc-render train --data DIR --model {unet,unet-wide-fine,resnet,wiener-unet} --display D --out RUN`: train a
+restorer on a dataset's pairs; `--degrade online --bank DIR`: on crops of clean images degraded on the fly through a
+kernel bank's panels (restore/online.py; wiener-unet, which is given each crop's panel description, trains only so).
+torch is imported when the command runs, not when the command line is built."""
 from __future__ import annotations
 
 import argparse
@@ -42,10 +42,12 @@ def register(sub) -> None:
                    help="with --degrade online: on the CPU, processes that degrade the next crops while the model "
                         "trains (one thread each); on a GPU, 1: a thread on its own CUDA stream; the same numbers "
                         "as 0, in this process [1]")
-    p.add_argument("--model", required=True, choices=("unet", "resnet", "wiener-unet"),
-                   help="the model type (restore/models.py): unet: the paper's UNet with two sub-encoders; resnet: "
-                        "the paper's ResNet baseline; wiener-unet: a UNet given the panel's description (kernels, "
-                        "γ, gain, noise: Wiener-deconvolved features and kernel codes), trained with --degrade online")
+    p.add_argument("--model", required=True, choices=("unet", "unet-wide-fine", "resnet", "wiener-unet"),
+                   help="the model type (restore/models.py): unet: the paper's UNet with two sub-encoders; "
+                        "unet-wide-fine: the same, its two finest levels 32 channels wider (the capacity study); "
+                        "resnet: the paper's ResNet baseline; wiener-unet: a UNet given the panel's description "
+                        "(kernels, γ, gain, noise: Wiener-deconvolved features and kernel codes), trained with "
+                        "--degrade online")
     p.add_argument("--config", type=Path, help="a model TOML file: type = ... and the model's arguments")
     add_display_argument(p, "the display whose captures to restore, by its name in the dataset (a file: the "
                             "name it gives; any other word: a display name of the dataset); required with "
@@ -75,11 +77,12 @@ def register(sub) -> None:
 
 def run(args) -> int:
     out_dir(args.out)
-    from restore.models import RESNET_CONFIG, UNET_CONFIG, load_config
+    from restore.models import RESNET_CONFIG, UNET_CONFIG, UNET_WIDE_FINE_CONFIG, load_config
     from restore.models_conditioned import WIENER_UNET_CONFIG
     from restore.train import TrainSettings, train
     set_threads(args.threads)
-    cfg = dict({"unet": UNET_CONFIG, "resnet": RESNET_CONFIG, "wiener-unet": WIENER_UNET_CONFIG}[args.model])
+    cfg = dict({"unet": UNET_CONFIG, "unet-wide-fine": UNET_WIDE_FINE_CONFIG, "resnet": RESNET_CONFIG,
+                "wiener-unet": WIENER_UNET_CONFIG}[args.model])
     if args.config:
         cfg = load_config(args.config)
         if cfg.get("type") != args.model:
