@@ -47,12 +47,19 @@ import torch
 from tqdm import tqdm
 
 from psf import layouts
+from restore.conditioning import (
+    bank_descriptions,
+    check_model_description,
+    needs_description,
+    predict_described,
+    spec_kernel_px,
+)
 from restore.degrade import Degrader
 from restore.dep import dep_restore
 from restore.known import packed_from_sensor
 from restore.metrics import level_matched_psnr_db, paper_metrics
 from restore.online import clean_images, images_fingerprint, validation_pairs
-from restore.studies.robustness_report import MODELS, ROWS, SETS, write_report
+from restore.studies.robustness_report import MODELS, ROWS, SETS, UNETS, write_report
 from restore.studies.stage_times import StageTimes
 from restore.train import TrainSettings, load_model, predict, train
 from udc_render.content.charts import dead_leaves_colour
@@ -99,6 +106,14 @@ class Budget:
     epochs: int
     lr: float
     clip_grad_norm: float | None = None
+    # the conditioned restorer (restore.models_conditioned's config), trained like (b) on the randomized panels and
+    # scored with each test panel's description (describe_panel of the bank's panel); None: not in the study
+    conditioned: dict | None = None
+
+    @property
+    def models(self) -> tuple[str, ...]:
+        """The models the budget trains and scores (robustness_report.MODELS' keys)."""
+        return UNETS + (("conditioned",) if self.conditioned else ())
 
     @property
     def steps(self) -> int:
@@ -220,22 +235,24 @@ def make_banks(out: Path, b: Budget, times: StageTimes, cache_dir: str | None, p
     return banks
 
 
-def train_settings(b: Budget, bank: Bank, data: Path) -> TrainSettings:
-    """The recipe both models share (module doc), on `bank`'s panels."""
+def train_settings(b: Budget, bank: Bank, data: Path, model: dict | None = None) -> TrainSettings:
+    """The recipe the models share (module doc), on `bank`'s panels, for `model` (None: the budget's UNet)."""
     names = [p.name for p in bank.panels]
-    return TrainSettings(model=b.model, display=",".join(names), epochs=b.epochs, batch=b.batch, crop_px=b.crop_px,
-                         crops_per_pair=b.crops_per_image, lr=b.lr, seed=TRAIN_SEED,
+    return TrainSettings(model=model or b.model, display=",".join(names), epochs=b.epochs, batch=b.batch,
+                         crop_px=b.crop_px, crops_per_pair=b.crops_per_image, lr=b.lr, seed=TRAIN_SEED,
                          data_fingerprint=images_fingerprint(data), clip_grad_norm=b.clip_grad_norm,
                          degrade={"mode": "online", "bank_fingerprint": bank.fingerprint, "panels": names})
 
 
 def train_models(out: Path, b: Budget, banks: dict, data: Path, progress: bool) -> dict:
-    """{model key: train summary} of both models ('fixed': a, on the default panel; 'randomized': b)
-    (restore.train: resumed from a checkpoint, a finished run kept)."""
+    """{model key: train summary} of the budget's models ('fixed': a, on the default panel; 'randomized': b; with
+    b.conditioned, 'conditioned': that model on b's panels) (restore.train: resumed from a checkpoint, a finished
+    run kept)."""
     summaries = {}
-    for key, bank_name in (("fixed", "default"), ("randomized", "random")):
-        bank = banks[bank_name]
-        summaries[key] = train(data, out / "train" / key, train_settings(b, bank, data), device="cpu",
+    plan = {"fixed": ("default", None), "randomized": ("random", None), "conditioned": ("random", b.conditioned)}
+    for key in b.models:
+        bank = banks[plan[key][0]]
+        summaries[key] = train(data, out / "train" / key, train_settings(b, bank, data, plan[key][1]), device="cpu",
                                checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
                                bank=bank.folder)
     return summaries
@@ -260,9 +277,20 @@ def panel_pairs(bank: Bank, panel, images: list) -> list[tuple]:
                             SCORE_SEED)
 
 
+def model_outputs(model, bank: Bank, panel, pairs: list) -> list[np.ndarray]:
+    """The model's restorations of the packed inputs of `pairs`; a model that needs the panel's description
+    (restore.conditioning) is given `panel`'s (describe_panel on the bank's frame, in the model's kernel window),
+    checked against the sensor and frame it was trained for."""
+    if not needs_description(model):
+        return [predict(model, x, torch.device("cpu")) for x, _ in pairs]
+    description = bank_descriptions(Bank(bank.folder, bank.settings, [panel]), spec_kernel_px(model))[0]
+    check_model_description(model, description, f"the study's {type(model).__name__}")
+    return [predict_described(model, x, description, torch.device("cpu")) for x, _ in pairs]
+
+
 def score_panel(models: dict, bank: Bank, index: int, images: list) -> dict[str, dict]:
     """{row key: scores} of the input, DeP with the panel's kernel (on the capture, and on the capture without the
-    sensor's noise) and each model on `images` degraded once through panel `index` (module doc)."""
+    sensor's noise) and each model on `images` degraded once through panel `index` (module doc; model_outputs)."""
     panel = bank.panels[index]
     pairs = panel_pairs(bank, panel, images)
     per_image = {"input": [paper_metrics(None, gt, packed=x)["psnr_db_paper"] for x, gt in pairs],
@@ -273,31 +301,33 @@ def score_panel(models: dict, bank: Bank, index: int, images: list) -> dict[str,
         per_image[key] = [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in dep]
         per_image[f"{key}_level"] = [level_matched_psnr_db(y, gt) for y, gt in dep]
     for key, model in models.items():
-        out = [(predict(model, x, torch.device("cpu")), gt) for x, gt in pairs]
+        out = list(zip(model_outputs(model, bank, panel, pairs), (gt for _, gt in pairs)))
         per_image[key] = [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in out]
         per_image[f"{key}_level"] = [level_matched_psnr_db(y, gt) for y, gt in out]
     return per_image
 
 
-def score_fingerprints(out: Path, banks: dict, data: Path) -> dict[str, str]:
+def score_fingerprints(out: Path, banks: dict, data: Path, keys: tuple = UNETS) -> dict[str, str]:
     """{set: the fingerprint of its score rows}: the set's bank (bank.json's fingerprint), the validation images,
-    the score seed, the rows scored and both models' files (sha256 of model.pt: a retrained model is another)."""
-    models = {key: file_digest(out / "train" / key / "model.pt") for key in MODELS}
+    the score seed, the rows scored and the models' files (`keys`; sha256 of model.pt: a retrained model is
+    another)."""
+    models = {key: file_digest(out / "train" / key / "model.pt") for key in keys}
+    rows = [k for k in ROWS if k not in MODELS or k in keys]
     common = {"version": SCORES_VERSION, "images": images_fingerprint(data), "score_seed": SCORE_SEED,
-              "rows": list(ROWS), "models": models}
+              "rows": rows, "models": models}
     return {s: digest({**common, "bank": banks[s].fingerprint}) for s in SETS}
 
 
-def score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
-    """Every (set, panel) row of scores.jsonl: the paper PSNR of the input, DeP and both models, per image and
+def score(out: Path, banks: dict, data: Path, progress: bool, keys: tuple = UNETS) -> list[dict]:
+    """Every (set, panel) row of scores.jsonl: the paper PSNR of the input, DeP and the models `keys`, per image and
     mean; logged rows are kept under their set's fingerprint only (score_fingerprints), the others recomputed."""
     path = out / SCORES_FILE
-    fingerprints, logged = score_fingerprints(out, banks, data), read_scores(path)
+    fingerprints, logged = score_fingerprints(out, banks, data, keys), read_scores(path)
     rows = [r for r in logged if r.get(FIELD) == fingerprints.get(r["set"])]
     if note := stale_note("study robustness", len(logged) - len(rows), path):
         print(note)
     done = {(r["set"], r["panel"]) for r in rows}
-    models = {key: load_model(out / "train" / key / "model.pt", "cpu")[0] for key in MODELS}
+    models = {key: load_model(out / "train" / key / "model.pt", "cpu")[0] for key in keys}
     images = clean_images(data, "val")
     todo = [(s, i) for s in SETS for i, p in enumerate(banks[s].panels) if (s, p.name) not in done]
     for s, i in tqdm(todo, desc="score", unit="panel", disable=not progress):
@@ -313,12 +343,25 @@ def score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
     return rows
 
 
-def run_study(out: Path, quick: bool = False, cache_dir: str | None = None, progress: bool = True) -> dict:
+def conditioned_config(b: Budget) -> dict:
+    """The conditioned restorer of budget b (`study robustness --conditioned`): restore.models_conditioned's
+    defaults at the budget UNet's width and depth, its descriptions' window the rig's kernel at the packed pitch
+    (half the sensor kernel's size, odd)."""
+    from restore.models_conditioned import WIENER_UNET_CONFIG
+    size = sensor_kernel_px(study_scene(b)) // 2 | 1
+    return {**WIENER_UNET_CONFIG, **{k: b.model[k] for k in ("width", "depth") if k in b.model}, "kernel_px": size}
+
+
+def run_study(out: Path, quick: bool = False, cache_dir: str | None = None, progress: bool = True,
+              conditioned: bool = False) -> dict:
     """The study (module doc) in `out`, or the rest of an interrupted one; writes the report and returns
-    {"rows", "budget", "times", "train"}."""
+    {"rows", "budget", "times", "train"}. conditioned: the budget's conditioned model (conditioned_config) trained
+    and scored beside the two UNets."""
     out = Path(out).resolve()  # the tile's path is in the micrograph bank's settings: one spelling per folder
     out.mkdir(parents=True, exist_ok=True)
     b = BUDGETS["quick" if quick else "full"]
+    if conditioned:
+        b = replace(b, conditioned=conditioned_config(b))
     times = StageTimes(out / TIMES_FILE)
     t0 = time.perf_counter()
     data = write_clean_images(out / "clean", b)
@@ -326,7 +369,7 @@ def run_study(out: Path, quick: bool = False, cache_dir: str | None = None, prog
         times.add("clean images", time.perf_counter() - t0)
     banks = make_banks(out, b, times, cache_dir, progress)
     summaries = train_models(out, b, banks, data, progress)
-    rows = score(out, banks, data, progress)
+    rows = score(out, banks, data, progress, b.models)
     budget = dict(asdict(b), steps=b.steps, seeds={"train": TRAIN_SEED, "randomize": RANDOMIZE_SEED,
                                                   "heldout": HELDOUT_SEED, "score": SCORE_SEED, "images": IMAGES_SEED},
                   panels={name: [p.name for p in bank.panels] for name, bank in banks.items()})

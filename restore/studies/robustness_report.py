@@ -22,7 +22,9 @@ from udc_render.io.files import save_figure
 from udc_render.io.plots import pyplot
 from udc_render.studies.report import duration, load_average, md_table, write_tables
 
-MODELS = {"fixed": "UNet (default P-OLED)", "randomized": "UNet (randomized)"}
+MODELS = {"fixed": "UNet (default P-OLED)", "randomized": "UNet (randomized)",
+          "conditioned": "conditioned (randomized, given the panel)"}
+UNETS = ("fixed", "randomized")  # every budget's; 'conditioned' where the budget trains one (its rows then hold it)
 SETS = {"default": "default P-OLED (d = 2 mm)", "heldout": "held-out draws within the ranges",
         "toled": "T-OLED (d = 2 mm)", "disordered": "disordered P-OLED",
         "micrograph": "micrograph-type layout (diamond tile)", "far": "P-OLED at d = 8 mm",
@@ -38,29 +40,46 @@ COLUMNS = ["set", "panels", "images", "psnr_input_db", "psnr_dep_db", "psnr_dep_
            "psnr_input_level_db", "psnr_dep_level_db", "psnr_dep_noiseless_level_db", "psnr_fixed_level_db",
            "drop_fixed_level_db", "psnr_randomized_level_db", "drop_randomized_level_db",
            "randomized_minus_fixed_level_db"]
-COLOURS = {"input": "0.7", "dep": "0.35", "dep_noiseless": "0.55", "fixed": "tab:blue", "randomized": "tab:orange"}
+CONDITIONED_COLUMNS = [f"{k}{t}_db" for t in ("", "_level")
+                       for k in ("psnr_conditioned", "drop_conditioned", "conditioned_minus_randomized")]
+COLOURS = {"input": "0.7", "dep": "0.35", "dep_noiseless": "0.55", "fixed": "tab:blue", "randomized": "tab:orange",
+           "conditioned": "tab:green"}
+
+
+def present(rows: list[dict]) -> list[str]:
+    """The keys of ROWS that the score rows hold (the conditioned model's only where the budget trained it)."""
+    return [k for k in ROWS if k not in MODELS or k in UNETS or (rows and f"psnr_{k}_db" in rows[0])]
+
+
+def columns(rows: list[dict]) -> list[str]:
+    """The CSV's columns: COLUMNS, and the conditioned model's where the rows hold it."""
+    return COLUMNS + (CONDITIONED_COLUMNS if "conditioned" in present(rows) else [])
 
 
 def summary_rows(rows: list[dict]) -> list[dict]:
     """One row per set present (in SETS' order): panels, images, each row's mean PSNR, both models' drops
     against their own default-panel PSNR (None without a default row) and randomized − fixed."""
-    out = []
+    out, keys = [], present(rows)
+    models = [k for k in keys if k in MODELS]
     for s in SETS:
         mine = [r for r in rows if r["set"] == s]
         if not mine:
             continue
         row = {"set": s, "panels": len(mine), "images": mine[0]["images"]}
-        for k in ROWS:
+        for k in keys:
             for tail in ("", "_level"):
                 row[f"psnr_{k}{tail}_db"] = float(np.mean([r[f"psnr_{k}{tail}_db"] for r in mine]))
         out.append(row)
     base = next((r for r in out if r["set"] == "default"), None)
     for row in out:
         for tail in ("", "_level"):
-            for k in MODELS:
+            for k in models:
                 key = f"psnr_{k}{tail}_db"
                 row[f"drop_{k}{tail}_db"] = None if base is None else row[key] - base[key]
             row[f"randomized_minus_fixed{tail}_db"] = row[f"psnr_randomized{tail}_db"] - row[f"psnr_fixed{tail}_db"]
+            if "conditioned" in models:
+                row[f"conditioned_minus_randomized{tail}_db"] = (row[f"psnr_conditioned{tail}_db"]
+                                                                 - row[f"psnr_randomized{tail}_db"])
     return out
 
 
@@ -115,6 +134,9 @@ def markdown(result: dict) -> str:
              "noise' is the same on the captures without the sensor's noise, fixed-pattern noise and defects.", "",
              *budget_text(result["budget"], result["times"], train, rows),
              "", "## PSNR (dB) and drops", ""]
+    if "conditioned" in present(rows):
+        lines[2] += (" A third model, conditioned on the panel's description (restore.models_conditioned), trained "
+                     "like the randomized UNet, restores each test panel with that panel's own description.")
     lines += psnr_table(summary, "")
     lines += ["", "## Level-matched PSNR (dB) and drops", "",
               "Each channel of each output (and of the input) scaled by its least-squares gain onto the truth "
@@ -128,10 +150,8 @@ def markdown(result: dict) -> str:
                           for k, t in train.items() if t.get("val_psnr_db") is not None) + ".",
               "", "## Every panel", ""]
     pcols = [("set", "set"), ("panel", "panel"), ("family", "family"), ("distance_mm", "d (mm)"),
-             ("psnr_input_db", "input"), ("psnr_dep_db", DEP), ("psnr_dep_noiseless_db", QUIET),
-             ("psnr_fixed_db", MODELS["fixed"]), ("psnr_randomized_db", MODELS["randomized"])]
-    lines += md_table(rows, pcols, {"psnr_input_db": two, "psnr_dep_db": two, "psnr_dep_noiseless_db": two,
-                                    "psnr_fixed_db": two, "psnr_randomized_db": two,
+             *((f"psnr_{k}_db", ROWS[k]) for k in present(rows))]
+    lines += md_table(rows, pcols, {**{f"psnr_{k}_db": two for k in present(rows)},
                                     "distance_mm": lambda v: f"{v:.2f}"})
     return "\n".join(lines) + "\n"
 
@@ -143,11 +163,15 @@ def psnr_table(summary: list[dict], tail: str) -> list[str]:
             (f"psnr_fixed{tail}_db", MODELS["fixed"]), (f"drop_fixed{tail}_db", "drop"),
             (f"psnr_randomized{tail}_db", MODELS["randomized"]), (f"drop_randomized{tail}_db", "drop"),
             (f"randomized_minus_fixed{tail}_db", "randomized − default")]
+    if summary and f"psnr_conditioned{tail}_db" in summary[0]:
+        cols += [(f"psnr_conditioned{tail}_db", MODELS["conditioned"]), (f"drop_conditioned{tail}_db", "drop"),
+                 (f"conditioned_minus_randomized{tail}_db", "conditioned − randomized")]
     return md_table(summary, cols, {"set": lambda s: SETS[s], f"psnr_input{tail}_db": two, f"psnr_dep{tail}_db": two,
-                                    f"psnr_dep_noiseless{tail}_db": two,
-                                    f"psnr_fixed{tail}_db": two, f"psnr_randomized{tail}_db": two,
+                                    f"psnr_dep_noiseless{tail}_db": two, f"psnr_fixed{tail}_db": two,
+                                    f"psnr_randomized{tail}_db": two, f"psnr_conditioned{tail}_db": two,
                                     f"drop_fixed{tail}_db": db, f"drop_randomized{tail}_db": db,
-                                    f"randomized_minus_fixed{tail}_db": db})
+                                    f"drop_conditioned{tail}_db": db, f"randomized_minus_fixed{tail}_db": db,
+                                    f"conditioned_minus_randomized{tail}_db": db})
 
 
 def plot(summary: list[dict], path: Path) -> None:
@@ -157,15 +181,17 @@ def plot(summary: list[dict], path: Path) -> None:
     fig, (ax, cx, bx) = plt.subplots(1, 3, figsize=(19, 4))
     x = np.arange(len(summary))
     labels = [SHORT[r["set"]] for r in summary]
-    w = 0.8 / len(ROWS)
-    for i, k in enumerate(ROWS):
-        at = x + (i - (len(ROWS) - 1) / 2) * w
+    keys = [k for k in ROWS if f"psnr_{k}_db" in summary[0]]
+    models = [k for k in keys if k in MODELS]
+    w, wd = 0.8 / len(keys), 0.76 / len(models)
+    for i, k in enumerate(keys):
+        at = x + (i - (len(keys) - 1) / 2) * w
         ax.bar(at, [r[f"psnr_{k}_db"] for r in summary], w, label=ROWS[k], color=COLOURS[k])
         cx.bar(at, [r[f"psnr_{k}_level_db"] for r in summary], w, label=ROWS[k], color=COLOURS[k])
-    for i, k in enumerate(MODELS):
-        bx.bar(x + (i - 0.5) * 0.38, [r[f"drop_{k}_db"] or 0.0 for r in summary], 0.38, label=MODELS[k],
-               color=COLOURS[k])
-    top = 1.3 * max(r[f"psnr_{k}{t}_db"] for r in summary for k in ROWS for t in ("", "_level"))
+    for i, k in enumerate(models):
+        bx.bar(x + (i - (len(models) - 1) / 2) * wd, [r[f"drop_{k}_db"] or 0.0 for r in summary], wd,
+               label=MODELS[k], color=COLOURS[k])
+    top = 1.3 * max(r[f"psnr_{k}{t}_db"] for r in summary for k in keys for t in ("", "_level"))
     ax.set_ylim(0, top)  # room for the legend
     cx.set_ylim(0, top)
     bx.axhline(0, color="k", lw=0.8)
@@ -184,10 +210,10 @@ def plot(summary: list[dict], path: Path) -> None:
 
 def write_report(out: Path, result: dict) -> None:
     """study_robustness.csv, .md and .png in `out`; every score must be finite."""
-    bad = [(r["set"], r["panel"], k) for r in result["rows"] for k in ROWS for t in ("", "_level")
+    bad = [(r["set"], r["panel"], k) for r in result["rows"] for k in present(result["rows"]) for t in ("", "_level")
            if not math.isfinite(r[f"psnr_{k}{t}_db"])]
     if bad:
         raise UdcError(f"study robustness: non-finite PSNR for {bad[0]} (and {len(bad) - 1} more)")
     summary = summary_rows(result["rows"])
-    write_tables(Path(out), "study_robustness", summary, COLUMNS, markdown(result))
+    write_tables(Path(out), "study_robustness", summary, columns(result["rows"]), markdown(result))
     plot(summary, Path(out) / "study_robustness.png")

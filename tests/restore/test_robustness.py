@@ -111,7 +111,7 @@ def fake_scoring(monkeypatch, tmp_path):
 
     def score_panel(models, bank, index, images):
         calls.append(bank.panels[index].name)
-        scores = {k: [float(len(models[k])) if k in MODELS else 10.0] for k in ROWS}
+        scores = {k: [float(len(models[k])) if k in MODELS else 10.0] for k in ROWS if k not in MODELS or k in models}
         return {**scores, **{f"{k}_level": v for k, v in scores.items()}}
     monkeypatch.setattr(R, "load_model", lambda path, device: (path.read_bytes(), {}))
     monkeypatch.setattr(R, "clean_images", lambda data, split: [])
@@ -166,3 +166,58 @@ def test_another_budgets_clean_images_are_refused_in_one_line(tmp_path):
         with pytest.raises(UdcError, match="another budget's clean images") as e:
             write_clean_images(folder, other)
         assert says in str(e.value) and "\n" not in str(e.value)
+
+
+def test_the_conditioned_model_is_scored_with_each_panels_own_description(tmp_path, monkeypatch):
+    """score_panel beside the two UNets, on untrained tiny weights (mechanics only): the conditioned model restores
+    every image of a panel with describe_panel of that panel on the bank's frame, in its kernel window; a model
+    made for another frame is refused in one line; the report adds its columns."""
+    import torch
+
+    from restore.conditioning import described_spec, description_tensors
+    from restore.models import build_model
+    from restore.models_conditioned import WienerUNet
+    from restore.online import CleanImage
+    from restore.studies.robustness import score_panel
+    from restore.studies.robustness_report import CONDITIONED_COLUMNS
+    from tests.restore.test_models_conditioned import TINY_9, _bank
+    from udc_render.dataset.bank import read_bank
+    from udc_render.description import DescriptionError
+    from udc_render.description.make import describe_panel
+    bank = read_bank(_bank(tmp_path, frame_px=(64, 32)))
+    rng = np.random.default_rng(0)
+    images = [CleanImage(f"im{i}", rng.uniform(0.1, 0.8, (3, 32, 64)).astype(np.float32)) for i in range(2)]
+    torch.manual_seed(0)
+    models = {"fixed": build_model({"type": "unet", "width": 4, "depth": 2}).eval(),
+              "randomized": build_model({"type": "unet", "width": 4, "depth": 2}).eval(),
+              "conditioned": build_model(TINY_9).eval()}
+    seen, forward = [], WienerUNet.forward
+
+    def spy(self, x, description):
+        seen.append({k: v.clone() for k, v in description.items()})
+        return forward(self, x, description)
+    monkeypatch.setattr(WienerUNet, "forward", spy)
+    scores = score_panel(models, bank, 1, images)
+    want = description_tensors([describe_panel(bank.panels[1], (64, 32), kernel_px=9)])
+    assert len(seen) == 2 and all(torch.equal(d[k], want[k]) for d in seen for k in want)
+    assert {"conditioned", "conditioned_level", "fixed", "randomized"} <= set(scores)
+    assert all(len(v) == 2 and all(map(math.isfinite, v)) for v in scores.values())
+    models["conditioned"].set_description_spec(described_spec([describe_panel(bank.panels[0], (96, 64), 9)]))
+    with pytest.raises(DescriptionError) as e:
+        score_panel(models, bank, 0, images)
+    assert "\n" not in str(e.value) and "frame" in str(e.value)
+    rows = [dict(_row(s, f"p_{s}", 10.0, 20.0, 19.0), psnr_conditioned_db=21.0 + i, psnr_conditioned_level_db=22.0 + i)
+            for i, s in enumerate(SETS)]
+    write_report(tmp_path / "report", _result(rows))
+    with open(tmp_path / "report" / "study_robustness.csv") as f:
+        table = list(csv.DictReader(f))
+    assert list(table[0]) == COLUMNS + CONDITIONED_COLUMNS
+    assert float(table[6]["drop_conditioned_db"]) == 6.0 and float(table[6]["conditioned_minus_randomized_db"]) == 8.0
+    assert "conditioned − randomized" in (tmp_path / "report" / "study_robustness.md").read_text()
+
+
+def test_conditioned_is_refused_in_one_line_for_another_study(tmp_path, capsys):
+    from udc_render.cli import main
+    assert main(["study", "psf", "--conditioned", "--out", str(tmp_path / "s")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--conditioned: only `study robustness`" in err and not (tmp_path / "s").exists()

@@ -5,6 +5,7 @@ robustness of a restorer trained on one panel or on randomized panels (restore.s
 from __future__ import annotations
 
 import argparse
+from functools import partial
 from pathlib import Path
 
 from udc_render.cli.args import UserError, add_display_argument, out_dir, positive
@@ -56,6 +57,9 @@ def register(sub) -> None:
     s.add_argument("--out", type=Path, default=Path("out/study"),
                    help="output folder: study_<what>.csv, .md, .png [out/study]")
     s.add_argument("--quick", action="store_true", help="a reduced grid (smoke run)")
+    s.add_argument("--conditioned", action="store_true",
+                   help="robustness only: also train the restorer conditioned on the panel's description "
+                        "(wiener-unet) on the randomized panels and score it with each test panel's own")
     s.add_argument("--images", type=image_files, default=(),
                    help="gap only: image files (comma-separated, or a folder searched for .png/.jpg/.tif) scored "
                         "beside the dead leaves, e.g. DIV2K's validation photographs [none]")
@@ -80,6 +84,8 @@ def run(args) -> int:
         raise UserError(f"--frame {args.frame}: only `study layout` takes a framing")
     if args.what != "layout" and args.distance_mm != 2.0:
         raise UserError(f"--distance-mm {args.distance_mm}: only `study layout` takes a distance")
+    if args.conditioned and args.what != "robustness":
+        raise UserError("--conditioned: only `study robustness` trains a conditioned restorer")
     if args.what == "layout":
         return _layout(args)
     out = out_dir(args.out)
@@ -101,6 +107,7 @@ def run(args) -> int:
         from udc_render.studies.design_knobs import run_study
     elif args.what == "robustness":
         from restore.studies.robustness import run_study
+        run_study = partial(run_study, conditioned=args.conditioned)
     elif args.what == "render":
         from udc_render.studies.render_knobs import run_study
     else:
