@@ -150,7 +150,7 @@ def markdown(result: dict) -> str:
                           for k, t in train.items() if t.get("val_psnr_db") is not None) + ".",
               "", "## Every panel", ""]
     pcols = [("set", "set"), ("panel", "panel"), ("family", "family"), ("distance_mm", "d (mm)"),
-             *((f"psnr_{k}_db", ROWS[k]) for k in present(rows))]
+             *((f"psnr_{k}_db", "input" if k == "input" else ROWS[k]) for k in present(rows))]
     lines += md_table(rows, pcols, {**{f"psnr_{k}_db": two for k in present(rows)},
                                     "distance_mm": lambda v: f"{v:.2f}"})
     return "\n".join(lines) + "\n"
