@@ -1,4 +1,4 @@
-"""`udc-render design --out DIR`: optimise a display cell for restorability (udc_render.design.optimise) and
+"""`udc-render design --out DIR`: search a binary display cell for restorability (udc_render.design.optimise) and
 write it as a display file every command takes; the same command resumes an interrupted run."""
 from __future__ import annotations
 
@@ -19,13 +19,18 @@ def register(sub) -> None:
     p.add_argument("--open-area", type=float, default=0.20, help="the open area, a fraction in (0, 1) [0.20]")
     p.add_argument("--tiling", choices=TILINGS, default="turned",
                    help="repeated: the cell tiled as it is; turned: each tile turned and mirrored at random "
-                        "(a fresh D4 draw per step) [turned]")
+                        "(one fixed D4 draw for the search, another held out for the scores) [turned]")
     p.add_argument("--objective", choices=OBJECTIVES, default="wiener",
                    help="wiener: the Wiener estimate's expected error under the sensor's noise; upc: UPC's "
                         "Wiener-response term (lowest 30 %% of |H|²/(|H|² + 0.015)) [wiener]")
-    p.add_argument("--steps", type=positive("--steps", int), default=150, help="Adam steps [150]")
-    p.add_argument("--lr", type=positive("--lr"), default=0.1, help="Adam's learning rate [0.1]")
-    p.add_argument("--seed", type=int, default=0, help="seed of the initial cell and the tilings [0]")
+    p.add_argument("--steps", type=positive("--steps", int), default=150,
+                   help="at most this many swaps of an open and an opaque square; the search stops earlier at a "
+                        "local optimum [150]")
+    p.add_argument("--candidates", type=positive("--candidates", int), default=40,
+                   help="swaps scored exactly per step, the most promising by the gradient first [40]")
+    p.add_argument("--scatters", type=positive("--scatters", int), default=20,
+                   help="random scatters at the same open area scored beside the design, the baseline [20]")
+    p.add_argument("--seed", type=int, default=0, help="seed of the initial cell, the scatters and the tilings [0]")
     p.add_argument("--pupil-samples", type=positive("--pupil-samples", int), default=512,
                    help="pupil samples across the aperture of the objective's kernels [512]")
     p.add_argument("--kernel-px", type=positive("--kernel-px", int), default=127,
@@ -40,10 +45,13 @@ def run(args) -> int:
     from udc_render.design.job import run_design
     from udc_render.design.optimise import DesignConfig
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
-                          args.lr, args.seed, args.pupil_samples, args.kernel_px)
+                          args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
-    f = doc["final"]
-    print(f"open area {f['open_area']:.4f} ({doc['open_squares']} of {doc['cell_px']}² squares), objective "
-          f"{f['objective']:.4g}; wrote {out}/design.toml, cell.png, design.json, design_loss.png")
+    f, b = doc["final"], doc["scatters"]
+    unit = " dB" if b["key"] == "psnr_db" else ""
+    print(f"open area {f['open_area']:.4f} ({doc['open_squares']} of {doc['cell_px']}² squares), {b['key']} "
+          f"{f[b['key']]:.4g}{unit} after {doc['steps_done']} steps{' (converged)' if doc['converged'] else ''}; "
+          f"{b['n']} random scatters {b['mean']:.4g} ± {b['std']:.2g}{unit}, the best {b['best']:.4g}{unit}, margin "
+          f"{b['margin']:.3g}{unit}; wrote {out}/design.toml, cell.png, design.json, design_loss.png")
     return 0

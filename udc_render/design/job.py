@@ -1,14 +1,17 @@
 """One `udc-render design` run in an output folder: resumable (design_state.pt, written atomically every
 CHECKPOINT_STEPS steps and at the end), a progress bar, and what it writes:
 
-    design_state.pt   the checkpoint (settings, θ, Adam, losses): the same command resumes it
+    design_state.pt   the checkpoint (settings, the cell, its objective, the record): the same command resumes it
     cell.png          the designed cell, 0 / 255 (one pixel per feature square)
     design.toml       a display file of the cell repeated ([display.layout] type = "micrograph", gain 1 / open
                       area): every command takes it (psf, synth, dataset, bank, train, study layout)
     design_turned.toml  with --tiling turned: the cell with the engine's random quarter-turns per tile
-                      (tile_rotation; the engine turns without mirroring, the optimiser drew the 8 D4 elements)
-    design.json       the settings, the final cell's scores, the loss curve
-    design_loss.png   the loss curve
+                      (tile_rotation; the engine turns without mirroring, the search's tilings draw the 8 D4 elements)
+    design.json       the settings, the record, and in the same run on the held-out tiling: the designed cell's and
+                      the initial scatter's scores, N random scatters at the same open area (their spread, the best,
+                      the margin of the design over it), and UPC's mean ring minima of the designed cell and of the
+                      T-OLED at the same open area in the same cell (slit at the tile's edge), turned and repeated
+    design_loss.png   the objective's PSNR against the step, the scatters' spread beside it
 """
 from __future__ import annotations
 
@@ -20,10 +23,10 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from udc_render.design.optimise import DesignConfig, Designer
+from udc_render.design.optimise import DesignConfig, Designer, scatter
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 
-__all__ = ["CHECKPOINT_STEPS", "run_design"]
+__all__ = ["CHECKPOINT_STEPS", "run_design", "scatter_baseline", "upc_comparison"]
 
 CHECKPOINT_STEPS = 10
 
@@ -40,26 +43,63 @@ def _display_toml(name: str, image: str, pixel_um: float, open_area: float, turn
             f'type = "micrograph"\nfile = "{image}"\npixel_um = {pixel_um!r}\nvalues = "amplitude"\n{turns}')
 
 
-def _loss_figure(losses: list, out: Path) -> None:
+def scatter_baseline(designer: Designer, design: dict) -> dict:
+    """N random scatters of the same open squares (streams 'design', 'scatter', k), scored as the design is (held-
+    out tiling, float64): their objectives, mean, standard deviation, best, and the design's margin over the best
+    (in dB for 'wiener', in the objective's units otherwise; positive: the design is better)."""
+    scores = [designer.score(scatter(designer.config, "scatter", k)) for k in range(designer.config.scatters)]
+    key = "psnr_db" if designer.config.objective == "wiener" else "objective"
+    values = np.array([s[key] for s in scores])
+    best = float(values.max() if key == "psnr_db" else values.min())
+    margin = design[key] - best if key == "psnr_db" else best - design[key]
+    return {"n": len(scores), "key": key, "values": values.tolist(), "mean": float(values.mean()),
+            "std": float(values.std(ddof=1)) if len(values) > 1 else 0.0, "best": best, "margin": float(margin)}
+
+
+def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
+    """UPC's mean ring minima (R / G / B, their sampling) of the designed cell and of the preset T-OLED at the same
+    open area in the same cell, its slit at the tile's edge (the framing that reproduces their turned baseline),
+    turned (D4 tiles, seed config.seed) and repeated, each cell taken to 21 × 21 as `study layout` takes it; the
+    designed / T-OLED ratios."""
+    from psf import layouts
+    from udc_render.design import metrics, torch_psf as tp, upc
+    from udc_render.studies.layout import RINGS, frame_cell, layout_cell, upc_cell
+    toled, _ = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
+    cells = {"design": upc_cell(cell), "toled_edge": upc_cell(frame_cell(toled, "edge"))}
+    out = {}
+    for tiling, seed in (("turned", config.seed), ("repeated", None)):
+        turns = tp.tile_transforms(upc.tiles_for(upc.grid_sizes()[0]), seed)
+        with torch.no_grad():
+            minima = {name: metrics.ring_summary(upc.psf(torch.tensor(c), turns).numpy(), RINGS)["mean_of_ring_minima"]
+                      for name, c in cells.items()}
+        ratio = np.divide(minima["design"], minima["toled_edge"])
+        out[tiling] = {**minima, "ratio": ratio.tolist(), "ratio_mean": float(ratio.mean())}
+    return out
+
+
+def _loss_figure(doc: dict, out: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6, 4))
-    steps = [r["step"] for r in losses]
-    ax.plot(steps, [r["loss"] for r in losses], label="loss")
-    ax.plot(steps, [r["objective"] for r in losses], label="objective")
-    ax.set_yscale("symlog", linthresh=1e-4)
-    ax.set_xlabel("step")
-    ax.legend()
+    wiener = doc["config"]["objective"] == "wiener"
+    values = [doc["initial"]["search_objective"]] + [r["objective"] for r in doc["losses"]]
+    ax.plot(np.arange(len(values)), -10 * np.log10(values) if wiener else values, label="the search (its tiling)")
+    base = doc["scatters"]
+    ax.axhspan(base["mean"] - base["std"], base["mean"] + base["std"], color="C3", alpha=0.2,
+               label=f"{base['n']} random scatters: mean ± sd (held-out tiling)")
+    ax.axhline(base["best"], color="C3", label="the best scatter")
+    ax.plot([len(values) - 1], [doc["final"]["psnr_db" if wiener else "objective"]], "ko", label="the design, held out")
+    ax.set_xlabel("step (accepted swaps)")
+    ax.set_ylabel("Wiener PSNR (dB)" if wiener else "UPC objective")
+    ax.legend(fontsize=8)
     save_figure(fig, out / "design_loss.png")
     plt.close(fig)
 
 
-def _write(designer: Designer, out: Path) -> dict:
+def _write(designer: Designer, out: Path, compare: bool) -> dict:
     cfg = designer.config
-    cell = designer.final_cell()
-    with torch.no_grad():
-        _, scores = designer.objective(torch.tensor(cell, device=designer.device), designer.transforms(None))
+    cell = designer.cell
     with atomic_path(out / "cell.png") as tmp:
         iio.imwrite(tmp, (cell * 255).astype(np.uint8), extension=".png")
     open_area = float(cell.mean())
@@ -67,24 +107,32 @@ def _write(designer: Designer, out: Path) -> dict:
     if cfg.tiling == "turned":
         save_text(out / "design_turned.toml", _display_toml("design_turned", "cell.png", cfg.feature_um, open_area,
                                                             True, cfg.seed))
-    doc = {"config": asdict(cfg), "final": scores, "open_squares": int(cell.sum()), "cell_px": cfg.cell_px,
-           "losses": designer.losses}
+    initial = scatter(cfg, "init")
+    final = designer.score(cell)
+    doc = {"config": asdict(cfg), "final": final, "search_objective": designer.current,
+           "initial": {**designer.score(initial), "search_objective": designer.search_score(initial),
+                       "squares_moved": int(np.sum(initial != cell) // 2)},
+           "scatters": scatter_baseline(designer, final), "upc": upc_comparison(cell, cfg) if compare else None,
+           "open_squares": int(cell.sum()), "cell_px": cfg.cell_px, "steps_done": designer.step_done,
+           "converged": designer.converged, "evaluations": designer.evaluations, "losses": designer.losses}
     save_json(out / "design.json", doc)
-    _loss_figure(designer.losses, out)
+    _loss_figure(doc, out)
     return doc
 
 
-def run_design(config: DesignConfig, out: Path, device: str = "cpu", quiet: bool = False) -> dict:
-    """Optimise (resuming design_state.pt when the folder holds this run) and write the module doc's files."""
+def run_design(config: DesignConfig, out: Path, device: str = "cpu", quiet: bool = False, compare: bool = True
+               ) -> dict:
+    """Search (resuming design_state.pt when the folder holds this run) and write the module doc's files (compare:
+    False leaves out UPC's comparison, a few seconds)."""
     designer = Designer(config, device=device)
     state_path = out / "design_state.pt"
     if state_path.is_file():
         designer.load(torch.load(state_path, weights_only=False))
     with tqdm(total=config.steps, initial=designer.step_done, disable=quiet, desc="design") as bar:
-        while designer.step_done < config.steps:
+        while not designer.finished:
             rec = designer.step()
             bar.update(1)
-            bar.set_postfix(loss=f"{rec['loss']:.3g}", open=f"{rec['open_area']:.3f}")
-            if designer.step_done % CHECKPOINT_STEPS == 0 or designer.step_done == config.steps:
+            bar.set_postfix(objective=f"{rec['objective']:.4g}", tried=rec["tried"])
+            if designer.finished or designer.step_done % CHECKPOINT_STEPS == 0:
                 _save_state(designer, state_path)
-    return _write(designer, out)
+    return _write(designer, out, compare)

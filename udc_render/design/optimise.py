@@ -1,17 +1,28 @@
-"""`udc-render design`: optimise a display cell for restorability (issue 48), through the differentiable PSF.
+"""`udc-render design`: optimise a binary display cell for restorability (issue 48), through the differentiable PSF.
 
-The cell is c × c squares of the minimum feature size (c = cell_um / feature_um), each with transmission
-a = sigmoid(β θ), β annealed geometrically from 1 to BETA_MAX so that the cell ends binary; the last step
-projects it: the round(open_fraction · c²) most open squares open, the rest opaque (the open area exact to one
-square). Every open or opaque feature is then a union of whole squares: none is smaller than feature_um.
+The cell is c × c squares of the minimum feature size (c = cell_um / feature_um), each open (amplitude 1) or
+opaque, with K = round(open_fraction · c²) open: every opening and every opaque bar is a union of whole squares, so
+none is smaller than feature_um, and the open area is exact to one square. The search starts from a random scatter
+of K squares (udc_render.streams) and moves by swaps of an open and an opaque square, which keep K:
 
-Objective, on the exact kernels of the paper's rig (psf.Lens(), 3.1 µm pixels, 640 / 520 / 450 nm) with the
-cell tiled plainly or, each step, by a fresh random D4 tiling (udc_render.streams):
+    each step: g = ∂J/∂a at the current binary cell (one backward pass, the transmission held at K / c²);
+    the swap (close i, open j) changes J by ≈ g_j − g_i to first order; the `candidates` swaps of lowest
+    predicted change are scored exactly, in that order, and the first that lowers J is taken;
+    none lowers J: a local optimum of this neighbourhood, and the run stops early (converged).
+
+Why not a relaxation: a sigmoid-relaxed cell's optimum is a uniform grey cell (an attenuator that does not
+diffract: 37.0 dB against 27.8 dB for a binary scatter at 20 %), so the gradient of a relaxed cell flattens its
+transmissions instead of reordering them, and projecting back to binary returns the initial scatter (the former
+Adam optimiser: 8 of 441 squares moved in 150 steps, 0.001 dB; docs/guides/design.md).
+
+Objective J, on the exact kernels of the paper's rig (psf.Lens(), 3.1 µm pixels, 640 / 520 / 450 nm), the cell
+tiled plainly or by one fixed random D4 tiling (the search's; the final scores take another: held out):
 - 'wiener' (default): the mean over channels of the Wiener estimate's expected error under a 1/f² scene and the
-  sensor's shot and read noise at the cell's own transmission (udc_render.design.metrics);
+  sensor's shot and read noise at the cell's transmission K / c² (udc_render.design.metrics);
 - 'upc': UPC's first term, −0.01 × the mean of the lowest 30 % of |H|² / (|H|² + 0.015) (their image L2 term,
-  which needs an image set, is left out);
-plus OPEN_WEIGHT (open area − target)² (UPC's weight 10).
+  which needs an image set, is left out; their open-area term is met exactly by the swaps).
+The search scores in float32 (a swap is taken only if it lowers J by more than IMPROVE_REL of J, well above
+float32's rounding); every reported score is float64.
 
 Minimum feature size: DEFAULT_FEATURE_UM = 8 µm, UPC's pupil sampling (so the design is scored in their mode),
 5× the 1.5 µm that LTPS backplane lithography patterns (Azores Corp., "Flat Panel Display Applications": LTPS
@@ -19,7 +30,6 @@ feature sizes down to 1.5 µm, amorphous silicon 3 to 5 µm). Smaller features d
 """
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -31,11 +41,9 @@ from udc_render.design.options import DEFAULT_FEATURE_UM, LITHOGRAPHY_UM, OBJECT
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
 
-__all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "DesignConfig", "Designer", "project"]
+__all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig", "Designer", "scatter"]
 
-BETA_MAX = 32.0
-OPEN_WEIGHT = 10.0
-ADAM_BETAS = (0.9, 0.999)
+IMPROVE_REL = 1e-5
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
 
 
@@ -48,10 +56,11 @@ class DesignConfig:
     tiling: str = "turned"
     objective: str = "wiener"
     steps: int = 150
-    lr: float = 0.1
+    candidates: int = 40
     seed: int = 0
     pupil_samples: int = 512
     kernel_px: int = 127
+    scatters: int = 20
 
     def __post_init__(self):
         if not 0 < self.open_fraction < 1:
@@ -69,25 +78,29 @@ class DesignConfig:
         for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES)):
             if getattr(self, key) not in allowed:
                 raise tp.DesignError(f"--{key} {getattr(self, key)}: expected one of {', '.join(allowed)}")
-        if not (isinstance(self.steps, int) and self.steps >= 1 and self.lr > 0):
-            raise tp.DesignError(f"--steps {self.steps} / --lr {self.lr}: expected ≥ 1 step and a rate > 0")
+        for key in ("steps", "candidates", "scatters"):
+            if not (isinstance(getattr(self, key), int) and getattr(self, key) >= 1):
+                raise tp.DesignError(f"--{key} {getattr(self, key)}: expected an integer ≥ 1")
 
     @property
     def cell_px(self) -> int:
         return round(self.cell_um / self.feature_um)
 
+    @property
+    def open_squares(self) -> int:
+        return round(self.open_fraction * self.cell_px ** 2)
 
-def project(a: np.ndarray, open_fraction: float) -> np.ndarray:
-    """The binary cell with the round(open_fraction · c²) largest transmissions open (ties by position)."""
-    flat = np.asarray(a, np.float64).ravel()
-    keep = np.argsort(-flat, kind="stable")[: round(open_fraction * flat.size)]
-    out = np.zeros(flat.size)
-    out[keep] = 1.0
-    return out.reshape(np.shape(a))
+
+def scatter(config: DesignConfig, *keys) -> np.ndarray:
+    """A random binary cell of config.open_squares open squares, from stream(seed, 'design', *keys)."""
+    c = config.cell_px
+    flat = np.zeros(c * c)
+    flat[stream(config.seed, "design", *keys).permutation(c * c)[: config.open_squares]] = 1.0
+    return flat.reshape(c, c)
 
 
 class Designer:
-    """The objective and one optimisation step; state (θ, Adam, the losses) is what a checkpoint keeps."""
+    """The objective and one search step; state (the cell, its objective, the record) is what a checkpoint keeps."""
 
     def __init__(self, config: DesignConfig, sensor: SensorConfig | None = None, device: str = "cpu"):
         self.config, self.sensor, self.device = config, sensor or SensorConfig(), device
@@ -95,73 +108,87 @@ class Designer:
                                  config.kernel_px, config.pupil_samples)
         variance = (metrics.RMS_CONTRAST * metrics.MEAN_LEVEL) ** 2
         self.signal = torch.tensor(metrics.natural_spectrum(config.kernel_px, variance), device=device)
-        root = math.sqrt(config.open_fraction)  # mean a² ≈ the open area at the start (β = 1)
-        target = math.log(root / (1 - root))
-        init = stream(config.seed, "design", "init").normal(0.0, 0.5, (config.cell_px,) * 2) + target
-        self.theta = torch.tensor(init, device=device, requires_grad=True)
-        self.moments = [torch.zeros_like(self.theta), torch.zeros_like(self.theta)]
-        self.step_done, self.losses = 0, []
+        self.transmission = config.open_squares / config.cell_px ** 2
+        self.noise = metrics.noise_variance(self.sensor, metrics.MEAN_LEVEL, self.transmission)
+        self.cell = scatter(config, "init")
+        self.current = self.search_score(self.cell)
+        self.step_done, self.converged, self.evaluations, self.losses = 0, False, 1, []
 
-    def beta(self, step: int) -> float:
-        return BETA_MAX ** (step / max(self.config.steps - 1, 1))
-
-    def transforms(self, step: int | None):
-        """A fresh D4 tiling per step (turned), the final one for the evaluation (step None)."""
+    def transforms(self, which: str):
+        """The search's fixed D4 tiling ('search') or the held-out one of the final scores ('final')."""
         if self.config.tiling == "repeated":
             return None
-        return tp.tile_transforms(self.grid.tiles, self.config.seed, keys=("design", "final" if step is None else step))
+        return tp.tile_transforms(self.grid.tiles, self.config.seed, keys=("design", which))
 
-    def objective(self, cell: torch.Tensor, transforms) -> tuple[torch.Tensor, dict]:
-        """(loss, its parts as floats) of a cell of transmissions (module doc)."""
+    def objective(self, cell: torch.Tensor, transforms) -> torch.Tensor:
+        """J of a cell of amplitudes (module doc), at the transmission K / c² (the swaps keep it)."""
         k = tp.kernels(cell, self.grid, transforms)
         h = torch.fft.fft2(torch.fft.ifftshift(k, dim=(-2, -1)))
-        t = (cell ** 2).mean()
         if self.config.objective == "wiener":
-            noise = metrics.noise_variance(self.sensor, metrics.MEAN_LEVEL, t)
-            main = torch.stack([metrics.wiener_mse(hc, self.signal, noise, t) for hc in h]).mean()
-        else:
-            w = (h.abs() ** 2 / (h.abs() ** 2 + 0.015)).flatten()
-            main = -0.01 * torch.topk(w, int(0.3 * w.numel()), largest=False).values.mean()
-        penalty = OPEN_WEIGHT * (t - self.config.open_fraction) ** 2
-        return main + penalty, {"objective": float(main.detach()), "open_penalty": float(penalty.detach()),
-                                "open_area": float(t.detach())}
+            signal = self.signal.to(cell.dtype)
+            return torch.stack([metrics.wiener_mse(hc, signal, self.noise, self.transmission) for hc in h]).mean()
+        w = (h.abs() ** 2 / (h.abs() ** 2 + 0.015)).flatten()
+        return -0.01 * torch.topk(w, int(0.3 * w.numel()), largest=False).values.mean()
+
+    def score(self, cell: np.ndarray, which: str = "final") -> dict:
+        """The float64 objective of a binary cell on the held-out ('final') or the search's tiling, with its PSNR
+        (wiener: −10 log10 J) and open area."""
+        with torch.no_grad():
+            j = float(self.objective(torch.tensor(cell, dtype=torch.float64, device=self.device),
+                                     self.transforms(which)))
+        psnr = float(-10 * np.log10(j)) if self.config.objective == "wiener" else None
+        return {"objective": j, "psnr_db": psnr, "open_area": float(np.mean(cell))}
+
+    def search_score(self, cell: np.ndarray) -> float:
+        with torch.no_grad():
+            return float(self.objective(torch.tensor(cell, dtype=torch.float32, device=self.device),
+                                        self.transforms("search")))
+
+    def _predicted(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(open squares, opaque squares, predicted change [open, opaque] of each swap: g_j − g_i)."""
+        x = torch.tensor(self.cell, dtype=torch.float32, device=self.device, requires_grad=True)
+        self.objective(x, self.transforms("search")).backward()
+        g = x.grad.double().cpu().numpy().ravel()
+        flat = self.cell.ravel()
+        opened, closed = np.flatnonzero(flat > 0.5), np.flatnonzero(flat < 0.5)
+        return opened, closed, g[closed][None, :] - g[opened][:, None]
 
     def step(self) -> dict:
-        s = self.step_done
-        self.theta.grad = None
-        loss, parts = self.objective(torch.sigmoid(self.beta(s) * self.theta), self.transforms(s))
-        loss.backward()
-        self._adam(self.theta.grad, s + 1)
+        """One step (module doc): the first improving swap among the candidates, or converged."""
+        opened, closed, predicted = self._predicted()
+        order = np.argsort(predicted, axis=None, kind="stable")[: self.config.candidates]
+        rec = {"step": self.step_done, "swap": None, "tried": 0}
+        for idx in order:
+            i, j = np.unravel_index(idx, predicted.shape)
+            trial = self.cell.ravel().copy()
+            trial[opened[i]], trial[closed[j]] = 0.0, 1.0
+            value = self.search_score(trial.reshape(self.cell.shape))
+            rec["tried"] += 1
+            if value < self.current - IMPROVE_REL * abs(self.current):
+                self.cell, self.current = trial.reshape(self.cell.shape), value
+                rec["swap"] = [int(opened[i]), int(closed[j])]
+                break
+        self.evaluations += rec["tried"] + 1
+        self.converged = rec["swap"] is None
         self.step_done += 1
-        self.losses.append({"step": s, "loss": float(loss.detach()), **parts})
-        return self.losses[-1]
+        rec["objective"] = self.current
+        self.losses.append(rec)
+        return rec
 
-    def _adam(self, grad: torch.Tensor, t: int) -> None:
-        """Adam (Kingma & Ba 2015, Algorithm 1; β = 0.9, 0.999, ε = 1e-8): written out, so that neither the run
-        nor its tests pay torch.optim's first-use import of torch._dynamo (seconds)."""
-        m, v = self.moments
-        m.mul_(ADAM_BETAS[0]).add_(grad, alpha=1 - ADAM_BETAS[0])
-        v.mul_(ADAM_BETAS[1]).addcmul_(grad, grad, value=1 - ADAM_BETAS[1])
-        m_hat, v_hat = m / (1 - ADAM_BETAS[0] ** t), v / (1 - ADAM_BETAS[1] ** t)
-        with torch.no_grad():
-            self.theta.sub_(self.config.lr * m_hat / (v_hat.sqrt() + 1e-8))
-
-    def final_cell(self) -> np.ndarray:
-        a = torch.sigmoid(BETA_MAX * self.theta).detach().cpu().numpy()
-        return project(a, self.config.open_fraction)
+    @property
+    def finished(self) -> bool:
+        return self.converged or self.step_done >= self.config.steps
 
     def state(self) -> dict:
-        return {"config": asdict(self.config), "theta": self.theta.detach().cpu(),
-                "moments": [t.cpu() for t in self.moments],
-                "step": self.step_done, "losses": self.losses}
+        return {"config": asdict(self.config), "cell": self.cell.copy(), "current": self.current,
+                "step": self.step_done, "converged": self.converged, "evaluations": self.evaluations,
+                "losses": self.losses}
 
     def load(self, state: dict) -> None:
         if state["config"] != asdict(self.config):
             changed = sorted(k for k, v in asdict(self.config).items() if state["config"].get(k) != v)
             raise tp.DesignError(f"the output folder holds a run with other settings ({', '.join(changed)}); "
                                  "use another --out or the same settings to resume")
-        with torch.no_grad():
-            self.theta.copy_(state["theta"].to(self.device))
-            for t, saved in zip(self.moments, state["moments"]):
-                t.copy_(saved.to(self.device))
-        self.step_done, self.losses = int(state["step"]), list(state["losses"])
+        self.cell, self.current = np.asarray(state["cell"], np.float64), float(state["current"])
+        self.step_done, self.converged = int(state["step"]), bool(state["converged"])
+        self.evaluations, self.losses = int(state["evaluations"]), list(state["losses"])

@@ -10,8 +10,9 @@ from udc_render.io.files import save_figure, save_json, save_text
 
 __all__ = ["COLUMNS", "markdown", "write"]
 
-COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "psnr_db", "error_psnr_db",
-           "error_ring_means_rel", "error_ring_minima_rel", "objective", "open_area", "cpu_s", "cpu_gradient_s"]
+COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "steps_done", "evaluations", "psnr_db",
+           "error_psnr_db", "error_ring_means_rel", "error_ring_minima_rel", "objective", "open_area", "cpu_s",
+           "cpu_gradient_s"]
 
 
 def _cell(v) -> str:
@@ -42,11 +43,13 @@ def markdown(doc: dict) -> str:
         lines.append(f"| {r['cell']} | {r['pupil_samples']} | {r['samples_per_cell']} | {_cell(r['psnr_db'])} | "
                      f"{r['error_psnr_db']:.2g} | {r['error_ring_means_rel']:.2g} | {r['error_ring_minima_rel']:.2g} | "
                      f"{r['cpu_s']:.2f} | {r['cpu_gradient_s']:.2f} |")
-    lines += ["", "## The optimiser's steps (each a run of its own; the final binary cell on the final tiling; 0: the "
-              "initial cell projected, a random scatter)", "",
-              "| steps | objective (mean Wiener MSE) | its PSNR (dB) | open area | CPU s |", "|---|---|---|---|---|"]
+    lines += ["", "## The search's steps (one run; its cell after each step count on the held-out tiling; 0: the "
+              "initial random scatter)", "",
+              "| steps | steps done | objective (mean Wiener MSE) | its PSNR (dB) | open area | exact scores | CPU s |",
+              "|---|---|---|---|---|---|---|"]
     for r in doc["steps"]:
-        lines.append(f"| {r['steps']} | {r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | "
+        lines.append(f"| {r['steps']} | {r['steps_done']}{' (converged)' if r['converged'] else ''} | "
+                     f"{r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | {r['evaluations']} | "
                      f"{r['cpu_s']:.0f} |")
     return "\n".join(lines) + "\n"
 
@@ -73,13 +76,14 @@ def _figure(doc: dict, out: Path) -> None:
     b.plot([r["steps"] for r in steps], [r["psnr_db"] for r in steps], "o-", label="designed")
     if doc["steps"][0]["steps"] == 0:
         b.axhline(doc["steps"][0]["psnr_db"], color="0.5", ls="--", label="0 steps: the initial random scatter")
+    b.plot([r["steps_done"] for r in steps], [r["psnr_db"] for r in steps], "x", color="C1", label="steps done")
     b.legend(fontsize=7)
     for r in steps:
         b.annotate(f"{r['cpu_s']:.0f} s", (r["steps"], r["psnr_db"]), fontsize=7)
     b.set_xscale("log")
     for axis in (a.xaxis, b.xaxis):
         axis.set_minor_formatter(NullFormatter())
-    b.set_xlabel("optimiser steps (CPU s beside each)")
+    b.set_xlabel("search steps, accepted swaps (CPU s beside each)")
     b.set_ylabel("final cell: Wiener PSNR (dB, mean MSE over R, G, B)")
     b.set_title("design: steps")
     save_figure(fig, out / "study_design.png")
