@@ -15,17 +15,24 @@ gives the medians, and each degradation's ratio to each step (medians, and in br
 
 --train: training itself, steps of the UNet (--autocast bf16|fp32) on batches degraded on the fly (restore.online
 .OnlineBatches: crops of two clean 2048 × 1024 images through the panels, drawn per crop) with the degradation in
-this process (workers 0) and in a DataLoader worker process (1), crop by crop on the CPU; on a GPU workers 1 is
-a thread on its own stream and a batch is degraded as one (the Degrader's defaults). Against the same steps on
-batches made beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median
-step times (each run's first step left out: a worker's start) less one. --device cuda: the steps and the
-degradation on the GPU (float32 panels), timed to a synchronize after each step. --capture-draws adds a run of
-workers 1 in which every crop draws its own sensor and exposure (restore.captures, `udc-render train
+this process (workers 0) and in a DataLoader worker process (1), crop by crop on the CPU; on a GPU workers 1 is a
+thread on its own stream and a batch is degraded as one (the Degrader's defaults). Against the same steps on batches
+made beforehand, the three runs alternating for --rounds rounds; the slowdown is the ratio of the median step times
+(each run's first step left out: a worker's start) less one, in wall time and in this process's CPU time (the
+degradation's CPU where it runs in this process; a load from other jobs stretches the wall time). --device cuda: the
+steps and the degradation on the GPU (float32 panels), timed to a synchronize after each step. --capture-draws adds
+a run of workers 1 in which every crop draws its own sensor and exposure (restore.captures, `udc-render train
 --capture-draws default`).
 
-Without --bank the panels are synthetic with the shapes of the default bank (kernels of --kernel-px, a T-OLED
-series of 453 × 200 orders, 4 × 4 phases, Poisson noise, defects, FPN): the cost depends on the shapes, not on
-the values. With --bank DIR its first d = 0 and first d > 0 panel are timed.
+Without --bank the panels are synthetic with the shapes of the default bank (kernels of --kernel-px, a T-OLED series
+of 453 × 200 orders, 4 × 4 phases, Poisson noise, defects, FPN): the cost depends on the shapes, not on the values.
+With --bank DIR its first d = 0 and first d > 0 panel are timed. --results-bank toled|poled: the results run's own
+bank (`udc-render results --budget cpu`'s UNet (randomized) row: restore.studies.random_row.bank_plan), its first
+--bank-panels panels (1: random_000) made once in out/bench_degrade/banks (resumable; random_000 took 4.7 min on the
+loaded 2-core machine) and all of them drawn from, as that run's crops are.
+
+--train --autocast both: the fp32 and the bf16 step in the same run, their rounds interleaved. The step is the
+results run's (restore.train.train_step with its gradient clip, 0.5, and lr 2e-4: BUDGETS['cpu']).
 
 --regions 1,2,3,4: what sharing one degraded region between t × t crops would save (a design not built: the
 10 % bound's candidate). Per panel, one region of t·crop px with its margins degraded as one crop on one thread,
@@ -68,6 +75,28 @@ def synthetic_panels(kernel_px: int, rank: int) -> list[Panel]:
     return [flat, Panel("d2", k, 1.55, (0.97,) * 3, sensor, DefectConfig(), FpnConfig(), field, {})]
 
 
+def results_bank(display: str, count: int) -> Path:
+    """The first `count` panels of the results run's bank for `display` (restore.studies.random_row.bank_plan at
+    BUDGETS['cpu']: the same specs and settings, so panel random_<i> is that run's), made or finished in
+    out/bench_degrade/banks/random_<display>; its folder."""
+    from restore.studies.budgets import BUDGETS
+    from restore.studies.random_row import bank_plan
+    from udc_render.dataset.bank_make import make_bank
+    plan = bank_plan(Path("out/bench_degrade"), BUDGETS["cpu"], display)
+    t0 = time.perf_counter()
+    made = make_bank(plan.folder, plan.specs[:count], plan.settings, plan.kernel_px, progress=False)["made"]
+    if made:
+        print(f"made {made} panel(s) of the results bank in {plan.folder}: {time.perf_counter() - t0:.0f} s")
+    return plan.folder
+
+
+def chosen_panels(a) -> list[Panel]:
+    """The panels timed: --results-bank's all, --bank's first d = 0 and d > 0, or the synthetic pair."""
+    if a.results_bank:
+        return read_bank(a.bank).panels
+    return bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
+
+
 def bank_panels(folder) -> list[Panel]:
     panels = read_bank(folder).panels
     flat = next((p for p in panels if p.field is None), None)
@@ -85,6 +114,9 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=7)
     ap.add_argument("--threads", type=int, help="torch threads [torch's default]")
     ap.add_argument("--bank", help="time this bank's panels instead of the synthetic ones")
+    ap.add_argument("--results-bank", choices=("toled", "poled"),
+                    help="the results run's bank of this display, its first --bank-panels panels (module doc)")
+    ap.add_argument("--bank-panels", type=int, default=1, help="--results-bank: how many of its panels [1]")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--degrade-threads", default="1,0",
                     help="the Degrader's CPU threads to time, comma-separated (0: torch's setting) [1,0]")
@@ -93,11 +125,13 @@ def main() -> None:
     ap.add_argument("--train", action="store_true", help="time training steps on online batches (module doc)")
     ap.add_argument("--steps", type=int, default=6, help="--train: steps per run [6]")
     ap.add_argument("--rounds", type=int, default=3, help="--train: rounds of the three runs [3]")
-    ap.add_argument("--autocast", choices=("bf16", "fp32"),
+    ap.add_argument("--autocast", choices=("bf16", "fp32", "both"),
                     help="the step's precision [--train: bf16; else both] (bf16 is 13× slower where it is emulated)")
     ap.add_argument("--capture-draws", action="store_true", help="--train: add a run with a capture per crop")
     ap.add_argument("--regions", help="t values, comma-separated: time t × t crops sharing one region (module doc)")
     a = ap.parse_args()
+    if a.results_bank:
+        a.bank = str(results_bank(a.results_bank, a.bank_panels))
     if a.train:
         a.autocast = a.autocast or "bf16"
         return train_runs(a)
@@ -107,7 +141,7 @@ def main() -> None:
         torch.set_num_threads(a.threads)
     dev = torch.device(a.device)
     w, h = (int(v) for v in a.frame.split(","))
-    panels = bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
+    panels = chosen_panels(a)
     degraders = {n: Degrader(panels, dev, threads=n or None) for n in (int(t) for t in a.degrade_threads.split(","))}
     deg = next(iter(degraders.values()))
     m, c = deg.margin_px, a.crop_px
@@ -127,7 +161,7 @@ def main() -> None:
     x = torch.rand(a.batch, 4, c // 2, c // 2, device=dev).to(memory_format=torch.channels_last)
     y = torch.rand(a.batch, 3, c, c, device=dev).to(memory_format=torch.channels_last)
     settings = {name: TrainSettings(model=UNET_CONFIG, display="bench", autocast=ac)
-                for name, ac in (("fp32", None), ("bf16", "bf16")) if a.autocast in (None, name)}
+                for name, ac in (("fp32", None), ("bf16", "bf16")) if a.autocast in (None, "both", name)}
     step_threads = [int(t) or torch.get_num_threads() for t in a.step_threads.split(",")]
 
     def sync():
@@ -178,7 +212,7 @@ def _setup(a) -> tuple[torch.device, tuple[int, int], list[Panel]]:
     if a.threads:
         torch.set_num_threads(a.threads)
     w, h = (int(v) for v in a.frame.split(","))
-    return torch.device(a.device), (w, h), bank_panels(a.bank) if a.bank else synthetic_panels(a.kernel_px, a.rank)
+    return torch.device(a.device), (w, h), chosen_panels(a)
 
 
 def region_runs(a) -> None:
@@ -217,47 +251,61 @@ def train_runs(a) -> None:
     bank = Bank(Path("."), {}, panels)
     rng = np.random.default_rng(0)
     images = [CleanImage(f"noise {i}", rng.random((3, h, w), dtype=np.float32)) for i in range(2)]
-    settings = TrainSettings(model=UNET_CONFIG, display="bench", autocast=None if a.autocast == "fp32" else "bf16")
+    precisions = ("fp32", "bf16") if a.autocast == "both" else (a.autocast,)
+    settings = {p: TrainSettings(model=UNET_CONFIG, display="bench", autocast=None if p == "fp32" else "bf16",
+                                 clip_grad_norm=0.5, lr=2e-4) for p in precisions}  # the results run's step
     model = build_model(UNET_CONFIG).to(dev, memory_format=torch.channels_last)
-    opt = torch.optim.Adam(model.parameters(), lr=1e-4)
+    opt = torch.optim.Adam(model.parameters(), lr=2e-4)
     loss_of = loss_fn("l1")
     c, per_image = a.crop_px, (a.steps * a.batch + 1) // 2
 
-    def run(batches) -> list[float]:
-        times, t = [], time.perf_counter()
+    def run(batches, s) -> list[tuple[float, float]]:
+        """(wall s, this process's CPU s) of each step but the first, the batch's making included."""
+        times, t, cpu = [], time.perf_counter(), time.process_time()
         for x, y in batches:
             train_step(model, opt, x.to(memory_format=torch.channels_last), y.to(memory_format=torch.channels_last),
-                       loss_of, settings)
+                       loss_of, s)
             if dev.type == "cuda":
                 torch.cuda.synchronize()
-            now = time.perf_counter()
-            times.append(now - t)
-            t = now
+            now, now_cpu = time.perf_counter(), time.process_time()
+            times.append((now - t, now_cpu - cpu))
+            t, cpu = now, now_cpu
         return times[1:]
     ready = [(torch.rand(a.batch, 4, c // 2, c // 2, device=dev), torch.rand(a.batch, 3, c, c, device=dev))
              for _ in range(a.steps)]
     online = {"online, workers 0": (0, None), "online, workers 1": (1, None)}  # name: (workers, capture draws)
     if a.capture_draws:
         online["online, workers 1, a capture per crop"] = (1, load_capture_draws("default"))
-    times: dict = {"ready batches": [], **{name: [] for name in online}}
+    times: dict = {(p, name): [] for p in precisions for name in ("ready batches", *online)}
     for _ in range(a.rounds):  # the runs alternate, round by round
-        for name in times:
+        for p, name in times:
             if name.startswith("ready"):
-                times[name] += run(ready)
+                times[(p, name)] += run(ready, settings[p])
             else:
                 workers, captures = online[name]
                 ob = OnlineBatches(images, bank, Degrader(panels, dev), c, a.batch, 0, per_image, workers, captures)
-                times[name] += run(ob.epoch(0)[1])
-    med = {k: statistics.median(v) for k, v in times.items()}
-    print(f"device {dev}, torch threads {torch.get_num_threads()}, UNet {a.autocast}, batch {a.batch} × {c} px, "
-          f"kernel {panels[0].kernel_px} px, panels {', '.join(p.name for p in panels)} (drawn per crop), {a.rounds} "
-          f"rounds of {a.steps} steps per run (each run's first left out); "
+                times[(p, name)] += run(ob.epoch(0)[1], settings[p])
+    print(f"device {dev}, torch threads {torch.get_num_threads()}, UNet {', '.join(precisions)}, batch {a.batch} × "
+          f"{c} px, kernel {panels[0].kernel_px} px, panels {', '.join(p.name for p in panels)} (drawn per crop), "
+          f"{a.rounds} rounds of {a.steps} steps per run (each run's first left out); "
           f"{'bank ' + a.bank if a.bank else 'synthetic panels'}")
-    print("| run | median s per step | quartiles | slowdown vs ready batches (medians) |")
-    print("|---|---|---|---|")
-    for k, v in med.items():
-        q = statistics.quantiles(times[k], n=4)
-        print(f"| {k} | {v:.3f} | {q[0]:.3f}–{q[2]:.3f} | {v / med['ready batches'] - 1:+.1%} |")
+    print(train_table(times))
+
+
+def train_table(times: dict) -> str:
+    """Markdown: per (precision, run) the steps timed, the median wall time of a step, its quartiles and its
+    slowdown against the same precision's ready batches; the same for this process's CPU time (a worker process's
+    is not in it), which a load from other jobs changes far less than the wall time."""
+    lines = ["| step | run | steps timed | median wall s | quartiles | wall slowdown | median CPU s | quartiles | "
+             "CPU slowdown |", "|---|---|---|---|---|---|---|---|---|"]
+    for (p, name), v in times.items():
+        cells = []
+        for k in (0, 1):
+            med, q = statistics.median(t[k] for t in v), statistics.quantiles([t[k] for t in v], n=4)
+            ref = statistics.median(t[k] for t in times[(p, "ready batches")])
+            cells.append(f"{med:.3f} | {q[0]:.3f}–{q[2]:.3f} | {med / ref - 1:+.1%}")
+        lines.append(f"| {p} | {name} | {len(v)} | {' | '.join(cells)} |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":
