@@ -69,7 +69,8 @@ def median_time(fn, repeats: int = 5) -> float:
 
 def fft_counts(item: Path, bands: int, rank: int) -> dict:
     """FFTs of one item (module doc) from its records: per view, blend or not (optics.model), through the
-    monitor's planes or the bands (optics.primaries), the far field's bands (far_field.bands_added)."""
+    monitor's planes or the bands (optics.primaries; a blend through them: optics.field_planes, 3J forward FFTs),
+    the far field's bands (far_field.bands_added)."""
     views = {"gt": json.loads((item / "synth.json").read_text())["gt_optics"]}
     for folder in sorted(p.parent for p in item.glob("*/capture.json")):
         optics = json.loads((folder / "capture.json").read_text()).get("optics")
@@ -82,7 +83,8 @@ def fft_counts(item: Path, bands: int, rank: int) -> dict:
     for name, o in views.items():
         blend = o["model"] == "field-dependent"
         r = o.get("field_rank", rank)
-        now += (bands * r if blend else 9 if "primaries" in o else 0) + 3  # kernel spectra of the cache: none
+        through = o.get("field_planes", {}).get("forward_ffts")  # the blend through the planes: 3J of its own
+        now += (through if through else bands * r if blend else 9 if "primaries" in o else 0) + 3  # spectra: kept
         far = o.get("far_field")
         if far:
             small += (9 + 3 if "primaries" in o else 2 * far["bands_added"]) + 3

@@ -32,8 +32,9 @@ def blas_count() -> int:
 
 
 def test_a_worker_prepares_its_kernels_at_the_parents_blas_threads(tiny_dataset_scene, tmp_path, monkeypatch):
-    """The kernels, their rank-r field bases (whose residual capture.json records) and the exact-power maps are
-    made at the parent's BLAS thread count in a worker that has fewer."""
+    """The kernels, their rank-r field bases (whose residual capture.json records), the exact-power maps and the
+    plane bases (a Gram matrix's eigenvectors) are made at the parent's BLAS thread count in a worker that has
+    fewer."""
     import udc_render.pipeline as pipeline
     seen = {}
 
@@ -42,14 +43,14 @@ def test_a_worker_prepares_its_kernels_at_the_parents_blas_threads(tiny_dataset_
             seen[name] = blas_count()
             return Kernels(None, {})
         return made
-    for name in ("plan_kernels", "compact_kernels", "store_power_maps"):
+    for name in ("plan_kernels", "compact_kernels", "store_power_maps", "store_field_planes"):
         monkeypatch.setattr(pipeline, name, spy(name))
     shared = Shared(load_scene(tiny_dataset_scene), [load_display("glass")], SynthConfig(), tmp_path, False, False,
                     blas_threads=2)
     with threadpool_limits(limits=1, user_api="blas"):
         worker_kernels(shared)
         assert blas_count() == 1
-    assert seen == {"plan_kernels": 2, "compact_kernels": 2, "store_power_maps": 2}
+    assert seen == {"plan_kernels": 2, "compact_kernels": 2, "store_power_maps": 2, "store_field_planes": 2}
 
 
 def test_the_field_basis_residual_depends_on_the_blas_threads():

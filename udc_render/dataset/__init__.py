@@ -81,6 +81,7 @@ from udc_render.dataset.randomized import Randomization, plan_panels
 from udc_render.dataset.store import check_job, clean_stale, locked, write_manifest
 from udc_render.dataset.threads import parent_blas_threads
 from udc_render.optics.displays import Display
+from udc_render.optics.field_planes import PAYBACK_ITEMS as PLANES_PAYBACK_ITEMS
 from udc_render.pipeline import SynthConfig, prepare_kernels
 from udc_render.scene import Monitor, Scene
 from udc_render.scene.geometry import camera_geometry
@@ -165,6 +166,9 @@ def _shared(job: DatasetJob, out: Path) -> Shared:
     cfg = job.cfg
     if cfg.use_cache and cfg.kernel_cache is None:  # workers must load the parent's kernels: pin the folder
         cfg = replace(cfg, kernel_cache=str(cache_dir().resolve()))
+    rand = job.randomize
+    if rand is not None and job.count < PLANES_PAYBACK_ITEMS * len(rand.panels):  # the blend through the planes
+        cfg = replace(cfg, field_planes_rank=None)  # pays its basis back over PLANES_PAYBACK_ITEMS items a panel
     if job.is_monitor:
         scene = replace(job.scene, content=replace(job.scene.content, image="(per item)"))
         return Shared(scene, job.displays, cfg, out, job.side_by_side, job.previews, parent_blas_threads(),

@@ -34,6 +34,9 @@ from udc_render.optics.field_power import PowerMap
 
 MAX_RANK = 8  # maps stored: the T-OLED needs 3-4 at 0.05 σ (benchmarks/bench_field_knobs.py --planes)
 ROW_BLOCK = 32  # rows of the K·r maps made at a time (K·r · 32 · W float64: 79 MB at 120 maps, W = 2560)
+# The basis costs 45-55 CPU-s per display once (the kernel cache keeps it) and saves ~7.5 CPU-s an item on the paper's
+# frame (benchmarks/bench_field_planes.py): a randomized job takes it from this many items per panel on
+PAYBACK_ITEMS = 8
 KEEP_SPECTRA = 2  # the summed kernels' spectra kept per process (a worker's views)
 _SPECTRA: OrderedDict = OrderedDict()
 
