@@ -329,3 +329,19 @@ def test_stray_light_option_wins_over_the_profile():
     assert cfg.stray_light == StrayLight() and "stray light: haze poled 0.015 (option)" in describe(cfg.profile)
     cfg, _ = capture_setup(build_parser().parse_args(["synth", "monitor"]))
     assert cfg.stray_light == StrayLight() and "stray_light" not in cfg.profile["options"]
+
+
+def test_spread_back_interpolates_linearly_and_keeps_the_total():
+    """Coarse cells of a plane's densities a + b·y + c·x come back as that plane at every pixel centre between the
+    outer cell centres (bilinear interpolation is exact on a plane), clamped beyond them, and the total is the cells'."""
+    from udc_render.optics.stray.spread import spread_back
+    b, h, w = 4, 5, 7
+    yc, xc = np.arange(h)[:, None], np.arange(w)[None, :]  # cell centres in cell units
+    cells = ((2.0 + 0.3 * yc + 0.1 * xc) * b * b)[None]  # cell sums of the plane's density
+    fine = spread_back(cells, b)[0]
+    t_y = np.clip((np.arange(h * b) + 0.5) / b - 0.5, 0, h - 1)[:, None]
+    t_x = np.clip((np.arange(w * b) + 0.5) / b - 0.5, 0, w - 1)[None, :]
+    plane = 2.0 + 0.3 * t_y + 0.1 * t_x
+    scale = cells.sum() / plane.sum()  # the clamped border's share, put back uniformly
+    np.testing.assert_allclose(fine, plane * scale, rtol=1e-13)
+    assert fine.sum() == pytest.approx(cells.sum(), rel=1e-13)

@@ -22,6 +22,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 SUBSAMPLES = 4  # per axis and coarse cell, to integrate ρ over each cell
 COARSE_PER_RADIUS = 16  # the coarse cell is at most the inner radius / this
@@ -128,20 +129,24 @@ def convolve(x: np.ndarray, spread: Spread, pitch_um: float) -> tuple[np.ndarray
 
 def spread_back(cells: np.ndarray, b: int) -> np.ndarray:
     """Coarse cell sums [C, h, w] → pixels [C, h·b, w·b]: the cell densities interpolated linearly between
-    cell centres (clamped at the edges), scaled so that the total is the cells' (exact)."""
+    cell centres (clamped at the edges), scaled so that the total is the cells' (exact). Bilinear is separable:
+    U_y · d · U_xᵀ with two weights a row in U (two sparse products a channel, not four gathers of the frame)."""
     if b == 1:
         return cells
     c, h, w = cells.shape
-
-    def at(n):  # fine centres in cell units
-        return np.clip((np.arange(n * b) + 0.5) / b - 0.5, 0, n - 1)
-    y, x = at(h), at(w)
-    y0, x0 = np.minimum(y.astype(int), h - 2 if h > 1 else 0), np.minimum(x.astype(int), w - 2 if w > 1 else 0)
-    fy, fx = (y - y0)[:, None], (x - x0)[None, :]
-    y1, x1 = np.minimum(y0 + 1, h - 1), np.minimum(x0 + 1, w - 1)
-    d = cells / (b * b)
-    fine = ((d[:, y0][:, :, x0] * (1 - fx) + d[:, y0][:, :, x1] * fx) * (1 - fy)
-            + (d[:, y1][:, :, x0] * (1 - fx) + d[:, y1][:, :, x1] * fx) * fy)
+    uy, ux = _linear_weights(h, b), _linear_weights(w, b)
+    fine = np.stack([(ux @ (uy @ (d / (b * b))).T).T for d in cells])
     total, got = cells.sum(axis=(1, 2)), fine.sum(axis=(1, 2))
     scale = np.divide(total, got, out=np.zeros_like(total), where=got > 0)
     return fine * scale[:, None, None]
+
+
+def _linear_weights(n: int, b: int):
+    """[n·b, n] (scipy.sparse CSR): linear interpolation from n cell centres to the n·b pixel centres (cell units
+    (i + ½)/b − ½, clamped to [0, n − 1])."""
+    t = np.clip((np.arange(n * b) + 0.5) / b - 0.5, 0, n - 1)
+    i0 = np.minimum(t.astype(int), n - 2 if n > 1 else 0)
+    i1 = np.minimum(i0 + 1, n - 1)
+    rows = np.arange(n * b)
+    return sp.csr_matrix((np.concatenate([1 - (t - i0), t - i0]), (np.tile(rows, 2), np.concatenate([i0, i1]))),
+                         shape=(n * b, n))  # duplicates (i0 = i1) summed
