@@ -146,6 +146,46 @@ def test_profiles_average_sixteen_frames():
         assert cfg.gt_frames == 4
 
 
+def _exact_sum_pmf(e: float, s: SensorConfig, n: int) -> np.ndarray:
+    """The law of Σ_f DN_f over n frames of a pixel of mean e (black level 0, far below white and the full well), in
+    closed form: one frame's DN is v with probability Σ_k Poisson(k; e) P(rint(g (k + σ G)) = v), v ≥ 1, and the
+    rest of the mass at 0 (the clip); the sum's law is its n-fold convolution."""
+    from scipy.stats import norm, poisson
+    g, sigma = s.dn_per_electron, s.read_noise_e
+    k = np.arange(int(e + 12 * math.sqrt(e) + 12) + 1)
+    v = np.arange(int(g * (k[-1] + 12 * sigma)) + 2)
+    below = norm.cdf((v[None, :] + 0.5 - g * k[:, None]) / (g * sigma))  # P(g (k + σ G) < v + ½)
+    one = poisson.pmf(k, e) @ np.diff(below, axis=1, prepend=0.0)
+    pmf = np.array([1.0])
+    for _ in range(n):
+        pmf = np.convolve(pmf, one)
+    return pmf
+
+
+@pytest.mark.parametrize("e0", [0.05, 0.7, 6.0, 30.0])
+def test_frames_drawn_one_by_one_follow_the_exact_law(e0):
+    """The mean of 16 clipped frames of the pixels drawn frame by frame against the closed-form law of the sum: a χ²
+    test over 30 000 pixels, bins of ≥ 20 expected, at a fixed seed (refused below p = 1e-4)."""
+    from scipy.stats import chisquare
+    s = replace(SensorConfig(), gain=1.0)
+    e = np.full(60_000, e0)
+    e[::2] = 40.0  # the other path interleaved: the pixels keep their place
+    sums = np.rint(_frame_by_frame(e, s, 16, np.random.default_rng(7))[1::2] * 16).astype(int)
+    pmf = _exact_sum_pmf(e0, s, 16)
+    expected = pmf * sums.size
+    edges = [0]  # bins of ≥ 20 expected, the tails merged
+    acc = 0.0
+    for i, x in enumerate(expected):
+        acc += x
+        if acc >= 20:
+            edges.append(i + 1)
+            acc = 0.0
+    edges[-1] = max(len(pmf), sums.max() + 1)
+    observed = np.histogram(sums, bins=edges)[0]
+    want = np.add.reduceat(np.concatenate([expected, np.zeros(edges[-1] - len(pmf))]), edges[:-1])
+    assert chisquare(observed, want * observed.sum() / want.sum()).pvalue > 1e-4
+
+
 def test_frames_drawn_one_by_one_are_expose_frames_bit_for_bit():
     """The frame-by-frame pixels take expose's draws and arithmetic (Poisson counts, then the read noise's normals,
     every frame): the same bits as the mean of n expose frames on the zero-padded [2, 2⌈m/4⌉] layout, at the
