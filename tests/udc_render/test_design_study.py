@@ -90,3 +90,19 @@ def test_the_design_guide_prints_the_committed_runs_numbers(first, folder, tilin
     numbers.append(banding if tiling == "repeated" else "no period")
     assert all(n in rows[first] for n in numbers), (rows[first], numbers)
     assert abs(doc["open_fraction"] - 0.2) < 1 / 441
+
+
+def test_the_design_guide_prints_the_committed_designs_margin_over_the_scatters():
+    """docs/guides/design.md's designed-against-scatters paragraph is the committed design.json's."""
+    root = Path(__file__).resolve().parents[2]
+    text = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    doc = json.loads((root / "docs" / "figures" / "design" / "design" / "design.json").read_text())
+    base, upc = doc["scatters"], doc["upc"]["turned"]
+    assert base["n"] == 20 and doc["converged"] and doc["steps_done"] == 56
+    for phrase in (f"design scores {doc['final']['psnr_db']:.2f} dB",
+                   f"score {base['mean']:.2f} ± {base['std']:.2f} dB",
+                   f"best of them {base['best']:.2f} dB", f"design is {base['margin']:.2f} dB, "
+                   f"{base['margin'] / base['std']:.0f} sd", _rgb(upc["design"], ".3f", True),
+                   _rgb(upc["ratio"], ".2f") + " ×"):
+        assert phrase in text, phrase
+    assert base["margin"] > 5 * base["std"]  # the design beats the best scatter well outside the scatters' spread
