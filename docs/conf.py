@@ -38,8 +38,8 @@ exclude_patterns = ["_build", "Thumbs.db", ".DS_Store",
                     # bench_field_knobs.py's table beside its PNG (the guide's synth.md and concepts/defaults.md
                     # quote it)
                     "figures/field_knobs.md",
-                    # the layout study's own reports (guides/design.md quotes their tables)
-                    "figures/design/**/study_layout.md"]
+                    # the layout and design-knob studies' own reports (guides/design.md quotes their tables)
+                    "figures/design/**/study_layout.md", "figures/design/**/study_design.md"]
 templates_path = ["_templates"]
 
 # MyST: the project's Markdown is included as is (docs/*.md, RESULTS.md, scenes/README.md,
