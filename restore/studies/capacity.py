@@ -31,6 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
+from restore.studies.budgets import BUDGETS
+from restore.studies.error_bands import OCTAVE_EDGES, display_transfer, method_bands, plot
 from restore.studies.options import parse_options
 from udc_render.errors import UdcError
 from udc_render.io.files import save_json, save_text
@@ -72,7 +74,6 @@ class Recipe:
     @classmethod
     def of_budget(cls, budget: str, epochs: int | None = None) -> Recipe:
         """The UNet's recipe of BUDGETS[budget], its epoch cap or `epochs`."""
-        from restore.studies.budgets import BUDGETS
         if budget not in BUDGETS:
             raise UdcError(f"--budget = {budget!r}: expected one of {', '.join(BUDGETS)}")
         b = BUDGETS[budget]
@@ -136,7 +137,6 @@ def band_rows(data: Path, display: str, models: dict[str, Path], out: Path) -> d
     input's}} on the val split (module doc), plotted in out/error_bands_<display>.png. The display's transfer
     needs the dataset's synthesis record (synth.json): None without it."""
     from restore.data import list_pairs
-    from restore.studies.error_bands import OCTAVE_EDGES, display_transfer, method_bands, plot
     from restore.studies.scoring import BAND_CROP_PX, BAND_ITEMS, evaluation_stamp
     first = list_pairs(data, "val", [display])[0]
     transfer = display_transfer(data, display) if (first.folder / "synth.json").is_file() else None
