@@ -33,8 +33,12 @@ from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
+import torch
 from tqdm import tqdm
 
+from restore.counting import count_parameters
+from restore.metrics import level_matched_psnr_db, paper_metrics
+from restore.online import clean_images, images_fingerprint
 from restore.studies.ablation_report import ARMS, write_report
 from restore.studies.options import parse_options
 from restore.studies.robustness import (
@@ -53,8 +57,15 @@ from restore.studies.robustness import (
     write_clean_images,
 )
 from restore.studies.stage_times import StageTimes
+from restore.train import load_model, train
+from udc_render.dataset.bank import read_bank
+from udc_render.dataset.bank_make import bank_settings, make_bank, random_specs
+from udc_render.dataset.randomize import load_distributions
 from udc_render.errors import UdcError
 from udc_render.io.files import save_text
+from udc_render.pipeline import SynthConfig
+from udc_render.profiles import describe, resolve_profile
+from udc_render.scene.geometry import sensor_kernel_px
 from udc_render.studies.fingerprint import FIELD, digest, file_digest, stale_note
 
 SCORES_FILE, TIMES_FILE = "scores.jsonl", "times.json"
@@ -86,12 +97,6 @@ def arm_config(b: Budget, arm: str) -> dict:
 def make_study_banks(out: Path, b: Budget, cache_dir: str | None, progress: bool) -> dict:
     """{'random': the training bank, 'heldout': the test bank} under out/banks (made or finished: make_bank
     resumes), on the robustness study's rig and draws at budget b."""
-    from udc_render.dataset.bank import read_bank
-    from udc_render.dataset.bank_make import bank_settings, make_bank, random_specs
-    from udc_render.dataset.randomize import load_distributions
-    from udc_render.pipeline import SynthConfig
-    from udc_render.profiles import describe, resolve_profile
-    from udc_render.scene.geometry import sensor_kernel_px
     scene, dists = study_scene(b), load_distributions("default")
     cfg, _ = resolve_profile("physical", SynthConfig(field_phases=b.field_phases, kernel_cache=cache_dir), [])
     size = sensor_kernel_px(scene)
@@ -107,7 +112,6 @@ def make_study_banks(out: Path, b: Budget, cache_dir: str | None, progress: bool
 def train_arms(out: Path, b: Budget, bank, data: Path, arms: tuple, progress: bool) -> dict:
     """{arm: restore.train's summary} of each arm trained on `bank` with the shared recipe (resumed from its
     checkpoint; a finished run kept)."""
-    from restore.train import train
     return {arm: train(data, out / "train" / arm, train_settings(b, bank, data, arm_config(b, arm)),
                        device="cpu", checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
                        bank=bank.folder) for arm in arms}
@@ -116,7 +120,6 @@ def train_arms(out: Path, b: Budget, bank, data: Path, arms: tuple, progress: bo
 def score_fingerprint(out: Path, bank, data: Path, arms: tuple) -> str:
     """The fingerprint of the score rows: the held-out bank, the validation images, the score seed and the arms'
     model files (sha256 of model.pt: a retrained arm is another)."""
-    from restore.online import images_fingerprint
     return digest({"bank": bank.fingerprint, "images": images_fingerprint(data), "score_seed": SCORE_SEED,
                    "models": {a: file_digest(out / "train" / a / "model.pt") for a in arms}})
 
@@ -124,7 +127,6 @@ def score_fingerprint(out: Path, bank, data: Path, arms: tuple) -> str:
 def score_panel(models: dict, bank, index: int, images: list) -> dict[str, list[float]]:
     """{row: per-image PSNR} of the input, DeP with the panel's kernels and γ and each arm on the validation images
     through panel `index`, each also level-matched ('<row>_level')."""
-    from restore.metrics import level_matched_psnr_db, paper_metrics
     panel = bank.panels[index]
     pairs = panel_pairs(bank, panel, images)
     gts = [gt for _, gt in pairs]
@@ -141,8 +143,6 @@ def score_panel(models: dict, bank, index: int, images: list) -> dict[str, list[
 def score_arms(out: Path, bank, data: Path, arms: tuple, progress: bool) -> list[dict]:
     """One row per held-out panel (its family, d, per-image and mean PSNRs of score_panel), appended to scores.jsonl;
     logged rows kept under the same fingerprint only (score_fingerprint)."""
-    from restore.online import clean_images
-    from restore.train import load_model
     path, fingerprint = out / SCORES_FILE, score_fingerprint(out, bank, data, arms)
     logged = read_scores(path)
     rows = [r for r in logged if r.get(FIELD) == fingerprint]
@@ -167,8 +167,6 @@ def score_arms(out: Path, bank, data: Path, arms: tuple, progress: bool) -> list
 
 def parameters(out: Path, arms: tuple) -> dict[str, int]:
     """{arm: its trained model's parameters}."""
-    from restore.counting import count_parameters
-    from restore.train import load_model
     return {a: count_parameters(load_model(out / "train" / a / "model.pt", "cpu")[0]) for a in arms}
 
 
@@ -210,7 +208,6 @@ def main(argv: list[str]) -> None:
     if pos:
         sys.exit(f"usage: {usage}")
     out = Path(o.get("out", "out/ablation"))
-    import torch
     torch.set_num_threads(int(o.get("threads", 1)))  # 2 threads on 2 shared cores: ~10x slower epochs here
     try:
         run_ablation(out, o.get("budget", "cpu"), cache_dir=o.get("cache"))
