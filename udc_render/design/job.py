@@ -63,7 +63,7 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
     designed / T-OLED ratios."""
     from psf import layouts
     from udc_render.design import metrics, torch_psf as tp, upc
-    from udc_render.studies.layout import RINGS, frame_cell, layout_cell, upc_cell
+    from udc_render.design.cells import RINGS, frame_cell, layout_cell, upc_cell
     toled, _ = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
     cells = {"design": upc_cell(cell), "toled_edge": upc_cell(frame_cell(toled, "edge"))}
     out = {}

@@ -32,10 +32,10 @@ from tqdm import tqdm
 from psf import layouts
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp
+from udc_render.design.cells import frame_cell
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer
 from udc_render.streams import stream
 from udc_render.studies.design_knobs_report import write
-from udc_render.studies.layout import frame_cell
 
 __all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "run_study"]
 
