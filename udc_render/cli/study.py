@@ -73,6 +73,10 @@ def register(sub) -> None:
     s.add_argument("--frame", choices=("as_given", "edge"), default="as_given",
                    help="layout only: the cell as the layout frames it, or with its first open column moved to the "
                         "tile's edge, where a turn about the tile's centre moves the opening [as_given]")
+    s.add_argument("--restore", choices=("dep",), default=None,
+                   help="layout only: also restore crops of a natural image through the layout's kernels with DeP "
+                        "and report the PSNR (off by default: DeP's Wiener sampler takes seconds per plane, about "
+                        "a minute per layout) [off]")
 
 
 def run(args) -> int:
@@ -84,6 +88,8 @@ def run(args) -> int:
         raise UserError(f"--frame {args.frame}: only `study layout` takes a framing")
     if args.what != "layout" and args.distance_mm != 2.0:
         raise UserError(f"--distance-mm {args.distance_mm}: only `study layout` takes a distance")
+    if args.restore and args.what != "layout":
+        raise UserError(f"--restore {args.restore}: only `study layout` restores")
     if args.conditioned and args.what != "robustness":
         raise UserError("--conditioned: only `study robustness` trains a conditioned restorer")
     if args.what == "layout":
@@ -129,7 +135,7 @@ def _layout(args) -> int:
     layout_cell(display.layout)  # a tile the study cannot take is refused before the folder is made
     out = out_dir(args.out)
     scores = score_layout(display.name, display.layout, args.tile_seed, args.frame, args.quick,
-                          distance_mm=args.distance_mm)
+                          distance_mm=args.distance_mm, restore=args.restore)
     names = write(scores, out)
     print(f"wrote {out}/" + f", {out}/".join(names))
     return 0

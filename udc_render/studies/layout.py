@@ -13,14 +13,16 @@ mirrored at random (the 8 elements of D4, udc_render.design.torch_psf.tile_trans
 - the banding at the display-to-lens distance d (udc_render.studies.layout_banding: the exact power series of the
   layout repeated on the rig's lens; a turned tiling has no period);
 - the open area and power transmittance.
-Not here (issue 48, named in docs/guides/design.md): the restored PSNR by DeP and a UNet, the banding of a turned
+- with restore='dep' (opt-in: seconds per plane), the restored PSNR by DeP of a natural image through the rig's
+  kernels at the window's transmission (udc_render.studies.layout_restore).
+Not here (issue 48, named in docs/guides/design.md): the restored PSNR by a UNet, the banding of a turned
 tiling (it has no period). The error against run time of the design's knobs is `study design`
 (udc_render.studies.design_knobs).
 """
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import torch
@@ -30,6 +32,7 @@ from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.design.cells import RINGS, frame_cell, layout_cell, upc_cell
 from udc_render.sensor.config import SensorConfig
 from udc_render.studies.layout_banding import DEFAULT_DISTANCE_MM, layout_banding
+from udc_render.studies.layout_restore import CORNERS_PX, CROP_PX, QUICK_CROP_PX, RESTORERS, restored_psnr
 
 __all__ = ["UPC_LENS", "FRAMES", "LayoutScores", "layout_cell", "frame_cell", "upc_cell", "score_layout"]
 
@@ -46,7 +49,7 @@ TILINGS = ("repeated", "turned")
 class LayoutScores:
     """Every figure of one study: per tiling, the UPC-mode and exact ring summaries (metrics.ring_summary) and
     the rig's restorability (metrics.restorability); the banding at d of the repeated tiling (layout_banding);
-    the kernels' MTF maps (green) for the figures."""
+    the kernels' MTF maps (green) for the figures; with a restorer, its restored PSNR per tiling (layout_restore)."""
     name: str
     open_fraction: float
     power_transmittance: float
@@ -59,6 +62,7 @@ class LayoutScores:
     mtf_maps: dict
     seconds: float
     banding: dict
+    restored: dict = field(default_factory=dict)
 
 
 def _centre_mtf(kernel: np.ndarray) -> np.ndarray:
@@ -67,10 +71,13 @@ def _centre_mtf(kernel: np.ndarray) -> np.ndarray:
 
 def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quick: bool = False,
                  sensor: SensorConfig | None = None, progress=None,
-                 distance_mm: float = DEFAULT_DISTANCE_MM) -> LayoutScores:
-    """The study's figures for one layout (module doc); quick: 63-px kernels from 256 pupil samples."""
+                 distance_mm: float = DEFAULT_DISTANCE_MM, restore: str | None = None) -> LayoutScores:
+    """The study's figures for one layout (module doc); quick: 63-px kernels from 256 pupil samples (and one
+    96-px crop for the restorer); restore: None or one of RESTORERS."""
     if not distance_mm > 0:
         raise tp.DesignError(f"--distance-mm {distance_mm}: expected a distance > 0 mm")
+    if restore is not None and restore not in RESTORERS:
+        raise tp.DesignError(f"--restore {restore}: expected one of {', '.join(RESTORERS)}")
     if frame not in FRAMES:
         raise tp.DesignError(f"--frame {frame}: expected one of {', '.join(FRAMES)}")
     start = time.perf_counter()
@@ -84,7 +91,8 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
     rig_grid = tp.cell_grid(cell.shape[0], cell_um, Lens(), RIG_WAVELENGTHS_NM, 3.1, 63 if quick else RIG_KERNEL_PX,
                             pupil)
     trans = float(layout.power_transmittance)
-    out = {"upc": {}, "exact": {}, "restorability": {}, "mtf_maps": {}}
+    out = {"upc": {}, "exact": {}, "restorability": {}, "mtf_maps": {}, "restored": {}}
+    crop_px, corners_px = (QUICK_CROP_PX, CORNERS_PX[:1]) if quick else (CROP_PX, CORNERS_PX)
     with torch.no_grad():
         for tiling in TILINGS:
             s = seed if tiling == "turned" else None
@@ -96,6 +104,8 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
             out["restorability"][tiling] = metrics.restorability(r, trans, sensor)
             out["restorability"][tiling]["window_fraction"] = inside.tolist()
             out["restorability"][tiling]["window"] = metrics.restorability(r, trans * inside, sensor)
+            if restore:
+                out["restored"][tiling] = restored_psnr(r, trans * inside, sensor, crop_px, corners_px, seed)
             out["mtf_maps"][tiling] = {"upc": _centre_mtf(p[1]), "exact": _centre_mtf(k[1])}
             if tiling == "repeated":
                 banding = layout_banding(layout, Lens(), RIG_WAVELENGTHS_NM, distance_mm, r, rig_grid.pixel_um)
@@ -103,4 +113,4 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
                 progress(1)
     return LayoutScores(name, float(getattr(layout, "open_fraction", trans)), trans, float(cell.shape[0] * cell_um),
                         frame, int(seed), out["upc"], out["exact"], out["restorability"], out["mtf_maps"],
-                        time.perf_counter() - start, banding)
+                        time.perf_counter() - start, banding, out["restored"])

@@ -46,12 +46,32 @@ def markdown(s: LayoutScores) -> str:
         lines.append(f"| {tiling} | {' / '.join(f'{v:.2f}' for v in r['wiener_psnr_db'])} | "
                      f"{' / '.join(f'{v:.3f}' for v in r['window_fraction'])} | "
                      f"{' / '.join(f'{v:.2f}' for v in r['window']['wiener_psnr_db'])} |")
+    lines += _restored_lines(s)
     lines += _banding_lines(s.banding)
     r = s.restorability["repeated"]
     lines += ["", f"Scene mean {r['mean_level']} of the full well, RMS contrast {r['rms_contrast']}, power spectrum "
               f"∝ 1/f²; noise: shot + read {r['read_noise_e']} e⁻ at a full well of {r['full_well_e']:.0f} e⁻ "
               f"(variance {r['noise_variance'][0]:.3g} full wells² in R).", ""]
     return "\n".join(lines)
+
+
+def _restored_lines(s: LayoutScores) -> list[str]:
+    """The restored-PSNR table (udc_render.studies.layout_restore), when the study ran a restorer."""
+    if not s.restored:
+        return []
+    first = s.restored[TILINGS[0]]
+    lines = ["", f"## Restored PSNR by DeP ({first['image']}, {len(first['corners_px'])} crop(s) of "
+             f"{first['crop_px']} px; PSNR in dB of the full well, R / G / B)", "",
+             "| tiling | DeP PSNR | mean | noisy input y / t | Wiener PSNR, the light outside lost |",
+             "|---|---|---|---|---|"]
+    for tiling in TILINGS:
+        d, w = s.restored[tiling], s.restorability[tiling]["window"]
+        lines.append(f"| {tiling} | {' / '.join(f'{v:.2f}' for v in d['psnr_db'])} | {d['mean_psnr_db']:.2f} | "
+                     f"{' / '.join(f'{v:.2f}' for v in d['input_psnr_db'])} | "
+                     f"{' / '.join(f'{v:.2f}' for v in w['wiener_psnr_db'])} |")
+    lines += ["", "y = t (x ⊗ k) + Poisson-Gaussian noise at the restorability's exposure, t the open area × the "
+              "light inside the window; DeP: NLM, ÷ t, unsupervised Wiener-Hunt with the same kernel (seeded)."]
+    return lines
 
 
 def _banding_lines(b: dict) -> list[str]:
