@@ -277,6 +277,10 @@ MOVED_TO_SLOW = {
     "tests/udc_render/test_primaries.py::test_through_the_planes_equals_the_band_path[2.0]": "[0.0]",
     "tests/udc_render/test_study_defocus.py::test_quick_study_writes_files_and_passes_checks":
         "test_blur_grows_with_defocus_on_both_sides",
+    "tests/udc_render/test_design_optimise.py::test_the_search_ends_in_a_local_optimum_of_all_swaps[repeated]":
+        "[turned]",
+    "tests/udc_render/test_layout_restore.py::test_cli_writes_the_restored_psnr":
+        "restored_psnr's own tests in the file; test_restore_is_refused_outside_layout (the option)",
 }
 
 

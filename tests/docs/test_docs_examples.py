@@ -128,6 +128,7 @@ HEAVY_PAGES = {
     "docs/concepts/profiles.md": "tests/udc_render/test_profiles.py",
     "docs/troubleshooting.md": "tests/udc_render/test_cli.py (one-line errors)",
     "docs/guides/train.md": "tests/restore/test_train.py, test_models_conditioned.py",
+    "docs/guides/design.md": "tests/udc_render/test_design_optimise.py, test_design_study.py, test_design_torch_psf.py",
 }
 FAST_PAGES = [p for p in PAGES if any(e.mode in ("run", "tiny", "help", "slow") for e in EXAMPLES if e.path == p)]
 SLOW_PAGES = [p for p in PAGES if any(e.mode == "slow" for e in EXAMPLES if e.path == p) or _page_id(p) in HEAVY_PAGES]
