@@ -2,10 +2,12 @@
 a CPU budget (issue 47, item 3: kernel codes as DISCNet, Wiener-deconvolved features as deep Wiener deconvolution,
 or both).
 
-Five arms, trained with one recipe (restore.studies.robustness.train_settings: the same clean images, seed, crops,
+Six arms, trained with one recipe (restore.studies.robustness.train_settings: the same clean images, seed, crops,
 panels, noise and steps) on one bank of randomized panels (randomize `default`, robustness.RANDOMIZE_SEED):
 
     unet       the blind UNet, the robustness study's "UNet (randomized)" recipe: the budget's UNet on the capture
+    wide       the blind twin of the conditioned arms' backbone (unet-wide-fine: the same widths, levels and
+               sub-encoders) on the capture: the blind UNet at the conditioned arms' capacity
     level      wiener-unet with both parts off (wiener = false, kernel_codes = false): its backbone on x / γ, the
                description giving the input's level only; the control for the backbone's width and for γ
     codes      kernel codes alone (kernel_codes, FiLM at every level; wiener = false)
@@ -18,7 +20,9 @@ validation image degraded once through each panel (robustness.panel_pairs, SCORE
 panel's own description (robustness.model_outputs), beside the input and DeP given the panel's kernels and γ
 (robustness.dep_outputs): the paper protocol's PSNR and the level-matched one (restore.metrics), per panel.
 
-    python -m restore.studies.ablation [--out out/ablation] [--budget cpu] [--threads 1]
+    python -m restore.studies.ablation [--out out/ablation] [--budget cpu] [--seed 0] [--banks RUN] [--threads 1]
+
+--seed: the arms' training seed (TRAIN_SEED by default); --banks: another run's folder whose banks to use.
 
 Resumable: the banks through make_bank, each arm's training through restore.train's checkpoint, each panel's score
 row kept in scores.jsonl under the fingerprint of what made it (the bank, the images, the score seed, the arms'
@@ -29,7 +33,7 @@ from __future__ import annotations
 import json
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -88,10 +92,14 @@ BUDGETS = {
 
 def arm_config(b: Budget, arm: str) -> dict:
     """The model config of `arm` (module doc) at budget b: the conditioned arms' b.conditioned (None:
-    robustness.conditioned_config) with the arm's switches."""
+    robustness.conditioned_config) with the arm's switches; 'wide' its backbone's keys as a unet-wide-fine."""
     if arm == "unet":
         return dict(b.model)
-    return {**(b.conditioned or conditioned_config(b)), **SWITCHES[arm]}
+    cond = b.conditioned or conditioned_config(b)
+    if arm == "wide":
+        keys = ("out_channels", "width", "depth", "fine_levels", "fine_extra_width", "sub_encoders", "negative_slope")
+        return {"type": "unet-wide-fine", **{k: cond[k] for k in keys if k in cond}}
+    return {**cond, **SWITCHES[arm]}
 
 
 def make_study_banks(out: Path, b: Budget, cache_dir: str | None, progress: bool) -> dict:
@@ -109,10 +117,10 @@ def make_study_banks(out: Path, b: Budget, cache_dir: str | None, progress: bool
     return banks
 
 
-def train_arms(out: Path, b: Budget, bank, data: Path, arms: tuple, progress: bool) -> dict:
-    """{arm: restore.train's summary} of each arm trained on `bank` with the shared recipe (resumed from its
-    checkpoint; a finished run kept)."""
-    return {arm: train(data, out / "train" / arm, train_settings(b, bank, data, arm_config(b, arm)),
+def train_arms(out: Path, b: Budget, bank, data: Path, arms: tuple, progress: bool, seed: int = TRAIN_SEED) -> dict:
+    """{arm: restore.train's summary} of each arm trained on `bank` with the shared recipe and training `seed`
+    (resumed from its checkpoint; a finished run kept)."""
+    return {arm: train(data, out / "train" / arm, replace(train_settings(b, bank, data, arm_config(b, arm)), seed=seed),
                        device="cpu", checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
                        bank=bank.folder) for arm in arms}
 
@@ -171,9 +179,10 @@ def parameters(out: Path, arms: tuple) -> dict[str, int]:
 
 
 def run_ablation(out: Path, budget: str = "cpu", banks: dict | None = None, cache_dir: str | None = None,
-                 progress: bool = True) -> dict:
+                 progress: bool = True, seed: int = TRAIN_SEED) -> dict:
     """The study (module doc) in `out`, or the rest of an interrupted one; writes the report and returns its result.
-    banks: {'random', 'heldout'} given instead of made (the mechanics test's)."""
+    banks: {'random', 'heldout'} given instead of made (the mechanics test's, or another run's: --banks); seed: the
+    arms' training seed (initial weights, crops, panels and noise)."""
     if budget not in BUDGETS:
         raise UdcError(f"--budget {budget}: expected one of {', '.join(BUDGETS)}")
     out, b, arms = Path(out).resolve(), BUDGETS[budget], tuple(ARMS)
@@ -187,13 +196,13 @@ def run_ablation(out: Path, budget: str = "cpu", banks: dict | None = None, cach
         done.append(make())
         times.add(stage, time.perf_counter() - t0)
     data, banks = done
-    summaries = train_arms(out, b, banks["random"], data, arms, progress)
+    summaries = train_arms(out, b, banks["random"], data, arms, progress, seed)
     t0 = time.perf_counter()
     rows = score_arms(out, banks["heldout"], data, arms, progress)
     times.add("score", time.perf_counter() - t0)
     config = dict(asdict(b), steps=b.steps,
                   arms={a: arm_config(b, a) for a in arms},
-                  seeds={"train": TRAIN_SEED, "randomize": RANDOMIZE_SEED, "heldout": HELDOUT_SEED,
+                  seeds={"train": seed, "randomize": RANDOMIZE_SEED, "heldout": HELDOUT_SEED,
                          "score": SCORE_SEED},
                   panels={k: [p.name for p in bank.panels] for k, bank in banks.items()})
     result = {"budget": config, "rows": rows, "train": summaries, "parameters": parameters(out, arms),
@@ -203,14 +212,16 @@ def run_ablation(out: Path, budget: str = "cpu", banks: dict | None = None, cach
 
 
 def main(argv: list[str]) -> None:
-    usage = "python -m restore.studies.ablation [--out out/ablation] [--budget cpu] [--cache DIR] [--threads 1]"
+    usage = ("python -m restore.studies.ablation [--out out/ablation] [--budget cpu] [--seed 0] [--banks RUN] "
+             "[--cache DIR] [--threads 1]")
     pos, o = parse_options(argv, usage)
     if pos:
         sys.exit(f"usage: {usage}")
     out = Path(o.get("out", "out/ablation"))
     torch.set_num_threads(int(o.get("threads", 1)))  # 2 threads on 2 shared cores: ~10x slower epochs here
     try:
-        run_ablation(out, o.get("budget", "cpu"), cache_dir=o.get("cache"))
+        banks = {k: read_bank(Path(o["banks"]) / "banks" / k) for k in ("random", "heldout")} if "banks" in o else None
+        run_ablation(out, o.get("budget", "cpu"), banks, o.get("cache"), seed=int(o.get("seed", TRAIN_SEED)))
     except (UdcError, OSError, ValueError) as exc:
         sys.exit(f"error: {exc}")
     print(f"wrote {out}/ablation.md, ablation.json, ablation.png")

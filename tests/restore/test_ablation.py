@@ -25,10 +25,11 @@ def one_thread():
 
 def test_the_arms_switch_the_conditioning_and_share_the_backbone():
     """unet is the budget's blind UNet; the four conditioned arms are one wiener-unet config but for the two
-    switches, and a model built from each has exactly the parts its arm names."""
+    switches, and a model built from each has exactly the parts its arm names; wide is the blind twin of their
+    backbone (the same encoder widths; the conditioned arm with neither part also takes 4 channels)."""
     b = BUDGETS["cpu"]
     assert arm_config(b, "unet") == {"type": "unet", "width": 8, "depth": 3}
-    cfgs = {a: arm_config(b, a) for a in ARMS if a != "unet"}
+    cfgs = {a: arm_config(b, a) for a in ARMS if a not in ("unet", "wide")}
     assert {(c["wiener"], c["kernel_codes"]) for c in cfgs.values()} == {(False, False), (False, True), (True, False),
                                                                          (True, True)}
     strip = [{k: v for k, v in c.items() if k not in ("wiener", "kernel_codes")} for c in cfgs.values()]
@@ -36,10 +37,13 @@ def test_the_arms_switch_the_conditioning_and_share_the_backbone():
     for arm, cfg in cfgs.items():
         m = build_model({**cfg, "fine_extra_width": 0, "width": 2, "code_dim": 4})
         assert (m.wiener is not None, m.codes is not None) == (arm in ("features", "both"), arm in ("codes", "both"))
+    wide, level = build_model(arm_config(b, "wide")), build_model(cfgs["level"])  # the same backbone, blind
+    assert [c.weight.shape for c in wide.encoder.modules() if isinstance(c, torch.nn.Conv2d)] == \
+        [c.weight.shape for c in level.encoder.modules() if isinstance(c, torch.nn.Conv2d)]
 
 
 def test_the_ablation_trains_scores_and_resumes_each_arm(tmp_path, capsys, monkeypatch):
-    """The tiny budget on two given 9-px blur banks: five arms trained the same steps, every held-out panel scored
+    """The tiny budget on two given 9-px blur banks: six arms trained the same steps, every held-out panel scored
     for every row (plain and level-matched, finite), the report written; a re-run keeps every score row, and a
     retrained arm's model makes the rows stale. An unknown budget is refused in one line. (The training runs' loss
     plots are left out: 5 matplotlib figures, most of the test's time.)"""
@@ -77,9 +81,14 @@ def test_the_summary_takes_each_group_and_each_arm_against_the_blind_unet():
                                                                                           ("toled", 20.0))]
     s = summary(rows)
     assert s["all"]["panels"] == 2 and s["all"]["means"]["unet"] == {"plain": 17.0, "level": 19.0}
-    assert s["poled"]["minus_unet"]["both"] == {"plain": 4.0, "level": 8.0}
-    assert choice(s) == {"chosen": "both", "level_pick": "both", "gain_db": {"plain": 4.0, "level": 8.0},
-                         "target_met": True}
+    assert s["poled"]["minus_unet"]["both"] == {"plain": 5.0, "level": 10.0}
+    c = choice(s, rows)
+    assert {k: c[k] for k in ("chosen", "level_pick", "gain_db", "target_met", "runner_up")} == {
+        "chosen": "both", "level_pick": "both", "gain_db": {"plain": 5.0, "level": 10.0}, "target_met": True,
+        "runner_up": "features"}
+    assert c["against_runner_up"]["plain"] == {"mean": 1.0, "sd": 0.0, "min": 1.0, "max": 1.0, "above": 2}
+    assert c["against_unet"]["level"]["mean"] == 10.0 and s["all"]["panels_above_unet"]["codes"]["plain"] == 2
+    assert c["against_wide"]["plain"]["mean"] == 4.0  # wide is an arm, never the choice
 
 
 def test_each_arm_sees_only_the_description_its_parts_read():
@@ -105,3 +114,21 @@ def test_each_arm_sees_only_the_description_its_parts_read():
         assert torch.equal(models["features"](x, scalars), out["features"])
         assert (models["features"](x, other) - out["features"]).abs().max() > 1e-4
         assert (models["codes"](x, scalars) - out["codes"]).abs().max() > 1e-6
+
+
+def test_the_robustness_page_states_the_committed_ablations_numbers():
+    """docs/studies/robustness.md's ablation table prints, for every row, the committed run's means (ablation.json's
+    summary: every held-out panel, the P-OLED and T-OLED draws; plain and level-matched) to 0.01 dB, and names the
+    chosen arm."""
+    from restore.studies.ablation_report import ROWS
+    from tests.docs.examples import ROOT
+    doc = json.loads((ROOT / "docs/figures/restore_studies/ablation_cpu/ablation.json").read_text())
+    page = (ROOT / "docs/studies/robustness.md").read_text(encoding="utf-8")
+    section = page[page.index("## Which conditioning"):]
+    rows = {line.split("|")[1].strip(): line for line in section.splitlines() if line.startswith("| ")}
+    for key, label in ROWS.items():
+        row = rows[label]
+        for group in ("all", "poled", "toled"):
+            for kind in ("plain", "level"):
+                assert f" {doc['summary'][group]['means'][key][kind]:.2f} " in row, (label, group, kind)
+    assert f"**`{doc['choice']['chosen']}`**" in section
