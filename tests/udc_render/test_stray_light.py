@@ -333,7 +333,7 @@ def test_stray_light_option_wins_over_the_profile():
 
 def test_spread_back_interpolates_linearly_and_keeps_the_total():
     """Coarse cells of a plane's densities a + b·y + c·x come back as that plane at every pixel centre between the
-    outer cell centres (bilinear interpolation is exact on a plane), clamped beyond them, and the total is the cells'."""
+    outer cell centres (bilinear interpolation is exact on a plane), clamped beyond them; the total is the cells'."""
     from udc_render.optics.stray.spread import spread_back
     b, h, w = 4, 5, 7
     yc, xc = np.arange(h)[:, None], np.arange(w)[None, :]  # cell centres in cell units
