@@ -84,7 +84,7 @@ def _signed(v) -> str:
 
 def markdown(result: dict, s: dict, c: dict) -> str:
     b, t = result["budget"], result["times"]
-    lines = ["# The conditioning ablation (CPU budget)", "",
+    lines = [f"# The conditioning ablation (CPU budget, training seed {b['seeds']['train']})", "",
              f"Budget `{b['name']}`: {b['sensor_px'][0]} × {b['sensor_px'][1]} px of {b['pitch_um']} µm, bands "
              f"{b['bands_nm']} nm, {b['field_phases']} × {b['field_phases']} field phases; {b['train_images']} "
              f"training and {b['val_images']} validation images (colour dead leaves); {len(b['panels']['random'])} "

@@ -118,8 +118,8 @@ def test_each_arm_sees_only_the_description_its_parts_read():
 
 def test_the_robustness_page_states_the_committed_ablations_numbers():
     """docs/studies/robustness.md's ablation table prints, for every row, the committed run's means (ablation.json's
-    summary: every held-out panel, the P-OLED and T-OLED draws; plain and level-matched) to 0.01 dB, and names the
-    chosen arm."""
+    summary: every held-out panel, the P-OLED and T-OLED draws; plain and level-matched) to 0.01 dB, names the
+    chosen arm, and says which arm each seed's report picks (seed_1/ablation.json)."""
     from restore.studies.ablation_report import ROWS
     from tests.docs.examples import ROOT
     doc = json.loads((ROOT / "docs/figures/restore_studies/ablation_cpu/ablation.json").read_text())
@@ -131,4 +131,7 @@ def test_the_robustness_page_states_the_committed_ablations_numbers():
         for group in ("all", "poled", "toled"):
             for kind in ("plain", "level"):
                 assert f" {doc['summary'][group]['means'][key][kind]:.2f} " in row, (label, group, kind)
-    assert f"**`{doc['choice']['chosen']}`**" in section
+    assert f"The chosen design: `{doc['choice']['chosen']}`" in section
+    seed_1 = json.loads((ROOT / "docs/figures/restore_studies/ablation_cpu/seed_1/ablation.json").read_text())
+    for seed, d in ((0, doc), (1, seed_1)):
+        assert f"seed {seed} picks `{d['choice']['chosen']}`" in " ".join(section.split())
