@@ -74,8 +74,8 @@ def register(sub) -> None:
                    help="layout only: the cell as the layout frames it, or with its first open column moved to the "
                         "tile's edge, where a turn about the tile's centre moves the opening [as_given]")
     s.add_argument("--restore", choices=("dep",), default=None,
-                   help="layout only: also restore crops of a natural image through the layout's kernels with DeP "
-                        "and report the PSNR (off by default: DeP's Wiener sampler takes about a second per "
+                   help="layout only: dep: also restore crops of a natural image through the layout's kernels with "
+                        "DeP and report the PSNR (off by default: DeP's Wiener sampler takes about a second per "
                         "plane, 12 planes: 12-14 s more per layout) [off]")
 
 
