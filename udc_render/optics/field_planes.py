@@ -178,14 +178,15 @@ def convolve_field_planes(planes: np.ndarray, matrix: np.ndarray, pb: PlaneBasis
     shape = fft_shape((H, W), basis.bases[0].shape[-1], m)
     weights = np.asarray(channel_weights, np.float64) * np.asarray(gains, np.float64)[None, :]
     spectra = _summed_spectra(pb, basis.bases, weights, np.asarray(matrix, np.float64), J, shape, dtype, workers)
-    acc = [None] * weights.shape[0]
     padded = np.zeros(shape, dtype)
     view = padded[:H, :W]
+    acc, term = None, None
     for c in range(P):
         for j in range(J):
             np.multiply(planes[c], pb.maps[j], out=view, casting="unsafe")
             f = sfft.rfft2(padded, workers=workers)
+            if acc is None:
+                acc, term = np.zeros((weights.shape[0],) + f.shape, f.dtype), np.empty_like(f)
             for Cc in range(weights.shape[0]):
-                term = spectra[j][Cc][c] * f
-                acc[Cc] = term if acc[Cc] is None else np.add(acc[Cc], term, out=acc[Cc])
+                acc[Cc] += np.multiply(spectra[j][Cc][c], f, out=term)
     return np.stack([sfft.irfft2(a, s=shape, workers=workers)[m:H - m, m:W - m] for a in acc])
