@@ -46,3 +46,26 @@ def test_through_the_planes_equals_the_band_path(small, distance_mm):
         optics, old = planes.display_meta[d.name]["optics"], bands.display_meta[d.name]["optics"]
         through = "the far field" if distance_mm and not d.is_glass else "the blur and the far field"
         assert optics["primaries"].startswith(through) and "primaries" not in old
+
+
+def test_the_kept_kernel_spectra_give_the_same_bits_and_follow_the_weights():
+    """convolve_primaries keeps its summed kernels' spectra per process: a second call returns the same bits as the
+    first, and a change of the weights (another view or sensor) is not served the kept spectra: its result is the
+    cold path's, and linear in the weights."""
+    from udc_render.optics import primaries as pr
+    rng = np.random.default_rng(3)
+    planes = rng.random((3, 48, 40)).astype(np.float32)
+    kernels = rng.random((5, 7, 7)).astype(np.float32)
+    p = pr.Primaries(planes, rng.random((3, 5)))
+    w = rng.random((3, 5))
+
+    def run(weights):
+        return pr.convolve_primaries(p, kernels, 4, np.ones(5), weights)
+
+    pr._SPECTRA.clear()
+    first = run(w)
+    assert np.array_equal(run(w), first)
+    doubled = run(2 * w)
+    pr._SPECTRA.clear()
+    assert np.array_equal(run(2 * w), doubled)
+    np.testing.assert_allclose(doubled, 2 * first, rtol=1e-5, atol=1e-6 * np.abs(first).max())

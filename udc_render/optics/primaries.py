@@ -4,13 +4,15 @@ rgb_matrix path; BandImage.primaries_image), so a view's channel sums (apply_ker
 
     y_C = Σ_k w_Ck g_k (x_k ⊗ k_k) = Σ_c r_c ⊗ H_Cc,    H_Cc = Σ_k w_Ck g_k M_ck k_k
 
-by linearity: 3 forward FFTs of the planes (shared by the views), C × 3 kernel spectra of the summed kernels and
-C inverse FFTs per view, in place of K forward FFTs, K kernel spectra and C × K products. The far field the same
-way: y_C = Σ_c r̄_c ⊗ F_Cc, F_Cc = Σ_k v_Ck M_ck f_k (optics.far_field). The same numbers as the band path but for
-float32 round-off in another order (tests/udc_render/test_primaries.py).
+by linearity: 3 forward FFTs of the planes (shared by the views), C × 3 kernel spectra of the summed kernels (made
+by a worker's first item and kept) and C inverse FFTs per view, in place of K forward FFTs, K kernel spectra and
+C × K products. The far field the same way: y_C = Σ_c r̄_c ⊗ F_Cc, F_Cc = Σ_k v_Ck M_ck f_k (optics.far_field). The
+same numbers as the band path but for float32 round-off in another order (tests/udc_render/test_primaries.py).
 """
 from __future__ import annotations
 
+import hashlib
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -18,6 +20,9 @@ import scipy.fft as sfft
 
 from udc_render.optics.convolution import OpticsError, _check_margin, _kernel_spectrum, _precision, _workers, fft_shape
 from udc_render.optics.far_field import FarField, _block_means, _upsampling
+
+KEEP_SPECTRA = 4  # the summed kernels' spectra kept per process: a worker's views (C × 3 spectra each, 16 MB apiece)
+_SPECTRA: OrderedDict = OrderedDict()
 
 
 @dataclass(frozen=True)
@@ -45,6 +50,23 @@ def _summed(weights: np.ndarray, kernels: np.ndarray) -> np.ndarray:
     return out
 
 
+def _summed_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, dtype, workers: int) -> list:
+    """spectra[C][c] of H_Cc (module doc), made once per (kernels, weights, matrix, shape, dtype) and kept (KEEP_SPECTRA
+    sets per process): a job's items share their views' kernels, gains and sensor weights, so each item's C × 3
+    kernel FFTs are made by a worker's first item only."""
+    k = np.ascontiguousarray(kernels)
+    key = (hashlib.sha1(k.view(np.uint8).ravel()).hexdigest(), k.shape, k.dtype.str,
+           hashlib.sha1(w.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape), np.dtype(dtype).str)
+    kept = _SPECTRA.pop(key, None)
+    if kept is None:
+        kept = [[_kernel_spectrum(_summed(w[C] * matrix[c], kernels).astype(dtype), shape, dtype, workers)
+                 for c in range(matrix.shape[0])] for C in range(w.shape[0])]
+    _SPECTRA[key] = kept
+    while len(_SPECTRA) > KEEP_SPECTRA:
+        _SPECTRA.popitem(last=False)
+    return kept
+
+
 def convolve_primaries(p: Primaries, kernels: np.ndarray, margin_px: int, gains, channel_weights,
                        precision: str = "float32", workers: int | None = None) -> np.ndarray:
     """The channel sums [C, H − 2m, W − 2m] of Σ_k w_Ck g_k (x_k ⊗ k_k) through the planes (module doc); kernels
@@ -62,12 +84,11 @@ def convolve_primaries(p: Primaries, kernels: np.ndarray, margin_px: int, gains,
     shape = fft_shape((H, W), S, m)
     spectra = p.spectra if p.spectra is not None else plane_spectra(planes, S, m, precision, workers)
     out = np.empty((w.shape[0], H - 2 * m, W - 2 * m), dtype)
+    summed = _summed_spectra(kernels, w, matrix, shape, dtype, workers)
     for C in range(w.shape[0]):
         acc = None
         for c in range(planes.shape[0]):
-            kernel = _summed(w[C] * matrix[c], kernels).astype(dtype)
-            term = _kernel_spectrum(kernel, shape, dtype, workers)
-            term *= spectra[c]
+            term = summed[C][c] * spectra[c]
             if acc is None:
                 acc = term
             else:
