@@ -58,18 +58,21 @@ def display_referred(rgb: np.ndarray, balance: np.ndarray) -> np.ndarray:
     return encode_srgb(x)
 
 
-def display_referred_quarters(dn: np.ndarray, range_dn: float, balance: np.ndarray) -> np.ndarray:
-    """display_referred(dn / range_dn, balance) bit for bit when dn [3, H, W] holds whole multiples of 1/4 (the
-    bilinear demosaic of a whole-number mosaic: sensor.demosaic_bilinear), through one table per channel over dn's
-    range: a lookup per pixel in place of a power (the summaries' srgb PSNR); other values take display_referred."""
-    b = border_px(*dn.shape[1:])
-    q = 4 * np.asarray(dn, np.float64)[:, b:dn.shape[1] - b or None, b:dn.shape[2] - b or None]
-    lo, hi = (float(v) for v in (q.min(), q.max())) if q.size else (0.0, 0.0)
-    if not (np.isfinite(lo) and np.isfinite(hi) and hi - lo < 2 ** 22 and np.array_equal(np.rint(q), q)):
-        return display_referred(np.asarray(dn, np.float64) / range_dn, balance)
-    steps = np.arange(lo, hi + 1) / 4 / range_dn  # the same float64 operations as the caller's dn / range_dn
-    index = (q - lo).astype(np.intp)
-    return np.stack([encode_srgb(np.clip(steps * balance[c], 0, 1))[index[c]] for c in range(q.shape[0])])
+def display_referred_quarters(quarters: np.ndarray, range_dn: float, balance: np.ndarray) -> np.ndarray:
+    """display_referred(quarters / 4 / range_dn, balance) bit for bit, for whole-number quarters [3, H, W] (an
+    integer mosaic's bilinear demosaic in quarter DN: sensor.bilinear_quarters), through one table per channel over
+    their range: a lookup per pixel in place of a power (the summaries' srgb PSNR of every capture)."""
+    if not np.issubdtype(quarters.dtype, np.integer):
+        raise TypeError(f"display_referred_quarters: integer quarters expected, got {quarters.dtype}")
+    b = border_px(*quarters.shape[1:])
+    q = quarters[:, b:quarters.shape[1] - b or None, b:quarters.shape[2] - b or None]
+    lo, hi = (int(q.min()), int(q.max())) if q.size else (0, 0)
+    steps = np.arange(lo, hi + 1, dtype=np.float64) / 4 / range_dn  # the float64 operations of quarters / 4 / range_dn
+    out = np.empty(q.shape)
+    for c in range(q.shape[0]):
+        table = encode_srgb(np.clip(steps * balance[c], 0, 1))
+        np.take(table, q[c] - lo, out=out[c])
+    return out
 
 
 def paper_linear(x: np.ndarray) -> np.ndarray:

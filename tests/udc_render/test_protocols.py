@@ -47,15 +47,17 @@ def test_every_protocol_is_named():
 
 
 def test_the_quarter_table_is_display_referred_bit_for_bit():
-    """display_referred_quarters (a table per channel over whole multiples of 1/4 DN) gives display_referred's bits:
-    on a bilinear demosaic of a whole-number mosaic with values below black and above the range (both clipped), and
-    on values off the lattice (its fallback)."""
+    """The summaries' fast srgb path gives the float path's bits: bilinear_quarters (shifted integer sums) / 4 equals
+    demosaic_bilinear (scipy's 3 × 3 convolution) on a whole-number mosaic, and display_referred_quarters (a table per
+    channel) equals display_referred of quarters / 4 / range, with values below black and above the range (both
+    clipped); real quarters are refused."""
     from udc_render.metrics import display_referred, display_referred_quarters
-    from udc_render.sensor import demosaic_bilinear
+    from udc_render.sensor import bilinear_quarters, demosaic_bilinear
     rng = np.random.default_rng(4)
-    mosaic = rng.integers(0, 1100, (96, 130)).astype(np.float64) - 64  # black level 64, white 1023
-    dn = demosaic_bilinear(mosaic)
+    mosaic = rng.integers(0, 1100, (96, 130)).astype(np.int32) - 64  # black level 64, white 1023
+    quarters = bilinear_quarters(mosaic)
+    assert quarters.dtype == np.int32 and np.array_equal(quarters / 4, demosaic_bilinear(mosaic))
     bal = np.array([2.1, 1.0, 1.6])
-    assert np.array_equal(display_referred_quarters(dn, 959, bal), display_referred(dn / 959, bal))
-    off = dn + rng.random(dn.shape) / 7
-    assert np.array_equal(display_referred_quarters(off, 959, bal), display_referred(off / 959, bal))
+    assert np.array_equal(display_referred_quarters(quarters, 959, bal), display_referred(quarters / 4 / 959, bal))
+    with pytest.raises(TypeError, match="integer quarters"):
+        display_referred_quarters(quarters / 4, 959, bal)

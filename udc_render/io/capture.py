@@ -31,7 +31,7 @@ from udc_render.io.images import write_png
 from udc_render.io.plots import plot_side_by_side
 from udc_render.io.previews import daylight_balance, preview_srgb
 from udc_render.metrics import PROTOCOLS, display_referred, display_referred_quarters, paper_linear, psnr_db
-from udc_render.sensor import CHANNELS, demosaic_bilinear, mosaic_of, pack_rggb
+from udc_render.sensor import CHANNELS, bilinear_quarters, mosaic_of, pack_rggb
 
 
 class CaptureFileError(UdcError):
@@ -54,14 +54,14 @@ def capture_psnr_db(packed: np.ndarray, gt: np.ndarray | None, rgb: np.ndarray, 
     return {"paper": psnr_db(paper_linear(packed), refs[0]), "srgb": psnr_db(display_referred(rgb, balance), refs[1])}
 
 
-def capture_summary(cap, refs: tuple, dn: np.ndarray, balance: np.ndarray, white_level_dn: int,
+def capture_summary(cap, refs: tuple, quarters: np.ndarray, balance: np.ndarray, white_level_dn: int,
                     black_level_dn: int) -> dict:
     """Mean level per RGGB channel (fraction of the range), and PSNR against the ground truth under the
-    paper protocol (packed RAW) and the srgb protocol (`dn`: the demosaiced mosaic [3, H, W] in DN above black,
-    sensor.demosaic_bilinear; udc_render.metrics). refs: gt_references of the item's ground truth."""
+    paper protocol (packed RAW) and the srgb protocol (`quarters`: the bilinear demosaic of the mosaic above black,
+    in quarter DN, sensor.bilinear_quarters; udc_render.metrics). refs: gt_references of the item's ground truth."""
     rng_dn = white_level_dn - black_level_dn
     norm = (cap.packed_dn.astype(np.float64) - black_level_dn) / rng_dn
-    shown = display_referred_quarters(dn, rng_dn, balance)  # = display_referred(dn / rng_dn, balance), bit for bit
+    shown = display_referred_quarters(quarters, rng_dn, balance)  # display_referred(demosaic / range), bit for bit
     return {"mean_level": {c: float(norm[i].mean()) for i, c in enumerate(CHANNELS)},
             "psnr_db_vs_gt": psnr_db(paper_linear(norm), refs[0]), "psnr_db_vs_gt_srgb": psnr_db(shown, refs[1]),
             "saturated_fraction": float((cap.mosaic_dn >= white_level_dn).mean())}
@@ -85,13 +85,13 @@ def write_synthesis(out: Path, result, camera: str, side_by_side: bool = True, p
         d.mkdir(exist_ok=True)
         s = cap.params["sensor"]
         save_dng(d / "raw.dng", cap.mosaic_dn, s["camera"], s["black_level_dn"], s["white_level_dn"])
-        dn = demosaic_bilinear(cap.mosaic_dn.astype(np.float64) - s["black_level_dn"])
+        quarters = bilinear_quarters(cap.mosaic_dn.astype(np.int32) - np.int32(s["black_level_dn"]))
         if previews or side_by_side:
-            images[name] = preview_srgb(dn / (s["white_level_dn"] - s["black_level_dn"]), balance)
+            images[name] = preview_srgb(quarters / 4 / (s["white_level_dn"] - s["black_level_dn"]), balance)
         if previews:
             write_png(d / "preview.png", images[name])
         save_json(d / "capture.json", {**cap.params, **result.display_meta[name]})
-        summary["views"][name] = capture_summary(cap, refs, dn, balance, s["white_level_dn"], s["black_level_dn"])
+        summary["views"][name] = capture_summary(cap, refs, quarters, balance, s["white_level_dn"], s["black_level_dn"])
     save_json(out / "synth.json", result.meta)
     save_json(out / "summary.json", summary)
     save_text(out / "summary.md", summary_markdown(summary))

@@ -29,6 +29,7 @@ from udc_render.sensor.bayer import (
     CHANNELS,
     SITE_COLOUR,
     SITES,
+    bilinear_quarters,
     demosaic_bilinear,
     mosaic_of,
     pack_rggb,
@@ -51,8 +52,8 @@ from udc_render.sensor.radiometry import (
 )
 
 __all__ = ["CHANNELS", "SITES", "SITE_COLOUR", "Capture", "DefectConfig", "DefectError", "FpnConfig", "FpnError",
-           "FpnMaps", "SensorConfig", "SensorError", "apply_defects", "band_electron_weights", "capture",
-           "capture_electrons", "cos4_map", "defect_levels", "defect_map", "demosaic_bilinear", "electrons_per_channel",
-           "electrons_rgb", "electrons_spectral", "expose", "fpn_maps", "fpn_normals", "mosaic_of", "noise_lambdas",
-           "pack_rggb", "photon_weights", "readout", "rgb_to_rggb", "sample_brooks", "sensor_lambdas", "site_colour",
-           "unpack_rggb"]
+           "FpnMaps", "SensorConfig", "SensorError", "apply_defects", "band_electron_weights", "bilinear_quarters",
+           "capture", "capture_electrons", "cos4_map", "defect_levels", "defect_map", "demosaic_bilinear",
+           "electrons_per_channel", "electrons_rgb", "electrons_spectral", "expose", "fpn_maps", "fpn_normals",
+           "mosaic_of", "noise_lambdas", "pack_rggb", "photon_weights", "readout", "rgb_to_rggb", "sample_brooks",
+           "sensor_lambdas", "site_colour", "unpack_rggb"]
