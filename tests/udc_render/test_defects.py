@@ -141,3 +141,12 @@ def test_same_map_in_every_capture_of_a_run_and_ground_truth_untouched(white):
     other = synthesize(bi, scene, views[:1], SynthConfig(sensor=SensorConfig(noise="none"),
                                                          defects=replace(defects, seed=5)))
     assert not np.array_equal(_defect_positions(other.captures["glass"]), expected)
+
+
+def test_the_defect_map_is_made_once_per_shape_and_read_only():
+    """defect_map is a function of (shape, config): made once per process, read-only."""
+    d = DefectConfig(dead_fraction=0.01, hot_fraction=0.01, seed=2)
+    kind = defect_map(8, 6, d)
+    assert defect_map(8, 6, d) is kind
+    with pytest.raises(ValueError, match="read-only"):
+        kind[0, 0] = 0

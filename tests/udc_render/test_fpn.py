@@ -243,3 +243,13 @@ def test_profiles_physical_has_fpn_paper_none():
     cfg, _ = resolve_profile("paper", SynthConfig(), [D.preset("toled")])
     assert cfg.fpn is None and cfg.form == "per_channel" and "fixed-pattern noise: none" in describe(cfg.profile)
     assert SynthConfig().fpn is None
+
+
+def test_the_maps_are_made_once_per_shape_and_read_only():
+    """fpn_maps is a function of (shape, config): a process makes it once and hands out read-only arrays (a capture
+    that wrote into them would change every later capture)."""
+    fpn = FpnConfig(prnu=0.01, dsnu_e=1.0, seed=3)
+    a = fpn_maps(8, 6, fpn)
+    assert fpn_maps(8, 6, fpn) is a and fpn_maps(8, 8, fpn) is not a
+    with pytest.raises(ValueError, match="read-only"):
+        a.gain[0, 0] = 2.0

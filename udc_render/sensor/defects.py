@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -109,11 +110,14 @@ class DefectConfig:
         return self.hot_dark_e_per_s * float(exposure_s)
 
 
+@lru_cache(maxsize=2)
 def defect_map(height_px: int, width_px: int, defects: DefectConfig) -> np.ndarray:
     """[H, W] int8: 0 good, 1 (DEAD) dead, 2 (HOT) hot; a function of (shape, defects) alone (module doc;
-    sensor.readout.defect_classes of default_rng(seed).random((H, W)))."""
+    sensor.readout.defect_classes of default_rng(seed).random((H, W))), made once per process and shape, read-only."""
     u = np.random.default_rng(defects.seed).random((int(height_px), int(width_px)))
-    return readout.defect_classes(u, defects.dead_fraction, defects.hot_fraction)
+    kind = readout.defect_classes(u, defects.dead_fraction, defects.hot_fraction)
+    kind.setflags(write=False)
+    return kind
 
 
 def defect_levels(sensor: SensorConfig, defects: DefectConfig) -> tuple[float, float]:

@@ -61,6 +61,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -136,10 +137,15 @@ def fpn_normals(height_px: int, width_px: int, seed: int) -> tuple[np.ndarray, n
             col_rng.standard_normal(w))
 
 
+@lru_cache(maxsize=2)
 def fpn_maps(height_px: int, width_px: int, fpn: FpnConfig) -> FpnMaps:
-    """The maps of an H × W sensor: a function of (shape, fpn) alone (module doc; sensor.readout.fpn_gain)."""
+    """The maps of an H × W sensor: a function of (shape, fpn) alone (module doc; sensor.readout.fpn_gain), made
+    once per process and shape (every capture of a job draws the same), read-only."""
     z, u, r, c = fpn_normals(height_px, width_px, fpn.seed)
-    return FpnMaps(readout.fpn_gain(z, fpn.prnu), fpn.dsnu_e * u, fpn.row_offset_e * r, fpn.column_offset_e * c)
+    maps = (readout.fpn_gain(z, fpn.prnu), fpn.dsnu_e * u, fpn.row_offset_e * r, fpn.column_offset_e * c)
+    for a in maps:
+        a.setflags(write=False)
+    return FpnMaps(*maps)
 
 
 def mean_charge_e(electrons: np.ndarray, maps: FpnMaps, fpn: FpnConfig, exposure_s: float) -> np.ndarray:
