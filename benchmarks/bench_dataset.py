@@ -84,7 +84,7 @@ def fft_counts(item: Path, bands: int, rank: int) -> dict:
         blend = o["model"] == "field-dependent"
         r = o.get("field_rank", rank)
         through = o.get("field_planes", {}).get("forward_ffts")  # the blend through the planes: 3J of its own
-        now += (through if through else bands * r if blend else 9 if "primaries" in o else 0) + 3  # spectra: kept
+        now += (through if through else bands * r if blend else 0) + 3  # kernel spectra kept by the worker; 3 inverse
         far = o.get("far_field")
         if far:
             small += (9 + 3 if "primaries" in o else 2 * far["bands_added"]) + 3

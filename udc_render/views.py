@@ -102,6 +102,18 @@ def bin_pixels(a: np.ndarray, pitch_um: float, sensor_pitch_um: float) -> np.nda
     return a.reshape(*lead, h // s, s, w // s, s).mean(axis=(-3, -1))
 
 
+def _band_norms_sq(band_image: BandImage) -> np.ndarray:
+    """‖x_k‖² of every band [K] (float64): from the planes' Gram matrix when the bands are made of three planes,
+    ‖Σ_c M_ck r_c‖² = Σ_cd M_ck M_dk ⟨r_c, r_d⟩ (6 products of planes in place of K; equal but for the bands'
+    float32 rounding), else from the bands."""
+    r, m = band_image.primaries_image, band_image.primaries_matrix
+    if r is None or m is None:
+        return np.einsum("khw,khw->k", band_image.bands, band_image.bands, dtype=np.float64)
+    gram = np.einsum("chw,dhw->cd", r, r, dtype=np.float64)
+    m = np.asarray(m, np.float32).astype(np.float64)  # the matrix the bands were made with (BandImage.of_primaries)
+    return np.maximum(np.einsum("ck,cd,dk->k", m, gram, m), 0.0)
+
+
 def bright_pixels(band_image: BandImage, sensor: SensorConfig) -> BrightPixels | None:
     """The pixels to convolve apart in float64 (module doc, ROUNDOFF_*), from their electrons at gain 1,
     e = max_c Σ_k w_ck x_k: none unless ‖e‖₂ exceeds the budget target · σ_read · √N / (factor · safety · ε32)."""
@@ -110,7 +122,7 @@ def bright_pixels(band_image: BandImage, sensor: SensorConfig) -> BrightPixels |
     n = x.shape[1] * x.shape[2]
     budget = ROUNDOFF_TARGET * sensor.read_noise_e * np.sqrt(n) / (
         ROUNDOFF_FACTOR * ROUNDOFF_SAFETY * np.finfo(np.float32).eps)
-    band_norms = np.sqrt(np.einsum("khw,khw->k", x, x, dtype=np.float64))
+    band_norms = np.sqrt(_band_norms_sq(band_image))
     if float(np.abs(w).max(axis=0) @ band_norms) <= budget:  # ‖Σ_k w_k x_k‖ ≤ Σ_k |w_k| ‖x_k‖: nothing to split
         return None
     e = np.einsum("ck,khw->chw", w.astype(np.float32), x, optimize=True).max(axis=0).astype(np.float64)

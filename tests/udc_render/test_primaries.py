@@ -69,3 +69,15 @@ def test_the_kept_kernel_spectra_give_the_same_bits_and_follow_the_weights():
     pr._SPECTRA.clear()
     assert np.array_equal(run(2 * w), doubled)
     np.testing.assert_allclose(doubled, 2 * first, rtol=1e-5, atol=1e-6 * np.abs(first).max())
+
+
+def test_the_band_norms_from_the_planes_gram_matrix_equal_the_bands():
+    """bright_pixels' gate takes ‖x_k‖² from the planes' Gram matrix when the bands are made of three planes:
+    the bands' own sums of squares to within their float32 rounding (relative 1e-6; it measures ~1e-10)."""
+    from udc_render.render.band_image import BandImage
+    from udc_render.views import _band_norms_sq
+    rng = np.random.default_rng(5)
+    planes = rng.random((3, 40, 56)).astype(np.float32)
+    b = BandImage.of_primaries(planes, rng.random((3, 7)), np.arange(8) * 10.0 + 400, 1.55, 4)
+    want = np.einsum("khw,khw->k", b.bands, b.bands, dtype=np.float64)
+    np.testing.assert_allclose(_band_norms_sq(b), want, rtol=1e-6)
