@@ -8,13 +8,15 @@ shared machine moves far less than the wall's.
 TREE is this checkout, or an older one to compare (`git archive COMMIT udc_render psf | tar -x -C DIR`; the same
 kernel cache: run a one-item `udc-render dataset` job of the same settings first, so both trees find their
 kernels there). As executors.make_item runs them at one thread (BLAS, FFTs, Dr.Jit): the imports a worker makes,
-its kernels (worker_kernels: loading, and whatever it computes), then per image the render and the synthesis
-(`pipeline.synthesize`; the files are not written).
+its kernels (worker_kernels: loading, and whatever it computes), then per image the render, the synthesis
+(`pipeline.synthesize`) and the files (`io.capture.write_synthesis` into a temporary folder, as a dataset item
+without previews).
 """
 from __future__ import annotations
 
 import argparse
 import os
+import tempfile
 import time
 
 os.environ.update(OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1", MKL_NUM_THREADS="1")  # before numpy loads
@@ -37,6 +39,7 @@ def main() -> None:
     from udc_render.dataset import _shared
     from udc_render.dataset.executors import worker_kernels
     from udc_render.dataset.threads import set_worker_threads
+    from udc_render.io.capture import write_synthesis
     from udc_render.pipeline import synthesize
     from udc_render.render import render_scene
     set_worker_threads(1)
@@ -54,8 +57,12 @@ def main() -> None:
         c0 = time.process_time()
         band_image = render_scene(scene, progress=False)
         c1 = time.process_time()
-        synthesize(band_image, scene, shared.displays, shared.cfg, 0, kernels=kernels)
-        print(f"{image}: render {c1 - c0:.2f} CPU s, synthesis {time.process_time() - c1:.2f} CPU s", flush=True)
+        result = synthesize(band_image, scene, shared.displays, shared.cfg, 0, kernels=kernels)
+        c2 = time.process_time()
+        with tempfile.TemporaryDirectory() as tmp:  # the files as a dataset item writes them (no previews)
+            write_synthesis(Path(tmp), result, shared.cfg.sensor.camera, side_by_side=False, previews=False)
+        print(f"{image}: render {c1 - c0:.2f} CPU s, synthesis {c2 - c1:.2f} CPU s, files "
+              f"{time.process_time() - c2:.2f} CPU s", flush=True)
 
 
 if __name__ == "__main__":
