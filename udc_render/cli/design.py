@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from udc_render.cli.args import out_dir, positive
-from udc_render.design.options import DEFAULT_FEATURE_UM, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
+from udc_render.design.options import CROP_PX, DEFAULT_FEATURE_UM, INITS, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
 
 
 def register(sub) -> None:
@@ -22,7 +22,15 @@ def register(sub) -> None:
                         "(one fixed D4 draw for the search, another held out for the scores) [turned]")
     p.add_argument("--objective", choices=OBJECTIVES, default="wiener",
                    help="wiener: the Wiener estimate's expected error under the sensor's noise; upc: UPC's "
-                        "Wiener-response term (lowest 30 %% of |H|²/(|H|² + 0.015)) [wiener]")
+                        "Wiener-response term (lowest 30 %% of |H|²/(|H|² + 0.015)); crop: wiener on a --crop-px crop, "
+                        "the kernel's light reaching past it interference [wiener]")
+    p.add_argument("--crop-px", type=positive("--crop-px", int), default=CROP_PX,
+                   help=f"--objective crop: the restorer's crop in px [{CROP_PX}: study layout --restore dep's]")
+    p.add_argument("--contrast", type=positive("--contrast"), default=0.3,
+                   help="the scene's RMS contrast in the wiener and crop objectives [0.3]")
+    p.add_argument("--init", choices=INITS, default="scatter",
+                   help="the search's start: a random scatter, or the preset T-OLED on the squares, its slit at the "
+                        "tile's edge [scatter]")
     p.add_argument("--steps", type=positive("--steps", int), default=150,
                    help="at most this many swaps of an open and an opaque square; the search stops earlier at a "
                         "local optimum [150]")
@@ -45,7 +53,8 @@ def run(args) -> int:
     from udc_render.design.job import run_design
     from udc_render.design.optimise import DesignConfig
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
-                          args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters)
+                          args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
+                          args.contrast, args.init)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]

@@ -58,10 +58,14 @@ def natural_spectrum(size: int, variance: float) -> np.ndarray:
     return s * variance / s.mean()
 
 
-def wiener_mse(h, signal, noise, transmission=1.0):
+def wiener_mse(h, signal, noise, transmission=1.0, h_far=None):
     """Mean over the DFT grid of S N / (T² |H|² S + N) (module doc): h, signal [L, L] in fft2's order; numpy
-    arrays or torch tensors (the designer's objective), the result of the same kind."""
-    v = signal * noise / (transmission ** 2 * abs(h) ** 2 * signal + noise)
+    arrays or torch tensors (the designer's objective), the result of the same kind. With h_far, the light of that
+    part of the kernel is interference (a scene independent of x, the same spectrum), N → N + T² S |H_far|²:
+    S (N + T² S |H_far|²) / (T² (|H|² + |H_far|²) S + N)."""
+    t2 = transmission ** 2
+    far = 0.0 if h_far is None else t2 * signal * abs(h_far) ** 2
+    v = signal * (noise + far) / (t2 * abs(h) ** 2 * signal + far + noise)
     return v.mean()
 
 

@@ -3,7 +3,8 @@
 The cell is c × c squares of the minimum feature size (c = cell_um / feature_um), each open (amplitude 1) or
 opaque, with K = round(open_fraction · c²) open: every opening and every opaque bar is a union of whole squares, so
 none is smaller than feature_um, and the open area is exact to one square. The search starts from a random scatter
-of K squares (udc_render.streams) and moves by swaps of an open and an opaque square, which keep K:
+of K squares (udc_render.streams), or (init 'toled') from the preset T-OLED on the squares, and moves by swaps of
+an open and an opaque square, which keep K:
 
     each step: g = ∂J/∂a at the current binary cell (one backward pass, the transmission held at K / c²);
     the swap (close i, open j) changes J by ≈ g_j − g_i to first order; the `candidates` swaps of lowest
@@ -22,6 +23,12 @@ tiled plainly or by one fixed random D4 tiling (the search's; the final scores t
   transmitted light inside the kernel's window (torch_psf.kernels_and_window): the light diffracted past the
   window counts as lost. Without that factor the unit-sum kernel does not see the light it loses, and the search
   threw light past the 127-px window: +1.1 dB on its own kernels, +0.2 dB on `study layout`'s 255-px ones;
+- 'crop': the same with the restorer seeing only a crop of crop_px (`study layout --restore dep`'s 192): the share
+  w(Δ) = (1 − 2|Δy|/C)₊ (1 − 2|Δx|/C)₊ of the kernel at offset Δ is signal, the rest interference from a scene the
+  crop does not show (udc_render.design.crop.near_window; metrics.wiener_mse's h_far), at the RMS contrast given
+  (natural crops reach 0.6–1.7; the restorability's 0.3 is low for them). A stationary stand-in, checked against
+  the exact posterior mean on finite crops (crop.crop_mse): the designed cell of 'wiener' restores 9 dB below the
+  T-OLED in DeP on 192-px crops because its light reaches ±96 px and more (docs/guides/design.md);
 - 'upc': UPC's first term, −0.01 × the mean of the lowest 30 % of |H|² / (|H|² + 0.015) (their image L2 term,
   which needs an image set, is left out; their open-area term is met exactly by the swaps).
 The search scores in float32 (a swap is taken only if it lowers J by more than IMPROVE_REL of J, well above
@@ -40,11 +47,13 @@ import torch
 
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp
-from udc_render.design.options import DEFAULT_FEATURE_UM, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
+from udc_render.design.crop import near_window, split_kernel
+from udc_render.design.options import CROP_PX, DEFAULT_FEATURE_UM, INITS, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
 
-__all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig", "Designer", "scatter"]
+__all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig", "Designer", "scatter",
+           "toled_cell", "initial_cell"]
 
 IMPROVE_REL = 1e-5
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
@@ -64,6 +73,9 @@ class DesignConfig:
     pupil_samples: int = 512
     kernel_px: int = 127
     scatters: int = 20
+    crop_px: int = CROP_PX
+    contrast: float = metrics.RMS_CONTRAST
+    init: str = "scatter"
 
     def __post_init__(self):
         if not 0 < self.open_fraction < 1:
@@ -78,7 +90,11 @@ class DesignConfig:
         if round(self.open_fraction * self.cell_px ** 2) < 1:
             raise tp.DesignError(f"--open-area {self.open_fraction}: less than one {self.feature_um} µm square of "
                                  f"the {self.cell_px} × {self.cell_px} cell")
-        for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES)):
+        if not (isinstance(self.crop_px, int) and self.crop_px >= 2):
+            raise tp.DesignError(f"--crop-px {self.crop_px}: expected an integer ≥ 2")
+        if not self.contrast > 0:
+            raise tp.DesignError(f"--contrast {self.contrast}: expected an RMS contrast > 0")
+        for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES), ("init", INITS)):
             if getattr(self, key) not in allowed:
                 raise tp.DesignError(f"--{key} {getattr(self, key)}: expected one of {', '.join(allowed)}")
         for key in ("steps", "candidates", "scatters"):
@@ -102,6 +118,28 @@ def scatter(config: DesignConfig, *keys) -> np.ndarray:
     return flat.reshape(c, c)
 
 
+def _spectrum(k: torch.Tensor) -> torch.Tensor:
+    return torch.fft.fft2(torch.fft.ifftshift(k, dim=(-2, -1)))
+
+
+def toled_cell(config: DesignConfig) -> np.ndarray:
+    """The preset T-OLED (psf.layouts.toled) in the config's cell at its open area, on the feature squares: the
+    config.open_squares squares of the largest area-weighted amplitude (ties in raster order), its slit moved to
+    the tile's edge (cells.frame_cell: the framing that reproduces UPC's turned T-OLED)."""
+    from psf import layouts
+    from udc_render.design.cells import frame_cell
+    raster = tp.preset_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction),
+                            config.cell_px)
+    flat = np.zeros(raster.size)
+    flat[np.argsort(-raster.ravel(), kind="stable")[: config.open_squares]] = 1.0
+    return frame_cell(flat.reshape(raster.shape), "edge")
+
+
+def initial_cell(config: DesignConfig) -> np.ndarray:
+    """The search's start: a random scatter (stream 'design', 'init') or the T-OLED (toled_cell), by config.init."""
+    return toled_cell(config) if config.init == "toled" else scatter(config, "init")
+
+
 class Designer:
     """The objective and one search step; state (the cell, its objective, the record) is what a checkpoint keeps."""
 
@@ -109,10 +147,11 @@ class Designer:
         self.config, self.sensor, self.device = config, sensor or SensorConfig(), device
         self.grid = tp.cell_grid(config.cell_px, config.feature_um, Lens(), RIG_WAVELENGTHS_NM, 3.1,
                                  config.kernel_px, config.pupil_samples)
-        variance = (metrics.RMS_CONTRAST * metrics.MEAN_LEVEL) ** 2
+        variance = (config.contrast * metrics.MEAN_LEVEL) ** 2
         self.signal = torch.tensor(metrics.natural_spectrum(config.kernel_px, variance), device=device)
+        self.window = torch.tensor(near_window(config.kernel_px, config.crop_px), device=device)
         self.transmission = config.open_squares / config.cell_px ** 2
-        self.cell = scatter(config, "init")
+        self.cell = initial_cell(config)
         self.current = self.search_score(self.cell)
         self.step_done, self.converged, self.evaluations, self.losses = 0, False, 1, []
 
@@ -123,15 +162,18 @@ class Designer:
         return tp.tile_transforms(self.grid.tiles, self.config.seed, keys=("design", which))
 
     def objective(self, cell: torch.Tensor, transforms) -> torch.Tensor:
-        """J of a cell of amplitudes (module doc): wiener at the transmission K / c² (the swaps keep it) × the
-        fraction of the light inside the kernel's window."""
+        """J of a cell of amplitudes (module doc): wiener (crop: its light split by the crop's near_window) at the
+        transmission K / c² (the swaps keep it) × the fraction of the light inside the kernel's window."""
         k, inside = tp.kernels_and_window(cell, self.grid, transforms)
-        h = torch.fft.fft2(torch.fft.ifftshift(k, dim=(-2, -1)))
-        if self.config.objective == "wiener":
+        if self.config.objective in ("wiener", "crop"):
+            near, far = split_kernel(k, self.window.to(k.dtype)) if self.config.objective == "crop" else (k, None)
+            h, h_far = _spectrum(near), (None if far is None else _spectrum(far))
             signal, kept = self.signal.to(cell.dtype), self.transmission * inside
-            return torch.stack([metrics.wiener_mse(hc, signal, metrics.noise_variance(self.sensor, metrics.MEAN_LEVEL,
-                                                                                      t), t)
-                                for hc, t in zip(h, kept)]).mean()
+            return torch.stack([metrics.wiener_mse(h[c], signal, metrics.noise_variance(self.sensor, metrics.MEAN_LEVEL,
+                                                                                       t), t,
+                                                   None if h_far is None else h_far[c])
+                                for c, t in enumerate(kept)]).mean()
+        h = _spectrum(k)
         w = (h.abs() ** 2 / (h.abs() ** 2 + 0.015)).flatten()
         return -0.01 * torch.topk(w, int(0.3 * w.numel()), largest=False).values.mean()
 
@@ -141,7 +183,7 @@ class Designer:
         with torch.no_grad():
             j = float(self.objective(torch.tensor(cell, dtype=torch.float64, device=self.device),
                                      self.transforms(which)))
-        psnr = float(-10 * np.log10(j)) if self.config.objective == "wiener" else None
+        psnr = float(-10 * np.log10(j)) if self.config.objective in ("wiener", "crop") else None
         return {"objective": j, "psnr_db": psnr, "open_area": float(np.mean(cell))}
 
     def search_score(self, cell: np.ndarray) -> float:
