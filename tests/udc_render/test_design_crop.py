@@ -2,6 +2,9 @@
 (udc_render.design.optimise): oracles in closed form, limits, and the refusals."""
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -81,3 +84,39 @@ def test_design_refuses_bad_crop_settings_in_one_line(tmp_path, capsys, argv, sa
     assert cli.main(["design", *argv, "--out", str(tmp_path / "never")]) == 2
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()
+
+
+def _guide() -> str:
+    root = Path(__file__).resolve().parents[2]
+    return " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+
+
+def _figures() -> Path:
+    return Path(__file__).resolve().parents[2] / "docs" / "figures" / "design"
+
+
+def test_the_guides_dep_rows_and_verdict_are_the_committed_studies():
+    """docs/guides/design.md's DeP table of the `crop` design against the T-OLED and the P-OLED is the committed
+    study JSONs' (same session), and its verdict (the miss against the T-OLED) is their difference."""
+    text, mean = _guide(), {}
+    for name in ("design", "toled168_20_edge", "poled_20"):
+        doc = json.loads((_figures() / "crop_studies" / name / "study_layout.json").read_text())
+        for tiling in ("turned", "repeated"):
+            r = doc["restored"][tiling]
+            row = " / ".join(f"{v:.2f}" for v in r["psnr_db"]) + f" dB, {r['mean_psnr_db']:.2f}"
+            assert row in text, row
+        mean[name] = doc["restored"]["turned"]["mean_psnr_db"]
+    miss = mean["toled168_20_edge"] - mean["design"]
+    assert f"misses by {miss:.2f} dB" in text and miss > 0
+    assert f"({mean['design']:.2f} against {mean['toled168_20_edge']:.2f} dB" in text
+
+
+def test_the_guides_diagnosis_rows_are_layout_crop_json():
+    doc = json.loads((_figures() / "layout_crop" / "layout_crop.json").read_text())
+    text = _guide()
+    for name, rows in doc["astronaut"].items():
+        for mode in ("dep", "dep_periodic", "mmse_finite", "wiener_periodic"):
+            cells = " / ".join(f"{rows[c][mode]:.2f}" for c in ("192", "384", "512"))
+            assert cells in text, (name, mode, cells)
+    g = doc["gaussian"]["toled168_20@edge"]["1.0"]
+    assert f"T-OLED {g['crop_objective']:.2f} against {g['mmse_finite']:.2f} dB exact" in text
