@@ -29,8 +29,8 @@ def register(sub) -> None:
     p.add_argument("--contrast", type=positive("--contrast"), default=0.3,
                    help="the scene's RMS contrast in the wiener and crop objectives [0.3]")
     p.add_argument("--init", choices=INITS, default="scatter",
-                   help="the search's start: a random scatter, or the preset T-OLED on the squares, its slit at the "
-                        "tile's edge [scatter]")
+                   help="the search's start: scatter: a random scatter; toled: the preset T-OLED on the squares, its "
+                        "slit at the tile's edge [scatter]")
     p.add_argument("--steps", type=positive("--steps", int), default=150,
                    help="at most this many swaps of an open and an opaque square; the search stops earlier at a "
                         "local optimum [150]")

@@ -15,11 +15,10 @@ each at crop sizes (192 px: the study's two crops; 384: two; 512: one), and for 
 0.3 and 1.0 (draws of the prior itself, 192 px): the exact finite-crop error (crop.crop_mse), the periodic
 restorability (metrics.wiener_mse) and the objective 'crop''s stationary stand-in (crop.near_window).
 
-    python -m udc_render.studies.layout_crop --display D.toml[@edge],… --out DIR   (writes layout_crop.json, .md)
+    run_study(Path(DIR), ["D.toml[@edge]", …])   (writes layout_crop.json, .md; not a command: docs/guides/design.md)
 """
 from __future__ import annotations
 
-import argparse
 import time
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from psf.lens import Lens
 from restore.dep import centred_psf, denoise_plane, wiener_plane
 from udc_render.design import crop, metrics, torch_psf as tp
 from udc_render.design.cells import frame_cell, layout_cell
+from udc_render.io.files import save_json, save_text
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
 from udc_render.studies.layout_restore import CORNERS_PX, degrade, natural_crops
@@ -154,8 +154,10 @@ def _markdown(doc: dict) -> str:
 
 
 def run_study(out: Path, specs: list[str], crops=tuple(CROPS), contrasts=CONTRASTS, draws: int = 2) -> dict:
-    """Every mode for every layout (module doc); writes layout_crop.json and layout_crop.md in out."""
-    from udc_render.io.files import save_json, save_text
+    """Every mode for every layout (module doc); writes layout_crop.json and layout_crop.md in out. crops: among
+    CROPS' sizes."""
+    if any(c not in CROPS for c in crops):
+        raise ValueError(f"crops {crops}: expected sizes among {', '.join(map(str, CROPS))}")
     start = time.process_time()
     doc = {"channel": CHANNEL, "kernel_px": KERNEL_PX, "prior_contrast": PRIOR_CONTRAST, "cg_iterations":
            crop.CG_ITERATIONS, "crops": {str(c): [list(v) for v in CROPS[c]] for c in crops}, "layouts": {},
@@ -172,21 +174,3 @@ def run_study(out: Path, specs: list[str], crops=tuple(CROPS), contrasts=CONTRAS
     save_json(out / "layout_crop.json", doc)
     save_text(out / "layout_crop.md", _markdown(doc))
     return doc
-
-
-def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m udc_render.studies.layout_crop", description=__doc__)
-    parser.add_argument("--display", required=True, help="DISPLAY.toml[@edge], comma-separated")
-    parser.add_argument("--crops", default="192,384,512", help="crop sizes in px, of 192, 384, 512")
-    parser.add_argument("--draws", type=int, default=2, help="Gaussian draws per layout and contrast [2]")
-    parser.add_argument("--out", type=Path, required=True)
-    args = parser.parse_args(argv)
-    crops = tuple(int(c) for c in args.crops.split(","))
-    if any(c not in CROPS for c in crops):
-        raise SystemExit(f"--crops {args.crops}: expected sizes among {', '.join(map(str, CROPS))}")
-    run_study(args.out, args.display.split(","), crops, draws=args.draws)
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
