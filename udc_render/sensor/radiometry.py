@@ -66,14 +66,14 @@ def photon_weights(edges_nm, camera: str = "Nikon 5100 (NPL)", peak_qe: float = 
 
 def checked_nonnegative(a: np.ndarray, what: str) -> tuple[np.ndarray, int]:
     """Reject NaN/inf and real negatives; clamp round-off negatives. Returns (array, n_clamped)."""
-    bad = ~np.isfinite(a)
-    if bad.any():
+    lo, hi = (float(a.min()), float(a.max())) if a.size else (0.0, 0.0)
+    if not (np.isfinite(lo) and np.isfinite(hi)):  # a NaN or an infinity makes the min or the max one
+        bad = ~np.isfinite(a)
         raise SensorError(f"{what}: {int(bad.sum())} NaN or infinite values (first at index "
                           f"{tuple(int(i) for i in np.argwhere(bad)[0])}); the sensor needs finite input")
-    lo = float(a.min()) if a.size else 0.0
     if lo >= 0:
         return a, 0
-    scale = float(np.abs(a).max())
+    scale = max(-lo, hi)  # max |x|
     if lo < -NEGATIVE_TOLERANCE_REL * scale:
         raise SensorError(f"{what}: negative value {lo:g} (max |x| {scale:g}); only round-off negatives "
                           f"≥ −{NEGATIVE_TOLERANCE_REL:g} × max|x| are accepted (clamped to 0)")
