@@ -41,7 +41,8 @@ def encode_srgb(linear: np.ndarray) -> np.ndarray:
 
 def psnr_db(a: np.ndarray, b: np.ndarray, peak: float = 1.0) -> float:
     """10 log10(peak² / MSE); inf for identical images."""
-    mse = float(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2))
+    d = np.subtract(a, b, dtype=np.float64)
+    mse = float(np.mean(np.square(d, out=d)))  # in place: frames hold millions of values
     return math.inf if mse == 0 else 10 * math.log10(peak ** 2 / mse)
 
 
