@@ -81,3 +81,19 @@ def test_the_band_norms_from_the_planes_gram_matrix_equal_the_bands():
     b = BandImage.of_primaries(planes, rng.random((3, 7)), np.arange(8) * 10.0 + 400, 1.55, 4)
     want = np.einsum("khw,khw->k", b.bands, b.bands, dtype=np.float64)
     np.testing.assert_allclose(_band_norms_sq(b), want, rtol=1e-6)
+
+
+def test_the_kept_far_field_spectra_give_the_same_bits():
+    """far_light_primaries keeps its summed far kernels' spectra per process: a second call gives the first's bits,
+    and the cold path after clearing them gives them too."""
+    from udc_render.optics import primaries as pr
+    from udc_render.optics.far_field import FarField
+    rng = np.random.default_rng(6)
+    k = rng.random((2, 9, 9))
+    far = FarField(k, 4, 1.0, np.full(2, 0.06), np.full(2, 0.05), np.full(2, 0.01), np.ones(2, bool), 1e9, 0.0, 0.0)
+    p = pr.Primaries(rng.random((3, 64, 72)).astype(np.float32), rng.random((3, 2)))
+    w = rng.random((3, 2))
+    first = pr.far_light_primaries(p, far, 8, w)
+    assert np.array_equal(pr.far_light_primaries(p, far, 8, w), first)
+    pr._FAR.clear()
+    assert np.array_equal(pr.far_light_primaries(p, far, 8, w), first)

@@ -22,7 +22,9 @@ from udc_render.optics.convolution import OpticsError, _check_margin, _kernel_sp
 from udc_render.optics.far_field import FarField, _block_means, _upsampling
 
 KEEP_SPECTRA = 4  # the summed kernels' spectra kept per process: a worker's views (C × 3 spectra each, 16 MB apiece)
+KEEP_FAR = 12  # the far fields' summed spectra kept (a view's channel C each, small: the coarse grid)
 _SPECTRA: OrderedDict = OrderedDict()
+_FAR: OrderedDict = OrderedDict()
 
 
 @dataclass(frozen=True)
@@ -97,6 +99,21 @@ def convolve_primaries(p: Primaries, kernels: np.ndarray, margin_px: int, gains,
     return out
 
 
+def _far_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape) -> list:
+    """rfft2 of F_Cc = Σ_k w_k M_ck f_k for each plane c (module doc) at `shape`, made once per (far kernels, weights,
+    matrix, shape) and kept (KEEP_FAR sets per process)."""
+    k = np.ascontiguousarray(kernels)
+    key = (hashlib.sha1(k.view(np.uint8).ravel()).hexdigest(), k.shape, k.dtype.str,
+           hashlib.sha1(w.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape))
+    kept = _FAR.pop(key, None)
+    if kept is None:
+        kept = [sfft.rfft2(_summed(w * matrix[c], kernels), s=shape) for c in range(matrix.shape[0])]
+    _FAR[key] = kept
+    while len(_FAR) > KEEP_FAR:
+        _FAR.popitem(last=False)
+    return kept
+
+
 def far_light_primaries(p: Primaries, far: FarField, margin_px: int, weights: np.ndarray,
                         blocks: dict | None = None) -> np.ndarray:
     """far_field.far_light through the planes (module doc): [C, H − 2m, W − 2m] float64 of Σ_k weights[C, k]
@@ -120,7 +137,8 @@ def far_light_primaries(p: Primaries, far: FarField, margin_px: int, weights: np
     for C in range(w.shape[0]):
         if not w[C].any():
             continue
-        acc = sum(spectra[c] * sfft.rfft2(_summed(w[C] * matrix[c], far.kernels), s=shape) for c in range(len(spectra)))
+        kept = _far_spectra(far.kernels, w[C], matrix, shape)
+        acc = sum(spectra[c] * kept[c] for c in range(len(spectra)))
         y = sfft.irfft2(acc, s=shape)[2 * half:2 * half + nby + 2, 2 * half:2 * half + nbx + 2]
         out[C] = uy @ np.maximum(y, 0.0) @ ux.T  # the FFT's round-off kept non-negative, as far_light
     return out
