@@ -6,18 +6,23 @@ import math
 import numpy as np
 import pytest
 
-from udc_render.io.capture import capture_psnr_db
-from udc_render.metrics import PROTOCOLS
+from udc_render.io.capture import capture_psnr_db, gt_references
+from udc_render.metrics import PROTOCOLS, display_referred
 from udc_render.sensor import mosaic_of, pack_rggb
 
 ONES = np.ones(3)
+
+
+def _psnr(packed, gt, rgb, balance):
+    """Both protocols' PSNR of a capture (packed RAW, demosaiced rgb) as the summaries compute them."""
+    return capture_psnr_db(packed, display_referred(rgb, balance), gt_references(gt, balance))
 
 
 def test_paper_protocol_scores_the_packed_raw_linearly():
     """GT 0.5 everywhere, a capture reading 0.6: MSE 0.01, PSNR 20 dB exactly, whatever the balance."""
     gt = np.full((3, 96, 128), 0.5)
     packed = np.full((4, 48, 64), 0.6)
-    psnr = capture_psnr_db(packed, gt, rgb=gt, balance=np.array([2.0, 1.0, 0.5]))
+    psnr = _psnr(packed, gt, gt, np.array([2.0, 1.0, 0.5]))
     assert psnr["paper"] == pytest.approx(20.0, abs=1e-12)
     assert math.isinf(psnr["srgb"])  # the demosaiced image equals the ground truth
 
@@ -26,11 +31,11 @@ def test_paper_protocol_clips_at_the_white_level_and_keeps_the_mosaic_sites():
     """A ground truth above the white level and a saturated capture agree (both clip to 1); an error on
     the R sites alone is counted on the R plane only: a quarter of the samples at 0.2 → MSE 0.01."""
     gt = np.full((3, 8, 8), 1.5)
-    assert math.isinf(capture_psnr_db(np.ones((4, 4, 4)), gt, np.ones((3, 8, 8)), ONES)["paper"])
+    assert math.isinf(_psnr(np.ones((4, 4, 4)), gt, np.ones((3, 8, 8)), ONES)["paper"])
     gt = np.full((3, 8, 8), 0.5)
     packed = pack_rggb(mosaic_of(gt)).copy()
     packed[0] += 0.2
-    assert capture_psnr_db(packed, gt, gt, ONES)["paper"] == pytest.approx(20.0, abs=1e-12)
+    assert _psnr(packed, gt, gt, ONES)["paper"] == pytest.approx(20.0, abs=1e-12)
 
 
 def test_srgb_protocol_encodes_after_the_balance():
@@ -39,7 +44,7 @@ def test_srgb_protocol_encodes_after_the_balance():
     rgb = np.full((3, 8, 8), 0.25)
     enc = 1.055 * 0.5 ** (1 / 2.4) - 0.055
     expected = 10 * math.log10(1 / (1.0 - enc) ** 2)
-    assert capture_psnr_db(pack_rggb(mosaic_of(rgb)), gt, rgb, np.full(3, 2.0))["srgb"] == pytest.approx(expected)
+    assert _psnr(pack_rggb(mosaic_of(rgb)), gt, rgb, np.full(3, 2.0))["srgb"] == pytest.approx(expected)
 
 
 def test_every_protocol_is_named():

@@ -44,14 +44,12 @@ def gt_references(gt: np.ndarray, balance: np.ndarray) -> tuple[np.ndarray, np.n
     return pack_rggb(paper_linear(mosaic_of(gt))), display_referred(gt, balance)
 
 
-def capture_psnr_db(packed: np.ndarray, gt: np.ndarray | None, rgb: np.ndarray, balance: np.ndarray,
-                    refs: tuple | None = None) -> dict:
+def capture_psnr_db(packed: np.ndarray, shown: np.ndarray, refs: tuple) -> dict:
     """PSNR of a capture against the ground truth under both protocols: 'paper' on the packed RAW
-    [4, H/2, W/2] (white-level units) against the ground truth's RGGB samples; 'srgb' on its
-    demosaiced camera RGB `rgb` [3, H, W] (white-level units) against the ground truth [3, H, W]
-    (refs: gt_references(gt, balance) made once, when several captures share a ground truth)."""
-    refs = refs if refs is not None else gt_references(gt, balance)
-    return {"paper": psnr_db(paper_linear(packed), refs[0]), "srgb": psnr_db(display_referred(rgb, balance), refs[1])}
+    [4, H/2, W/2] (white-level units) against the ground truth's RGGB samples; 'srgb' on its display-referred
+    image `shown` (metrics.display_referred of its demosaiced camera RGB) against the ground truth's. refs:
+    gt_references(gt, balance), made once per item."""
+    return {"paper": psnr_db(paper_linear(packed), refs[0]), "srgb": psnr_db(shown, refs[1])}
 
 
 def capture_summary(cap, refs: tuple, quarters: np.ndarray, balance: np.ndarray, white_level_dn: int,
@@ -62,8 +60,9 @@ def capture_summary(cap, refs: tuple, quarters: np.ndarray, balance: np.ndarray,
     rng_dn = white_level_dn - black_level_dn
     norm = (cap.packed_dn.astype(np.float64) - black_level_dn) / rng_dn
     shown = display_referred_quarters(quarters, rng_dn, balance)  # display_referred(demosaic / range), bit for bit
+    psnr = capture_psnr_db(norm, shown, refs)
     return {"mean_level": {c: float(norm[i].mean()) for i, c in enumerate(CHANNELS)},
-            "psnr_db_vs_gt": psnr_db(paper_linear(norm), refs[0]), "psnr_db_vs_gt_srgb": psnr_db(shown, refs[1]),
+            "psnr_db_vs_gt": psnr["paper"], "psnr_db_vs_gt_srgb": psnr["srgb"],
             "saturated_fraction": float((cap.mosaic_dn >= white_level_dn).mean())}
 
 
