@@ -99,7 +99,7 @@ def test_the_guides_dep_rows_and_verdict_are_the_committed_studies():
     """docs/guides/design.md's DeP table of the `crop` design against the T-OLED and the P-OLED is the committed
     study JSONs' (same session), and its verdict (the miss against the T-OLED) is their difference."""
     text, mean = _guide(), {}
-    for name in ("design", "toled168_20_edge", "poled_20"):
+    for name in ("design", "toled168_20_edge", "poled_20", "design_crop128"):
         doc = json.loads((_figures() / "crop_studies" / name / "study_layout.json").read_text())
         for tiling in ("turned", "repeated"):
             r = doc["restored"][tiling]
@@ -109,6 +109,8 @@ def test_the_guides_dep_rows_and_verdict_are_the_committed_studies():
     miss = mean["toled168_20_edge"] - mean["design"]
     assert f"misses by {miss:.2f} dB" in text and miss > 0
     assert f"({mean['design']:.2f} against {mean['toled168_20_edge']:.2f} dB" in text
+    second = mean["design_crop128"]
+    assert f"misses by {mean['toled168_20_edge'] - second:.2f} dB ({second:.2f};" in text
 
 
 def test_the_guides_diagnosis_rows_are_layout_crop_json():
