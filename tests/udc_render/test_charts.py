@@ -84,3 +84,35 @@ def test_pattern_names_with_arguments():
     for bad in ("sine_x:many", "slanted_edge:60", "siemens:0", "white:3", "spiral"):
         with pytest.raises(DisplayImageError, match=r"^content.image = 'pattern:"):
             pattern(bad, 64, 32)
+
+
+def _dead_leaves_one_by_one(cols, rows, seed, r_min_px=charts.DEAD_LEAVES_R_MIN_PX):
+    """The definition, disc by disc (the implementation before the batched fill): the oracle of the fast one."""
+    rng = np.random.default_rng(seed)
+    r_max = charts.DEAD_LEAVES_R_MAX_FRACTION * rows
+    img, covered, left, batch = np.zeros((rows, cols)), np.zeros((rows, cols), bool), rows * cols, 4096
+    while left:
+        u = rng.random(batch)
+        radii = (r_min_px ** -2 + u * (r_max ** -2 - r_min_px ** -2)) ** -0.5
+        cx, cy, value = rng.random(batch) * cols, rng.random(batch) * rows, rng.random(batch)
+        for r, x0, y0, v in zip(radii, cx, cy, value):
+            r0, r1 = max(int(y0 - r), 0), min(int(y0 + r) + 1, rows)
+            c0, c1 = max(int(x0 - r), 0), min(int(x0 + r) + 1, cols)
+            yy = np.arange(r0, r1)[:, None] + 0.5 - y0
+            xx = np.arange(c0, c1)[None, :] + 0.5 - x0
+            new = (xx * xx + yy * yy <= r * r) & ~covered[r0:r1, c0:c1]
+            n = int(new.sum())
+            if n:
+                img[r0:r1, c0:c1][new] = v
+                covered[r0:r1, c0:c1] |= new
+                left -= n
+                if not left:
+                    break
+    return img
+
+
+@pytest.mark.parametrize("cols, rows, seed", [(320, 180, 3), (97, 61, 0), (640, 360, 11)])
+def test_dead_leaves_batched_equal_the_disc_by_disc_definition(cols, rows, seed):
+    """The batched fill (culled discs, then every disc against the last pixels) paints the same bits as the
+    definition, disc by disc."""
+    assert np.array_equal(charts.dead_leaves(cols, rows, seed), _dead_leaves_one_by_one(cols, rows, seed))

@@ -52,33 +52,88 @@ def siemens(cols: int, rows: int, spokes: int = 72) -> np.ndarray:
     return np.where(np.hypot(dx, dy) <= 0.45 * rows, star, 0.5)
 
 
+DEAD_LEAVES_BATCH = 4096  # discs drawn at a time (u, x, y, value: the draws' order fixes every image)
+VECTOR_PAIRS = 1 << 23  # discs × uncovered pixels tested at once when few pixels are left (the late batches)
+CULL_BLOCK_PX = 16  # the blocks of the uncovered-pixel map that decide which discs can still fill a pixel
+
+
 def dead_leaves(cols: int, rows: int, seed: int = 0, r_min_px: float = DEAD_LEAVES_R_MIN_PX,
                 r_max_px: float | None = None) -> np.ndarray:
-    """Front-to-back occluding discs: each new disc fills only the pixels not yet covered."""
+    """Front-to-back occluding discs: each new disc fills only the pixels not yet covered, so a pixel takes the
+    value of the first disc whose circle holds its centre. While many pixels are uncovered, a batch's discs one by
+    one, skipping those whose box meets no block with an uncovered pixel; when few are left (the last pixels take
+    most of the discs: 93 % of them at 3840 × 2160), every disc of a batch against every uncovered pixel at once."""
     rng = np.random.default_rng(seed)
     r_max = r_max_px or DEAD_LEAVES_R_MAX_FRACTION * rows
     img = np.zeros((rows, cols))
     covered = np.zeros((rows, cols), bool)
-    left = rows * cols
-    batch = 4096
+    left, pending = rows * cols, None
     while left:
-        u = rng.random(batch)  # inverse CDF of p(r) ∝ r⁻³: r⁻² uniform between r_max⁻² and r_min⁻²
+        u = rng.random(DEAD_LEAVES_BATCH)  # inverse CDF of p(r) ∝ r⁻³: r⁻² uniform between r_max⁻² and r_min⁻²
         radii = (r_min_px ** -2 + u * (r_max ** -2 - r_min_px ** -2)) ** -0.5
-        cx, cy, value = rng.random(batch) * cols, rng.random(batch) * rows, rng.random(batch)
-        for r, x0, y0, v in zip(radii, cx, cy, value):
-            r0, r1 = max(int(y0 - r), 0), min(int(y0 + r) + 1, rows)
-            c0, c1 = max(int(x0 - r), 0), min(int(x0 + r) + 1, cols)
-            yy = np.arange(r0, r1)[:, None] + 0.5 - y0
-            xx = np.arange(c0, c1)[None, :] + 0.5 - x0
-            new = (xx * xx + yy * yy <= r * r) & ~covered[r0:r1, c0:c1]
-            n = int(new.sum())
-            if n:
-                img[r0:r1, c0:c1][new] = v
-                covered[r0:r1, c0:c1] |= new
-                left -= n
-                if not left:
-                    break
+        cx, cy, value = (rng.random(DEAD_LEAVES_BATCH) * cols, rng.random(DEAD_LEAVES_BATCH) * rows,
+                         rng.random(DEAD_LEAVES_BATCH))
+        boxes = _boxes(radii, cx, cy, rows, cols)
+        if pending is None and left * DEAD_LEAVES_BATCH <= VECTOR_PAIRS:
+            pending = np.nonzero(~covered)
+        if pending is None:
+            left -= _fill_discs(img, covered, radii, cx, cy, value, boxes, left)
+        else:
+            pending = _fill_pixels(img, pending, radii, cx, cy, value, boxes)
+            left = pending[0].size
     return img
+
+
+def _boxes(radii, cx, cy, rows: int, cols: int) -> np.ndarray:
+    """[n, 4] each disc's pixel box (r0, r1, c0, c1): the rows and columns whose centres it may hold."""
+    return np.stack([np.maximum((cy - radii).astype(np.int64), 0), np.minimum((cy + radii).astype(np.int64) + 1, rows),
+                     np.maximum((cx - radii).astype(np.int64), 0), np.minimum((cx + radii).astype(np.int64) + 1, cols)],
+                    axis=1)
+
+
+def _open_discs(covered: np.ndarray, boxes: np.ndarray) -> np.ndarray:
+    """The discs whose box meets a CULL_BLOCK_PX block holding an uncovered pixel (a summed-area table of them)."""
+    b = CULL_BLOCK_PX
+    h, w = covered.shape
+    padded = np.ones((-(-h // b) * b, -(-w // b) * b), bool)
+    padded[:h, :w] = covered
+    open_blocks = ~padded.reshape(padded.shape[0] // b, b, padded.shape[1] // b, b).all(axis=(1, 3))
+    table = np.zeros((open_blocks.shape[0] + 1, open_blocks.shape[1] + 1), np.int64)
+    np.cumsum(np.cumsum(open_blocks, axis=0), axis=1, out=table[1:, 1:])
+    r0, r1, c0, c1 = boxes[:, 0] // b, (boxes[:, 1] - 1) // b + 1, boxes[:, 2] // b, (boxes[:, 3] - 1) // b + 1
+    return np.flatnonzero(table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0] > 0)
+
+
+def _fill_discs(img, covered, radii, cx, cy, value, boxes, left: int) -> int:
+    """The batch's discs in order on the pixels they are first to cover; returns how many were filled."""
+    filled = 0
+    for i in _open_discs(covered, boxes):
+        a, b, c, d, x0, y0, r = *boxes[i], cx[i], cy[i], radii[i]
+        yy = np.arange(a, b)[:, None] + 0.5 - y0
+        xx = np.arange(c, d)[None, :] + 0.5 - x0
+        new = (xx * xx + yy * yy <= r * r) & ~covered[a:b, c:d]
+        n = int(new.sum())
+        if n:
+            img[a:b, c:d][new] = value[i]
+            covered[a:b, c:d] |= new
+            filled += n
+            if filled == left:
+                break
+    return filled
+
+
+def _fill_pixels(img, pending: tuple, radii, cx, cy, value, boxes) -> tuple:
+    """Every pending pixel (rows, cols) takes the first disc of the batch that holds its centre (the same test as
+    _fill_discs); returns the pixels still uncovered."""
+    rows, cols = pending
+    inside = ((boxes[:, 0, None] <= rows) & (rows < boxes[:, 1, None]) & (boxes[:, 2, None] <= cols)
+              & (cols < boxes[:, 3, None]))
+    xx = cols[None, :] + 0.5 - cx[:, None]
+    yy = rows[None, :] + 0.5 - cy[:, None]
+    inside &= xx * xx + yy * yy <= (radii * radii)[:, None]
+    hit = inside.any(axis=0)
+    img[rows[hit], cols[hit]] = value[inside.argmax(axis=0)[hit]]
+    return rows[~hit], cols[~hit]
 
 
 def dead_leaves_colour(cols: int, rows: int, seed: int, palette: np.ndarray) -> np.ndarray:
