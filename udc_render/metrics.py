@@ -53,10 +53,13 @@ def border_px(h: int, w: int) -> int:
 
 def display_referred(rgb: np.ndarray, balance: np.ndarray) -> np.ndarray:
     """[3, H, W] → the srgb protocol's image [3, H − 2b, W − 2b] in [0, 1], float64 (module doc)."""
-    x = np.clip(np.asarray(rgb, np.float64) * balance[:, None, None], 0, 1)
-    b = border_px(*x.shape[1:])
-    x = x[:, b:x.shape[1] - b or None, b:x.shape[2] - b or None]
-    return encode_srgb(x)
+    return encode_srgb(without_border(np.clip(np.asarray(rgb, np.float64) * balance[:, None, None], 0, 1)))
+
+
+def without_border(a: np.ndarray) -> np.ndarray:
+    """[..., H, W] without its border_px border (a view)."""
+    b = border_px(*a.shape[-2:])
+    return a[..., b:a.shape[-2] - b or None, b:a.shape[-1] - b or None]
 
 
 def display_referred_quarters(quarters: np.ndarray, range_dn: float, balance: np.ndarray) -> np.ndarray:
@@ -65,8 +68,7 @@ def display_referred_quarters(quarters: np.ndarray, range_dn: float, balance: np
     their range: a lookup per pixel in place of a power (the summaries' srgb PSNR of every capture)."""
     if not np.issubdtype(quarters.dtype, np.integer):
         raise TypeError(f"display_referred_quarters: integer quarters expected, got {quarters.dtype}")
-    b = border_px(*quarters.shape[1:])
-    q = quarters[:, b:quarters.shape[1] - b or None, b:quarters.shape[2] - b or None]
+    q = without_border(quarters)
     lo, hi = (int(q.min()), int(q.max())) if q.size else (0, 0)
     steps = np.arange(lo, hi + 1, dtype=np.float64) / 4 / range_dn  # the float64 operations of quarters / 4 / range_dn
     out = np.empty(q.shape)

@@ -120,6 +120,9 @@ def test_the_designed_display_files_are_displays(tmp_path):
     (["--feature-um", "1"], "--feature-um 1.0: below the 1.5 µm"),
     (["--cell-um", "170"], "--cell-um 170.0: the minimum feature size 8.0 µm cannot tile it"),
     (["--open-area", "0.001"], "less than one 8.0 µm square"),
+    (["--objective", "crop", "--crop-px", "1"], "--crop-px 1: expected an integer ≥ 2"),
+    (["--contrast", "0"], "--contrast"),
+    (["--init", "poled"], "--init"),
 ])
 def test_design_refuses_in_one_line(tmp_path, capsys, argv, says):
     assert cli.main(["design", *argv, "--out", str(tmp_path / "never")]) == 2

@@ -52,21 +52,29 @@ def _summed(weights: np.ndarray, kernels: np.ndarray) -> np.ndarray:
     return out
 
 
+def _key(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, *more) -> tuple:
+    """What a summed spectrum depends on: the kernels' bytes, the weights, the matrix, the FFT shape (and more)."""
+    k = np.ascontiguousarray(kernels)
+    return (hashlib.sha1(k.view(np.uint8).ravel()).hexdigest(), k.shape, k.dtype.str,
+            hashlib.sha1(w.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape), *more)
+
+
+def _kept(store: OrderedDict, limit: int, key: tuple, make) -> list:
+    """store[key], made by make() when missing; the store keeps the `limit` most recently used entries."""
+    value = store.pop(key, None)
+    store[key] = make() if value is None else value
+    while len(store) > limit:
+        store.popitem(last=False)
+    return store[key]
+
+
 def _summed_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, dtype, workers: int) -> list:
     """spectra[C][c] of H_Cc (module doc), made once per (kernels, weights, matrix, shape, dtype) and kept (KEEP_SPECTRA
     sets per process): a job's items share their views' kernels, gains and sensor weights, so each item's C × 3
     kernel FFTs are made by a worker's first item only."""
-    k = np.ascontiguousarray(kernels)
-    key = (hashlib.sha1(k.view(np.uint8).ravel()).hexdigest(), k.shape, k.dtype.str,
-           hashlib.sha1(w.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape), np.dtype(dtype).str)
-    kept = _SPECTRA.pop(key, None)
-    if kept is None:
-        kept = [[_kernel_spectrum(_summed(w[C] * matrix[c], kernels).astype(dtype), shape, dtype, workers)
-                 for c in range(matrix.shape[0])] for C in range(w.shape[0])]
-    _SPECTRA[key] = kept
-    while len(_SPECTRA) > KEEP_SPECTRA:
-        _SPECTRA.popitem(last=False)
-    return kept
+    return _kept(_SPECTRA, KEEP_SPECTRA, _key(kernels, w, matrix, shape, np.dtype(dtype).str), lambda: [
+        [_kernel_spectrum(_summed(w[C] * matrix[c], kernels).astype(dtype), shape, dtype, workers)
+         for c in range(matrix.shape[0])] for C in range(w.shape[0])])
 
 
 def convolve_primaries(p: Primaries, kernels: np.ndarray, margin_px: int, gains, channel_weights,
@@ -102,16 +110,8 @@ def convolve_primaries(p: Primaries, kernels: np.ndarray, margin_px: int, gains,
 def _far_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape) -> list:
     """rfft2 of F_Cc = Σ_k w_k M_ck f_k for each plane c (module doc) at `shape`, made once per (far kernels, weights,
     matrix, shape) and kept (KEEP_FAR sets per process)."""
-    k = np.ascontiguousarray(kernels)
-    key = (hashlib.sha1(k.view(np.uint8).ravel()).hexdigest(), k.shape, k.dtype.str,
-           hashlib.sha1(w.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape))
-    kept = _FAR.pop(key, None)
-    if kept is None:
-        kept = [sfft.rfft2(_summed(w * matrix[c], kernels), s=shape) for c in range(matrix.shape[0])]
-    _FAR[key] = kept
-    while len(_FAR) > KEEP_FAR:
-        _FAR.popitem(last=False)
-    return kept
+    return _kept(_FAR, KEEP_FAR, _key(kernels, w, matrix, shape), lambda: [
+        sfft.rfft2(_summed(w * matrix[c], kernels), s=shape) for c in range(matrix.shape[0])])
 
 
 def far_light_primaries(p: Primaries, far: FarField, margin_px: int, weights: np.ndarray,

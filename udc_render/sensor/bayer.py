@@ -52,12 +52,17 @@ def demosaic_bilinear(mosaic: np.ndarray) -> np.ndarray:
     m = np.asarray(mosaic, dtype=np.float64)
     out = np.zeros((3,) + m.shape)
     for c in range(3):
-        sparse = np.zeros_like(m)
-        for s, (i, j) in enumerate(SITES):
-            if SITE_COLOUR[s] == c:
-                sparse[i::2, j::2] = m[i::2, j::2]
-        out[c] = convolve(sparse, _BILINEAR_G if c == 1 else _BILINEAR_RB, mode="mirror")
+        out[c] = convolve(_colour_samples(m, c), _BILINEAR_G if c == 1 else _BILINEAR_RB, mode="mirror")
     return out
+
+
+def _colour_samples(mosaic: np.ndarray, c: int) -> np.ndarray:
+    """The mosaic's samples of colour c (0 R, 1 G, 2 B) at their sites, zero elsewhere."""
+    sparse = np.zeros_like(mosaic)
+    for s, (i, j) in enumerate(SITES):
+        if SITE_COLOUR[s] == c:
+            sparse[i::2, j::2] = mosaic[i::2, j::2]
+    return sparse
 
 
 def bilinear_quarters(mosaic: np.ndarray) -> np.ndarray:
@@ -66,11 +71,7 @@ def bilinear_quarters(mosaic: np.ndarray) -> np.ndarray:
     the summaries' srgb PSNR, metrics.display_referred_quarters)."""
     out = np.empty((3,) + mosaic.shape, mosaic.dtype)
     for c in range(3):
-        sparse = np.zeros_like(mosaic)
-        for s, (i, j) in enumerate(SITES):
-            if SITE_COLOUR[s] == c:
-                sparse[i::2, j::2] = mosaic[i::2, j::2]
-        p = np.pad(sparse, 1, mode="reflect")  # scipy.ndimage's 'mirror': d c b | a b c d | c b a
+        p = np.pad(_colour_samples(mosaic, c), 1, mode="reflect")  # scipy.ndimage's 'mirror': d c b | a b c d | c b a
         o = out[c]
         np.multiply(p[1:-1, 1:-1], 4, out=o)
         edges = p[:-2, 1:-1] + p[2:, 1:-1]

@@ -32,7 +32,7 @@ from udc_render.design.cells import frame_cell, layout_cell
 from udc_render.io.files import save_json, save_text
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
-from udc_render.studies.layout_restore import CORNERS_PX, degrade, natural_crops
+from udc_render.studies.layout_restore import CORNERS_PX, degrade, natural_crops, noisy
 
 __all__ = ["CROPS", "CONTRASTS", "CHANNEL", "layout_kernels", "astronaut_modes", "gaussian_modes", "run_study"]
 
@@ -60,11 +60,6 @@ def layout_kernels(spec: str, seed: int = 0) -> tuple[str, np.ndarray, np.ndarra
 
 def _periodic_blur(x: np.ndarray, kernel: np.ndarray) -> np.ndarray:
     return np.real(np.fft.ifft2(np.fft.fft2(x) * np.fft.fft2(np.fft.ifftshift(centred_psf(kernel, x.shape)))))
-
-
-def _noisy(blurred: np.ndarray, t: float, sensor: SensorConfig, rng) -> np.ndarray:
-    fw = sensor.full_well_e
-    return (rng.poisson(fw * t * np.clip(blurred, 0, None)) + rng.normal(0, sensor.read_noise_e, blurred.shape)) / fw
 
 
 def _wiener_periodic(y: np.ndarray, kernel: np.ndarray, t: float, noise: float, variance: float) -> np.ndarray:
@@ -96,7 +91,7 @@ def astronaut_modes(kernel: np.ndarray, t: float, crop_px: int, sensor: SensorCo
     for i, region in enumerate(natural_crops(crop_px, m, CROPS[crop_px])):
         x = region[CHANNEL, m:m + crop_px, m:m + crop_px]
         y = degrade(region[CHANNEL], kernel, t, sensor, stream(seed, "layout_restore", "noise", i, CHANNEL))
-        yp = _noisy(_periodic_blur(x, kernel), t, sensor, stream(seed, "layout_restore", "noise", i, CHANNEL))
+        yp = noisy(_periodic_blur(x, kernel), t, sensor, stream(seed, "layout_restore", "noise", i, CHANNEL))
 
         def sampler():
             return stream(seed, "layout_restore", "wiener", i, CHANNEL)

@@ -49,9 +49,14 @@ def degrade(region: np.ndarray, kernel: np.ndarray, transmission: float, sensor:
     side: 'valid' convolution), k normalised to unit sum."""
     from scipy.signal import fftconvolve
     k = kernel / kernel.sum()
-    blurred = np.clip(fftconvolve(region, k, mode="valid"), 0, None)
+    return noisy(fftconvolve(region, k, mode="valid"), transmission, sensor, rng)
+
+
+def noisy(blurred: np.ndarray, transmission: float, sensor: SensorConfig, rng: np.random.Generator) -> np.ndarray:
+    """(Poisson(FW t max(b, 0)) + N(0, read²)) / FW of a blurred image b (values in fractions of the full well)."""
     fw = sensor.full_well_e
-    electrons = rng.poisson(fw * transmission * blurred) + rng.normal(0.0, sensor.read_noise_e, blurred.shape)
+    electrons = rng.poisson(fw * transmission * np.clip(blurred, 0, None)) + rng.normal(0.0, sensor.read_noise_e,
+                                                                                        blurred.shape)
     return electrons / fw
 
 
