@@ -97,3 +97,28 @@ def test_the_kept_far_field_spectra_give_the_same_bits():
     assert np.array_equal(pr.far_light_primaries(p, far, 8, w), first)
     pr._FAR.clear()
     assert np.array_equal(pr.far_light_primaries(p, far, 8, w), first)
+
+
+def test_kept_spectra_on_disk_are_loaded_by_a_fresh_process_with_the_same_bits(tmp_path, monkeypatch):
+    """Inside kept.on_disk(folder) the summed spectra go into the kernel cache: a process that has not made them
+    (the store cleared) loads them without making them (memory-mapped when large: psf.kernel_io), and gets the
+    first call's bits; other weights make their own entry; outside the block nothing is written."""
+    from udc_render.optics import kept, primaries as pr
+    rng = np.random.default_rng(7)
+    p = pr.Primaries(rng.random((3, 48, 40)).astype(np.float32), rng.random((3, 5)))
+    kernels, w = rng.random((5, 7, 7)).astype(np.float32), rng.random((3, 5))
+
+    def run(weights):
+        pr._SPECTRA.clear()
+        return pr.convolve_primaries(p, kernels, 4, np.ones(5), weights)
+
+    want = run(w)
+    assert not list(tmp_path.iterdir())
+    with kept.on_disk(tmp_path):
+        assert np.array_equal(run(w), want)
+        assert len(list(tmp_path.glob("*.npz"))) == 1
+        monkeypatch.setattr(pr, "_kernel_spectrum", lambda *a: pytest.fail("made again, not loaded"))
+        assert np.array_equal(run(w), want)
+        monkeypatch.undo()
+        run(2 * w)
+    assert len(list(tmp_path.glob("*.npz"))) == 2

@@ -28,6 +28,7 @@ from udc_render.dataset.threads import (
 from udc_render.io.capture import write_synthesis
 from udc_render.io.files import current_umask, save_json
 from udc_render.optics.displays import Display
+from udc_render.optics.kept import on_disk
 from udc_render.pipeline import Kernels, SynthConfig
 from udc_render.scene import Monitor, Scene
 
@@ -99,6 +100,15 @@ def cache_layer_kernels(band_image, scene: Scene, shared: Shared, kernels: Kerne
                 plan_kernels(scene, displays or shared.displays, shared.cfg, object_distance_m=z)
 
 
+def kept_spectra(shared: Shared, kernels: Kernels):
+    """The block in which an item's summed kernel spectra are kept in the kernel cache too (optics.kept), so that
+    every worker of this job and of the next loads what the first made: a job of fixed panels through the cache.
+    A randomized job's panels are new each job, and their spectra used by few items: kept in memory only."""
+    if shared.randomize is None and shared.cfg.use_cache and kernels.cache_spectra:
+        return on_disk(kernels.cache_dir)
+    return contextlib.nullcontext()
+
+
 def make_item(shared: Shared, task: Task) -> dict:
     """Render and synthesise one item into a temporary folder, then rename it into place.
     Runs in this process, a pool process or a Dask worker; returns run times (s) for the log."""
@@ -122,7 +132,8 @@ def make_item(shared: Shared, task: Task) -> dict:
     kernels = worker_kernels(shared, None if setup is None else setup.panel.index)
     t_kernels = time.perf_counter()
     cache_layer_kernels(band_image, scene, shared, kernels, displays)
-    result = synthesize(band_image, scene, displays, cfg, task.item, kernels=kernels)
+    with kept_spectra(shared, kernels):
+        result = synthesize(band_image, scene, displays, cfg, task.item, kernels=kernels)
     if setup is not None:
         result = recorded(result, setup, exposure)
     t2 = time.perf_counter()

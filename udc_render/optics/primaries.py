@@ -20,6 +20,7 @@ import scipy.fft as sfft
 
 from udc_render.optics.convolution import OpticsError, _check_margin, _kernel_spectrum, _precision, _workers, fft_shape
 from udc_render.optics.far_field import FarField, _block_means, _upsampling
+from udc_render.optics.kept import kept
 
 KEEP_SPECTRA = 4  # the summed kernels' spectra kept per process: a worker's views (C × 3 spectra each, 16 MB apiece)
 KEEP_FAR = 12  # the far fields' summed spectra kept (a view's channel C each, small: the coarse grid)
@@ -59,22 +60,13 @@ def _key(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, *more) -
             hashlib.sha1(w.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape), *more)
 
 
-def _kept(store: OrderedDict, limit: int, key: tuple, make) -> list:
-    """store[key], made by make() when missing; the store keeps the `limit` most recently used entries."""
-    value = store.pop(key, None)
-    store[key] = make() if value is None else value
-    while len(store) > limit:
-        store.popitem(last=False)
-    return store[key]
-
-
 def _summed_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, dtype, workers: int) -> list:
-    """spectra[C][c] of H_Cc (module doc), made once per (kernels, weights, matrix, shape, dtype) and kept (KEEP_SPECTRA
-    sets per process): a job's items share their views' kernels, gains and sensor weights, so each item's C × 3
-    kernel FFTs are made by a worker's first item only."""
-    return _kept(_SPECTRA, KEEP_SPECTRA, _key(kernels, w, matrix, shape, np.dtype(dtype).str), lambda: [
-        [_kernel_spectrum(_summed(w[C] * matrix[c], kernels).astype(dtype), shape, dtype, workers)
-         for c in range(matrix.shape[0])] for C in range(w.shape[0])])
+    """spectra [C, 3, …] of H_Cc (module doc), made once per (kernels, weights, matrix, shape, dtype) and kept
+    (optics.kept: KEEP_SPECTRA sets per process, and in a dataset job's kernel cache): a job's items share their
+    views' kernels, gains and sensor weights, so each item's C × 3 kernel FFTs are made once."""
+    return kept(_SPECTRA, KEEP_SPECTRA, _key(kernels, w, matrix, shape, np.dtype(dtype).str), lambda: np.stack([
+        np.stack([_kernel_spectrum(_summed(w[C] * matrix[c], kernels).astype(dtype), shape, dtype, workers)
+                  for c in range(matrix.shape[0])]) for C in range(w.shape[0])]))
 
 
 def convolve_primaries(p: Primaries, kernels: np.ndarray, margin_px: int, gains, channel_weights,
@@ -109,9 +101,9 @@ def convolve_primaries(p: Primaries, kernels: np.ndarray, margin_px: int, gains,
 
 def _far_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape) -> list:
     """rfft2 of F_Cc = Σ_k w_k M_ck f_k for each plane c (module doc) at `shape`, made once per (far kernels, weights,
-    matrix, shape) and kept (KEEP_FAR sets per process)."""
-    return _kept(_FAR, KEEP_FAR, _key(kernels, w, matrix, shape), lambda: [
-        sfft.rfft2(_summed(w * matrix[c], kernels), s=shape) for c in range(matrix.shape[0])])
+    matrix, shape) and kept (optics.kept: KEEP_FAR sets per process, and in a dataset job's kernel cache)."""
+    return kept(_FAR, KEEP_FAR, _key(kernels, w, matrix, shape), lambda: np.stack([
+        sfft.rfft2(_summed(w * matrix[c], kernels), s=shape) for c in range(matrix.shape[0])]))
 
 
 def far_light_primaries(p: Primaries, far: FarField, margin_px: int, weights: np.ndarray,
@@ -137,8 +129,8 @@ def far_light_primaries(p: Primaries, far: FarField, margin_px: int, weights: np
     for C in range(w.shape[0]):
         if not w[C].any():
             continue
-        kept = _far_spectra(far.kernels, w[C], matrix, shape)
-        acc = sum(spectra[c] * kept[c] for c in range(len(spectra)))
+        summed = _far_spectra(far.kernels, w[C], matrix, shape)
+        acc = sum(spectra[c] * summed[c] for c in range(len(spectra)))
         y = sfft.irfft2(acc, s=shape)[2 * half:2 * half + nby + 2, 2 * half:2 * half + nbx + 2]
         out[C] = uy @ np.maximum(y, 0.0) @ ux.T  # the FFT's round-off kept non-negative, as far_light
     return out
