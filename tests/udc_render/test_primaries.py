@@ -122,3 +122,22 @@ def test_kept_spectra_on_disk_are_loaded_by_a_fresh_process_with_the_same_bits(t
         monkeypatch.undo()
         run(2 * w)
     assert len(list(tmp_path.glob("*.npz"))) == 2
+
+
+@pytest.mark.parametrize("value, band", [(np.nan, r"a \(index 0\)"), (np.inf, r"a \(index 0\)"),
+                                         (3e38, r"b \(index 1\)")])
+def test_bands_of_bad_planes_are_refused_naming_the_band(value, band):
+    """With the planes given, apply_kernels checks them in place of the bands; a NaN, an infinity or planes whose
+    bands overflow float32 (band b: 2 × 3e38) still get the first bad band's one-line error (0 × NaN is NaN)."""
+    from udc_render.optics.apply import _check_finite
+    from udc_render.optics.convolution import OpticsError
+    from udc_render.optics.primaries import Primaries
+    planes = np.ones((3, 8, 8), np.float32)
+    planes[1, 2, 3] = value
+    matrix = np.array([[0.0, 0.5, 0.5], [0.0, 2.0, 0.5], [1.0, 0.5, 0.0]])
+    with np.errstate(over="ignore", invalid="ignore"):
+        bands = np.einsum("ck,chw->khw", matrix.astype(np.float32), planes)
+    with pytest.raises(OpticsError, match=band + " holds 1 NaN or infinite"):
+        _check_finite(bands, ["a", "b", "c"], Primaries(planes, matrix))
+    planes[1, 2, 3] = 1.0
+    _check_finite(np.einsum("ck,chw->khw", matrix.astype(np.float32), planes), None, Primaries(planes, matrix))

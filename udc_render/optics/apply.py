@@ -47,15 +47,28 @@ class OpticsResult:
     applied: dict = field(default_factory=dict)
 
 
-def _check_finite(bands: np.ndarray, names=None) -> None:
+def _check_finite(bands: np.ndarray, names=None, primaries: Primaries | None = None) -> None:
     """A one-line error naming the first band with a NaN or an infinity (a band's float64 sum is finite exactly
-    when its float32 values are: one pass, no mask)."""
+    when its float32 values are: one pass, no mask). Bands made of three planes (primaries) are finite when the
+    planes and the matrix are and |x_k| ≤ Σ_c |M_ck| max|r_c| stays inside float32's range: 3 planes checked, not K
+    bands."""
+    if primaries is not None and _planes_bounded(primaries):
+        return
     bad = ~np.isfinite(bands.sum(axis=(1, 2), dtype=np.float64))
     if bad.any():
         k = int(np.argmax(bad))
         name = names[k] if names is not None else f"band {k}"
         n = int((~np.isfinite(bands[k])).sum())
         raise OpticsError(f"{name} (index {k}) holds {n} NaN or infinite value(s); the optics need finite input")
+
+
+def _planes_bounded(p: Primaries) -> bool:
+    """Finite planes and matrix whose bands' bound Σ_c |M_ck| max|r_c| is below half float32's largest value."""
+    flat = p.planes.reshape(p.planes.shape[0], -1)
+    peaks = np.maximum(np.abs(flat.max(axis=1).astype(np.float64)), np.abs(flat.min(axis=1).astype(np.float64)))
+    with np.errstate(invalid="ignore", over="ignore"):  # a NaN or an infinity: the bands' own check names it
+        bound = np.abs(np.asarray(p.matrix, np.float64)).T @ peaks
+    return bool(np.all(np.isfinite(bound)) and bound.max() < 0.5 * np.finfo(np.float32).max)
 
 
 def _transmission(transmission, K: int) -> np.ndarray:
@@ -132,7 +145,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     edges = np.asarray(band_image.edges_nm, dtype=np.float64)
     wl = np.asarray(kernel_set.wavelengths_nm, dtype=np.float64)
     names = [f"band {0.5 * (edges[k] + edges[k + 1]):g} nm" for k in range(K)] if edges.size == K + 1 else None
-    _check_finite(bands, names)
+    _check_finite(bands, names, primaries)
     if kernel_set.kernels.shape[0] != K or wl.size != K:
         raise OpticsError(f"{K} band images but {kernel_set.kernels.shape[0]} kernels: one kernel per band needed")
     if edges.size == K + 1:
