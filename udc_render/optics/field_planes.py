@@ -31,14 +31,14 @@ import scipy.fft as sfft
 from udc_render.optics.convolution import OpticsError, _kernel_spectrum, _precision, _workers, fft_shape
 from udc_render.optics.field import FieldBasis, _basis_map
 from udc_render.optics.field_power import PowerMap
-from udc_render.optics.kept import made
+from udc_render.optics.kept import kept
 
 MAX_RANK = 8  # maps stored: the T-OLED needs 3-4 at 0.05 σ (benchmarks/bench_field_knobs.py --planes)
 ROW_BLOCK = 32  # rows of the K·r maps made at a time (K·r · 32 · W float64: 79 MB at 120 maps, W = 2560)
 # The basis costs 45-55 CPU-s per display once (the kernel cache keeps it) and saves ~7.5 CPU-s an item on the paper's
 # frame (benchmarks/bench_field_planes.py): a randomized job takes it from this many items per panel on
 PAYBACK_ITEMS = 8
-KEEP_SPECTRA = 2  # the summed kernels' spectra kept per process (a worker's views)
+KEEP_SPECTRA = 2  # sets of summed kernel spectra kept per process (a worker's views), each of its J members
 _SPECTRA: OrderedDict = OrderedDict()
 
 
@@ -135,20 +135,13 @@ def planes_bound(pb: PlaneBasis, weights: np.ndarray, gains: np.ndarray, matrix:
 
 def _summed_spectra(pb: PlaneBasis, bases: list, weights: np.ndarray, matrix: np.ndarray, J: int, shape,
                     dtype, workers: int) -> list:
-    """spectra[j] [C, P, …] of H_Ccj (module doc), j < J, made once per (basis, weights, matrix, shape, dtype) and
-    kept (KEEP_SPECTRA sets per process, more members made when a later item needs a larger J; each member also in
-    a dataset job's kernel cache: optics.kept)."""
+    """spectra[j] [C, P, …] of H_Ccj (module doc), j < J, each member made once per (basis, weights, matrix, shape,
+    dtype, j) and kept (optics.kept: KEEP_SPECTRA sets of members per process, and in a dataset job's kernel cache)."""
     key = (pb.key, hashlib.sha1(weights.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape), np.dtype(dtype).str)
-    members = _SPECTRA.pop(key, [])
     C, P = weights.shape[0], matrix.shape[0]
-    for j in range(len(members), J):
-        members.append(made(key + (j,), lambda j=j: np.stack([np.stack([_kernel_spectrum(_summed_kernel(
-            bases, weights[Cc] * matrix[c], pb.coeffs[:, j]).astype(dtype), shape, dtype, workers)
-            for c in range(P)]) for Cc in range(C)])))
-    _SPECTRA[key] = members
-    while len(_SPECTRA) > KEEP_SPECTRA:
-        _SPECTRA.popitem(last=False)
-    return members
+    return [kept(_SPECTRA, KEEP_SPECTRA * pb.maps.shape[0], key + (j,), lambda j=j: np.stack([np.stack([
+        _kernel_spectrum(_summed_kernel(bases, weights[Cc] * matrix[c], pb.coeffs[:, j]).astype(dtype), shape, dtype,
+                         workers) for c in range(P)]) for Cc in range(C)])) for j in range(J)]
 
 
 def _summed_kernel(bases: list, band_weights: np.ndarray, a: np.ndarray) -> np.ndarray:
