@@ -10,9 +10,10 @@ import pytest
 from udc_render import cli
 from udc_render.design.metrics import noise_variance
 from udc_render.sensor.config import SensorConfig
-from udc_render.studies.layout_restore import natural_crops, restored_psnr
+from udc_render.studies.layout_compare import paired, run_compare
+from udc_render.studies.layout_restore import CROP_PX, CROP_SETS, natural_crops, restored_psnr
 
-CORNER = ((64, 160),)
+CORNER = (("astronaut", 64, 160),)
 
 
 def test_input_noise_is_the_restorability_s_variance():
@@ -41,13 +42,39 @@ def test_a_wider_kernel_restores_worse_at_equal_transmission():
     assert all(x > y + 1 for x, y in zip(a["psnr_db"], b["psnr_db"]))
 
 
+def test_every_crop_lies_inside_its_photograph():
+    """The crop sets' corners leave a whole 192-px crop inside each image (reflection only supplies the margin)."""
+    import skimage.data
+    for crops in CROP_SETS.values():
+        for name, r, c in crops:
+            h, w = getattr(skimage.data, name)().shape[:2]
+            assert 0 <= r and r + CROP_PX <= h and 0 <= c and c + CROP_PX <= w, (name, r, c)
+
+
+def test_paired_difference_golden():
+    """Per-crop differences 1, 2, 3 dB (channels equal): mean 2, standard error 1 / √3, 3 wins of 3."""
+    crops = [["astronaut", 0, 0]] * 3
+    ref = {"crops": crops, "crop_px": 96, "crop_psnr_db": [[20.0] * 3] * 3}
+    lay = dict(ref, crop_psnr_db=[[21.0] * 3, [22.0] * 3, [23.0] * 3])
+    p = paired(lay, ref)
+    assert p["mean_db"] == pytest.approx(2.0) and p["standard_error_db"] == pytest.approx(1 / np.sqrt(3))
+    assert (p["wins"], p["crops"]) == (3, 3)
+    with pytest.raises(ValueError, match="paired crops differ"):
+        paired(dict(lay, crop_px=192), ref)
+
+
 def test_cli_writes_the_restored_psnr(tmp_path):
     args = ["study", "layout", "--display", "toled", "--quick", "--restore", "dep", "--out", str(tmp_path)]
     assert cli.main(args) == 0
+    for tiling in ("repeated", "turned"):
+        assert (tmp_path / f"study_layout_restored_{tiling}.png").is_file()
+    doc = run_compare(tmp_path / "compare", {"a": tmp_path, "b": tmp_path}, "a")
+    assert doc["layouts"]["b"]["paired"]["mean_db"] == 0.0 and (tmp_path / "compare/study_layout_compare.png").is_file()
     doc = json.loads((tmp_path / "study_layout.json").read_text())
     for tiling in ("repeated", "turned"):
         d = doc["restored"][tiling]
         assert d["crop_px"] == 96 and len(d["psnr_db"]) == 3 and np.isfinite(d["psnr_db"]).all()
+        assert np.shape(d["crop_psnr_db"]) == (1, 3) and "first_crop" not in d
         assert d["transmission"] == pytest.approx(np.multiply(doc["power_transmittance"],
                                                               doc["restorability"][tiling]["window_fraction"]))
     assert "Restored PSNR by DeP" in (tmp_path / "study_layout.md").read_text()
@@ -56,3 +83,5 @@ def test_cli_writes_the_restored_psnr(tmp_path):
 def test_restore_is_refused_outside_layout(capsys):
     assert cli.main(["study", "psf", "--restore", "dep"]) == 2
     assert "--restore dep" in capsys.readouterr().err
+    assert cli.main(["study", "layout", "--restore-crops", "photos", "--out", "x"]) == 2
+    assert "--restore-crops photos: only with --restore dep" in capsys.readouterr().err

@@ -77,6 +77,9 @@ def register(sub) -> None:
                    help="layout only: dep: also restore crops of a natural image through the layout's kernels with "
                         "DeP and report the PSNR (off by default: DeP's Wiener sampler takes about a second per "
                         "plane, 12 planes: 12-14 s more per layout) [off]")
+    s.add_argument("--restore-crops", choices=("astronaut", "photos"), default="astronaut",
+                   help="layout only, with --restore: the natural crops restored: astronaut, its face and suit (2 "
+                        "crops); photos, 8 crops of astronaut, chelsea, coffee and rocket (4x the time) [astronaut]")
 
 
 def run(args) -> int:
@@ -90,6 +93,8 @@ def run(args) -> int:
         raise UserError(f"--distance-mm {args.distance_mm}: only `study layout` takes a distance")
     if args.restore and args.what != "layout":
         raise UserError(f"--restore {args.restore}: only `study layout` restores")
+    if args.restore_crops != "astronaut" and not args.restore:
+        raise UserError(f"--restore-crops {args.restore_crops}: only with --restore dep")
     if args.conditioned and args.what != "robustness":
         raise UserError("--conditioned: only `study robustness` trains a conditioned restorer")
     if args.what == "layout":
@@ -135,7 +140,8 @@ def _layout(args) -> int:
     layout_cell(display.layout)  # a tile the study cannot take is refused before the folder is made
     out = out_dir(args.out)
     scores = score_layout(display.name, display.layout, args.tile_seed, args.frame, args.quick,
-                          distance_mm=args.distance_mm, restore=args.restore)
+                          distance_mm=args.distance_mm, restore=args.restore,
+                          crops=args.restore_crops)
     names = write(scores, out)
     print(f"wrote {out}/" + f", {out}/".join(names))
     return 0

@@ -32,7 +32,7 @@ from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.design.cells import RINGS, frame_cell, layout_cell, upc_cell
 from udc_render.sensor.config import SensorConfig
 from udc_render.studies.layout_banding import DEFAULT_DISTANCE_MM, layout_banding
-from udc_render.studies.layout_restore import CORNERS_PX, CROP_PX, QUICK_CROP_PX, RESTORERS, restored_psnr
+from udc_render.studies.layout_restore import CROP_PX, CROP_SETS, QUICK_CROP_PX, RESTORERS, restored_psnr
 
 __all__ = ["UPC_LENS", "FRAMES", "LayoutScores", "layout_cell", "frame_cell", "upc_cell", "score_layout"]
 
@@ -71,13 +71,16 @@ def _centre_mtf(kernel: np.ndarray) -> np.ndarray:
 
 def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quick: bool = False,
                  sensor: SensorConfig | None = None, progress=None,
-                 distance_mm: float = DEFAULT_DISTANCE_MM, restore: str | None = None) -> LayoutScores:
+                 distance_mm: float = DEFAULT_DISTANCE_MM, restore: str | None = None,
+                 crops: str = "astronaut") -> LayoutScores:
     """The study's figures for one layout (module doc); quick: 63-px kernels from 256 pupil samples (and one
-    96-px crop for the restorer); restore: None or one of RESTORERS."""
+    96-px crop for the restorer); restore: None or one of RESTORERS, on the crops of CROP_SETS[crops]."""
     if not distance_mm > 0:
         raise tp.DesignError(f"--distance-mm {distance_mm}: expected a distance > 0 mm")
     if restore is not None and restore not in RESTORERS:
         raise tp.DesignError(f"--restore {restore}: expected one of {', '.join(RESTORERS)}")
+    if crops not in CROP_SETS:
+        raise tp.DesignError(f"--restore-crops {crops}: expected one of {', '.join(CROP_SETS)}")
     if frame not in FRAMES:
         raise tp.DesignError(f"--frame {frame}: expected one of {', '.join(FRAMES)}")
     start = time.perf_counter()
@@ -92,7 +95,7 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
                             pupil)
     trans = float(layout.power_transmittance)
     out = {"upc": {}, "exact": {}, "restorability": {}, "mtf_maps": {}, "restored": {}}
-    crop_px, corners_px = (QUICK_CROP_PX, CORNERS_PX[:1]) if quick else (CROP_PX, CORNERS_PX)
+    crop_px, crop_set = (QUICK_CROP_PX, CROP_SETS[crops][:1]) if quick else (CROP_PX, CROP_SETS[crops])
     with torch.no_grad():
         for tiling in TILINGS:
             s = seed if tiling == "turned" else None
@@ -105,7 +108,7 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
             out["restorability"][tiling]["window_fraction"] = inside.tolist()
             out["restorability"][tiling]["window"] = metrics.restorability(r, trans * inside, sensor)
             if restore:
-                out["restored"][tiling] = restored_psnr(r, trans * inside, sensor, crop_px, corners_px, seed)
+                out["restored"][tiling] = restored_psnr(r, trans * inside, sensor, crop_px, crop_set, seed)
             out["mtf_maps"][tiling] = {"upc": _centre_mtf(p[1]), "exact": _centre_mtf(k[1])}
             if tiling == "repeated":
                 banding = layout_banding(layout, Lens(), RIG_WAVELENGTHS_NM, distance_mm, r, rig_grid.pixel_um)

@@ -32,11 +32,12 @@ from udc_render.design.cells import frame_cell, layout_cell
 from udc_render.io.files import save_json, save_text
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
-from udc_render.studies.layout_restore import CORNERS_PX, degrade, natural_crops, noisy
+from udc_render.studies.layout_restore import CROP_SETS, degrade, natural_crops, noisy
 
 __all__ = ["CROPS", "CONTRASTS", "CHANNEL", "layout_kernels", "astronaut_modes", "gaussian_modes", "run_study"]
 
-CROPS = {192: CORNERS_PX, 384: ((0, 0), (128, 128)), 512: ((0, 0),)}
+CROPS = {192: CROP_SETS["astronaut"], 384: (("astronaut", 0, 0), ("astronaut", 128, 128)),
+         512: (("astronaut", 0, 0),)}
 CONTRASTS = (0.3, 1.0)
 CHANNEL = 1  # green (520 nm)
 KERNEL_PX = 255

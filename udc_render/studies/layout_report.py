@@ -1,5 +1,6 @@
-"""The layout study's outputs: study_layout.json, study_layout.md, study_layout_mtf.png, study_layout_rings.png
-(udc_render.studies.layout), written atomically (udc_render.io.files)."""
+"""The layout study's outputs: study_layout.json, study_layout.md, study_layout_mtf.png, study_layout_rings.png and,
+with a restorer, study_layout_restored_{tiling}.png (udc_render.studies.layout), written atomically
+(udc_render.io.files)."""
 from __future__ import annotations
 
 from dataclasses import asdict
@@ -60,7 +61,7 @@ def _restored_lines(s: LayoutScores) -> list[str]:
     if not s.restored:
         return []
     first = s.restored[TILINGS[0]]
-    lines = ["", f"## Restored PSNR by DeP ({first['image']}, {len(first['corners_px'])} crop(s) of "
+    lines = ["", f"## Restored PSNR by DeP ({first['image']}, {len(first['crops'])} crop(s) of "
              f"{first['crop_px']} px; PSNR in dB of the full well, R / G / B)", "",
              "| tiling | DeP PSNR | mean | noisy input y / t | Wiener PSNR, the light outside lost |",
              "|---|---|---|---|---|"]
@@ -123,6 +124,7 @@ def _figures(s: LayoutScores, out: Path) -> None:
 def write(s: LayoutScores, out: Path) -> list[str]:
     """Write the JSON (every figure and curve, without the MTF maps), the Markdown and the figures."""
     doc = {k: v for k, v in asdict(s).items() if k != "mtf_maps"}
+    doc["restored"] = {t: {k: v for k, v in d.items() if k != "first_crop"} for t, d in s.restored.items()}
     doc["upc_parameters"] = {"cell_px": upc.CELL_PX, "pupil_um": upc.PUPIL_UM, "focal_um": upc.FOCAL_UM,
                              "aperture_um": upc.APERTURE_UM, "wavelengths_nm": upc.WAVELENGTHS_NM,
                              "grid_sizes": upc.grid_sizes(), "crop_px": upc.CROP_PX, "box_px": upc.BOX_PX}
@@ -130,4 +132,19 @@ def write(s: LayoutScores, out: Path) -> list[str]:
     save_json(out / "study_layout.json", doc)
     save_text(out / "study_layout.md", markdown(s))
     _figures(s, out)
-    return ["study_layout.json", "study_layout.md", "study_layout_mtf.png", "study_layout_rings.png"]
+    return ["study_layout.json", "study_layout.md", "study_layout_mtf.png", "study_layout_rings.png"] + [
+        _restored_figure(s.restored[t], out / f"study_layout_restored_{t}.png") for t in s.restored]
+
+
+def restored_panels(first_crop: np.ndarray) -> np.ndarray:
+    """The first crop's truth, input y / t and estimate [3, 3, h, w] side by side as 8-bit RGB [h, 3w, 3]: the
+    crops were sRGB code values taken as linear, shown as code values again, divided by the truth's maximum."""
+    x = np.clip(np.asarray(first_crop) / first_crop[0].max(), 0.0, 1.0)
+    return np.round(255 * np.concatenate(list(x), axis=-1).transpose(1, 2, 0)).astype(np.uint8)
+
+
+def _restored_figure(d: dict, path: Path) -> str:
+    """study_layout_restored_{tiling}.png: restored_panels of the first crop (truth | input | DeP)."""
+    from udc_render.io.images import write_png
+    write_png(path, restored_panels(d["first_crop"]))
+    return path.name
