@@ -68,7 +68,7 @@ def test_cli_writes_the_restored_psnr(tmp_path):
     assert cli.main(args) == 0
     for tiling in ("repeated", "turned"):
         assert (tmp_path / f"study_layout_restored_{tiling}.png").is_file()
-    doc = run_compare(tmp_path / "compare", {"a": tmp_path, "b": tmp_path}, "a")
+    doc = run_compare(tmp_path / "compare", {"a": (tmp_path, "turned"), "b": (tmp_path, "turned")}, "a")
     assert doc["layouts"]["b"]["paired"]["mean_db"] == 0.0 and (tmp_path / "compare/study_layout_compare.png").is_file()
     doc = json.loads((tmp_path / "study_layout.json").read_text())
     for tiling in ("repeated", "turned"):

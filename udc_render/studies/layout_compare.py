@@ -6,8 +6,11 @@
   same for every layout (named streams keyed by crop and channel), so the pairs share the scene;
 - study_layout_compare.png: the first crop, its truth and each layout's DeP estimate (study_layout_restored_*.png).
 
+Each entry is a study folder and one of its tilings (repeated, turned):
+
     from udc_render.studies.layout_compare import run_compare
-    run_compare(Path("out/compare"), {"T-OLED": Path("out/toled"), "designed": Path("out/design")}, "T-OLED")
+    run_compare(Path("out/compare"), {"T-OLED": (Path("out/toled"), "repeated"),
+                                      "designed": (Path("out/design"), "turned")}, "T-OLED")
 """
 from __future__ import annotations
 
@@ -46,43 +49,43 @@ def paired(layout: dict, reference: dict) -> dict:
             "per_crop_db": d.tolist()}
 
 
-def run_compare(out: Path, studies: dict[str, Path], reference: str, tiling: str = "turned") -> dict:
-    """study_layout_compare.json, .md and .png in `out` for the study folders `studies` (label: folder), each layout
+def run_compare(out: Path, studies: dict[str, tuple[Path, str]], reference: str) -> dict:
+    """study_layout_compare.json, .md and .png in `out` for the studies (label: (study folder, tiling)), each
     paired with `reference` (one of the labels)."""
     if reference not in studies:
         raise ValueError(f"reference {reference!r}: expected one of {', '.join(studies)}")
-    restored = {name: _restored(folder, tiling) for name, folder in studies.items()}
+    restored = {name: _restored(folder, tiling) for name, (folder, tiling) in studies.items()}
     rows = {name: {"psnr_db": d["psnr_db"], "mean_psnr_db": d["mean_psnr_db"],
                    "paired": paired(d, restored[reference]) if name != reference else None}
             for name, d in restored.items()}
     first = restored[reference]
-    doc = {"tiling": tiling, "reference": reference, "crops": first["crops"], "crop_px": first["crop_px"],
-           "studies": {k: str(v) for k, v in studies.items()}, "layouts": rows}
+    doc = {"reference": reference, "crops": first["crops"], "crop_px": first["crop_px"],
+           "studies": {k: [str(v[0]), v[1]] for k, v in studies.items()}, "layouts": rows}
     out.mkdir(parents=True, exist_ok=True)
     save_json(out / "study_layout_compare.json", doc)
     save_text(out / "study_layout_compare.md", _markdown(doc))
-    _figure(studies, tiling, out / "study_layout_compare.png")
+    _figure(studies, out / "study_layout_compare.png")
     return doc
 
 
 def _markdown(doc: dict) -> str:
     n = len(doc["crops"])
-    lines = [f"# Layouts restored by DeP, {doc['tiling']} tilings", "",
+    lines = ["# Layouts restored by DeP", "",
              f"{n} crops of {doc['crop_px']} px ({', '.join(sorted({c[0] for c in doc['crops']}))}); the same noise "
              f"and sampler draws for every layout. Paired: crop by crop against {doc['reference']}, the PSNR's mean "
              "over R, G, B (mean ± standard error over the crops).", "",
-             "| layout | DeP PSNR R / G / B (dB) | mean | paired difference (dB) | crops won |",
-             "|---|---|---|---|---|"]
+             "| layout | tiling | DeP PSNR R / G / B (dB) | mean | paired difference (dB) | crops won |",
+             "|---|---|---|---|---|---|"]
     for name, r in doc["layouts"].items():
         p = r["paired"]
         diff = "reference" if p is None else f"{p['mean_db']:+.2f} ± {p['standard_error_db']:.2f}"
         wins = "" if p is None else f"{p['wins']} of {p['crops']}"
-        lines.append(f"| {name} | {' / '.join(f'{v:.2f}' for v in r['psnr_db'])} | {r['mean_psnr_db']:.2f} | {diff} | "
-                     f"{wins} |")
+        lines.append(f"| {name} | {doc['studies'][name][1]} | {' / '.join(f'{v:.2f}' for v in r['psnr_db'])} | "
+                     f"{r['mean_psnr_db']:.2f} | {diff} | {wins} |")
     return "\n".join(lines + [""])
 
 
-def _figure(studies: dict[str, Path], tiling: str, path: Path) -> None:
+def _figure(studies: dict[str, tuple[Path, str]], path: Path) -> None:
     """The first crop's truth and each layout's DeP estimate, from study_layout_restored_{tiling}.png (truth | input
     | estimate)."""
     import imageio.v3 as iio
@@ -90,16 +93,17 @@ def _figure(studies: dict[str, Path], tiling: str, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     panels = {name: iio.imread(Path(folder) / f"study_layout_restored_{tiling}.png")
-              for name, folder in studies.items()}
+              for name, (folder, tiling) in studies.items()}
     w = next(iter(panels.values())).shape[1] // 3
-    fig, axes = plt.subplots(1, len(panels) + 1, figsize=(2.6 * (len(panels) + 1), 2.9))
-    axes[0].imshow(next(iter(panels.values()))[:, :w])
-    axes[0].set_title("truth", fontsize=9)
-    for ax, (name, img) in zip(axes[1:], panels.items()):
-        ax.imshow(img[:, 2 * w:])
-        ax.set_title(f"{name}: DeP", fontsize=9)
-    for ax in axes:
-        ax.set_xticks([])
-        ax.set_yticks([])
+    images = [("truth", next(iter(panels.values()))[:, :w])] + [(f"{name}:\nDeP", img[:, 2 * w:])
+                                                                for name, img in panels.items()]
+    cols = min(5, len(images))
+    rows = -(-len(images) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(2.7 * cols, 3.0 * rows), squeeze=False)
+    for ax in axes.ravel():
+        ax.axis("off")
+    for ax, (title, img) in zip(axes.ravel(), images):
+        ax.imshow(img)
+        ax.set_title(title, fontsize=8)
     save_figure(fig, path)
     plt.close(fig)
