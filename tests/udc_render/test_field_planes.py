@@ -94,3 +94,18 @@ def test_a_dataset_workers_toled_goes_through_the_planes(tmp_path):
     assert record["maps"] == cfg.field_planes_rank and "field_planes" not in bands.display_meta["toled"]["optics"]
     got, want = planes.captures["toled"].electrons, bands.captures["toled"].electrons
     assert 0 < np.abs(got - want).max() <= record["bound_e"]
+
+
+def test_kept_member_spectra_follow_the_field_basis_kernels():
+    """The members' spectra are keyed by the field basis's kernels too: the same plane basis with kernels doubled
+    is not served the kept spectra, and its spectra are doubled (linear in the kernels)."""
+    from udc_render.optics.field_planes import PlaneBasis, _summed_spectra
+    rng = np.random.default_rng(4)
+    bases = [rng.random((2, 5, 5)).astype(np.float32) for _ in range(3)]  # 3 bands of rank 2
+    pb = PlaneBasis(rng.random((2, 8, 8)), rng.random((6, 2)), rng.random((6, 3)), rng.random(6),
+                    np.repeat(np.arange(3), 2), rng.random(6))
+    w, m = rng.random((3, 3)), rng.random((3, 3))
+    _SPECTRA.clear()
+    one = _summed_spectra(pb, bases, w, m, 2, (16, 16), np.float64, 1)
+    two = _summed_spectra(pb, [2 * b for b in bases], w, m, 2, (16, 16), np.float64, 1)
+    np.testing.assert_allclose(two, 2 * np.asarray(one), rtol=1e-12)

@@ -135,9 +135,14 @@ def planes_bound(pb: PlaneBasis, weights: np.ndarray, gains: np.ndarray, matrix:
 
 def _summed_spectra(pb: PlaneBasis, bases: list, weights: np.ndarray, matrix: np.ndarray, J: int, shape,
                     dtype, workers: int) -> list:
-    """spectra[j] [C, P, …] of H_Ccj (module doc), j < J, each member made once per (basis, weights, matrix, shape,
-    dtype, j) and kept (optics.kept: KEEP_SPECTRA sets of members per process, and in a dataset job's kernel cache)."""
-    key = (pb.key, hashlib.sha1(weights.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape), np.dtype(dtype).str)
+    """spectra[j] [C, P, …] of H_Ccj (module doc), j < J, each member made once per (plane basis, the field basis's
+    kernels, weights, matrix, shape, dtype, j) and kept (optics.kept: KEEP_SPECTRA sets of members per process, and
+    in a dataset job's kernel cache)."""
+    kernels = hashlib.sha1()
+    for b in bases:
+        kernels.update(np.ascontiguousarray(b).view(np.uint8).ravel())
+    key = (pb.key, kernels.hexdigest(), hashlib.sha1(weights.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape),
+           np.dtype(dtype).str)
     C, P = weights.shape[0], matrix.shape[0]
     return [kept(_SPECTRA, KEEP_SPECTRA * pb.maps.shape[0], key + (j,), lambda j=j: np.stack([np.stack([
         _kernel_spectrum(_summed_kernel(bases, weights[Cc] * matrix[c], pb.coeffs[:, j]).astype(dtype), shape, dtype,

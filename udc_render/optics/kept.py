@@ -35,7 +35,7 @@ def on_disk(folder: Path | str | None):
         _FOLDER.reset(token)
 
 
-def made(key: tuple, make) -> np.ndarray:
+def _made(key: tuple, make) -> np.ndarray:
     """make() (an array), or inside on_disk the cache's entry for `key`, made and stored when missing."""
     folder = _FOLDER.get()
     if folder is _OFF:
@@ -45,10 +45,9 @@ def made(key: tuple, make) -> np.ndarray:
 
 
 def kept(store: OrderedDict, limit: int, key: tuple, make) -> np.ndarray:
-    """store[key], else made(key, make); the store keeps the `limit` most recently used entries."""
+    """store[key], else _made(key, make); the store keeps the `limit` most recently used entries."""
     value = store.pop(key, None)
-    store[key] = made(key, make) if value is None else value
+    store[key] = _made(key, make) if value is None else value
     while len(store) > limit:
         store.popitem(last=False)
     return store[key]
-

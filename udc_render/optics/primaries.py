@@ -60,7 +60,8 @@ def _key(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, *more) -
             hashlib.sha1(w.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape), *more)
 
 
-def _summed_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, dtype, workers: int) -> list:
+def _summed_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, dtype,
+                    workers: int) -> np.ndarray:
     """spectra [C, 3, …] of H_Cc (module doc), made once per (kernels, weights, matrix, shape, dtype) and kept
     (optics.kept: KEEP_SPECTRA sets per process, and in a dataset job's kernel cache): a job's items share their
     views' kernels, gains and sensor weights, so each item's C × 3 kernel FFTs are made once."""
@@ -99,7 +100,7 @@ def convolve_primaries(p: Primaries, kernels: np.ndarray, margin_px: int, gains,
     return out
 
 
-def _far_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape) -> list:
+def _far_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape) -> np.ndarray:
     """rfft2 of F_Cc = Σ_k w_k M_ck f_k for each plane c (module doc) at `shape`, made once per (far kernels, weights,
     matrix, shape) and kept (optics.kept: KEEP_FAR sets per process, and in a dataset job's kernel cache)."""
     return kept(_FAR, KEEP_FAR, _key(kernels, w, matrix, shape), lambda: np.stack([
