@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 import torch
 
 from udc_render.design import crop, metrics
@@ -109,3 +110,13 @@ def test_the_guides_diagnosis_rows_are_layout_crop_json():
             assert cells in text, (name, mode, cells)
     g = doc["gaussian"]["toled168_20@edge"]["1.0"]
     assert f"T-OLED {g['crop_objective']:.2f} against {g['mmse_finite']:.2f} dB exact" in text
+
+
+@pytest.mark.parametrize("argv, contrast", [([], 0.3), (["--objective", "crop"], 1.0),
+                                            (["--objective", "crop", "--contrast", "0.5"], 0.5),
+                                            (["--objective", "upc"], 0.3)])
+def test_the_contrast_defaults_per_objective(argv, contrast):
+    """--contrast unset: 0.3 for wiener (and upc, which does not use it), 1.0 for crop (design.options)."""
+    from udc_render.cli import build_parser
+    from udc_render.cli.design import _contrast
+    assert _contrast(build_parser().parse_args(["design", *argv])) == contrast

@@ -5,7 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 
 from udc_render.cli.args import out_dir, positive
-from udc_render.design.options import CROP_PX, DEFAULT_FEATURE_UM, INITS, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
+from udc_render.design.options import (
+    CONTRAST_DEFAULTS,
+    CROP_PX,
+    DEFAULT_FEATURE_UM,
+    INITS,
+    LITHOGRAPHY_UM,
+    OBJECTIVES,
+    TILINGS,
+)
 
 
 def register(sub) -> None:
@@ -26,8 +34,9 @@ def register(sub) -> None:
                         "the kernel's light reaching past it interference [wiener]")
     p.add_argument("--crop-px", type=positive("--crop-px", int), default=CROP_PX,
                    help=f"--objective crop: the restorer's crop in px [{CROP_PX}: study layout --restore dep's]")
-    p.add_argument("--contrast", type=positive("--contrast"), default=0.3,
-                   help="the scene's RMS contrast in the wiener and crop objectives [0.3]")
+    p.add_argument("--contrast", type=positive("--contrast"), default=None,
+                   help="the scene's RMS contrast in the wiener and crop objectives [0.3 with wiener; 1.0 with crop: "
+                        "its designs restore best by DeP at 1.0 of 0.3, 0.5, 1.0 (docs/guides/design.md)]")
     p.add_argument("--init", choices=INITS, default="scatter",
                    help="the search's start: scatter: a random scatter; toled: the preset T-OLED on the squares, its "
                         "slit at the tile's edge [scatter]")
@@ -49,12 +58,17 @@ def register(sub) -> None:
                    help="output folder: design.toml, cell.png, design.json, design_loss.png [out/design]")
 
 
+def _contrast(args) -> float:
+    """--contrast, or its default for the objective (CONTRAST_DEFAULTS)."""
+    return args.contrast if args.contrast is not None else CONTRAST_DEFAULTS.get(args.objective, 0.3)
+
+
 def run(args) -> int:
     from udc_render.design.job import run_design
     from udc_render.design.optimise import DesignConfig
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
-                          args.contrast, args.init)
+                          _contrast(args), args.init)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]
