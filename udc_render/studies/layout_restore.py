@@ -30,8 +30,8 @@ __all__ = ["RESTORERS", "CROP_PX", "CROP_SETS", "QUICK_CROP_PX", "natural_crops"
 
 RESTORERS = ("dep",)
 CROP_PX = 192
-# (skimage.data image, top-left row, column) of each crop: astronaut's face, its suit and flag; the cat's head and
-# the fabric; the cup and the table; the rocket and its tower, the sky and the buildings
+# (skimage.data image, top-left row, column) of each crop: astronaut's face, her suit and helmet; the cat's left eye,
+# its right eye and nose; the cup and saucer, the saucer and the table; two launch towers against the dusk sky
 CROP_SETS = {"astronaut": (("astronaut", 64, 160), ("astronaut", 300, 280)),
              "photos": (("astronaut", 64, 160), ("astronaut", 300, 280), ("chelsea", 60, 40), ("chelsea", 100, 250),
                         ("coffee", 30, 40), ("coffee", 200, 380), ("rocket", 40, 60), ("rocket", 220, 420))}
