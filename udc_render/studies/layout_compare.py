@@ -18,6 +18,7 @@ import json
 import math
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 
 from udc_render.io.files import save_figure, save_json, save_text
@@ -88,7 +89,6 @@ def _markdown(doc: dict) -> str:
 def _figure(studies: dict[str, tuple[Path, str]], path: Path) -> None:
     """The first crop's truth and each layout's DeP estimate, from study_layout_restored_{tiling}.png (truth | input
     | estimate)."""
-    import imageio.v3 as iio
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -10,6 +10,7 @@ import numpy as np
 
 from udc_render.design import upc
 from udc_render.io.files import save_figure, save_json, save_text
+from udc_render.io.images import write_png
 from udc_render.studies.layout import TILINGS, LayoutScores
 
 __all__ = ["THEIRS", "markdown", "write"]
@@ -145,6 +146,5 @@ def restored_panels(first_crop: np.ndarray) -> np.ndarray:
 
 def _restored_figure(d: dict, path: Path) -> str:
     """study_layout_restored_{tiling}.png: restored_panels of the first crop (truth | input | DeP)."""
-    from udc_render.io.images import write_png
     write_png(path, restored_panels(d["first_crop"]))
     return path.name
