@@ -113,11 +113,11 @@ class FrameMaps:
         out = []
         for (frame_hw, origin_yx), d, o in zip(crops, defects, own):
             if o:
-                out.append(packed_sites(torch.as_tensor(defect_map(*size_hw, d).copy(), device=self.device)))
+                out.append(packed_sites(torch.tensor(defect_map(*size_hw, d), device=self.device)))
                 continue
             key = (tuple(frame_hw), d.seed, d.dead_fraction, d.hot_fraction)
             if key not in self._defects:
-                self._defects[key] = packed_sites(torch.as_tensor(defect_map(*frame_hw, d).copy(), device=self.device))
+                self._defects[key] = packed_sites(torch.tensor(defect_map(*frame_hw, d), device=self.device))
             out.append(self._defects[key][(slice(None),) + _packed_slices(origin_yx, size_hw)])
         return torch.stack(out)
 

@@ -60,8 +60,9 @@ def test_the_crop_objective_tends_to_the_wiener_objective_for_a_crop_far_wider_t
     cell = np.zeros((5, 5))
     cell[[0, 1, 3, 4, 2, 2], [0, 2, 4, 1, 3, 0]] = 1.0
     wiener = Designer(DesignConfig(**TINY)).score(cell)["objective"]
-    wide = Designer(DesignConfig(**{**TINY, "objective": "crop", "crop_px": 10 ** 7})).score(cell)["objective"]
-    narrow = Designer(DesignConfig(**{**TINY, "objective": "crop", "crop_px": 8})).score(cell)["objective"]
+    crop = {**TINY, "objective": "crop", "contrast": 0.3}  # wiener's default contrast
+    wide = Designer(DesignConfig(**{**crop, "crop_px": 10 ** 7})).score(cell)["objective"]
+    narrow = Designer(DesignConfig(**{**crop, "crop_px": 8})).score(cell)["objective"]
     assert abs(wide / wiener - 1) < 1e-5 and narrow > 1.1 * wiener  # measured 1.23 ×
 
 
@@ -116,7 +117,8 @@ def test_the_guides_diagnosis_rows_are_layout_crop_json():
                                             (["--objective", "crop", "--contrast", "0.5"], 0.5),
                                             (["--objective", "upc"], 0.3)])
 def test_the_contrast_defaults_per_objective(argv, contrast):
-    """--contrast unset: 0.3 for wiener (and upc, which does not use it), 1.0 for crop (design.options)."""
+    """--contrast unset: 0.3 for wiener (and upc, which does not use it), 1.0 for crop (design.options), in the
+    config the CLI builds."""
     from udc_render.cli import build_parser
-    from udc_render.cli.design import _contrast
-    assert _contrast(build_parser().parse_args(["design", *argv])) == contrast
+    args = build_parser().parse_args(["design", *argv])
+    assert DesignConfig(objective=args.objective, contrast=args.contrast).contrast == contrast

@@ -6,7 +6,6 @@ from pathlib import Path
 
 from udc_render.cli.args import out_dir, positive
 from udc_render.design.options import (
-    CONTRAST_DEFAULTS,
     CROP_PX,
     DEFAULT_FEATURE_UM,
     INITS,
@@ -58,17 +57,12 @@ def register(sub) -> None:
                    help="output folder: design.toml, cell.png, design.json, design_loss.png [out/design]")
 
 
-def _contrast(args) -> float:
-    """--contrast, or its default for the objective (CONTRAST_DEFAULTS)."""
-    return args.contrast if args.contrast is not None else CONTRAST_DEFAULTS.get(args.objective, 0.3)
-
-
 def run(args) -> int:
     from udc_render.design.job import run_design
     from udc_render.design.optimise import DesignConfig
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
-                          _contrast(args), args.init)
+                          args.contrast, args.init)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]

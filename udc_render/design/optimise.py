@@ -48,7 +48,15 @@ import torch
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp
 from udc_render.design.crop import near_window, split_kernel
-from udc_render.design.options import CROP_PX, DEFAULT_FEATURE_UM, INITS, LITHOGRAPHY_UM, OBJECTIVES, TILINGS
+from udc_render.design.options import (
+    CONTRAST_DEFAULTS,
+    CROP_PX,
+    DEFAULT_FEATURE_UM,
+    INITS,
+    LITHOGRAPHY_UM,
+    OBJECTIVES,
+    TILINGS,
+)
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
 
@@ -74,10 +82,12 @@ class DesignConfig:
     kernel_px: int = 127
     scatters: int = 20
     crop_px: int = CROP_PX
-    contrast: float = metrics.RMS_CONTRAST
+    contrast: float | None = None  # None: the objective's (options.CONTRAST_DEFAULTS)
     init: str = "scatter"
 
     def __post_init__(self):
+        if self.contrast is None:
+            object.__setattr__(self, "contrast", CONTRAST_DEFAULTS.get(self.objective, metrics.RMS_CONTRAST))
         if not 0 < self.open_fraction < 1:
             raise tp.DesignError(f"--open-area {self.open_fraction}: expected a fraction in (0, 1)")
         if not self.feature_um >= LITHOGRAPHY_UM:

@@ -9,5 +9,5 @@ CROP_PX = 192  # the objective 'crop's crop: `study layout --restore dep`'s
 # The scene's RMS contrast per objective when --contrast is not given. wiener: 0.3 (not studied). crop: 1.0, the
 # photographs' (astronaut's crops 0.6-1.6): from the T-OLED at 192 px its designs restore by DeP, paired against the
 # turned T-OLED on 8 photo crops, -0.46 / -0.20 / -0.06 dB at contrast 0.3 / 0.5 / 1.0 (docs/guides/design.md)
-CONTRAST_DEFAULTS = {"wiener": 0.3, "crop": 1.0}
+CONTRAST_DEFAULTS = {"wiener": 0.3, "crop": 1.0, "upc": 0.3}  # upc does not use it
 TILINGS = ("repeated", "turned")

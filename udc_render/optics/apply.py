@@ -64,10 +64,8 @@ def _check_finite(bands: np.ndarray, names=None, primaries: Primaries | None = N
 
 def _planes_bounded(p: Primaries) -> bool:
     """Finite planes and matrix whose bands' bound Σ_c |M_ck| max|r_c| is below half float32's largest value."""
-    flat = p.planes.reshape(p.planes.shape[0], -1)
-    peaks = np.maximum(np.abs(flat.max(axis=1).astype(np.float64)), np.abs(flat.min(axis=1).astype(np.float64)))
     with np.errstate(invalid="ignore", over="ignore"):  # a NaN or an infinity: the bands' own check names it
-        bound = np.abs(np.asarray(p.matrix, np.float64)).T @ peaks
+        bound = np.abs(np.asarray(p.matrix, np.float64)).T @ p.peaks
     return bool(np.all(np.isfinite(bound)) and bound.max() < 0.5 * np.finfo(np.float32).max)
 
 
@@ -96,8 +94,7 @@ def _field_through_planes(primaries: Primaries, field_planes: tuple, basis: Fiel
     J = min(int(J), pb.maps.shape[0])
     images = convolve_field_planes(primaries.planes, primaries.matrix, pb, basis, gains, channel_weights, margin_px,
                                    J, precision, workers)
-    peaks = np.abs(primaries.planes).reshape(primaries.planes.shape[0], -1).max(axis=1)
-    bound = planes_bound(pb, np.asarray(channel_weights, float), gains, primaries.matrix, peaks)
+    bound = planes_bound(pb, np.asarray(channel_weights, float), gains, primaries.matrix, primaries.peaks)
     tail = pb.values.clip(0.0)
     applied["field_planes"] = {
         "maps": J, "forward_ffts": 3 * J, "stored_maps": int(pb.maps.shape[0]),

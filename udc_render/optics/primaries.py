@@ -14,6 +14,7 @@ from __future__ import annotations
 import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import scipy.fft as sfft
@@ -35,6 +36,12 @@ class Primaries:
     planes: np.ndarray
     matrix: np.ndarray
     spectra: np.ndarray | None = None
+
+    @cached_property
+    def peaks(self) -> np.ndarray:
+        """max |r_c| of each plane [3] (float64; NaN where a plane holds one), made once and shared by the views."""
+        flat = self.planes.reshape(self.planes.shape[0], -1)
+        return np.maximum(np.abs(flat.max(axis=1).astype(np.float64)), np.abs(flat.min(axis=1).astype(np.float64)))
 
 
 def plane_spectra(planes: np.ndarray, size_px: int, margin_px: int, precision: str = "float32",
