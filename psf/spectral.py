@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import colour_tables
 from .engine import KernelSet, PSFError, compute_kernels
 
 __all__ = ["CAMERAS", "band_samples", "combine", "auto_step_nm", "band_kernels", "load_sensitivities", "load_weight",
@@ -91,9 +92,9 @@ def load_sensitivities(camera: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
     CSV: a header row, first column wavelength in nm, then one column per channel.
     """
     if camera in CAMERAS:
-        import colour
-        msds = colour.MSDS_CAMERA_SENSITIVITIES[camera]
-        return np.asarray(msds.wavelengths, float), np.asarray(msds.values, float).T, list(msds.labels)
+        wavelengths, values = colour_tables.spectrum("camera_sensitivities", camera)
+        return (np.asarray(wavelengths, float), np.asarray(values, float).T,
+                list(colour_tables.labels("camera_sensitivities", camera)))
     path = Path(camera)
     if not path.is_file():
         raise PSFError(f"sensitivities '{camera}': neither a built-in camera ({', '.join(CAMERAS)}) nor a CSV file")
@@ -112,10 +113,9 @@ def load_weight(spec: str = "E"):
     (header row; wavelength_nm, weight), linearly interpolated and 0 outside its range."""
     if spec == "E":
         return lambda lam: np.ones_like(np.asarray(lam, dtype=np.float64))
-    import colour
-    if spec in colour.SDS_ILLUMINANTS:
-        sd = colour.SDS_ILLUMINANTS[spec]
-        wl, values = np.asarray(sd.wavelengths, float), np.asarray(sd.values, float)
+    key = colour_tables.key("illuminants", spec)
+    if key is not None:
+        wl, values = (np.asarray(a, float) for a in colour_tables.spectrum("illuminants", key))
     else:
         path = Path(spec)
         if not path.is_file():

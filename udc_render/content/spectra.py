@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from psf import colour_tables
 from udc_render.errors import UdcError
 
 GRID_NM = np.arange(360.0, 831.0, 1.0)
@@ -28,9 +29,8 @@ def _on_grid(wavelengths_nm, values) -> np.ndarray:
 
 def cmfs() -> np.ndarray:
     """CIE 1931 2° x̄, ȳ, z̄ on GRID_NM, shape [3, G]."""
-    import colour
-    c = colour.MSDS_CMFS[_OBSERVER]
-    return np.stack([_on_grid(c.wavelengths, c.values[:, i]) for i in range(3)])
+    wavelengths, values = colour_tables.spectrum("cmfs", _OBSERVER)
+    return np.stack([_on_grid(wavelengths, values[:, i]) for i in range(3)])
 
 
 def luminance_cd_m2(radiance: np.ndarray) -> np.ndarray:
@@ -48,20 +48,21 @@ def scaled_to_luminance(spectrum: np.ndarray, luminance: float) -> np.ndarray:
 
 def illuminant(name: str) -> np.ndarray:
     """A colour-science illuminant's relative spectral power (e.g. 'D65', 'A') on GRID_NM."""
-    import colour
-    if name not in colour.SDS_ILLUMINANTS:
+    key = colour_tables.key("illuminants", name)
+    if key is None:
         raise SpectrumError(f"illuminant = {name!r}: expected a colour-science illuminant such as D65, A, D50, FL2")
-    sd = colour.SDS_ILLUMINANTS[name]
-    return _on_grid(sd.wavelengths, sd.values)
+    return _on_grid(*colour_tables.spectrum("illuminants", key))
 
 
 def colourchecker(name: str) -> np.ndarray:
     """Reflectance of a ColorChecker patch (colour-science 'ColorChecker N Ohta') on GRID_NM."""
-    import colour
-    sd = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"][name]
-    v = _on_grid(sd.wavelengths, sd.values)
-    lo, hi = sd.wavelengths[0], sd.wavelengths[-1]  # hold the end values outside the table
-    v[GRID_NM < lo], v[GRID_NM > hi] = sd.values[0], sd.values[-1]
+    key = colour_tables.key("colourchecker", name)
+    if key is None:
+        raise SpectrumError(f"ColorChecker patch {name!r}: expected one of "
+                            f"{', '.join(colour_tables.names('colourchecker'))}")
+    wavelengths, values = colour_tables.spectrum("colourchecker", key)
+    v = _on_grid(wavelengths, values)
+    v[GRID_NM < wavelengths[0]], v[GRID_NM > wavelengths[-1]] = values[0], values[-1]  # the end values held outside
     return v
 
 
@@ -70,14 +71,14 @@ def load_primaries(spec: str, base: Path | None = None) -> tuple[np.ndarray, str
 
     `spec` is a key of colour-science's MSDS_DISPLAY_PRIMARIES (default 'Apple Studio Display', an
     LCD) or a CSV with columns wavelength_nm, r, g, b (header line optional)."""
-    import colour
-    if spec in colour.MSDS_DISPLAY_PRIMARIES:
-        m = colour.MSDS_DISPLAY_PRIMARIES[spec]
-        return np.stack([_on_grid(m.wavelengths, m.values[:, i]) for i in range(3)]), f"colour-science: {spec}"
+    key = colour_tables.key("display_primaries", spec)
+    if key is not None:
+        wavelengths, values = colour_tables.spectrum("display_primaries", key)
+        return np.stack([_on_grid(wavelengths, values[:, i]) for i in range(3)]), f"colour-science: {spec}"
     path = Path(spec) if base is None or Path(spec).is_absolute() else base / spec
     if not path.exists():
         raise SpectrumError(f"content.primaries = {spec!r}: expected a colour-science display "
-                            f"({', '.join(sorted(colour.MSDS_DISPLAY_PRIMARIES))}) or a CSV file")
+                            f"({', '.join(sorted(colour_tables.names('display_primaries')))}) or a CSV file")
     try:
         table = np.loadtxt(path, delimiter=",", ndmin=2, skiprows=_header_lines(path))
     except ValueError as e:
@@ -107,15 +108,14 @@ def monitor_primaries(spec: str, peak_luminance_cd_m2: float, base: Path | None 
     three at full drive) has `peak_luminance_cd_m2` and, like a calibrated monitor, the chromaticity
     of `white_point` (a colour-science illuminant, default D65, the sRGB white): the gains a solve
     Σ_c a_c XYZ_c = XYZ_white. `white_point = "native"` keeps the measured primaries' ratios."""
-    import colour
     prim, desc = load_primaries(spec, base)
     if white_point == "native":
         return prim * (peak_luminance_cd_m2 / float(luminance_cd_m2(prim.sum(0)))), desc
-    ccs = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]
-    if white_point not in ccs:
+    key = colour_tables.key("white_points", white_point)
+    if key is None:
         raise SpectrumError(f"content.white_point = {white_point!r}: expected native or a colour-science "
                             "illuminant such as D65, D50")
-    x, y = ccs[white_point]
+    x, y = colour_tables.white_point_xy(key)
     target = peak_luminance_cd_m2 * np.array([x / y, 1.0, (1 - x - y) / y])
     xyz = KM_LM_PER_W * cmfs() @ prim.T  # [3 (XYZ), 3 (primaries)]
     gains = np.linalg.solve(xyz, target)

@@ -35,6 +35,7 @@ from typing import NamedTuple
 import numpy as np
 import tifffile
 
+from psf import colour_tables
 from udc_render.content import spectra
 from udc_render.errors import UdcError
 from udc_render.io.files import atomic_path
@@ -63,8 +64,7 @@ def checker_responses(camera: str) -> tuple[np.ndarray, np.ndarray]:
     c = Σ_k q_k L̄_k Δλ (q: photon_weights, the sensor's quantum efficiency per joule), XYZ = Σ_k x̄_k L̄_k Δλ
     (x̄_k: band means of the CIE 1931 2° CMFs), L = reflectance × D65, L̄ the band means. Units are arbitrary
     (only ratios matter)."""
-    import colour
-    patches = colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"]
+    patches = colour_tables.names("colourchecker")
     d65 = spectra.illuminant("D65")
     radiance = np.stack([spectra.colourchecker(n) * d65 for n in patches] + [d65])
 

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from psf import colour_tables
 from udc_render.content import spectra
 from udc_render.scene import HDRRoom, Lens, Room
 from udc_render.scene.geometry import CameraGeometry
@@ -170,8 +171,7 @@ def _shell(mi, window: tuple[float, float, float, float] | None = None) -> dict:
 def _objects(mi) -> dict:
     """Coloured diffuse objects on the floor and a 6 × 4 ColorChecker chart on the back wall."""
     cc = spectra.colourchecker
-    import colour
-    names = list(colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"])
+    names = list(colour_tables.names("colourchecker"))
     obj = {
         "sphere_red": _sphere((-0.9, 0.3, -0.6), 0.3, _diffuse(cc("red"))),
         "sphere_blue": _sphere((0.15, 0.22, -0.2), 0.22, _diffuse(cc("blue"))),

@@ -11,6 +11,7 @@ from dataclasses import replace
 from importlib import resources
 from pathlib import Path
 
+from psf import colour_tables
 from udc_render.scene.model import (
     CONTENT_TYPES,
     FRAMINGS,
@@ -131,8 +132,7 @@ def _content(data, source: str):
     if kind == "room":
         d = Room()
         illuminant = t.string("illuminant", d.illuminant)
-        import colour
-        if illuminant not in colour.SDS_ILLUMINANTS:
+        if colour_tables.key("illuminants", illuminant) is None:
             t.fail("illuminant", illuminant, "a colour-science illuminant such as D65, A, D50, FL2")
         return Room(light_luminance_cd_m2=t.number("light_luminance_cd_m2", d.light_luminance_cd_m2, 0, 1e10,
                                                    lo_open=True), illuminant=illuminant)
