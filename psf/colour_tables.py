@@ -71,8 +71,7 @@ def _table(dataset: str, name: str | None) -> dict[str, np.ndarray]:
     """The entry of (dataset, name) (None: the names) from the cache folder, or made and written there."""
     if dataset not in DATASETS:
         raise KeyError(f"colour table {dataset!r}: expected one of {', '.join(DATASETS)}")
-    path = entry_path(derived_key(KIND, [f"colour-science {version('colour-science')}"], dataset=dataset,
-                                  name=name), cache_dir())
+    path = entry_path(derived_key(KIND, [_installed()], dataset=dataset, name=name), cache_dir())
     try:
         return {k: np.array(v) for k, v in read_members(path).items()}
     except (OSError, ValueError, KeyError):
@@ -83,6 +82,12 @@ def _table(dataset: str, name: str | None) -> dict[str, np.ndarray]:
     except OSError:
         pass  # a read-only folder: this process keeps its own
     return arrays
+
+
+@functools.lru_cache(maxsize=1)
+def _installed() -> str:
+    """colour-science's version from its metadata (importlib.metadata: ~10 ms a lookup, so once)."""
+    return f"colour-science {version('colour-science')}"
 
 
 def _make(dataset: str, name: str | None) -> dict[str, np.ndarray]:
