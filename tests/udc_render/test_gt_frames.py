@@ -13,7 +13,13 @@ from udc_render.pipeline import SynthConfig, SynthError, synthesize
 from udc_render.profiles import PAPER_GT_FRAMES, resolve_profile
 from udc_render.render import render_scene
 from udc_render.sensor import SensorConfig, SensorError, mosaic_of
-from udc_render.sensor.frames import _frame_by_frame, burst_sensor, mean_of_frames
+from udc_render.sensor.frames import (
+    _frame_after_frame,
+    _frame_by_frame,
+    _thinned_counts,
+    burst_sensor,
+    mean_of_frames,
+)
 
 FLAT_PX = (256, 256)  # 65 536 pixels: a σ estimate within 0.3 % (1/√(2M)); tolerances about 4 of those
 
@@ -162,7 +168,7 @@ def _exact_sum_pmf(e: float, s: SensorConfig, n: int) -> np.ndarray:
     return pmf
 
 
-@pytest.mark.parametrize("e0", [0.05, 0.7, 6.0, 30.0])
+@pytest.mark.parametrize("e0", [0.05, 0.7, 6.0, 11.9, 30.0])  # thinned below frames.THIN_BELOW_E, then not
 def test_frames_drawn_one_by_one_follow_the_exact_law(e0):
     """The mean of 16 clipped frames of the pixels drawn frame by frame against the closed-form law of the sum: a χ²
     test over 30 000 pixels, bins of ≥ 20 expected, at a fixed seed (refused below p = 1e-4)."""
@@ -186,16 +192,35 @@ def test_frames_drawn_one_by_one_follow_the_exact_law(e0):
     assert chisquare(observed, want * observed.sum() / want.sum()).pvalue > 1e-4
 
 
-def test_frames_drawn_one_by_one_are_expose_frames_bit_for_bit():
-    """The frame-by-frame pixels take expose's draws and arithmetic (Poisson counts, then the read noise's normals,
-    every frame): the same bits as the mean of n expose frames on the zero-padded [2, 2⌈m/4⌉] layout, at the
-    clips (0, the full well, the white level) too."""
+def test_frame_after_frame_is_expose_frames_bit_for_bit():
+    """Above THIN_BELOW_E the pixels take expose's draws and arithmetic (Poisson counts, then the read noise's
+    normals, every frame): the same bits as the sum of n expose frames of the same pixels, at the clips (0, the
+    full well, the white level) too."""
     from udc_render.sensor.noise import expose
+    from udc_render.sensor.readout import poisson_cap_e
     s = replace(SensorConfig(), gain=1.0)
-    e = np.random.default_rng(1).exponential(20.0, 4001)
+    e = np.random.default_rng(1).exponential(20.0, 4000)
     e[:8] = [0.0, 1e9, s.full_well_e, 4e4, 0.1, 80.0, 1e-9, 2e5]
-    grid = np.zeros(4004)
-    grid[:e.size] = e
     rng = np.random.default_rng(5)
-    want = sum(expose(grid.reshape(2, -1), s, rng)[0].astype(np.float64) for _ in range(16)).ravel()[:e.size] / 16
-    assert np.array_equal(_frame_by_frame(e, s, 16, np.random.default_rng(5)), want)
+    want = sum(expose(e.reshape(2, -1), s, rng)[0].astype(np.float64) for _ in range(16)).ravel()
+    mean = np.minimum(e, poisson_cap_e(s.full_well_e, s.read_noise_e))
+    got = _frame_after_frame(mean, s, 16, np.random.default_rng(5))
+    assert np.array_equal(got, want)
+    assert got[1] == 16 * s.white_level_dn and got[0] >= 0
+
+
+def test_thinned_counts_are_independent_poisson_frames():
+    """T ~ Poisson(n λ) electrons put in uniform frames give n iid Poisson(λ) counts: each frame's counts against
+    the Poisson pmf (χ² over 40 000 pixels × 16 frames, refused below p = 1e-4 at a fixed seed) and two frames'
+    correlation within 4 standard errors of 0 (given T the frames are anti-correlated: only the mixture over T
+    makes them independent)."""
+    from scipy.stats import chisquare, poisson
+    lam, px = 1.3, 40_000
+    counts = _thinned_counts(np.full(px, lam), 16, np.random.default_rng(11))
+    assert counts.shape == (px, 16)
+    k = np.arange(8)
+    want = np.append(poisson.pmf(k, lam), poisson.sf(k[-1], lam)) * counts.size
+    observed = np.bincount(np.minimum(counts.ravel(), k[-1] + 1), minlength=k.size + 1)
+    assert chisquare(observed, want).pvalue > 1e-4
+    r = np.corrcoef(counts[:, 0], counts[:, 1])[0, 1]
+    assert abs(r) < 4 / math.sqrt(px)

@@ -15,7 +15,9 @@ It is drawn exactly in distribution, with one draw per pixel instead of N where 
   Widrow & Kollár 2008, the quantisation theorem), drawn as N(0, N / 12) (the Irwin–Hall sum: the same
   variance, excess kurtosis −1.2 / N; it is 0.02 % of the read noise's variance at the defaults);
 - the others (near black with black level 0, near saturation) and every pixel when the noise does not
-  dither the quantiser: the N frames drawn one by one (expose).
+  dither the quantiser: the N frames drawn one by one in expose's arithmetic. A dark pixel's N Poisson
+  counts come as T ~ Poisson(N e) electrons each put in a uniform frame (thinning: the same law, fewer
+  draws); the read noise is drawn frame by frame.
 
 The noise model's λ (gaussian, 'brooks') are drawn once for the burst: one camera, N frames. noise
 'none': every frame is the same, the mean is one frame. What averaging does not remove (fixed-pattern
@@ -36,6 +38,11 @@ from udc_render.sensor.noise import expose, noise_lambdas
 CLIP_SIGMAS = 8.0
 DITHER_DN = 1.0  # σ_f ≥ 1 DN: the rounding error is uniform and independent of the signal to < 1e-8 (Widrow)
 MAX_FRAMES = 4096
+# Frame by frame, a pixel of mean below this many electrons draws its n counts as one Poisson(n e) spread over the
+# frames (_thinned_counts), above it n Poisson draws: the faster of the two at n = 16 (benchmarks/bench_gt_frames.py:
+# thinned 0.35-0.6 of the time up to 4 e⁻, 0.76-0.92 at 8-12, 1.6 at 16, 6 at 64; the T small integers grow with e)
+THIN_BELOW_E = 12.0
+BLOCK_PX = 4096  # pixels a block of the frame-by-frame draws: its [4096, n] float64 (0.5 MB at n = 16) stay in cache
 
 
 def check_frames(frames) -> int:
@@ -102,28 +109,61 @@ def _moments(e: np.ndarray, sensor: SensorConfig) -> tuple[np.ndarray, np.ndarra
 
 
 def _frame_by_frame(e: np.ndarray, sensor: SensorConfig, n: int, rng: np.random.Generator) -> np.ndarray:
-    """The mean of n frames of expose for the pixels e [m], each frame drawn (laid out [2, 2⌈m/4⌉], zero-padded).
-    Poisson noise takes expose's draws and arithmetic in place, without its noise-free image and uint16 copy: the
-    same bits at 0.6 of its time (tests/udc_render/test_sensor_frames.py)."""
+    """The mean of n frames of expose for the pixels e [m], each frame drawn. Poisson noise (module doc): below
+    THIN_BELOW_E the frames' counts thinned from one draw (_thinned_counts) in blocks of BLOCK_PX pixels, above
+    it frame after frame (_frame_after_frame); then each frame's read noise, full well, gain, rounding and clips
+    in expose's arithmetic (_frames_sum). Other noise, or a non-finite e: n frames of expose on the zero-padded
+    [2, 2⌈m/4⌉] layout."""
     m = e.size
-    grid = np.zeros(4 * max(1, -(-m // 4)))
-    grid[:m] = e
-    if sensor.noise != "poisson" or not np.all(np.isfinite(grid)):
+    if sensor.noise != "poisson" or not np.all(np.isfinite(e)):
+        grid = np.zeros(4 * max(1, -(-m // 4)))
+        grid[:m] = e
         grid = grid.reshape(2, -1)
         total = np.zeros(grid.shape)
         for _ in range(n):
             total += expose(grid, sensor, rng)[0]
         return total.ravel()[:m] / n
-    fw, sigma, g = sensor.full_well_e, sensor.read_noise_e, sensor.dn_per_electron
-    mean = np.minimum(grid, readout.poisson_cap_e(fw, sigma))
-    total = np.zeros(grid.shape)
+    mean = np.minimum(e, readout.poisson_cap_e(sensor.full_well_e, sensor.read_noise_e))
+    out = np.empty(m)
+    thin = mean < THIN_BELOW_E
+    pixels = np.flatnonzero(thin)
+    for a in range(0, pixels.size, BLOCK_PX):
+        block = pixels[a:a + BLOCK_PX]
+        out[block] = _frames_sum(_thinned_counts(mean[block], n, rng), sensor, rng)
+    out[~thin] = _frame_after_frame(mean[~thin], sensor, n, rng)
+    return out / n
+
+
+def _thinned_counts(mean_e: np.ndarray, n: int, rng: np.random.Generator) -> np.ndarray:
+    """[c, n] counts of n frames, iid Poisson(mean_e) along each row, as T ~ Poisson(n · mean_e) electrons each put
+    in a uniform frame: given T, n iid Poisson counts are multinomial with equal shares (exact). One Poisson draw
+    and T small integers a pixel in place of n Poisson draws."""
+    total = rng.poisson(n * mean_e)
+    slots = np.repeat(np.arange(0, mean_e.size * n, n), total) + rng.integers(0, n, total.sum(), dtype=np.uint16)
+    return np.bincount(slots, minlength=mean_e.size * n).reshape(mean_e.size, n)
+
+
+def _frame_after_frame(mean_e: np.ndarray, sensor: SensorConfig, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Σ_f DN_f of n frames of the pixels mean_e [c], frame after frame over all of them: one Poisson and one
+    normal draw a pixel and frame."""
+    total = np.zeros(mean_e.size)
     for _ in range(n):
-        dn = rng.poisson(mean).astype(np.float64)
-        if sigma > 0:
-            dn += sigma * rng.standard_normal(dn.shape)
-        np.minimum(dn, fw, out=dn)
-        dn *= g
-        dn += sensor.black_level_dn
-        np.round(dn, out=dn)
-        total += np.clip(dn, 0.0, sensor.white_level_dn, out=dn)
-    return total[:m] / n
+        total += _read_out(rng.poisson(mean_e).astype(np.float64), sensor, rng)
+    return total
+
+
+def _frames_sum(counts: np.ndarray, sensor: SensorConfig, rng: np.random.Generator) -> np.ndarray:
+    """Σ_f DN_f over the frames (axis 1) of the counts [c, n] (_read_out); sums of integers, exact in float64."""
+    return _read_out(counts.astype(np.float64), sensor, rng).sum(axis=1)
+
+
+def _read_out(dn: np.ndarray, sensor: SensorConfig, rng: np.random.Generator) -> np.ndarray:
+    """Counts n_f (float64) to DN_f = clip(rint(black + g · min(n_f + σ_read N_f, FW)), 0, white) in place:
+    expose's arithmetic."""
+    if sensor.read_noise_e > 0:
+        dn += sensor.read_noise_e * rng.standard_normal(dn.shape)
+    np.minimum(dn, sensor.full_well_e, out=dn)
+    dn *= sensor.dn_per_electron
+    dn += sensor.black_level_dn
+    np.round(dn, out=dn)
+    return np.clip(dn, 0.0, sensor.white_level_dn, out=dn)
