@@ -157,3 +157,32 @@ def test_previews_are_optional_and_the_summary_is_not(tmp_path, previews):
     assert ({"gt_preview.png", "glass/preview.png"} <= files) is previews
     assert "side_by_side.png" not in files
     assert np.isfinite(summary["views"]["glass"]["psnr_db_vs_gt_srgb"])
+
+
+def test_gt_exr_is_written_uncompressed_and_read_back_bit_for_bit(tmp_path):
+    """gt.exr carries the ground truth's float32 bits, and its header says the compression capture.py chose."""
+    import OpenEXR
+
+    from udc_render.io.exr import read_exr
+    result = _result()
+    capture_files.write_synthesis(tmp_path, result, CAMERA, side_by_side=False, previews=False)
+    back = read_exr(tmp_path / "gt.exr")
+    assert all(np.array_equal(back[c], result.gt[i]) for i, c in enumerate("RGB"))
+    with OpenEXR.File(str(tmp_path / "gt.exr")) as f:
+        assert f.header()["compression"] == OpenEXR.NO_COMPRESSION
+
+
+@pytest.mark.parametrize("compression", ["zip", "zips", "piz", "rle", "none"])
+def test_every_exr_compression_is_lossless(tmp_path, compression):
+    from udc_render.io.exr import read_exr, save_exr
+    a = np.random.default_rng(0).random((3, 37, 53), dtype=np.float32)
+    save_exr(tmp_path / "a.exr", {c: a[i] for i, c in enumerate("RGB")}, compression=compression)
+    back = read_exr(tmp_path / "a.exr")
+    assert all(np.array_equal(back[c], a[i]) for i, c in enumerate("RGB"))
+
+
+def test_an_unknown_exr_compression_is_refused_before_writing(tmp_path):
+    from udc_render.io.exr import save_exr
+    with pytest.raises(ValueError, match="EXR compression 'b44': expected one of zip, zips, piz, rle, none"):
+        save_exr(tmp_path / "a.exr", {"Y": np.zeros((2, 2), np.float32)}, compression="b44")
+    assert not any(tmp_path.iterdir())

@@ -8,10 +8,17 @@ import OpenEXR
 
 from udc_render.io.files import atomic_path
 
+# Lossless compressions a caller may choose: OpenEXR's ZIP (16 scanlines a block), ZIPS (one), PIZ, RLE and none
+COMPRESSIONS = {"zip": OpenEXR.ZIP_COMPRESSION, "zips": OpenEXR.ZIPS_COMPRESSION, "piz": OpenEXR.PIZ_COMPRESSION,
+                "rle": OpenEXR.RLE_COMPRESSION, "none": OpenEXR.NO_COMPRESSION}
 
-def save_exr(path, channels: dict) -> None:
-    """Linear float32 image channels [H, W] (named, e.g. 'psf_450nm') as one ZIP-compressed OpenEXR."""
-    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+
+def save_exr(path, channels: dict, compression: str = "zip") -> None:
+    """Linear float32 image channels [H, W] (named, e.g. 'psf_450nm') as one scanline OpenEXR, compressed
+    losslessly (COMPRESSIONS; ZIP by default)."""
+    if compression not in COMPRESSIONS:
+        raise ValueError(f"EXR compression {compression!r}: expected one of {', '.join(COMPRESSIONS)}")
+    header = {"compression": COMPRESSIONS[compression], "type": OpenEXR.scanlineimage}
     data = {name: np.ascontiguousarray(a, dtype=np.float32) for name, a in channels.items()}
     with atomic_path(path, ".exr") as tmp:
         with OpenEXR.File(header, data) as f:
