@@ -3,6 +3,7 @@
 job-parameter check, a 2-process pool and a Dask cluster giving the same bytes, and bad input
 answered with one line and exit status 2."""
 import json
+import os
 import shutil
 import signal
 import subprocess
@@ -207,3 +208,17 @@ def test_bad_input_is_one_line(argv, says, tmp_path, monkeypatch, capsys):
     assert main(["dataset", *argv, "--out", str(tmp_path / "out"), "--quiet"]) == 2
     assert says in one_error_line(capsys.readouterr().err)
     assert not (tmp_path / "out" / "job.json").exists()
+
+
+@pytest.mark.parametrize("drjit_first", [False, True])
+def test_worker_threads_reach_drjit_when_it_loads_and_not_before(drjit_first):
+    """set_worker_threads does not import drjit (a monitor's workers never load Mitsuba); Dr.Jit gets the count
+    when set_variant loads it, or at once when it is already loaded."""
+    code = ("import sys\n" + ("import drjit\n" if drjit_first else "")
+            + "from udc_render.dataset.threads import set_worker_threads\nset_worker_threads(1)\n"
+              "now = sys.modules['drjit'].thread_count() if 'drjit' in sys.modules else None\n"
+              "from udc_render.render.variants import set_variant\nset_variant('rgb')\nimport drjit\n"
+              "print(now, drjit.thread_count())")
+    env = {**os.environ, "UDC_RENDER_VARIANT": "scalar"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
+    assert out.stdout.split() == ["1" if drjit_first else "None", "1"]

@@ -25,13 +25,14 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
 
 
 def set_worker_threads(threads: int) -> None:
-    """In a worker process: the optics' and psf's FFT threads and Dr.Jit's thread pool."""
+    """In a worker process: the optics' and psf's FFT threads and Dr.Jit's thread pool (set when Mitsuba loads,
+    render.variants.set_drjit_threads: a monitor's analytic render never loads it)."""
     import psf.fourier
     import udc_render.optics.convolution as convolution
+    from udc_render.render.variants import set_drjit_threads
     convolution.FFT_WORKERS = threads
     psf.fourier.WORKERS = threads
-    import drjit
-    drjit.set_thread_count(threads)
+    set_drjit_threads(threads)
 
 
 def process_age_s() -> float | None:
