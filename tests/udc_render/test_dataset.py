@@ -222,3 +222,21 @@ def test_worker_threads_reach_drjit_when_it_loads_and_not_before(drjit_first):
     env = {**os.environ, "UDC_RENDER_VARIANT": "scalar"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env)
     assert out.stdout.split() == ["1" if drjit_first else "None", "1"]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt")
+@pytest.mark.parametrize("tuned", [False, True])
+def test_items_reuse_freed_pages(tuned):
+    """keep_freed_memory: a 24 MB array allocated again after being freed reuses its pages (under 1 % of them
+    faulted in again; glibc's default maps it afresh, every page faulted)."""
+    code = ("import resource, numpy as np\nfrom udc_render.dataset.threads import keep_freed_memory\n"
+            f"ok = keep_freed_memory() if {tuned} else True\n"
+            "def faults():\n    f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt\n"
+            "    a = np.ones(3_000_000)\n    del a\n"
+            "    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0\n"
+            "faults()\nprint(ok, faults())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    ok, faults = out.stdout.split()
+    pages = 3_000_000 * 8 // 4096
+    assert ok == "True"
+    assert (int(faults) < pages // 100) is tuned, faults

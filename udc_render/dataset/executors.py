@@ -21,6 +21,7 @@ from udc_render.dataset.store import TMP_PREFIX, item_record
 from udc_render.dataset.threads import (
     blas_threads,
     blas_threads_env,
+    keep_freed_memory,
     process_age_s,
     set_worker_threads,
     threads_per_worker,
@@ -184,6 +185,7 @@ def executor(workers: int, scheduler: str | None, shared: Shared):
                                           tasks, window)
         return
     if workers == 1:
+        keep_freed_memory()
         yield lambda tasks: (make_item(shared, t) for t in tasks)
         return
     threads = threads_per_worker(workers)

@@ -11,11 +11,19 @@ thread count (parent_blas_threads), not a share of the cores.
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
 import os
 
 from threadpoolctl import threadpool_info, threadpool_limits
 
 BLAS_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+# glibc's malloc for items (mallopt parameter: value): arrays up to 32 MB (a frame's float64 plane is 31.5 MB)
+# from the heap, not mmap (M_MMAP_THRESHOLD, -3), freed memory kept up to 1 GB (M_TRIM_THRESHOLD, -1) and the heap
+# grown 256 MB at a time (M_TOP_PAD, -2): an item's arrays reuse the last item's pages instead of faulting fresh
+# ones in. After a process's first item: 56-59 k page faults an item → 2-3 k, its system CPU 0.91-0.97 → 0.15-0.18 s
+# (3 items at one thread, ru_minflt and ru_stime; benchmarks/README.md, issue 46). The values are unchanged.
+MALLOPT = {-3: 32 << 20, -1: 1 << 30, -2: 256 << 20}
 
 
 def threads_per_worker(workers: int, cores: int | None = None) -> int:
@@ -24,9 +32,20 @@ def threads_per_worker(workers: int, cores: int | None = None) -> int:
     return max(1, cores // max(1, workers))
 
 
+def keep_freed_memory() -> bool:
+    """MALLOPT in this process through glibc's mallopt; False where the C library is not glibc (nothing done)."""
+    try:
+        mallopt = ctypes.CDLL(ctypes.util.find_library("c")).mallopt
+    except (OSError, AttributeError, TypeError):
+        return False
+    return all(mallopt(param, value) == 1 for param, value in MALLOPT.items())
+
+
 def set_worker_threads(threads: int) -> None:
-    """In a worker process: the optics' and psf's FFT threads and Dr.Jit's thread pool (set when Mitsuba loads,
-    render.variants.set_drjit_threads: a monitor's analytic render never loads it)."""
+    """In a process that makes items: the optics' and psf's FFT threads, Dr.Jit's thread pool (set when Mitsuba
+    loads, render.variants.set_drjit_threads: a monitor's analytic render never loads it) and the allocator
+    (keep_freed_memory)."""
+    keep_freed_memory()
     import psf.fourier
     import udc_render.optics.convolution as convolution
     from udc_render.render.variants import set_drjit_threads
