@@ -6,7 +6,7 @@ the pixel's mean electrons, for the two ways of drawing its N frames' Poisson co
 
 For each mean e (a flat field of `--pixels` pixels at the paper's sensor, gain 1, black level 0):
 - thinned: T ~ Poisson(N e), each electron in a uniform frame (frames._thinned_counts), then frames._frames_sum,
-  in blocks of frames.BLOCK_PX pixels;
+  in blocks of frames.BLOCK_ELEMENTS pixel-frames;
 - frame after frame: one Poisson and one normal draw a pixel and frame over all the pixels
   (frames._frame_after_frame: the loop before the thinning, which frames keeps above THIN_BELOW_E).
 Times are medians of `--repeats` runs, one thread, in ns a pixel (all N frames). frames.THIN_BELOW_E is where
@@ -35,10 +35,9 @@ MEANS_E = (0.0, 0.05, 0.2, 0.5, 1.0, 2.0, 4.0, 8.0, 12.0, 16.0, 24.0, 32.0, 64.0
 
 
 def thinned(e: np.ndarray, s: SensorConfig, n: int, rng) -> np.ndarray:
-    out = np.empty(e.size)
-    for a in range(0, e.size, frames.BLOCK_PX):
-        out[a:a + frames.BLOCK_PX] = frames._frames_sum(frames._thinned_counts(e[a:a + frames.BLOCK_PX], n, rng),
-                                                        s, rng)
+    out, step = np.empty(e.size), -(-frames.BLOCK_ELEMENTS // n)
+    for a in range(0, e.size, step):
+        out[a:a + step] = frames._frames_sum(frames._thinned_counts(e[a:a + step], n, rng), s, rng)
     return out / n
 
 
@@ -73,7 +72,7 @@ def main() -> None:
     args = ap.parse_args()
     s, n, px = replace(SensorConfig(), gain=1.0), args.frames, args.pixels
     print(f"bench_gt_frames: {px} pixels, {n} frames, ns a pixel (CPU, median of {args.repeats}); "
-          f"THIN_BELOW_E = {frames.THIN_BELOW_E:g}, BLOCK_PX = {frames.BLOCK_PX}\n")
+          f"THIN_BELOW_E = {frames.THIN_BELOW_E:g}, BLOCK_ELEMENTS = {frames.BLOCK_ELEMENTS}\n")
     print("| mean e⁻ | thinned | frame after frame | thinned / frame after frame |\n|---|---|---|---|")
     for mean in MEANS_E:
         e = np.full(px, mean)

@@ -42,7 +42,7 @@ MAX_FRAMES = 4096
 # frames (_thinned_counts), above it n Poisson draws: the faster of the two at n = 16 (benchmarks/bench_gt_frames.py:
 # thinned 0.35-0.6 of the time up to 4 e⁻, 0.76-0.92 at 8-12, 1.6 at 16, 6 at 64; the T small integers grow with e)
 THIN_BELOW_E = 12.0
-BLOCK_PX = 4096  # pixels a block of the frame-by-frame draws: its [4096, n] float64 (0.5 MB at n = 16) stay in cache
+BLOCK_ELEMENTS = 65536  # pixel-frames a block of the thinned draws: its [⌈65536 / n⌉, n] float64 (0.5 MB) stay in cache
 
 
 def check_frames(frames) -> int:
@@ -110,7 +110,7 @@ def _moments(e: np.ndarray, sensor: SensorConfig) -> tuple[np.ndarray, np.ndarra
 
 def _frame_by_frame(e: np.ndarray, sensor: SensorConfig, n: int, rng: np.random.Generator) -> np.ndarray:
     """The mean of n frames of expose for the pixels e [m], each frame drawn. Poisson noise (module doc): below
-    THIN_BELOW_E the frames' counts thinned from one draw (_thinned_counts) in blocks of BLOCK_PX pixels, above
+    THIN_BELOW_E the frames' counts thinned from one draw (_thinned_counts) in blocks of BLOCK_ELEMENTS, above
     it frame after frame (_frame_after_frame); then each frame's read noise, full well, gain, rounding and clips
     in expose's arithmetic (_frames_sum). Other noise, or a non-finite e: n frames of expose on the zero-padded
     [2, 2⌈m/4⌉] layout."""
@@ -126,9 +126,9 @@ def _frame_by_frame(e: np.ndarray, sensor: SensorConfig, n: int, rng: np.random.
     mean = np.minimum(e, readout.poisson_cap_e(sensor.full_well_e, sensor.read_noise_e))
     out = np.empty(m)
     thin = mean < THIN_BELOW_E
-    pixels = np.flatnonzero(thin)
-    for a in range(0, pixels.size, BLOCK_PX):
-        block = pixels[a:a + BLOCK_PX]
+    pixels, step = np.flatnonzero(thin), -(-BLOCK_ELEMENTS // n)
+    for a in range(0, pixels.size, step):
+        block = pixels[a:a + step]
         out[block] = _frames_sum(_thinned_counts(mean[block], n, rng), sensor, rng)
     out[~thin] = _frame_after_frame(mean[~thin], sensor, n, rng)
     return out / n
