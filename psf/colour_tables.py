@@ -73,15 +73,22 @@ def _table(dataset: str, name: str | None) -> dict[str, np.ndarray]:
         raise KeyError(f"colour table {dataset!r}: expected one of {', '.join(DATASETS)}")
     path = entry_path(derived_key(KIND, [_installed()], dataset=dataset, name=name), cache_dir())
     try:
-        return {k: np.array(v) for k, v in read_members(path).items()}
+        return {k: _frozen(v) for k, v in read_members(path).items()}
     except (OSError, ValueError, KeyError):
         pass  # absent or damaged: made again
-    arrays = _make(dataset, name)
+    arrays = {k: _frozen(v) for k, v in _make(dataset, name).items()}
     try:
         atomic_write(path, lambda fh: np.savez(fh, **arrays))
     except OSError:
         pass  # a read-only folder: this process keeps its own
     return arrays
+
+
+def _frozen(a) -> np.ndarray:
+    """A read-only copy: the tables are shared by every caller of this process (lru_cache)."""
+    a = np.array(a)
+    a.setflags(write=False)
+    return a
 
 
 @functools.lru_cache(maxsize=1)

@@ -65,6 +65,8 @@ def test_the_tables_are_colour_sciences_bits(fresh_cache):
         assert colour_tables.names("colourchecker") == tuple(colour.SDS_COLOURCHECKERS["ColorChecker N Ohta"])
         assert np.array_equal(colour_tables.white_point_xy("D50"),
                               colour.CCS_ILLUMINANTS[colour_tables.OBSERVER]["D50"])
+        with pytest.raises(ValueError, match="read-only"):  # shared by every caller: not to be changed in place
+            colour_tables.spectrum("illuminants", "D65")[1][0] = 0.0
 
 
 @pytest.mark.parametrize("dataset, name", [("illuminants", "d65"), ("illuminants", "FL2"), ("illuminants", "fl2"),
