@@ -10,12 +10,13 @@ kernel cache: run a one-item `udc-render dataset` job of the same settings first
 kernels there). As executors.make_item runs them at one thread (BLAS, FFTs, Dr.Jit): the imports a worker makes,
 its kernels (worker_kernels: loading, and whatever it computes), then per image the render, the synthesis
 (`pipeline.synthesize`) and the files (`io.capture.write_synthesis` into a temporary folder, as a dataset item
-without previews).
+without previews), and the item's page faults and system CPU (getrusage: memory faulted in afresh).
 """
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import tempfile
 import time
 
@@ -54,6 +55,7 @@ def main() -> None:
           f"{time.process_time() - c0:.2f} CPU s")
     for image in a.images.split(","):
         scene = replace(shared.scene, content=replace(shared.scene.content, image=image))
+        u0 = resource.getrusage(resource.RUSAGE_SELF)
         c0 = time.process_time()
         band_image = render_scene(scene, progress=False)
         c1 = time.process_time()
@@ -61,8 +63,10 @@ def main() -> None:
         c2 = time.process_time()
         with tempfile.TemporaryDirectory() as tmp:  # the files as a dataset item writes them (no previews)
             write_synthesis(Path(tmp), result, shared.cfg.sensor.camera, side_by_side=False, previews=False)
+        u1 = resource.getrusage(resource.RUSAGE_SELF)
         print(f"{image}: render {c1 - c0:.2f} CPU s, synthesis {c2 - c1:.2f} CPU s, files "
-              f"{time.process_time() - c2:.2f} CPU s", flush=True)
+              f"{time.process_time() - c2:.2f} CPU s; {u1.ru_minflt - u0.ru_minflt} page faults, "
+              f"{u1.ru_stime - u0.ru_stime:.2f} s of it system CPU", flush=True)
 
 
 if __name__ == "__main__":
