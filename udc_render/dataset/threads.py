@@ -21,8 +21,8 @@ BLAS_ENV = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 # glibc's malloc for items (mallopt parameter: value): arrays up to 32 MB (a frame's float64 plane is 31.5 MB)
 # from the heap, not mmap (M_MMAP_THRESHOLD, -3), freed memory kept up to 1 GB (M_TRIM_THRESHOLD, -1) and the heap
 # grown 256 MB at a time (M_TOP_PAD, -2): an item's arrays reuse the last item's pages instead of faulting fresh
-# ones in. After a process's first item: 56-59 k page faults an item → 2-3 k, its system CPU 0.91-0.97 → 0.15-0.18 s
-# (3 items at one thread, ru_minflt and ru_stime; benchmarks/README.md, issue 46). The values are unchanged.
+# ones in. After a process's first item: 52-58 k page faults an item → 1-2 k, its system CPU 0.95-1.09 → 0.18-0.28 s,
+# its CPU 5-8 % less (benchmarks/bench_item_cpu.py; benchmarks/README.md, issue 46). The values are unchanged.
 MALLOPT = {-3: 32 << 20, -1: 1 << 30, -2: 256 << 20}
 
 
