@@ -193,7 +193,8 @@ def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None,
                 splits: tuple[str, ...] | None = None) -> dict:
     """Make the missing items of `job` (resuming an earlier run), only those of `splits` when given (the
     items keep their ids, images and seeds; the manifest lists the complete ones); returns counts and the
-    wall time."""
+    wall time of the whole call (the pool's start, the cache's preparation and the items)."""
+    t0 = time.perf_counter()  # the wall: the pool's start and the cache's preparation included
     images, source = image_list(job.images_dir) if job.is_monitor else (None, None)
     out = Path(job.out).resolve()
     shared = _shared(job, out)
@@ -218,7 +219,6 @@ def run_dataset(job: DatasetJob, workers: int = 1, scheduler: str | None = None,
                 plan_s = plan_panels(rand, shared.scene, shared.displays[0], shared.cfg)
         if rand is not None:  # a worker keeps few panels' kernels: one panel's items after another
             todo.sort(key=lambda t: (t.panel, t.item))
-        t0 = time.perf_counter()
         wanted = sum(1 for t in tasks if splits is None or t.split in splits)
         bar = tqdm(total=wanted, initial=wanted - len(todo), desc="dataset", unit="item",
                    disable=not progress)  # also into a log file: a job run in the background shows where it is

@@ -194,15 +194,17 @@ def executor(workers: int, scheduler: str | None, shared: Shared):
     # its workers get a share of the cores; a 3D scene's workers compute their off-focus layers' kernels, so
     # they get this process's BLAS threads (the same bits as a 1-worker run; threads.py)
     blas = threads if isinstance(shared.scene.content, Monitor) else shared.blas_threads
-    with blas_threads_env(blas) if blas else contextlib.nullcontext():  # spawn: Dr.Jit threads and fork do not mix
+    # spawn (Dr.Jit threads and fork do not mix), every worker inside the environment for the whole job
+    with blas_threads_env(blas) if blas else contextlib.nullcontext():
         pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                    initializer=set_worker_threads, initargs=(threads,))
-        [f.result() for f in [pool.submit(os.getpid) for _ in range(workers)]]  # start them inside the env
-    try:
-        yield lambda tasks: _windowed(lambda t: pool.submit(make_item, shared, t),
-                                      lambda fs: wait(fs, return_when=FIRST_COMPLETED), tasks, 2 * workers)
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+        for _ in range(workers):  # started now (a process a submit while none is idle), not waited for: they
+            pool.submit(os.getpid)  # import while this process checks the job and prepares the kernels
+        try:
+            yield lambda tasks: _windowed(lambda t: pool.submit(make_item, shared, t),
+                                          lambda fs: wait(fs, return_when=FIRST_COMPLETED), tasks, 2 * workers)
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 @contextlib.contextmanager
