@@ -93,7 +93,7 @@ def load_sensitivities(camera: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """
     if camera in CAMERAS:
         wavelengths, values = colour_tables.spectrum("camera_sensitivities", camera)
-        return (np.asarray(wavelengths, float), np.asarray(values, float).T,
+        return (np.array(wavelengths, float), np.array(values, float).T,  # copies: the tables are read-only
                 list(colour_tables.labels("camera_sensitivities", camera)))
     path = Path(camera)
     if not path.is_file():
