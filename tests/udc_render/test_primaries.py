@@ -141,3 +141,24 @@ def test_bands_of_bad_planes_are_refused_naming_the_band(value, band):
         _check_finite(bands, ["a", "b", "c"], Primaries(planes, matrix))
     planes[1, 2, 3] = 1.0
     _check_finite(np.einsum("ck,chw->khw", matrix.astype(np.float32), planes), None, Primaries(planes, matrix))
+
+
+def test_digest_is_the_bytes_sha1_hashed_once_while_the_arrays_live(monkeypatch):
+    """optics.kept.digest: SHA-1 of the arrays' bytes in turn (hashlib's own, on the bytes), the same for equal
+    bytes in other objects, and not hashed again for the same living objects."""
+    import gc
+    import hashlib
+
+    from udc_render.optics import kept as kept_mod
+    a, b = np.arange(12, dtype=np.float32).reshape(3, 4), np.ones((2, 2))
+    assert kept_mod.digest(a) == hashlib.sha1(a.tobytes()).hexdigest()
+    assert kept_mod.digest(a, b) == hashlib.sha1(a.tobytes() + b.tobytes()).hexdigest()
+    assert kept_mod.digest(a.T.copy()) == hashlib.sha1(a.T.copy().tobytes()).hexdigest()
+    want = hashlib.sha1(a.tobytes()).hexdigest()
+    monkeypatch.setattr(kept_mod.hashlib, "sha1", None)  # hashing again would fail
+    assert kept_mod.digest(a) == want
+    monkeypatch.undo()
+    ids = (id(a),)
+    del a
+    gc.collect()
+    assert ids not in kept_mod._DIGESTS

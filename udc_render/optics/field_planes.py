@@ -31,7 +31,7 @@ import scipy.fft as sfft
 from udc_render.optics.convolution import OpticsError, _kernel_spectrum, _precision, _workers, fft_shape
 from udc_render.optics.field import FieldBasis, _basis_map
 from udc_render.optics.field_power import PowerMap
-from udc_render.optics.kept import kept
+from udc_render.optics.kept import digest, kept
 
 MAX_RANK = 8  # maps stored: the T-OLED needs 3-4 at 0.05 σ (benchmarks/bench_field_knobs.py --planes)
 ROW_BLOCK = 32  # rows of the K·r maps made at a time (K·r · 32 · W float64: 79 MB at 120 maps, W = 2560)
@@ -138,10 +138,7 @@ def _summed_spectra(pb: PlaneBasis, bases: list, weights: np.ndarray, matrix: np
     """spectra[j] [C, P, …] of H_Ccj (module doc), j < J, each member made once per (plane basis, the field basis's
     kernels, weights, matrix, shape, dtype, j) and kept (optics.kept: KEEP_SPECTRA sets of members per process, and
     in a dataset job's kernel cache)."""
-    kernels = hashlib.sha1()
-    for b in bases:
-        kernels.update(np.ascontiguousarray(b).view(np.uint8).ravel())
-    key = (pb.key, kernels.hexdigest(), hashlib.sha1(weights.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape),
+    key = (pb.key, digest(*bases), hashlib.sha1(weights.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape),
            np.dtype(dtype).str)
     C, P = weights.shape[0], matrix.shape[0]
     return [kept(_SPECTRA, KEEP_SPECTRA * pb.maps.shape[0], key + (j,), lambda j=j: np.stack([np.stack([

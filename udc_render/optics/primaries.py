@@ -21,7 +21,7 @@ import scipy.fft as sfft
 
 from udc_render.optics.convolution import OpticsError, _check_margin, _kernel_spectrum, _precision, _workers, fft_shape
 from udc_render.optics.far_field import FarField, _block_means, _upsampling
-from udc_render.optics.kept import kept
+from udc_render.optics.kept import digest, kept
 
 KEEP_SPECTRA = 4  # the summed kernels' spectra kept per process: a worker's views (C × 3 spectra each, 16 MB apiece)
 KEEP_FAR = 12  # the far fields' summed spectra kept (a view's channel C each, small: the coarse grid)
@@ -62,8 +62,7 @@ def _summed(weights: np.ndarray, kernels: np.ndarray) -> np.ndarray:
 
 def _key(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, *more) -> tuple:
     """What a summed spectrum depends on: the kernels' bytes, the weights, the matrix, the FFT shape (and more)."""
-    k = np.ascontiguousarray(kernels)
-    return (hashlib.sha1(k.view(np.uint8).ravel()).hexdigest(), k.shape, k.dtype.str,
+    return (digest(kernels), kernels.shape, kernels.dtype.str,
             hashlib.sha1(w.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape), *more)
 
 
