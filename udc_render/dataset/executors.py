@@ -1,9 +1,8 @@
-"""Where items run: in this process, a spawn process pool, or a Dask distributed cluster. No home-made
+"""Where items run: in this process, a process pool (forked: workers.py), or a Dask distributed cluster. No home-made
 scheduler: a window of submitted items, results as they finish."""
 from __future__ import annotations
 
 import contextlib
-import multiprocessing
 import os
 import resource
 import shutil
@@ -23,9 +22,9 @@ from udc_render.dataset.threads import (
     blas_threads_env,
     keep_freed_memory,
     process_age_s,
-    set_worker_threads,
     threads_per_worker,
 )
+from udc_render.dataset.workers import start_worker, worker_context
 from udc_render.io.capture import write_synthesis
 from udc_render.io.files import current_umask, save_json
 from udc_render.optics.displays import Display
@@ -171,7 +170,7 @@ def _windowed(submit, wait_any, tasks, window: int):
 
 @contextlib.contextmanager
 def executor(workers: int, scheduler: str | None, shared: Shared):
-    """A function tasks -> iterator of make_item's results: in process, a spawn pool, or Dask."""
+    """A function tasks -> iterator of make_item's results: in process, a process pool (workers.py), or Dask."""
     if scheduler is not None:
         with _dask_client(scheduler) as client:
             import distributed
@@ -194,13 +193,11 @@ def executor(workers: int, scheduler: str | None, shared: Shared):
     # its workers get a share of the cores; a 3D scene's workers compute their off-focus layers' kernels, so
     # they get this process's BLAS threads (the same bits as a 1-worker run; threads.py)
     blas = threads if isinstance(shared.scene.content, Monitor) else shared.blas_threads
-    # spawn (Dr.Jit threads and fork do not mix), every worker inside the environment for the whole job
+    # forked (workers.py) or spawned inside the environment, held for the whole job
     with blas_threads_env(blas) if blas else contextlib.nullcontext():
-        pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
-                                   initializer=set_worker_threads, initargs=(threads,))
-        for _ in range(workers):  # started now (a process a submit while none is idle), not waited for: they
-            pool.submit(os.getpid)  # import while this process checks the job and prepares the kernels
-        try:
+        pool = ProcessPoolExecutor(workers, mp_context=worker_context(), initializer=start_worker,
+                                   initargs=(threads, blas))
+        try:  # the workers start at the first items' submission, after this process has prepared the kernels
             yield lambda tasks: _windowed(lambda t: pool.submit(make_item, shared, t),
                                           lambda fs: wait(fs, return_when=FIRST_COMPLETED), tasks, 2 * workers)
         finally:
