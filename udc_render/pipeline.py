@@ -363,7 +363,7 @@ def _spectral_capture(band_image: BandImage, d: Display, view_electrons: tuple, 
     t = d.transmission.band_means(band_image.edges_nm)
     sensor = replace(base_sensor, gain=d.gain, form="spectral")
     cap = capture_electrons(mosaic_of(e_rgb), sensor, rng, cfg.defects, {
-        "input_shape": list(band_image.shape), "input_pitch_um": float(band_image.pitch_um),
+        "input_shape": list(band_image.bands.shape), "input_pitch_um": float(band_image.pitch_um),
         "edges_nm": np.asarray(band_image.edges_nm, float).tolist(),
         "input": "camera-channel electrons of the blurred bands (views.layered_electrons)"}, cfg.fpn)
     applied = dict(applied)

@@ -84,7 +84,7 @@ def field_print(band_image: BandImage, view: View, sensor: SensorConfig, spread_
         return {"prints": True, "rule": why, "threshold_sigma": sigmas}
     t = np.ones(ks.kernels.shape[0]) if view.transmission is None else np.asarray(view.transmission, float)
     gains = t * np.asarray(ks.transmittance, float) * (1.0 - np.asarray(ks.energy_outside, float))
-    peak = band_image.band_peaks().astype(np.float64)
+    peak = band_image.bands.max(axis=(1, 2)).astype(np.float64)
     dev = power_deviation(ks)
     bound = float((band_electron_weights(band_image.edges_nm, sensor) @ (
         gains * peak * (np.asarray(spread_l1) * (1.0 + dev) / 2 + dev))).max())
@@ -117,14 +117,14 @@ def _band_norms_sq(band_image: BandImage) -> np.ndarray:
 def bright_pixels(band_image: BandImage, sensor: SensorConfig) -> BrightPixels | None:
     """The pixels to convolve apart in float64 (module doc, ROUNDOFF_*), from their electrons at gain 1,
     e = max_c Σ_k w_ck x_k: none unless ‖e‖₂ exceeds the budget target · σ_read · √N / (factor · safety · ε32)."""
+    x = band_image.bands
     w = band_electron_weights(band_image.edges_nm, sensor)
-    n = band_image.shape[1] * band_image.shape[2]
+    n = x.shape[1] * x.shape[2]
     budget = ROUNDOFF_TARGET * sensor.read_noise_e * np.sqrt(n) / (
         ROUNDOFF_FACTOR * ROUNDOFF_SAFETY * np.finfo(np.float32).eps)
     band_norms = np.sqrt(_band_norms_sq(band_image))
     if float(np.abs(w).max(axis=0) @ band_norms) <= budget:  # ‖Σ_k w_k x_k‖ ≤ Σ_k |w_k| ‖x_k‖: nothing to split
         return None
-    x = band_image.bands
     e = np.einsum("ck,khw->chw", w.astype(np.float32), x, optimize=True).max(axis=0).astype(np.float64)
     flat = np.sort(e.ravel())
     below = np.cumsum(flat ** 2)  # ‖e‖² of the pixels up to each value
@@ -139,7 +139,7 @@ def _optics(band_image: BandImage, view: View, sensor: SensorConfig, cfg, spectr
     """One optics pass: electrons [3, h, w] (float64, render pitch, before binning) and its record."""
     w = band_electron_weights(band_image.edges_nm, sensor)
     blends = view.blends
-    shape = fft_shape(band_image.shape[1:], view.kernel_set.size_px, band_image.margin_px)
+    shape = fft_shape(band_image.bands.shape[1:], view.kernel_set.size_px, band_image.margin_px)
     spectra_k = (view.spectra(blends, shape, cfg.precision) if view.spectra is not None
                  and (cfg.blend == "source" or not blends) else None)
     kw = dict(blend=cfg.blend, field_rank=cfg.field_rank, field_basis=view.field_basis if blends else None,

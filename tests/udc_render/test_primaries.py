@@ -10,7 +10,6 @@ from udc_render.optics.displays import preset
 from udc_render.optics.stray import StrayLight
 from udc_render.pipeline import SynthConfig, plan_kernels, synthesize
 from udc_render.render import render_scene
-from udc_render.render.band_image import BandImage
 from udc_render.scene import Bands, Sensor, load_scene
 
 TOL = 2e-6  # of the image maximum: float32 FFTs summed in another order (test_synth_fused's)
@@ -163,43 +162,3 @@ def test_digest_is_the_bytes_sha1_hashed_once_while_the_arrays_live(monkeypatch)
     del a
     gc.collect()
     assert ids not in kept_mod._DIGESTS
-
-
-def test_the_bands_of_planes_are_made_on_their_first_use_only(small):
-    """shape and band_peaks read the planes; the bands, when read, are the einsum of the planes bit for bit."""
-    scene, _ = small
-    band_image = render_scene(scene, progress=False)  # its own: the module's may have made its bands
-    planes, matrix = band_image.primaries_image, band_image.primaries_matrix
-    bands = np.einsum("ck,chw->khw", matrix.astype(np.float32), planes)
-
-    def made():
-        return band_image.__dict__["_bands"] is not None
-    assert band_image.shape == bands.shape and not made()
-    assert np.array_equal(band_image.band_peaks(), bands.max(axis=(1, 2))) and not made()
-    assert np.array_equal(band_image.bands, bands) and made()
-
-
-@pytest.mark.parametrize("rows", [1, 63, 64, 150])
-def test_band_peaks_of_blocks_equal_the_bands_maximum_bit_for_bit(rows):
-    """Blocks of BLOCK_ROWS rows, the last one short, against the bands' own max (any row count)."""
-    rng = np.random.default_rng(rows)
-    planes = (rng.random((3, rows, 97)) ** 3 * 200).astype(np.float32)
-    matrix = rng.random((3, 30)) * np.array([[1.0], [1e-3], [10.0]])
-    image = BandImage.of_primaries(planes, matrix, np.linspace(400, 700, 31), 3.1, 0)
-    bands = np.einsum("ck,chw->khw", matrix.astype(np.float32), planes)
-    assert np.array_equal(image.band_peaks(), bands.max(axis=(1, 2)))
-    assert np.array_equal(BandImage(bands, image.edges_nm, 3.1, 0, None).band_peaks(), bands.max(axis=(1, 2)))
-
-
-def test_an_item_through_the_planes_never_makes_its_bands(small, tmp_path):
-    """The physical profile's views at d = 2 mm as a dataset's kernels give them (pipeline.prepare_kernels: the
-    T-OLED's blend through the planes; the far fields, the stray light): 0.47 GB of bands at the paper's frame
-    that nothing reads."""
-    from udc_render.pipeline import prepare_kernels
-    scene, _ = small
-    band_image = render_scene(scene, progress=False)
-    displays = [preset("glass")] + [replace(preset(n), distance_mm=2.0) for n in ("toled", "poled")]
-    cfg = SynthConfig(field_phases=2, kernel_cache=str(tmp_path))
-    result = synthesize(band_image, scene, displays, cfg, kernels=prepare_kernels(scene, displays, cfg))
-    assert "field_planes" in result.display_meta["toled"]["optics"]
-    assert band_image.__dict__["_bands"] is None

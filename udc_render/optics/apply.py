@@ -135,15 +135,14 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
     through the planes at the first J shared weight maps (optics.field_planes; the J and its bounds recorded).
     """
     _precision(precision)  # validate early: one-line error for an unknown precision
-    shape = getattr(band_image, "shape", None) or np.shape(band_image.bands)  # a BandImage's: its bands unmade
-    if len(shape) != 3:
-        raise OpticsError(f"band image must be [K, H, W], got shape {tuple(shape)}")
-    K, H, W = shape
+    bands = np.asarray(band_image.bands)
+    if bands.ndim != 3:
+        raise OpticsError(f"band image must be [K, H, W], got shape {bands.shape}")
+    K, H, W = bands.shape
     edges = np.asarray(band_image.edges_nm, dtype=np.float64)
     wl = np.asarray(kernel_set.wavelengths_nm, dtype=np.float64)
     names = [f"band {0.5 * (edges[k] + edges[k + 1]):g} nm" for k in range(K)] if edges.size == K + 1 else None
-    if primaries is None or not _planes_bounded(primaries):  # else finite (_check_finite): the bands unmade
-        _check_finite(np.asarray(band_image.bands), names)
+    _check_finite(bands, names, primaries)
     if kernel_set.kernels.shape[0] != K or wl.size != K:
         raise OpticsError(f"{K} band images but {kernel_set.kernels.shape[0]} kernels: one kernel per band needed")
     if edges.size == K + 1:
@@ -177,8 +176,8 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         if through_planes:
             images = convolve_primaries(primaries, kernel_set.kernels, m, gains, channel_weights, precision, workers)
         else:
-            images = convolve_bands(np.asarray(band_image.bands), kernel_set.kernels, m, gains, precision, workers,
-                                    channel_weights, spectra, bright, kernel_spectra)
+            images = convolve_bands(bands, kernel_set.kernels, m, gains, precision, workers, channel_weights, spectra,
+                                    bright, kernel_spectra)
     else:
         wy, wx, geometry = field_weights(kernel_set, (H, W), pitch, d_mm, image_distance_um, period_um)
         power_map = stored_or_fresh(power_map, field_power_map(kernel_set, (H, W), pitch, d_mm,
@@ -189,10 +188,9 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
             images, residual = _field_through_planes(primaries, field_planes, field_basis, gains, channel_weights, m,
                                                      precision, workers, applied)
         else:
-            images, residual = convolve_field(np.asarray(band_image.bands), kernel_set.field_kernels,
-                                              kernel_set.field_power, wy, wx, m, gains, blend, precision, workers,
-                                              field_rank, channel_weights, field_basis, bright, power_map,
-                                              kernel_spectra)
+            images, residual = convolve_field(bands, kernel_set.field_kernels, kernel_set.field_power, wy, wx, m,
+                                              gains, blend, precision, workers, field_rank, channel_weights,
+                                              field_basis, bright, power_map, kernel_spectra)
         applied["field_power"] = ("exact series at each pixel's shift (optics.field_power)" if power_map is not None
                                   else "the phases' powers, interpolated (the kernel set has no field_series)")
         if field_rank is not None:
@@ -202,7 +200,7 @@ def apply_kernels(band_image, kernel_set, transmission=None, precision: str = "f
         far_gains = t * np.asarray(kernel_set.transmittance, float)
         far = (far_light_primaries(primaries, far_field, m, np.asarray(channel_weights, float) * far_gains[None, :],
                                    far_blocks) if through_planes else
-               far_field_images(np.asarray(band_image.bands), far_field, m, far_gains, channel_weights, far_blocks))
+               far_field_images(bands, far_field, m, far_gains, channel_weights, far_blocks))
         images = images + far.astype(images.dtype)
         applied["far_field"] = far_field.describe()
     blur_planes = not use_field or "field_planes" in applied
