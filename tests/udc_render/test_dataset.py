@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
 import numpy as np
@@ -134,7 +135,14 @@ def test_other_parameters_on_the_same_folder_are_refused(scene, reference, capsy
     assert tree(reference) == before
 
 
-def test_two_workers_give_the_same_bytes(scene, reference, tmp_path):
+@pytest.mark.parametrize("drjit_loaded", [False, True])
+def test_two_workers_give_the_same_bytes(scene, reference, tmp_path, monkeypatch, drjit_loaded):
+    """Workers forked from this process, or spawned where it has loaded Dr.Jit (a stand-in module here;
+    dataset.workers)."""
+    if drjit_loaded:
+        monkeypatch.setitem(sys.modules, "drjit", types.ModuleType("drjit"))
+    else:
+        monkeypatch.delitem(sys.modules, "drjit", raising=False)
     out = tmp_path / "data"
     assert main(args(scene, out, "--workers", "2")) == 0
     assert_same_files(out, reference)

@@ -195,9 +195,12 @@ def executor(workers: int, scheduler: str | None, shared: Shared):
     blas = threads if isinstance(shared.scene.content, Monitor) else shared.blas_threads
     # forked (workers.py) or spawned inside the environment, held for the whole job
     with blas_threads_env(blas) if blas else contextlib.nullcontext():
-        pool = ProcessPoolExecutor(workers, mp_context=worker_context(), initializer=start_worker,
-                                   initargs=(threads, blas))
-        try:  # the workers start at the first items' submission, after this process has prepared the kernels
+        context = worker_context()
+        pool = ProcessPoolExecutor(workers, mp_context=context, initializer=start_worker, initargs=(threads, blas))
+        if context.get_start_method() == "spawn":  # started now, not waited for: they import while this process
+            for _ in range(workers):  # checks the job and prepares the kernels (forked ones start at the first
+                pool.submit(os.getpid)  # items' submission, with all of it imported)
+        try:
             yield lambda tasks: _windowed(lambda t: pool.submit(make_item, shared, t),
                                           lambda fs: wait(fs, return_when=FIRST_COMPLETED), tasks, 2 * workers)
         finally:
