@@ -10,6 +10,7 @@ one library or experiment function.
     udc-render fit --psf IMAGE [IMAGE ...] [--flat IMAGE] [--white GLASS DISPLAY] [--noise-frames DIR] --out DIR
     udc-render study {psf,render,capture,realism,defocus,banding} --out DIR [--quick]
     udc-render train / evaluate / results   (restore/)
+    udc-render cache [--unused-days N] [--max-gb G] [--dry-run]   (the kernel cache's size; pruning)
     udc-render --version
 
 Every --display takes the same things (udc_render.optics.displays.load_display): glass (or none),
@@ -29,11 +30,25 @@ from psf.engine import PSFError
 from psf.layouts import LayoutError
 from psf.lens import LensError
 from udc_render import __version__
-from udc_render.cli import bank, calibrate, dataset, design, evaluate, fit, psf, render, results, study, synth, train
+from udc_render.cli import (
+    bank,
+    cache,
+    calibrate,
+    dataset,
+    design,
+    evaluate,
+    fit,
+    psf,
+    render,
+    results,
+    study,
+    synth,
+    train,
+)
 from udc_render.cli.args import Parser
 from udc_render.errors import UdcError
 
-COMMANDS = (psf, render, synth, dataset, bank, calibrate, fit, study, design, train, evaluate, results)
+COMMANDS = (psf, render, synth, dataset, bank, calibrate, fit, study, design, train, evaluate, results, cache)
 USER_ERRORS = (UdcError, PSFError, LayoutError, LensError)
 
 
