@@ -38,8 +38,8 @@ def entries(folder: Path) -> list[Entry]:
 def stale_temporaries(folder: Path, now_s: float | None = None) -> list[Entry]:
     """Temporaries of interrupted writes: hidden .tmp files last written more than STALE_TMP_S ago."""
     now_s = time.time() if now_s is None else now_s
-    found = [_entry(p) for p in Path(folder).glob(".*.tmp") if p.is_file()]
-    return [e for e in found if now_s - e.path.stat().st_mtime > STALE_TMP_S]
+    found = [(p, p.stat()) for p in Path(folder).glob(".*.tmp") if p.is_file()]
+    return [Entry(p, st.st_size, max(st.st_atime, st.st_mtime)) for p, st in found if now_s - st.st_mtime > STALE_TMP_S]
 
 
 def to_remove(found: list[Entry], unused_days: float | None = None, max_bytes: int | None = None,
@@ -48,8 +48,9 @@ def to_remove(found: list[Entry], unused_days: float | None = None, max_bytes: i
     rest hold at most `max_bytes` (None: no such rule)."""
     now_s = time.time() if now_s is None else now_s
     ordered = sorted(found, key=lambda e: e.last_used_s)
-    gone = [e for e in ordered if unused_days is not None and now_s - e.last_used_s > unused_days * 86400.0]
-    kept = [e for e in ordered if e not in gone]
+    unused = [unused_days is not None and now_s - e.last_used_s > unused_days * 86400.0 for e in ordered]
+    gone = [e for e, u in zip(ordered, unused) if u]
+    kept = [e for e, u in zip(ordered, unused) if not u]
     total = sum(e.size_bytes for e in kept)
     for e in kept:
         if max_bytes is None or total <= max_bytes:

@@ -6,16 +6,13 @@ import sys
 from concurrent.futures import ProcessPoolExecutor
 
 import pytest
-from threadpoolctl import threadpool_info, threadpool_limits
+from threadpoolctl import threadpool_limits
 
 import udc_render.dataset.workers as workers
+from tests.udc_render.test_dataset_bytes import blas_count
 from udc_render.dataset.workers import start_worker, worker_context
 
 FORK = "fork" in multiprocessing.get_all_start_methods()
-
-
-def blas_count() -> int:
-    return [i["num_threads"] for i in threadpool_info() if i.get("user_api") == "blas"][0]
 
 
 def marker() -> object:

@@ -22,11 +22,12 @@ from udc_render.content import charts
 from udc_render.content.resample import resample, resize_matrix
 from udc_render.errors import UdcError
 
-BUILTIN_IMAGES = ("astronaut", "coffee", "chelsea", "rocket", "camera", "immunohistochemistry")
-# their files in scikit-image's data folder, which skimage.data's functions read (skimage.data._fetchers): read
-# here with imageio without importing skimage.data and skimage.io (0.3 s a process; the same pixels, tested)
+# scikit-image's samples (skimage.data's function names) and their files in its data folder, which those functions
+# read (skimage.data._fetchers): read here with imageio without importing skimage.data and skimage.io (0.3 s a
+# process; the same pixels, tested)
 BUILTIN_FILES = {"astronaut": "astronaut.png", "coffee": "coffee.png", "chelsea": "chelsea.png",
                  "rocket": "rocket.jpg", "camera": "camera.png", "immunohistochemistry": "ihc.png"}
+BUILTIN_IMAGES = tuple(BUILTIN_FILES)
 PATTERNS = ("checker", "white", "grid", "orientation")
 CHARTS = {  # name: (function(cols, rows, arg), argument type, default argument)
     "slanted_edge": (charts.slanted_edge, float, 5.0),

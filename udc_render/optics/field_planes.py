@@ -21,7 +21,6 @@ grid: a derived entry of the kernel cache (synth_kernels.store_field_planes).
 """
 from __future__ import annotations
 
-import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
 
@@ -31,7 +30,7 @@ import scipy.fft as sfft
 from udc_render.optics.convolution import OpticsError, _kernel_spectrum, _precision, _workers, fft_shape
 from udc_render.optics.field import FieldBasis, _basis_map
 from udc_render.optics.field_power import PowerMap
-from udc_render.optics.kept import digest, kept
+from udc_render.optics.kept import digest, kept, sha1_of
 
 MAX_RANK = 8  # maps stored: the T-OLED needs 3-4 at 0.05 σ (benchmarks/bench_field_knobs.py --planes)
 ROW_BLOCK = 32  # rows of the K·r maps made at a time (K·r · 32 · W float64: 79 MB at 120 maps, W = 2560)
@@ -58,7 +57,7 @@ class PlaneBasis:
     @property
     def key(self) -> str:
         """A fingerprint of the basis (its coefficients and residuals), for the spectra kept per process."""
-        return hashlib.sha1(self.coeffs.tobytes() + self.residual_sup.tobytes()).hexdigest()
+        return sha1_of(self.coeffs, self.residual_sup)
 
     def arrays(self) -> dict:
         return {"maps": self.maps, "coeffs": self.coeffs, "residual_sup": self.residual_sup,
@@ -138,8 +137,7 @@ def _summed_spectra(pb: PlaneBasis, bases: list, weights: np.ndarray, matrix: np
     """spectra[j] [C, P, …] of H_Ccj (module doc), j < J, each member made once per (plane basis, the field basis's
     kernels, weights, matrix, shape, dtype, j) and kept (optics.kept: KEEP_SPECTRA sets of members per process, and
     in a dataset job's kernel cache)."""
-    key = (pb.key, digest(*bases), hashlib.sha1(weights.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape),
-           np.dtype(dtype).str)
+    key = (pb.key, digest(*bases), sha1_of(weights, matrix), tuple(shape), np.dtype(dtype).str)
     C, P = weights.shape[0], matrix.shape[0]
     return [kept(_SPECTRA, KEEP_SPECTRA * pb.maps.shape[0], key + (j,), lambda j=j: np.stack([np.stack([
         _kernel_spectrum(_summed_kernel(bases, weights[Cc] * matrix[c], pb.coeffs[:, j]).astype(dtype), shape, dtype,

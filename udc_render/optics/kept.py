@@ -34,12 +34,17 @@ def digest(*arrays: np.ndarray) -> str:
     hit = _DIGESTS.get(ids)
     if hit is not None and all(ref() is a for ref, a in zip(hit[0], arrays)):
         return hit[1]
+    _DIGESTS[ids] = (tuple(weakref.ref(a, lambda _, ids=ids: _DIGESTS.pop(ids, None)) for a in arrays),
+                     sha1_of(*arrays))
+    return _DIGESTS[ids][1]
+
+
+def sha1_of(*arrays) -> str:
+    """SHA-1 of the arrays' bytes one after the other (C order: a.tobytes()), hashed each call (digest keeps it)."""
     h = hashlib.sha1()
     for a in arrays:
         h.update(np.ascontiguousarray(a).view(np.uint8).ravel())
-    _DIGESTS[ids] = (tuple(weakref.ref(a, lambda _, ids=ids: _DIGESTS.pop(ids, None)) for a in arrays),
-                     h.hexdigest())
-    return _DIGESTS[ids][1]
+    return h.hexdigest()
 
 
 @contextlib.contextmanager

@@ -11,7 +11,6 @@ same numbers as the band path but for float32 round-off in another order (tests/
 """
 from __future__ import annotations
 
-import hashlib
 from collections import OrderedDict
 from dataclasses import dataclass
 from functools import cached_property
@@ -21,7 +20,7 @@ import scipy.fft as sfft
 
 from udc_render.optics.convolution import OpticsError, _check_margin, _kernel_spectrum, _precision, _workers, fft_shape
 from udc_render.optics.far_field import FarField, _block_means, _upsampling
-from udc_render.optics.kept import digest, kept
+from udc_render.optics.kept import digest, kept, sha1_of
 
 KEEP_SPECTRA = 4  # the summed kernels' spectra kept per process: a worker's views (C × 3 spectra each, 16 MB apiece)
 KEEP_FAR = 12  # the far fields' summed spectra kept (a view's channel C each, small: the coarse grid)
@@ -63,7 +62,7 @@ def _summed(weights: np.ndarray, kernels: np.ndarray) -> np.ndarray:
 def _key(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, *more) -> tuple:
     """What a summed spectrum depends on: the kernels' bytes, the weights, the matrix, the FFT shape (and more)."""
     return (digest(kernels), kernels.shape, kernels.dtype.str,
-            hashlib.sha1(w.tobytes() + matrix.tobytes()).hexdigest(), tuple(shape), *more)
+            sha1_of(w, matrix), tuple(shape), *more)
 
 
 def _summed_spectra(kernels: np.ndarray, w: np.ndarray, matrix: np.ndarray, shape, dtype,
