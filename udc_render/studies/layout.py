@@ -11,12 +11,13 @@ mirrored at random (the 8 elements of D4, udc_render.design.torch_psf.tile_trans
   3.1 µm, 255 px, 640 / 520 / 450 nm) under the sensor's noise, with the layout's open area as transmission,
   and again with only the light inside the kernel's window (open area × window fraction: the rest is lost);
 - the banding at the display-to-lens distance d (udc_render.studies.layout_banding: the exact power series of the
-  layout repeated on the rig's lens; a turned tiling has no period);
+  layout repeated on the rig's lens; and the power of both tilings sampled in space over the shifts the paper's
+  sensor sees, layout_banding.sampled_banding, the only figure a turned tiling has: it has no period);
 - the open area and power transmittance.
 - with restore='dep' (opt-in: seconds per plane), the restored PSNR by DeP of a natural image through the rig's
   kernels at the window's transmission (udc_render.studies.layout_restore).
-Not here (issue 48, named in docs/guides/design.md): the restored PSNR by a UNet, the banding of a turned
-tiling (it has no period). The error against run time of the design's knobs is `study design`
+Not here: the restored PSNR by a UNet trained through a bank of the layout (restore.studies.layout_trained:
+`study layout-trained`, minutes to an hour a layout). The error against run time of the design's knobs is `study design`
 (udc_render.studies.design_knobs).
 """
 from __future__ import annotations
@@ -31,8 +32,9 @@ from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.design.cells import RINGS, frame_cell, layout_cell, upc_cell
 from udc_render.sensor.config import SensorConfig
-from udc_render.studies.layout_banding import DEFAULT_DISTANCE_MM, layout_banding
+from udc_render.studies.layout_banding import DEFAULT_DISTANCE_MM, layout_banding, sampled_banding
 from udc_render.studies.layout_restore import CROP_PX, CROP_SETS, QUICK_CROP_PX, RESTORERS, restored_psnr
+from udc_render.studies.tiling_power import SAMPLE_UM
 
 __all__ = ["UPC_LENS", "FRAMES", "LayoutScores", "layout_cell", "frame_cell", "upc_cell", "score_layout"]
 
@@ -41,6 +43,7 @@ UPC_PIXEL_UM = 2.0
 UPC_KERNEL_PX = 295
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)  # R, G, B
 RIG_KERNEL_PX = 255
+QUICK_SAMPLE_UM = 4.0  # the sampled banding's raster step with --quick (2 µm without: tiling_power.SAMPLE_UM)
 FRAMES = ("as_given", "edge")
 TILINGS = ("repeated", "turned")
 
@@ -112,6 +115,8 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
             out["mtf_maps"][tiling] = {"upc": _centre_mtf(p[1]), "exact": _centre_mtf(k[1])}
             if tiling == "repeated":
                 banding = layout_banding(layout, Lens(), RIG_WAVELENGTHS_NM, distance_mm, r, rig_grid.pixel_um)
+                banding["sampled"] = sampled_banding(cell, cell_um, Lens(), RIG_WAVELENGTHS_NM, distance_mm, seed,
+                                                     QUICK_SAMPLE_UM if quick else SAMPLE_UM)
             if progress:
                 progress(1)
     return LayoutScores(name, float(getattr(layout, "open_fraction", trans)), trans, float(cell.shape[0] * cell_um),

@@ -87,9 +87,25 @@ def _banding_lines(b: dict) -> list[str]:
         lines.append(f"| {wl:.0f} | {b['order_x'][i]}, {b['amplitude_x'][i]:.2e} | {b['order_y'][i]}, "
                      f"{b['amplitude_y'][i]:.2e} | {b['peak_to_peak'][i]:.2e} | {after} |")
     lines += ["", "Amplitude 2|w_h|/w_0 of the strongest harmonic h of the exact power series P(s) (the banding "
-              "study's A1, relative to the mean); peak-to-peak of P over one period of shifts. A turned tiling has "
-              "no period: not computed."]
-    return lines
+              "study's A1, relative to the mean); peak-to-peak of P over one period of shifts."]
+    return lines + (_sampled_lines(b["sampled"]) if "sampled" in b else [])
+
+
+def _sampled_lines(b: dict) -> list[str]:
+    """Both tilings' P(s) sampled in space (layout_banding.sampled_banding), relative to its mean."""
+    lines = ["", f"### Both tilings, P(s) sampled on {b['sample_um']:g} µm over the shifts the paper's sensor sees "
+             f"(|s| ≤ {b['span_um'][0]:.0f} × {b['span_um'][1]:.0f} µm)", "",
+             "| λ (nm) | repeated: peak-to-peak, sd | turned: peak-to-peak, sd | turned, one period: "
+             "peak-to-peak, sd |",
+             "|---|---|---|---|"]
+    rep, turn = b["repeated"], b["turned"]
+    for i, wl in enumerate(b.get("wavelengths_nm", [])):
+        lines.append(f"| {wl:.0f} | {rep['peak_to_peak'][i]:.2e}, {rep['rms'][i]:.2e} | "
+                     f"{turn['peak_to_peak'][i]:.2e}, {turn['rms'][i]:.2e} | "
+                     f"{turn['peak_to_peak_one_period'][i]:.2e}, {turn['rms_one_period'][i]:.2e} |")
+    return lines + ["", "The turned tiling's power is not periodic: over the sensor's span it varies more than over "
+                    "one period of shifts, which is all that a model repeating one period's power (the engine's field "
+                    "blend for a turned tiling) can print."]
 
 
 def _figures(s: LayoutScores, out: Path) -> None:

@@ -1,0 +1,84 @@
+"""The transmitted power of any tiling of a cell, repeated or turned, at every mask shift the sensor sees (issue 48).
+
+A beam imaged at sensor position x crosses the display at the mask shift s = x d / z_i (docs/PHYSICS.md §4), and
+the power the lens passes is
+    P(s) = ∫ A(r) |u_d(r + s)|² dr = (A ⋆ |u_d|²)(s),   u_d = F⁻¹[F[m] H_d]
+(A: the aperture disc; m: the tiling's amplitude; H_d: the angular-spectrum transfer function over d,
+psf.propagation.angular_spectrum_tf; ⋆: correlation). A repeated tiling has the exact power series
+psf.banding.PowerSeries; a tiling with a random D4 turn per tile has no period and no series, so here P is
+sampled in space: the cell repeated on k × k squares of `sample_um` (a piecewise-constant cell is exact on them),
+tiled over the aperture plus the shifts' span plus the lateral spread of the highest angle the raster carries over
+d (sin θ = λ / 2δ: the margin keeps the FFT's wrap-around out of every shift used), propagated by one FFT pair and
+correlated with the area-weighted disc by another. Orders beyond the raster's band 1/2δ are lost; the error against
+the exact series of the repeated tiling is the knob's curve (`sample_um`; tests/udc_render/test_tiling_power.py and
+docs/guides/design.md).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.fft as sfft
+
+from psf.plan import PAPER_SENSOR_UM
+from psf.propagation import angular_spectrum_tf
+from udc_render.errors import UdcError
+
+__all__ = ["SAMPLE_UM", "MAX_SIDE", "shift_span_um", "tiled_cell", "tiling_power", "band_figures"]
+
+SAMPLE_UM = 2.0  # the raster's step (the design's 8 µm squares in 4; the T-OLED's 2 µm cell as it is)
+MAX_SIDE = 8192  # raster samples per side (a complex128 array of 1.07 GB, 5 of them at once; the paper's rig at
+# d = 2 mm takes 2.9 k at 2 µm and 6.4 k at 1 µm)
+
+
+def shift_span_um(lens, distance_um: float, sensor_um=PAPER_SENSOR_UM) -> tuple[float, float]:
+    """(S_x, S_y): the largest mask shift |s| = (sensor / 2) d / z_i the paper's sensor sees, per axis."""
+    return tuple(w / 2 * distance_um / lens.image_distance_um for w in sensor_um)
+
+
+def tiled_cell(cell: np.ndarray, transforms: np.ndarray, k: int) -> np.ndarray:
+    """The amplitude cell [c, c] on k × k squares per pixel, tiled as transforms [R, C] (D4 elements: np.rot90(·,
+    t % 4) of the cell, mirrored left-right first when t ≥ 4: udc_render.design.torch_psf.transform_tile's)."""
+    fine = np.kron(np.asarray(cell, np.float64), np.ones((k, k)))
+    variants = [np.rot90(np.fliplr(fine) if t >= 4 else fine, t % 4) for t in range(8)]
+    return np.block([[variants[t] for t in row] for row in transforms])
+
+
+def _spread_um(distance_um: float, wavelength_um: float, step_um: float) -> float:
+    s = min(wavelength_um / (2 * step_um), 0.999)
+    return distance_um * s / math.sqrt(1 - s * s)
+
+
+def tiling_power(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, distance_um: float,
+                 span_um: tuple[float, float], transforms=None, sample_um: float = SAMPLE_UM
+                 ) -> tuple[np.ndarray, float]:
+    """(P [2 J_y + 1, 2 J_x + 1] in µm², δ): the module doc's P(s) at the shifts s = (i δ, j δ), |s| ≤ span_um per
+    axis, of the cell (amplitude on cell_um squares) tiled plainly (transforms None) or as transforms(tiles) →
+    [tiles, tiles] D4 elements, tiles even, the window centred on the optical axis."""
+    k = max(1, round(cell_um / sample_um))
+    step, lam = cell_um / k, wavelength_nm * 1e-3
+    period = cell.shape[0] * cell_um
+    half = lens.aperture_um / 2 + max(span_um) + _spread_um(distance_um, lam, step) + period
+    tiles = 2 * math.ceil(half / period)
+    if tiles * cell.shape[0] * k > MAX_SIDE:
+        raise UdcError(f"--distance-mm {distance_um / 1000:g}: the sampled banding needs {tiles * cell.shape[0] * k}² "
+                       f"samples of {step:g} µm (aperture, shifts and spread over d); allowed ≤ {MAX_SIDE}²: use a "
+                       "smaller distance or a coarser raster")
+    plan = np.zeros((tiles, tiles), int) if transforms is None else np.asarray(transforms(tiles))
+    mask = tiled_cell(cell, plan, k)
+    n = mask.shape[0]
+    f = sfft.fftfreq(n, step)
+    field = sfft.ifft2(sfft.fft2(mask) * angular_spectrum_tf(f, f, lam, distance_um))
+    edges = (np.arange(n + 1) - n / 2) * step
+    disc = lens.aperture_area_fraction(edges, edges)
+    power = sfft.ifft2(np.conj(sfft.fft2(disc)) * sfft.fft2(np.abs(field) ** 2)).real * step ** 2
+    jx, jy = (int(s // step) for s in span_um)
+    rows, cols = np.arange(-jy, jy + 1) % n, np.arange(-jx, jx + 1) % n
+    return power[np.ix_(rows, cols)], step
+
+
+def band_figures(power: np.ndarray) -> dict:
+    """Relative figures of P over the shifts: peak-to-peak (max − min) / mean and the standard deviation / mean."""
+    mean = float(power.mean())
+    return {"peak_to_peak": float((power.max() - power.min()) / mean), "rms": float(power.std() / mean),
+            "mean_power_um2": mean}
