@@ -15,10 +15,16 @@ optimiser step pays for its PSF).
 after 0, 10, 20, 40, 80 and 150 steps (accepted swaps) scored as design.json's 'final' (the mean Wiener MSE over
 channels on the held-out tiling, and its PSNR), with the search's CPU seconds so far; 0 steps is the initial
 random scatter, the baseline the search has to beat.
+(c) The sampled banding's raster step (udc_render.studies.tiling_power's sample_um: the layout study's banding of a
+turned tiling), on the rig's lens at d = 2 mm over the paper sensor's shifts, for both cells: the repeated tiling's
+relative P(s) against the exact power series (psf.banding.PowerSeries; the largest |P/P̄ − S/S̄| over the shifts
+and the relative error of the peak-to-peak), and the turned tiling's peak-to-peak and sd against the finest step
+(the same tiles at every step: layout_banding.DRAW_TILES); CPU seconds of both tilings (3 channels).
 
 Outputs: study_design.json (every figure), study_design.csv (one row per setting), study_design.md,
-study_design.png (error against CPU time; objective against steps). quick: a 96 µm cell, 31-px kernels, three
-settings and 2 and 4 steps from 128 pupil samples (a smoke run).
+study_design.png (error against CPU time; objective against steps; banding error against CPU time). quick: a 96 µm
+cell, 31-px kernels, three settings and 2 and 4 steps from 128 pupil samples, raster steps of 8 and 4 µm (a smoke
+run).
 """
 from __future__ import annotations
 
@@ -30,21 +36,28 @@ import torch
 from tqdm import tqdm
 
 from psf import layouts
+from psf.banding import PowerSeries, power_grid
 from psf.lens import Lens
+from psf.micrograph import MicrographLayout
 from udc_render.design import metrics, torch_psf as tp
 from udc_render.design.cells import frame_cell
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer
 from udc_render.streams import stream
 from udc_render.studies.design_knobs_report import write
+from udc_render.studies.layout_banding import sampled_banding
+from udc_render.studies.tiling_power import band_figures, shift_span_um, tiling_power
 
-__all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "run_study"]
+__all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "banding_rows", "run_study"]
 
 FULL = {"cell_um": 168.0, "kernel_px": 127, "samples": (128, 256, 384, 512, 768, 1024, 2048),
-        "steps": (10, 20, 40, 80, 150), "design_pupil_samples": DesignConfig().pupil_samples}
-QUICK = {"cell_um": 96.0, "kernel_px": 31, "samples": (64, 128, 256), "steps": (2, 4), "design_pupil_samples": 128}
+        "steps": (10, 20, 40, 80, 150), "design_pupil_samples": DesignConfig().pupil_samples,
+        "sample_um": (8.0, 4.0, 2.0, 1.0)}
+QUICK = {"cell_um": 96.0, "kernel_px": 31, "samples": (64, 128, 256), "steps": (2, 4), "design_pupil_samples": 128,
+         "sample_um": (8.0, 4.0)}
 FEATURE_UM = 8.0
 OPEN = 0.20
 SEED = 0
+BANDING_DISTANCE_UM = 2000.0
 
 
 def cells(cell_um: float) -> dict:
@@ -118,12 +131,51 @@ def steps_rows(cfg: dict, progress=None) -> list[dict]:
     return rows
 
 
+def _series_errors(cell: np.ndarray, sample_um: float) -> dict:
+    """The repeated cell's sampled P(s) against its exact series, the largest over the channels (part c)."""
+    layout = MicrographLayout("cell", FEATURE_UM, image=cell)
+    span, profile, p2p = shift_span_um(Lens(), BANDING_DISTANCE_UM), 0.0, 0.0
+    for wl in RIG_WAVELENGTHS_NM:
+        power, step = tiling_power(cell, FEATURE_UM, Lens(), wl, BANDING_DISTANCE_UM, span, sample_um=sample_um)
+        jy, jx = power.shape[0] // 2, power.shape[1] // 2
+        xs, ys = np.arange(-jx, jx + 1) * step, np.arange(-jy, jy + 1) * step
+        half = PowerSeries(layout, Lens(), wl * 1e-3, BANDING_DISTANCE_UM).truncated(1e-7)
+        series = power_grid(half, layout.period_um, -xs, -ys)
+        profile = max(profile, float(np.abs(power / power.mean() - series / series.mean()).max()))
+        p2p = max(p2p, abs(band_figures(power)["peak_to_peak"] / band_figures(series)["peak_to_peak"] - 1))
+    return {"error_profile_rel": profile, "error_peak_to_peak_rel": p2p}
+
+
+def banding_rows(cfg: dict, progress=None) -> list[dict]:
+    """Part (c): one row per cell and raster step; the turned figures' errors against the cell's finest step."""
+    rows = []
+    for name, cell in cells(cfg["cell_um"]).items():
+        found = []
+        for sample_um in cfg["sample_um"]:
+            b, cpu_s = _timed(lambda: sampled_banding(cell, FEATURE_UM, Lens(), RIG_WAVELENGTHS_NM,
+                                                      BANDING_DISTANCE_UM / 1000, SEED, sample_um))
+            found.append({"part": "banding", "cell": name, "sample_um": sample_um, "cpu_s": cpu_s,
+                          "turned_peak_to_peak": b["turned"]["peak_to_peak"], "turned_rms": b["turned"]["rms"],
+                          **_series_errors(cell, sample_um)})
+            if progress:
+                progress(1)
+        ref = found[-1]
+        for r in found:
+            r["error_turned_rel"] = float(max(np.max(np.abs(np.divide(r[k], ref[k]) - 1))
+                                              for k in ("turned_peak_to_peak", "turned_rms")))
+        rows += found
+    return rows
+
+
 def run_study(out: Path, quick: bool = False) -> dict:
-    """Both parts, written to out (udc_render.studies.design_knobs_report)."""
+    """The three parts, written to out (udc_render.studies.design_knobs_report)."""
     cfg = QUICK if quick else FULL
-    with tqdm(total=2 * len(cfg["samples"]) + len(cfg["steps"]) + 1, desc="study design") as bar:
+    total = 2 * len(cfg["samples"]) + len(cfg["steps"]) + 1 + 2 * len(cfg["sample_um"])
+    with tqdm(total=total, desc="study design") as bar:
         doc = {"config": {**cfg, "feature_um": FEATURE_UM, "open_fraction": OPEN, "seed": SEED,
-                          "wavelengths_nm": RIG_WAVELENGTHS_NM, "threads": torch.get_num_threads()},
-               "sampling": sampling_rows(cfg, bar.update), "steps": steps_rows(cfg, bar.update)}
+                          "wavelengths_nm": RIG_WAVELENGTHS_NM, "threads": torch.get_num_threads(),
+                          "banding_distance_mm": BANDING_DISTANCE_UM / 1000},
+               "sampling": sampling_rows(cfg, bar.update), "steps": steps_rows(cfg, bar.update),
+               "banding": banding_rows(cfg, bar.update)}
     write(doc, out)
     return doc

@@ -11,8 +11,9 @@ from udc_render.io.files import save_figure, save_json, save_text
 __all__ = ["COLUMNS", "markdown", "write"]
 
 COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "steps_done", "evaluations", "psnr_db",
-           "error_psnr_db", "error_ring_means_rel", "error_ring_minima_rel", "objective", "open_area", "cpu_s",
-           "cpu_gradient_s"]
+           "error_psnr_db", "error_ring_means_rel", "error_ring_minima_rel", "objective", "open_area", "sample_um",
+           "error_profile_rel", "error_peak_to_peak_rel", "turned_peak_to_peak", "turned_rms", "error_turned_rel",
+           "cpu_s", "cpu_gradient_s"]
 
 
 def _cell(v) -> str:
@@ -51,7 +52,22 @@ def markdown(doc: dict) -> str:
         lines.append(f"| {r['steps']} | {r['steps_done']}{' (converged)' if r['converged'] else ''} | "
                      f"{r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | {r['evaluations']} | "
                      f"{r['cpu_s']:.0f} |")
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines + _banding_lines(doc)) + "\n"
+
+
+def _banding_lines(doc: dict) -> list[str]:
+    """Part (c): the sampled banding's raster step (absent from a study run before it)."""
+    if not doc.get("banding"):
+        return []
+    lines = ["", f"## The sampled banding's raster step (d = {doc['config']['banding_distance_mm']:g} mm, the paper "
+             "sensor's shifts; repeated: against the exact series; turned: against the finest step)", "",
+             "| cell | step (µm) | repeated: profile error | repeated: peak-to-peak error | turned: peak-to-peak | "
+             "turned: sd | turned: error | CPU s |", "|---|---|---|---|---|---|---|---|"]
+    for r in doc["banding"]:
+        lines.append(f"| {r['cell']} | {r['sample_um']:g} | {r['error_profile_rel']:.2g} | "
+                     f"{r['error_peak_to_peak_rel']:.2g} | {_cell(r['turned_peak_to_peak'])} | "
+                     f"{_cell(r['turned_rms'])} | {r['error_turned_rel']:.2g} | {r['cpu_s']:.1f} |")
+    return lines
 
 
 def _figure(doc: dict, out: Path) -> None:
@@ -59,7 +75,7 @@ def _figure(doc: dict, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
-    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4))
+    fig, (a, b, c) = plt.subplots(1, 3, figsize=(16, 4))
     for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
         rows = [r for r in doc["sampling"] if r["cell"] == name][:-1]  # the reference has no error
         t = [r["cpu_gradient_s"] for r in rows]
@@ -81,6 +97,7 @@ def _figure(doc: dict, out: Path) -> None:
     for r in steps:
         b.annotate(f"{r['cpu_s']:.0f} s", (r["steps"], r["psnr_db"]), fontsize=7)
     b.set_xscale("log")
+    _banding_axes(c, doc.get("banding", []))
     for axis in (a.xaxis, b.xaxis):
         axis.set_minor_formatter(NullFormatter())
     b.set_xlabel("search steps, accepted swaps (CPU s beside each)")
@@ -88,6 +105,23 @@ def _figure(doc: dict, out: Path) -> None:
     b.set_title("design: steps")
     save_figure(fig, out / "study_design.png")
     plt.close(fig)
+
+
+def _banding_axes(ax, rows: list[dict]) -> None:
+    for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
+        these = [r for r in rows if r["cell"] == name]
+        t = [r["cpu_s"] for r in these]
+        ax.loglog(t, [max(r["error_profile_rel"], 1e-9) for r in these], "o-", color=colour,
+                  label=f"{name}: repeated, profile vs series")
+        ax.loglog(t[:-1], [max(r["error_turned_rel"], 1e-9) for r in these[:-1]], "s--", color=colour,
+                  label=f"{name}: turned, figures vs finest")
+        for r in these:
+            ax.annotate(f"{r['sample_um']:g} µm", (r["cpu_s"], max(r["error_profile_rel"], 1e-9)), fontsize=7)
+    ax.set_xlabel("CPU s, both tilings, 3 channels")
+    ax.set_ylabel("relative error")
+    ax.set_title("sampled banding: raster step")
+    if rows:
+        ax.legend(fontsize=7)
 
 
 def write(doc: dict, out: Path) -> list[str]:
