@@ -1,5 +1,5 @@
-"""`udc-render study {psf,render,capture,far_field,realism,defocus,banding,gap,robustness,layout,design}
---out DIR [--quick]`:
+"""`udc-render study {psf,render,capture,far_field,realism,defocus,banding,gap,robustness,layout,layout-trained,
+design} --out DIR [--quick]`:
 error-versus-run-time studies of the approximation knobs, the defocus and banding studies users run, and the
 robustness of a restorer trained on one panel or on randomized panels (restore.studies.robustness)."""
 from __future__ import annotations
@@ -22,6 +22,9 @@ STUDIES = {
     "far_field": "the far field's threshold and coarse factor (the light past the kernel window)",
     "layout": "a display's pixel layout scored for restorability: UPC's ring statistics in their sampling and on the "
               "exact kernels, the Wiener error under the sensor's noise, the open area (--display)",
+    "layout-trained": "layouts compared by DeP and a small UNet trained online through a bank of each (--display: "
+                      "comma-separated, each DISPLAY[@edge][@turned]; the first is the reference; about 20 min a "
+                      "layout on 2 cores, minutes with --quick)",
     "design": "the layout designer's knobs (the torch PSF's pupil samples, the optimiser's steps): error against "
               "CPU time",
     "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
@@ -63,7 +66,9 @@ def register(sub) -> None:
     s.add_argument("--images", type=image_files, default=(),
                    help="gap only: image files (comma-separated, or a folder searched for .png/.jpg/.tif) scored "
                         "beside the dead leaves, e.g. DIV2K's validation photographs [none]")
-    add_display_argument(s, "layout only: the display whose layout is scored", default="toled",
+    add_display_argument(s, "layout: the display whose layout is scored; layout-trained: the layouts compared, "
+                         "comma-separated, each a display with @edge (its cell framed at the tile's edge) and @turned "
+                         "(a random D4 turn per tile) appended as wanted", default="toled",
                          micrograph="pixels of --micrograph-pixel-um, amplitude values")
     s.add_argument("--micrograph-pixel-um", type=positive("--micrograph-pixel-um"), default=1.0,
                    help="layout only: a micrograph's pixel size in µm [1]")
@@ -85,8 +90,8 @@ def register(sub) -> None:
 def run(args) -> int:
     if args.images and args.what != "gap":
         raise UserError(f"--images {','.join(map(str, args.images))}: only `study gap` takes images")
-    if args.what != "layout" and args.display != "toled":
-        raise UserError(f"--display {args.display}: only `study layout` takes a display")
+    if args.what not in ("layout", "layout-trained") and args.display != "toled":
+        raise UserError(f"--display {args.display}: only `study layout` and `study layout-trained` take a display")
     if args.what != "layout" and args.frame != "as_given":
         raise UserError(f"--frame {args.frame}: only `study layout` takes a framing")
     if args.what != "layout" and args.distance_mm != 2.0:
@@ -99,6 +104,8 @@ def run(args) -> int:
         raise UserError("--conditioned: only `study robustness` trains a conditioned restorer")
     if args.what == "layout":
         return _layout(args)
+    if args.what == "layout-trained":
+        return _layout_trained(args)
     out = out_dir(args.out)
     if args.what == "gap":
         gap.run_study(out, quick=args.quick, images=args.images)
@@ -144,4 +151,16 @@ def _layout(args) -> int:
                           crops=args.restore_crops)
     names = write(scores, out)
     print(f"wrote {out}/" + f", {out}/".join(names))
+    return 0
+
+
+def _layout_trained(args) -> int:
+    """`study layout-trained`: every layout loaded first (a bad entry refused in one line), then the study."""
+    from restore.studies.layout_trained import NAME, entry_display, run_study
+    specs = [p for p in args.display.split(",") if p]
+    out = out_dir(args.out)
+    for spec in specs:
+        entry_display(spec, out / "panels")
+    run_study(out, specs, quick=args.quick)
+    print(f"wrote {out}/{NAME}.md, {NAME}.json, {NAME}.png, {NAME}_restored.png")
     return 0

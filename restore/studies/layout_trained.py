@@ -1,0 +1,257 @@
+"""`udc-render study layout-trained`: pixel layouts compared by restorers through the simulator (issue 48).
+
+For each layout given (a display file, a preset or a micrograph; `@edge` frames its cell with the first open column
+at the tile's edge, `@turned` tiles it with a random D4 turn per tile: udc_render.design.cells.frame_cell,
+psf.MicrographLayout), at equal footing:
+    d = 2 mm (the physical profile's), the stack's T(λ) as the display gives it, and a gain of 1 / the layout's
+    power transmittance, so that every capture's mean level is glass's;
+1. a kernel bank of the layout (udc_render.dataset.bank_make) under the `physical` profile at the robustness study's
+   rig (restore.studies.robustness.BUDGETS: 'full' 512 × 256 px of 6.2 µm, 129-px kernels; 'quick' 128 × 64 px of
+   12.4 µm): per-channel kernels with the field blend over d, the far field past the window, γ, fixed-pattern noise,
+   Poisson and read noise, quantisation, dead and hot pixels;
+2. a small UNet (the budget's: width 16, depth 4, EPOCHS = 80 epochs of 4 crops of 128 px from 48 images) trained
+   online through that bank (restore.train, --degrade online): one specialist per layout, the same recipe and seeds;
+3. scored on the budget's validation images (colour dead leaves) each degraded once through the layout
+   (restore.studies.robustness.score_panel): the packed input, DeP given the layout's own kernels and γ, DeP on the
+   same capture without the sensor's noise, and the UNet; the paper protocol's PSNR and the level-matched PSNR.
+The clean images, noise draws and training seeds are the same for every layout, so the per-image differences to
+the reference layout (the first given) are paired: mean, standard error s_d / √n and the images won.
+Not the spectral synthesis of `udc-render dataset`: the bank's per-channel form (one kernel and one γ per camera
+channel for the monitor's white).
+
+Resumable: the banks through make_bank, the training through restore.train's checkpoints, each layout's score row
+kept in scores.jsonl under the fingerprint of its bank, images and model (robustness.score_fingerprints' recipe).
+Writes study_layout_trained.md / .json / .png (the PSNRs) and study_layout_trained_restored.png (the first
+validation image: truth, DeP and the UNet per layout).
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from psf.micrograph import MicrographLayout
+from restore.online import clean_images, images_fingerprint
+from restore.studies.robustness import (
+    BUDGETS as ROBUSTNESS_BUDGETS,
+    SCORE_SEED,
+    TRAIN_SEED,
+    dep_outputs,
+    model_outputs,
+    panel_pairs,
+    read_scores,
+    score_panel,
+    study_scene,
+    train_settings,
+    write_clean_images,
+)
+from restore.studies.stage_times import StageTimes
+from restore.train import load_model, train
+from udc_render.dataset.bank import read_bank
+from udc_render.dataset.bank_make import bank_settings, make_bank, preset_specs
+from udc_render.design.cells import frame_cell, layout_cell
+from udc_render.errors import UdcError
+from udc_render.io.exr import save_exr
+from udc_render.io.files import save_figure, save_json, save_text
+from udc_render.optics.displays import Display, load_display, micrograph_display
+from udc_render.pipeline import SynthConfig
+from udc_render.profiles import describe, resolve_profile
+from udc_render.scene.geometry import sensor_kernel_px
+from udc_render.studies.fingerprint import FIELD, digest, file_digest, stale_note
+
+__all__ = ["DISTANCE_MM", "MODIFIERS", "NAME", "entry_display", "paired", "run_study"]
+
+DISTANCE_MM = 2.0  # the physical profile's d for the presets, and the issue's banding distance
+MODIFIERS = ("edge", "turned")
+CELL_PIXEL_UM = 1.0  # a preset's cell raster for @edge / @turned (the T-OLED's 168 µm cell: 168² squares)
+NAME = "study_layout_trained"
+ROW_KEYS = ("input", "dep", "dep_noiseless", "unet")
+VERSION = 1
+EPOCHS = 80  # the robustness recipe's 240 take 34 min a layout here (8.5 s an epoch on 2 cores with the physical
+# profile's online degradation at d = 2 mm); 80 (3840 steps) take 11 min
+BUDGETS = {"quick": ROBUSTNESS_BUDGETS["quick"], "full": replace(ROBUSTNESS_BUDGETS["full"], epochs=EPOCHS)}
+
+
+def _cell_display(display: Display, frame: str, turned: bool, folder: Path) -> Display:
+    """The display's cell as intensities on CELL_PIXEL_UM squares (a preset's exact area-weighted raster,
+    PeriodicLayout.cell_raster, so its open area is kept exactly; a micrograph's own pixels), framed, written as an
+    EXR in `folder` and tiled as a micrograph of intensity values, turned or not; its T(λ) kept."""
+    layout = display.layout
+    if isinstance(layout, MicrographLayout):
+        cell, pixel_um = layout_cell(layout)
+        cell = cell ** 2
+    else:
+        c = max(3, round(layout.pitch_x_um / CELL_PIXEL_UM))
+        cell, pixel_um = layout.cell_raster(c, c)[1], layout.pitch_x_um / c
+    cell = frame_cell(cell, frame)
+    name = display.name + ("_edge" if frame == "edge" else "") + ("_turned" if turned else "")
+    path = folder / f"{name}.exr"
+    folder.mkdir(parents=True, exist_ok=True)
+    save_exr(path, {c: cell.astype(np.float32) for c in "RGB"})
+    tiled = micrograph_display(path, pixel_um, "intensity", turned, 0)
+    return replace(tiled, name=name, transmission=display.transmission,
+                   source=f"{display.source}, cell {'framed at the edge, ' if frame == 'edge' else ''}"
+                          f"{'turned per tile' if turned else 'repeated'}")
+
+
+def entry_display(spec: str, folder: Path) -> Display:
+    """The display of one entry, DISPLAY[@edge][@turned] (module doc), with the gain 1 / its power transmittance
+    (its T(λ) and its distance as loaded: the study sets d)."""
+    base, *mods = spec.split("@")
+    bad = [m for m in mods if m not in MODIFIERS]
+    if bad or len(set(mods)) != len(mods):
+        raise UdcError(f"--display {spec}: unknown or repeated modifier @{(bad or mods)[0]}; allowed: "
+                       + ", ".join("@" + m for m in MODIFIERS))
+    display = load_display(base)
+    if display.layout is None:
+        raise UdcError(f"--display {spec}: glass has no pixel layout to compare")
+    if mods:
+        display = _cell_display(display, "edge" if "edge" in mods else "as_given", "turned" in mods, folder)
+    return replace(display, gain=1.0 / float(display.layout.power_transmittance))
+
+
+def _banks(out: Path, displays: list[Display], b, times: StageTimes, cache_dir: str | None, progress: bool) -> dict:
+    """{display name: its bank} under out/banks (make_bank resumes)."""
+    scene = study_scene(b)
+    cfg, placed = resolve_profile("physical", SynthConfig(field_phases=b.field_phases, kernel_cache=cache_dir),
+                                  displays, distance_mm=DISTANCE_MM)
+    size = sensor_kernel_px(scene)
+    banks = {}
+    for display in placed:
+        t0 = time.perf_counter()
+        folder = out / "banks" / display.name
+        specs = preset_specs([display], scene, cfg)
+        extra = {"profile": describe(cfg.profile), "study": "layout-trained", "budget": b.name}
+        if make_bank(folder, specs, bank_settings(scene, cfg, size, specs, extra), size, progress=progress)["made"]:
+            times.add(f"bank {display.name}", time.perf_counter() - t0)
+        banks[display.name] = read_bank(folder)
+    return banks
+
+
+def _fingerprint(out: Path, bank, data: Path, name: str) -> str:
+    return digest({"version": VERSION, "images": images_fingerprint(data), "score_seed": SCORE_SEED,
+                   "bank": bank.fingerprint, "model": file_digest(out / "train" / name / "model.pt")})
+
+
+def _score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
+    """Each layout's score row (score_panel) in scores.jsonl, kept under its fingerprint (module doc)."""
+    path = out / "scores.jsonl"
+    logged = read_scores(path)
+    prints = {name: _fingerprint(out, bank, data, name) for name, bank in banks.items()}
+    rows = [r for r in logged if prints.get(r["layout"]) == r.get(FIELD)]
+    if note := stale_note("study layout-trained", len(logged) - len(rows), path):
+        print(note)
+    images = clean_images(data, "val")
+    done = {r["layout"] for r in rows}
+    for name in tqdm([n for n in banks if n not in done], desc="score", unit="layout", disable=not progress):
+        t0 = time.perf_counter()
+        model = load_model(out / "train" / name / "model.pt", "cpu")[0]
+        per_image = score_panel({"unet": model}, banks[name], 0, images)
+        rows.append({"layout": name, "images": len(images), **{f"psnr_{k}_db": float(np.mean(v))
+                                                                for k, v in per_image.items()},
+                     "per_image_db": per_image, "seconds": round(time.perf_counter() - t0, 2), FIELD: prints[name]})
+        save_text(path, "".join(json.dumps(r) + "\n" for r in rows))
+    order = list(banks)
+    return sorted(rows, key=lambda r: order.index(r["layout"]))
+
+
+def paired(values: list[float], reference: list[float]) -> dict:
+    """Paired differences d_i = values_i − reference_i: mean, standard error s_d / √n (n ≥ 2) and the wins."""
+    d = np.asarray(values, float) - np.asarray(reference, float)
+    se = float(d.std(ddof=1) / math.sqrt(d.size)) if d.size > 1 else float("nan")
+    return {"mean_db": float(d.mean()), "se_db": se, "wins": int((d > 0).sum()), "n": int(d.size)}
+
+
+def _figure(out: Path, banks: dict, data: Path, rows: list[dict]) -> None:
+    """The first validation image: its truth, then DeP's and the UNet's restorations per layout (paper PSNR)."""
+    import matplotlib.pyplot as plt
+    image = clean_images(data, "val")[:1]
+    fig, axes = plt.subplots(len(banks), 3, figsize=(9, 1.6 * len(banks) + 0.4), squeeze=False)
+    for i, (name, bank) in enumerate(banks.items()):
+        pairs = panel_pairs(bank, bank.panels[0], image)
+        model = load_model(out / "train" / name / "model.pt", "cpu")[0]
+        row = next(r for r in rows if r["layout"] == name)["per_image_db"]
+        shown = [(pairs[0][1], "truth"), (dep_outputs(bank.panels[0], pairs)[0], f"DeP {row['dep'][0]:.2f} dB"),
+                 (model_outputs(model, bank, bank.panels[0], pairs)[0], f"UNet {row['unet'][0]:.2f} dB")]
+        for ax, (img, title) in zip(axes[i], shown):
+            ax.imshow(np.clip(np.asarray(img).transpose(1, 2, 0), 0, 1) ** (1 / 2.2))
+            ax.set_title(f"{name}: {title}" if title != "truth" else name, fontsize=8)
+            ax.axis("off")
+    fig.tight_layout()
+    save_figure(fig, out / f"{NAME}_restored.png")
+
+
+def _plot(out: Path, rows: list[dict]) -> None:
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(7, 3.2))
+    x = np.arange(len(rows))
+    for j, (key, label) in enumerate((("input", "input"), ("dep", "DeP"), ("unet", "UNet"))):
+        ax.bar(x + (j - 1) * 0.27, [r[f"psnr_{key}_db"] for r in rows], 0.27, label=label)
+    ax.set_xticks(x, [r["layout"] for r in rows], fontsize=8)
+    ax.set_ylabel("PSNR (paper protocol), dB")
+    ax.legend(fontsize=8)
+    ax.set_title("validation images through each layout's bank (d = 2 mm, gain 1/T)", fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, out / f"{NAME}.png")
+
+
+def _markdown(result: dict) -> str:
+    rows, ref = result["rows"], result["rows"][0]
+    lines = [f"# `study layout-trained` ({result['budget']['name']} budget)", "",
+             f"Reference for the paired differences: {ref['layout']} ({ref['images']} validation images, "
+             "the same noise draws for every layout). PSNR: the paper protocol's; level: level-matched.", "",
+             "| layout | T | input | DeP | DeP, no sensor noise | UNet | UNet level | DeP − ref | UNet − ref |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        p = result["paired"][r["layout"]]
+        diff = {k: "—" if r is ref else f"{p[k]['mean_db']:+.2f} ± {p[k]['se_db']:.2f} ({p[k]['wins']}/{p[k]['n']})"
+                for k in ("dep", "unet")}
+        lines.append(f"| {r['layout']} | {result['transmission'][r['layout']]:.4f} | {r['psnr_input_db']:.2f} | "
+                     f"{r['psnr_dep_db']:.2f} | {r['psnr_dep_noiseless_db']:.2f} | {r['psnr_unet_db']:.2f} | "
+                     f"{r['psnr_unet_level_db']:.2f} | {diff['dep']} | {diff['unet']} |")
+    seconds = {**result["times"], **{f"train {k}": t["seconds"] for k, t in result["train"].items()}}
+    lines += ["", "Seconds (2 cores unless said): " + ", ".join(f"{k} {v:.0f}" for k, v in seconds.items()), ""]
+    return "\n".join(lines)
+
+
+def run_study(out: Path, specs: list[str], quick: bool = False, cache_dir: str | None = None,
+              progress: bool = True) -> dict:
+    """The study (module doc) of the layouts `specs` (DISPLAY[@edge][@turned]; the first is the reference) in `out`,
+    or the rest of an interrupted one; writes the report and returns its JSON document."""
+    out = Path(out).resolve()
+    displays = [entry_display(s, out / "panels") for s in specs]
+    names = [d.name for d in displays]
+    if len(set(names)) != len(names):
+        raise UdcError(f"--display {','.join(specs)}: expected distinct layouts, got the names {', '.join(names)}")
+    out.mkdir(parents=True, exist_ok=True)
+    b = BUDGETS["quick" if quick else "full"]
+    times = StageTimes(out / "times.json")
+    data = write_clean_images(out / "clean", b)
+    banks = _banks(out, displays, b, times, cache_dir, progress)
+    summaries = {}
+    for name, bank in banks.items():
+        summaries[name] = train(data, out / "train" / name, train_settings(b, bank, data), device="cpu",
+                                checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
+                                bank=bank.folder)
+    t0 = time.perf_counter()
+    rows = _score(out, banks, data, progress)
+    times.add("score", time.perf_counter() - t0)
+    ref = rows[0]["per_image_db"]
+    result = {"budget": dict(asdict(b), steps=b.steps), "distance_mm": DISTANCE_MM, "specs": list(specs),
+              "transmission": {d.name: float(d.layout.power_transmittance) for d in displays},
+              "gain": {d.name: d.gain for d in displays}, "rows": rows, "times": dict(times.seconds),
+              "train": summaries, "seeds": {"train": TRAIN_SEED, "score": SCORE_SEED},
+              "paired": {r["layout"]: {k: paired(r["per_image_db"][k], ref[k]) for k in ROW_KEYS} for r in rows}}
+    bad = [(r["layout"], k) for r in rows for k in ROW_KEYS if not math.isfinite(r[f"psnr_{k}_db"])]
+    if bad:
+        raise UdcError(f"study layout-trained: non-finite PSNR for {bad[0]}")
+    save_json(out / f"{NAME}.json", result)
+    save_text(out / f"{NAME}.md", _markdown(result))
+    _plot(out, rows)
+    _figure(out, banks, data, rows)
+    return result

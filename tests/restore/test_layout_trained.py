@@ -1,0 +1,77 @@
+"""`udc-render study layout-trained` (restore.studies.layout_trained): its layouts at equal footing, the paired
+differences, the one-line refusals, and the quick study end to end (slow)."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from psf.micrograph import MicrographLayout
+from restore.studies.layout_trained import NAME, entry_display, paired, run_study
+from udc_render.cli import main
+from udc_render.errors import UdcError
+
+FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures" / "design"
+
+
+def test_a_preset_cell_framed_and_turned_keeps_its_open_area_and_gets_the_gain_one_over_it(tmp_path):
+    """@edge@turned: the preset's exact area-weighted intensity raster (1 µm squares) as a turned micrograph; its open
+    area is the preset's 20 % exactly, the gain 1 / 0.2, and its first column is open (framed at the edge)."""
+    d = entry_display(f"{FIGURES / 'toled168_20.toml'}@edge@turned", tmp_path)
+    assert isinstance(d.layout, MicrographLayout) and d.layout.random_rotation and d.name == "toled168_20_edge_turned"
+    assert d.layout.period_um == (168.0, 168.0)
+    assert d.layout.power_transmittance == pytest.approx(0.20, rel=1e-6)
+    assert d.gain == pytest.approx(5.0, rel=1e-6)
+    assert d.layout.image[:, 0].max() > 0 and (tmp_path / "toled168_20_edge_turned.exr").is_file()
+    plain = entry_display(str(FIGURES / "poled_20.toml"), tmp_path)
+    assert plain.layout.describe()["kind"] == "periodic" and plain.gain == pytest.approx(1 / 0.2)
+
+
+def test_a_micrograph_cell_is_taken_pixel_for_pixel(tmp_path):
+    d = entry_display(f"{FIGURES / 'design_crop' / 'design.toml'}@turned", tmp_path)
+    source = entry_display(str(FIGURES / "design_crop" / "design.toml"), tmp_path)
+    assert np.array_equal(d.layout.image, source.layout.image) and d.layout.random_rotation
+    assert d.gain == pytest.approx(source.gain)
+
+
+@pytest.mark.parametrize("spec, match", [("toled@sideways", "unknown or repeated modifier @sideways"),
+                                         ("toled@turned@turned", "unknown or repeated modifier @turned"),
+                                         ("glass", "glass has no pixel layout")])
+def test_a_bad_entry_is_refused_in_one_line(tmp_path, spec, match):
+    with pytest.raises(UdcError, match=match):
+        entry_display(spec, tmp_path)
+
+
+def test_the_cli_refuses_a_bad_entry_before_any_work(tmp_path, capsys):
+    assert main(["study", "layout-trained", "--display", "toled,poled@flipped", "--out", str(tmp_path / "o")]) != 0
+    err = capsys.readouterr().err
+    assert "poled@flipped" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o" / "banks").exists()
+
+
+def test_paired_differences():
+    p = paired([21.0, 23.0, 22.5], [20.0, 22.0, 23.0])
+    d = np.array([1.0, 1.0, -0.5])
+    assert p["mean_db"] == pytest.approx(d.mean()) and p["wins"] == 2 and p["n"] == 3
+    assert p["se_db"] == pytest.approx(d.std(ddof=1) / math.sqrt(3))
+    assert math.isnan(paired([1.0], [0.0])["se_db"])
+
+
+@pytest.mark.slow
+def test_the_quick_study_compares_two_layouts_and_resumes(tmp_path):
+    """Two layouts (the repeated T-OLED in a 168 µm cell, and it turned): a bank, a UNet and scores each; the
+    reference's paired differences are zero; a second run recomputes nothing and gives the same document."""
+    specs = [str(FIGURES / "toled168_20.toml"), f"{FIGURES / 'toled168_20.toml'}@edge@turned"]
+    doc = run_study(tmp_path, specs, quick=True, progress=False)
+    assert [r["layout"] for r in doc["rows"]] == ["toled168_20", "toled168_20_edge_turned"]
+    assert doc["paired"]["toled168_20"]["unet"]["mean_db"] == 0.0
+    for r in doc["rows"]:
+        assert all(math.isfinite(r[f"psnr_{k}_db"]) for k in ("input", "dep", "dep_noiseless", "unet"))
+        assert r["psnr_dep_noiseless_db"] > r["psnr_dep_db"]  # the sensor's noise costs DeP
+    again = run_study(tmp_path, specs, quick=True, progress=False)
+    assert again["rows"] == doc["rows"]
+    assert json.loads((tmp_path / f"{NAME}.json").read_text())["specs"] == specs
+    assert (tmp_path / f"{NAME}_restored.png").is_file()
