@@ -12,7 +12,7 @@ from psf.lens import Lens
 from psf.micrograph import MicrographLayout
 from udc_render.errors import UdcError
 from udc_render.studies.layout_banding import sampled_banding
-from udc_render.studies.tiling_power import tiled_cell, tiling_power
+from udc_render.studies.tiling_power import tiled_cell, tiling_power, window_tiles
 
 LENS = Lens(focal_length_um=6000.0, aperture_um=900.0)  # a small disc: fast, still ~8 cells across
 SPAN_UM = (120.0, 80.0)  # beyond the cells' 72 µm period on both axes
@@ -31,10 +31,7 @@ def test_near_the_lens_the_power_is_the_geometric_shadow_of_the_turned_tiling():
     """d → 0: P(s) = Σ_r A(r) |m(r + s)|² δ², summed directly (no FFT) over the same tiling for a few shifts."""
     cell = _cell()
     power, step = tiling_power(cell, 8.0, LENS, 520.0, 1e-6, SPAN_UM, _turned, sample_um=4.0)
-    k = 2
-    period = cell.shape[0] * 8.0
-    half = LENS.aperture_um / 2 + max(SPAN_UM) + 520e-3 / (2 * step) * 1e-6 + period  # tiling_power's window
-    tiles = 2 * math.ceil(half / period)
+    tiles, k, _ = window_tiles(cell.shape[0], 8.0, LENS, 520.0, 1e-6, SPAN_UM, 4.0)
     mask = tiled_cell(cell, _turned(tiles), k) ** 2
     n = mask.shape[0]
     edges = (np.arange(n + 1) - n / 2) * step

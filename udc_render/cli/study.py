@@ -155,12 +155,10 @@ def _layout(args) -> int:
 
 
 def _layout_trained(args) -> int:
-    """`study layout-trained`: every layout loaded first (a bad entry refused in one line), then the study."""
-    from restore.studies.layout_trained import NAME, entry_display, run_study
-    specs = [p for p in args.display.split(",") if p]
+    """`study layout-trained`: the folder checked, then the study (which loads every layout before any work: a bad
+    entry is refused in one line)."""
+    from restore.studies.layout_trained import NAME, run_study
     out = out_dir(args.out)
-    for spec in specs:
-        entry_display(spec, out / "panels")
-    run_study(out, specs, quick=args.quick)
+    run_study(out, [p for p in args.display.split(",") if p], quick=args.quick)
     print(f"wrote {out}/{NAME}.md, {NAME}.json, {NAME}.png, {NAME}_restored.png")
     return 0

@@ -24,7 +24,7 @@ from psf.plan import PAPER_SENSOR_UM
 from psf.propagation import angular_spectrum_tf
 from udc_render.errors import UdcError
 
-__all__ = ["SAMPLE_UM", "MAX_SIDE", "shift_span_um", "tiled_cell", "tiling_power", "band_figures"]
+__all__ = ["SAMPLE_UM", "MAX_SIDE", "shift_span_um", "tiled_cell", "window_tiles", "tiling_power", "band_figures"]
 
 SAMPLE_UM = 2.0  # the raster's step (the design's 8 µm squares in 4; the T-OLED's 2 µm cell as it is)
 MAX_SIDE = 8192  # raster samples per side (a complex128 array of 1.07 GB, 5 of them at once; the paper's rig at
@@ -37,11 +37,13 @@ def shift_span_um(lens, distance_um: float, sensor_um=PAPER_SENSOR_UM) -> tuple[
 
 
 def tiled_cell(cell: np.ndarray, transforms: np.ndarray, k: int) -> np.ndarray:
-    """The amplitude cell [c, c] on k × k squares per pixel, tiled as transforms [R, C] (D4 elements: np.rot90(·,
-    t % 4) of the cell, mirrored left-right first when t ≥ 4: udc_render.design.torch_psf.transform_tile's)."""
+    """The amplitude cell [c, c] on k × k squares per pixel, tiled as transforms [R, C] (D4 elements,
+    udc_render.design.torch_psf.tile)."""
+    import torch  # here: the module is imported by the light study modules
+
+    from udc_render.design.torch_psf import tile
     fine = np.kron(np.asarray(cell, np.float64), np.ones((k, k)))
-    variants = [np.rot90(np.fliplr(fine) if t >= 4 else fine, t % 4) for t in range(8)]
-    return np.block([[variants[t] for t in row] for row in transforms])
+    return tile(torch.from_numpy(fine), np.asarray(transforms)).numpy()
 
 
 def _spread_um(distance_um: float, wavelength_um: float, step_um: float) -> float:
@@ -49,21 +51,30 @@ def _spread_um(distance_um: float, wavelength_um: float, step_um: float) -> floa
     return distance_um * s / math.sqrt(1 - s * s)
 
 
+def window_tiles(cell_px: int, cell_um: float, lens, wavelength_nm: float, distance_um: float,
+                 span_um: tuple[float, float], sample_um: float = SAMPLE_UM) -> tuple[int, int, float]:
+    """(tiles per side, even; k squares per cell pixel; δ) of tiling_power's window (module doc): the disc, the
+    shifts, the spread over d at δ, and a period; refused in one line beyond MAX_SIDE samples a side."""
+    k = max(1, round(cell_um / sample_um))
+    step = cell_um / k
+    period = cell_px * cell_um
+    half = lens.aperture_um / 2 + max(span_um) + _spread_um(distance_um, wavelength_nm * 1e-3, step) + period
+    tiles = 2 * math.ceil(half / period)
+    if tiles * cell_px * k > MAX_SIDE:
+        raise UdcError(f"--distance-mm {distance_um / 1000:g}: the sampled banding needs {tiles * cell_px * k}² "
+                       f"samples of {step:g} µm (aperture, shifts and spread over d); allowed ≤ {MAX_SIDE}²: use a "
+                       "smaller distance or a coarser raster")
+    return tiles, k, step
+
+
 def tiling_power(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, distance_um: float,
                  span_um: tuple[float, float], transforms=None, sample_um: float = SAMPLE_UM
                  ) -> tuple[np.ndarray, float]:
     """(P [2 J_y + 1, 2 J_x + 1] in µm², δ): the module doc's P(s) at the shifts s = (i δ, j δ), |s| ≤ span_um per
     axis, of the cell (amplitude on cell_um squares) tiled plainly (transforms None) or as transforms(tiles) →
-    [tiles, tiles] D4 elements, tiles even, the window centred on the optical axis."""
-    k = max(1, round(cell_um / sample_um))
-    step, lam = cell_um / k, wavelength_nm * 1e-3
-    period = cell.shape[0] * cell_um
-    half = lens.aperture_um / 2 + max(span_um) + _spread_um(distance_um, lam, step) + period
-    tiles = 2 * math.ceil(half / period)
-    if tiles * cell.shape[0] * k > MAX_SIDE:
-        raise UdcError(f"--distance-mm {distance_um / 1000:g}: the sampled banding needs {tiles * cell.shape[0] * k}² "
-                       f"samples of {step:g} µm (aperture, shifts and spread over d); allowed ≤ {MAX_SIDE}²: use a "
-                       "smaller distance or a coarser raster")
+    [tiles, tiles] D4 elements, over window_tiles' window centred on the optical axis."""
+    tiles, k, step = window_tiles(cell.shape[0], cell_um, lens, wavelength_nm, distance_um, span_um, sample_um)
+    lam = wavelength_nm * 1e-3
     plan = np.zeros((tiles, tiles), int) if transforms is None else np.asarray(transforms(tiles))
     mask = tiled_cell(cell, plan, k)
     n = mask.shape[0]
