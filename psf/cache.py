@@ -26,8 +26,9 @@ from .kernel_io import atomic_write, load_kernels, read_members, save_kernels
 __all__ = ["ENGINE_VERSION", "cache_dir", "cache_key", "entry_path", "load", "store", "cached", "cached_keyed",
            "derived_key", "cached_arrays"]
 
-ENGINE_VERSION = "psf-4"  # psf-2: KernelSet.period_um, distance_mm, image_distance_um; psf-3: field_series;
-# psf-4: method 'paper' is the recipe as printed (psf.paper)
+ENGINE_VERSION = "psf-5"  # psf-2: KernelSet.period_um, distance_mm, image_distance_um; psf-3: field_series;
+# psf-4: method 'paper' is the recipe as printed (psf.paper); psf-5: an aperiodic display's field phases span the
+# sensor's shifts (psf.plan.field_shifts), not one tile period
 
 
 def cache_dir() -> Path:

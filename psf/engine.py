@@ -66,7 +66,7 @@ class KernelSet:
     field_kernels      [K, P, P, S, S] per field phase (d > 0 only), each unit sum
     field_power        [K, P, P]  transmitted power per phase / its mean (the banding samples)
     field_shifts_um    [P, P, 2]  mask shift (x, y) of each phase; image position = shift · z_i / d
-                                  (see field_shifts: a whole period, or the part the sensor sees)
+                                  (field_shifts: a whole period, or the part the sensor sees)
     field_series       [K, 2n+1, m+1] complex: field_power's exact series at any shift s (periodic display,
                                   d > 0): half weights k_y = −n…n, k_x = 0…m of P(s) / the phases' mean power
                                   (psf.banding.PowerSeries.truncated, one orders box for every band;
@@ -267,7 +267,8 @@ def compute_kernels(display=None, lens: Lens | None = None, wavelengths_nm=(450.
         or None for the bare lens.
     distance_mm: display-to-pupil gap d; 0 is the paper's principal-plane model.
     field_phases: P mask shifts per axis (d > 0 only; None: DEFAULT_FIELD_PHASES), over one display
-        period or over the sensor extent sensor_um (x, y) when that sees less than a period (field_shifts).
+        period or over the sensor extent sensor_um (x, y) when that sees less than a period, and always over
+        the sensor extent for an aperiodic display (randomly turned tiles; field_shifts).
     pupil_samples: samples across the aperture (None: auto, see auto_pupil_samples).
     precision: 'float32' (complex64 FFTs and products) or 'float64'.
     mask_raster: 'band_limited' (exact Fourier series, default) or 'area' (area-weighted, then

@@ -77,17 +77,18 @@ PAPER_SENSOR_UM = (2048 * 1.55, 1024 * 1.55)
 
 
 def field_shifts(period_um, distance_um: float, image_distance_um: float, phases: int,
-                 sensor_um=PAPER_SENSOR_UM) -> np.ndarray:
+                 sensor_um=PAPER_SENSOR_UM, periodic: bool = True) -> np.ndarray:
     """Mask shifts [P, P, 2] (µm) at which field kernels are sampled, per axis:
-    the whole display period (s_i = i p / P) when the sensor sees at least one banding period
-    (sensor · d / z_i ≥ p), else P points across the sensor (s_i = x_i d / z_i, x_i centred cells).
-    So the field average tends to the principal-plane kernel (s = 0) as d → 0.
+    the whole display period (s_i = i p / P) when the display is periodic and the sensor sees at least one
+    banding period (sensor · d / z_i ≥ p), else P points across the sensor (s_i = x_i d / z_i, x_i centred
+    cells). An aperiodic display (randomly turned tiles) repeats under no shift, so its phases always span
+    the part of it the sensor sees. The field average tends to the principal-plane kernel (s = 0) as d → 0.
     """
     axes = []
     for p, width in zip(period_um, sensor_um):
         span = width * distance_um / image_distance_um
         i = np.arange(phases)
-        axes.append(i / phases * p if span >= p else ((i + 0.5) / phases - 0.5) * span)
+        axes.append(i / phases * p if periodic and span >= p else ((i + 0.5) / phases - 0.5) * span)
     out = np.zeros((phases, phases, 2))
     out[..., 0], out[..., 1] = axes[0][None, :], axes[1][:, None]
     return out
@@ -99,11 +100,13 @@ def _spread_margin_um(distance_um, wavelength_um, d_um):
     return distance_um * s / math.sqrt(1 - s * s)
 
 
-def _window(display, lens: Lens, n_pupil: int, wl: np.ndarray, d_um: float, mask_raster: str):
+def _window(display, lens: Lens, n_pupil: int, wl: np.ndarray, d_um: float, mask_raster: str,
+            shifts: np.ndarray):
     """The pupil-plane window and the display's amplitude raster on it: (grid, mask or None, κ).
 
     Periodic displays need no margin (the window holds whole periods, propagation is exact);
-    aperiodic tiles at d > 0 get a margin for the lateral spread over d plus one period of shift.
+    aperiodic tiles at d > 0 get a margin for the lateral spread over d plus the largest field shift (at least
+    one period), so that no shifted phase wraps the window's far edge into the aperture.
     """
     if display is None:
         return lens_grid(lens, n_pupil), None, 1.0
@@ -111,7 +114,8 @@ def _window(display, lens: Lens, n_pupil: int, wl: np.ndarray, d_um: float, mask
     margin = 0.0
     if not getattr(display, "periodic", True) and d_um > 0:
         step = min(period) / math.ceil(min(period) * n_pupil / lens.aperture_um)
-        margin = _spread_margin_um(d_um, float(wl.max()) * 1e-3, step) + max(period)
+        margin = _spread_margin_um(d_um, float(wl.max()) * 1e-3, step) + max(float(np.abs(shifts).max()),
+                                                                              max(period))
         if margin > 20 * lens.aperture_um:
             raise PSFError(f"distance_mm={d_um / 1000:g}: an aperiodic display (random tile rotation) needs "
                            f"{margin / 1000:.1f} mm of padding; allowed ≤ {20 * lens.aperture_um / 1000:.1f} mm "
@@ -192,18 +196,18 @@ def make_plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, m
     cdtype = PRECISIONS[precision]
     n_pupil = pupil_samples or auto_pupil_samples(lens, float(wl.min()), pixel_um, size_px)
     d_um = distance_mm * 1000.0
-    grid, mask, kappa = _window(display, lens, n_pupil, wl, d_um, mask_raster)
+    use_field = d_um > 0 and display is not None
+    periodic = display is not None and getattr(display, "periodic", True)
+    phases = (field_phases or DEFAULT_FIELD_PHASES) if use_field else 1
+    shifts = (field_shifts(display.period_um, d_um, lens.image_distance_um, phases, sensor_um, periodic) if use_field
+              else np.zeros((1, 1, 2)))
+    grid, mask, kappa = _window(display, lens, n_pupil, wl, d_um, mask_raster, shifts)
     sy, sx = aperture_slices(grid, lens.aperture_um)
     pgrid = grid.crop(sy, sx)
-    use_field = d_um > 0 and display is not None
     if d_um > 0 and display is None:
         notes.append("distance_mm > 0 with a bare lens: nothing to propagate, principal-plane result")
     if not use_field and field_phases is not None and field_phases > 1:
         notes.append("field phases skipped: the PSF is field-independent when d = 0 or without a display")
-    phases = (field_phases or DEFAULT_FIELD_PHASES) if use_field else 1
-    shifts = (field_shifts(display.period_um, d_um, lens.image_distance_um, phases, sensor_um) if use_field
-              else np.zeros((1, 1, 2)))
-    periodic = display is not None and getattr(display, "periodic", True)
     raster = _field_raster(display, grid, mask) if use_field else None
     mask_spec = sfft.fft2(raster.astype(cdtype), workers=fourier.WORKERS) if use_field else None
     ny, nx = raster.shape if use_field else (0, 0)

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from psf.cache import cached
+from psf.cache import ENGINE_VERSION, cached
 from psf.spectral import channel_kernels
 from udc_render.content import spectra
 from udc_render.dataset.bank import (
@@ -283,7 +283,8 @@ def bank_settings(scene: Scene, cfg: SynthConfig, kernel_px: int, specs: list[Pa
            "pitch_um": scene.sensor.pitch_um, "kernel_px": kernel_px, "lens": psf_lens(scene).describe(),
            "edges_nm": list(scene.bands.edges_nm),
            "form": "per_channel (the numpy synthesis's y = γ x ⊗ k + n; d > 0: the field blend of each channel)",
-           "synth": synth, "displays": [s.display.describe() for s in specs], "effects": effects, **extra}
+           "synth": synth, "displays": [s.display.describe() for s in specs], "effects": effects,
+           "psf_engine": ENGINE_VERSION, **extra}  # kernels of another engine version: a new bank, not a resume
     return json.loads(json.dumps(doc, default=str))
 
 
