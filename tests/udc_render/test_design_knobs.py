@@ -58,3 +58,59 @@ def test_the_steps_rows_score_the_searched_cell_as_the_numpy_metric_does(tmp_pat
                    "sampling": sampling, "steps": [first, row]}, tmp_path)
     assert all((tmp_path / n).stat().st_size > 0 for n in names)
     assert "| 2 | 2 | " in (tmp_path / "study_design.md").read_text()
+
+
+def _aperiodic_rig(tmp_path):
+    """A turned asymmetric 60 µm tile before a 400 µm aperture at d = 0.6 mm, P = 3 phases on whole samples."""
+    from psf import Lens, MicrographLayout, compute_kernels
+    from psf.plan import make_plan
+    img = np.zeros((30, 30))
+    img[4:26, 6:13] = 1.0
+    img[20:26, 13:24] = 1.0
+    display = MicrographLayout("tile", 2.0, "amplitude", True, 5, img)
+    lens, wl, d_mm = Lens(aperture_um=400.0), np.array([520.0]), 0.6
+
+    def plan(sensor):
+        return make_plan(display, lens, wl, 3.1, 31, d_mm, 3, "mft", 128, "float64", True, "band_limited", sensor, [])
+    step = plan((100.0, 100.0)).grid.dx_um
+    sensor = (3 * 30 * step * lens.image_distance_um / 600.0,) * 2  # phases at 0, ±30 samples
+    ks = compute_kernels(display, lens, wl, 3.1, 31, d_mm, 3, pupil_samples=128, precision="float64",
+                         sensor_um=sensor)
+    return display, ks, plan(sensor)
+
+
+def test_the_raster_power_is_the_engines_phase_power_and_the_blend_passes_through_it(tmp_path):
+    """Part (d)'s exact P(s) (one FFT correlation over the engine's window) at the phases' whole-sample shifts
+    equals the engine's phase powers (its shift ramps and gather); the blend's profile passes through the phases;
+    psf-4's profile repeats with the tile (p = 21 samples)."""
+    from udc_render.studies.tiling_power import raster_power
+    display, ks, plan = _aperiodic_rig(tmp_path)
+    power = raster_power(plan, 520.0)
+    ny, nx = power.shape
+    at = np.rint(plan.shifts / np.array([plan.grid.dx_um, plan.grid.dy_um])).astype(int)
+    assert np.array_equal(np.abs(at).max(axis=(0, 1)), [30, 30])
+    sampled = power[at[..., 1] % ny, at[..., 0] % nx]
+    np.testing.assert_allclose(sampled / sampled.mean(), ks.field_power[0], rtol=0, atol=1e-10)
+    assert ks.transmittance[0] == pytest.approx(sampled.mean() / (np.pi * 200.0 ** 2), rel=1e-10)
+    prof = dk.field_profiles(display, ks, plan, power)
+    assert prof["exact"].shape == (61, 61)
+    on = prof["blend"][at[..., 1] + 30, at[..., 0] + 30] / prof["exact"][at[..., 1] + 30, at[..., 0] + 30]
+    assert np.ptp(on) < 1e-12  # equal at the phases up to the profiles' own means
+    n = round(display.period_um[0] / plan.grid.dx_um)
+    np.testing.assert_allclose(prof["one_tile"][:, n:], prof["one_tile"][:, :-n], rtol=1e-12)
+    assert np.ptp(prof["exact"]) > 1e-3  # the tiles differ across the shifts: a test that could fail
+
+
+def test_the_study_keeps_a_part_made_with_the_same_settings(tmp_path):
+    """run_study resumes part by part: a part in OUT's study_design.json is kept when its own settings and the shared
+    ones are unchanged, and made again otherwise."""
+    import json
+    config = {"cell_um": 96.0, "kernel_px": 31, "feature_um": 8.0, "open_fraction": 0.2, "seed": 0,
+              "wavelengths_nm": [640.0, 520.0, 450.0], "threads": 1, "banding_distance_mm": 2.0,
+              "samples": [64], "steps": [2], "design_pupil_samples": 64, "sample_um": [8.0], "phases": [2]}
+    parts = {p: [{"part": p}] for p in ("sampling", "steps", "banding", "field")}
+    (tmp_path / "study_design.json").write_text(json.dumps({"config": config, **parts}))
+    assert dk._kept_parts(tmp_path, config) == parts
+    assert set(dk._kept_parts(tmp_path, {**config, "phases": [2, 4]})) == {"sampling", "steps", "banding"}
+    assert dk._kept_parts(tmp_path, {**config, "threads": 2}) == {}
+    assert dk._kept_parts(tmp_path / "none", config) == {}

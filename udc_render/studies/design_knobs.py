@@ -21,43 +21,62 @@ relative P(s) against the exact power series (psf.banding.PowerSeries; the large
 and the relative error of the peak-to-peak), and the turned tiling's peak-to-peak and sd against the finest step
 (the same tiles at every step: layout_banding.DRAW_TILES); CPU seconds of both tilings (3 channels).
 
+(d) The engine's field phases of a turned tiling (psf.engine.compute_kernels' field_phases P for a
+psf.MicrographLayout with random quarter-turns, seed 0), on the rig's lens at d = 2 mm over the paper sensor, at
+520 nm: the relative power the field blend prints, Σ_q w_q(s) P_q (bilinear in phase, clamped:
+optics.field.phase_weights), against the engine window's exact P(s) at every whole-sample shift between the outer
+phases (tiling_power.raster_power: the same tiles). Also what engine version psf-4 printed for the same tiling:
+P phases over one tile, interpolated periodically. Each P is its own window (its margin holds its shifts), so its
+own draw of turns. CPU seconds of the kernels (one wavelength).
+
 Outputs: study_design.json (every figure), study_design.csv (one row per setting), study_design.md,
-study_design.png (error against CPU time; objective against steps; banding error against CPU time). quick: a 96 µm
-cell, 31-px kernels, three settings and 2 and 4 steps from 128 pupil samples, raster steps of 8 and 4 µm (a smoke
-run).
+study_design.png (error against CPU time; objective against steps; banding error against CPU time; field phases).
+A part already in OUT's study_design.json with the same settings is kept (the study resumes part by part).
+quick: a 96 µm cell, 31-px kernels, three settings and 2 and 4 steps from 128 pupil samples, raster steps of 8 and
+4 µm, 2 field phases (a smoke run).
 """
 from __future__ import annotations
 
+import json
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
+from scipy.ndimage import map_coordinates
 from tqdm import tqdm
 
-from psf import layouts
+from psf import compute_kernels, layouts
 from psf.banding import PowerSeries, power_grid
 from psf.lens import Lens
 from psf.micrograph import MicrographLayout
+from psf.plan import PAPER_SENSOR_UM, make_plan
 from udc_render.design import metrics, torch_psf as tp
 from udc_render.design.cells import frame_cell
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer
+from udc_render.optics.field import phase_weights
 from udc_render.streams import stream
 from udc_render.studies.design_knobs_report import write
 from udc_render.studies.layout_banding import sampled_banding
-from udc_render.studies.tiling_power import band_figures, shift_span_um, tiling_power
+from udc_render.studies.tiling_power import band_figures, raster_power, shift_span_um, tiling_power
 
-__all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "banding_rows", "run_study"]
+__all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "banding_rows", "field_profiles", "field_rows",
+           "run_study"]
 
 FULL = {"cell_um": 168.0, "kernel_px": 127, "samples": (128, 256, 384, 512, 768, 1024, 2048),
         "steps": (10, 20, 40, 80, 150), "design_pupil_samples": DesignConfig().pupil_samples,
-        "sample_um": (8.0, 4.0, 2.0, 1.0)}
+        "sample_um": (8.0, 4.0, 2.0, 1.0), "phases": (2, 3, 4, 6, 8)}
 QUICK = {"cell_um": 96.0, "kernel_px": 31, "samples": (64, 128, 256), "steps": (2, 4), "design_pupil_samples": 128,
-         "sample_um": (8.0, 4.0)}
+         "sample_um": (8.0, 4.0), "phases": (2,)}
 FEATURE_UM = 8.0
 OPEN = 0.20
 SEED = 0
 BANDING_DISTANCE_UM = 2000.0
+FIELD_WAVELENGTH_NM = 520.0
+PART_KEYS = {"sampling": ("samples",), "steps": ("steps", "design_pupil_samples"), "banding": ("sample_um",),
+             "field": ("phases",)}  # besides the shared keys: what decides each part (run_study resumes by them)
+SHARED_KEYS = ("cell_um", "kernel_px", "feature_um", "open_fraction", "seed", "wavelengths_nm", "threads",
+               "banding_distance_mm")
 
 
 def cells(cell_um: float) -> dict:
@@ -167,15 +186,85 @@ def banding_rows(cfg: dict, progress=None) -> list[dict]:
     return rows
 
 
+def _turned(cell: np.ndarray) -> MicrographLayout:
+    return MicrographLayout("cell", FEATURE_UM, "amplitude", True, SEED, cell)
+
+
+def field_profiles(display, ks, plan, power_map: np.ndarray) -> dict:
+    """Part (d)'s relative powers [2 J_y + 1, 2 J_x + 1] over the whole-sample shifts between the outer phases:
+    'exact' (the window's P(s), raster_power), 'blend' (the kernel set's phases interpolated as the render does)
+    and 'one_tile' (psf-4: P phases over one tile of the same window, interpolated periodically)."""
+    P, shifts, g = plan.phases, plan.shifts, plan.grid
+    z, d = plan.lens.image_distance_um, plan.d_um
+    jx, jy = int(np.abs(shifts[..., 0]).max() // g.dx_um), int(np.abs(shifts[..., 1]).max() // g.dy_um)
+    sx, sy = np.arange(-jx, jx + 1) * g.dx_um, np.arange(-jy, jy + 1) * g.dy_um
+    ny, nx = power_map.shape
+    exact = power_map[np.ix_(np.arange(-jy, jy + 1) % ny, np.arange(-jx, jx + 1) % nx)]
+    px, py = display.period_um
+    weights = [phase_weights(sy * z / d, shifts[:, 0, 1], d, z, py, False),
+               phase_weights(sx * z / d, shifts[0, :, 0], d, z, px, False)]
+    blend = weights[0].T @ np.asarray(ks.field_power[0], np.float64) @ weights[1]
+    ox, oy = np.arange(P) / P * px, np.arange(P) / P * py
+    at = np.stack(np.broadcast_arrays(oy[:, None] / g.dy_um, ox[None, :] / g.dx_um))
+    tile_p = map_coordinates(power_map, at, order=1, mode="grid-wrap")
+    one_tile = (phase_weights(sy * z / d, oy, d, z, py, True).T @ tile_p
+                @ phase_weights(sx * z / d, ox, d, z, px, True))
+    return {k: v / v.mean() for k, v in (("exact", exact), ("blend", blend), ("one_tile", one_tile))}
+
+
+def field_rows(cfg: dict, progress=None) -> list[dict]:
+    """Part (d): one row per cell and phase count P (module doc)."""
+    rows, lens, wl = [], Lens(), np.array([FIELD_WAVELENGTH_NM])
+    for name, cell in cells(cfg["cell_um"]).items():
+        display = _turned(cell)
+        for P in cfg["phases"]:
+            ks, cpu_s = _timed(lambda: compute_kernels(display, lens, wl, 3.1, cfg["kernel_px"],
+                                                       BANDING_DISTANCE_UM / 1000, P))
+            plan = make_plan(display, lens, wl, 3.1, cfg["kernel_px"], BANDING_DISTANCE_UM / 1000, P, "mft", None,
+                             "float64", True, "band_limited", PAPER_SENSOR_UM, [])
+            prof = field_profiles(display, ks, plan, raster_power(plan, FIELD_WAVELENGTH_NM))
+            exact = prof["exact"]
+            row = {"part": "field", "cell": name, "phases": P, "cpu_s": cpu_s,
+                   "phase_step_um": [float(np.diff(plan.shifts[0, :, 0])[0]) if P > 1 else 0.0,
+                                     float(np.diff(plan.shifts[:, 0, 1])[0]) if P > 1 else 0.0],
+                   "shifts_um": [float(exact.shape[1] // 2 * plan.grid.dx_um),
+                                 float(exact.shape[0] // 2 * plan.grid.dy_um)]}
+            for key, m in prof.items():
+                row[f"{key}_sd"] = float(m.std())
+                row[f"{key}_peak_to_peak"] = float(m.max() - m.min())
+                if key != "exact":
+                    row[f"{key}_error_rms"] = float(np.sqrt(np.mean((m - exact) ** 2)))
+            rows.append(row)
+            if progress:
+                progress(1)
+    return rows
+
+
+def _kept_parts(out: Path, config: dict) -> dict:
+    """The parts of OUT's study_design.json made with these settings (PART_KEYS and SHARED_KEYS)."""
+    try:
+        old = json.loads((out / "study_design.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    shared = all(old["config"].get(k) == config[k] for k in SHARED_KEYS)
+    return {part: old[part] for part, keys in PART_KEYS.items()
+            if shared and part in old and all(old["config"].get(k) == config[k] for k in keys)}
+
+
 def run_study(out: Path, quick: bool = False) -> dict:
-    """The three parts, written to out (udc_render.studies.design_knobs_report)."""
+    """The four parts, written to out (udc_render.studies.design_knobs_report); parts already there with the same
+    settings are kept."""
     cfg = QUICK if quick else FULL
-    total = 2 * len(cfg["samples"]) + len(cfg["steps"]) + 1 + 2 * len(cfg["sample_um"])
+    config = json.loads(json.dumps({**cfg, "feature_um": FEATURE_UM, "open_fraction": OPEN, "seed": SEED,
+                                    "wavelengths_nm": RIG_WAVELENGTHS_NM, "threads": torch.get_num_threads(),
+                                    "banding_distance_mm": BANDING_DISTANCE_UM / 1000,
+                                    "field_wavelength_nm": FIELD_WAVELENGTH_NM}))
+    kept = _kept_parts(Path(out), config)
+    makers = {"sampling": (sampling_rows, 2 * len(cfg["samples"])), "steps": (steps_rows, len(cfg["steps"]) + 1),
+              "banding": (banding_rows, 2 * len(cfg["sample_um"])), "field": (field_rows, 2 * len(cfg["phases"]))}
+    total = sum(n for part, (_, n) in makers.items() if part not in kept)
     with tqdm(total=total, desc="study design") as bar:
-        doc = {"config": {**cfg, "feature_um": FEATURE_UM, "open_fraction": OPEN, "seed": SEED,
-                          "wavelengths_nm": RIG_WAVELENGTHS_NM, "threads": torch.get_num_threads(),
-                          "banding_distance_mm": BANDING_DISTANCE_UM / 1000},
-               "sampling": sampling_rows(cfg, bar.update), "steps": steps_rows(cfg, bar.update),
-               "banding": banding_rows(cfg, bar.update)}
+        doc = {"config": config, **{part: kept[part] if part in kept else make(cfg, bar.update)
+                                    for part, (make, _) in makers.items()}}
     write(doc, out)
     return doc

@@ -13,7 +13,8 @@ __all__ = ["COLUMNS", "markdown", "write"]
 COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "steps_done", "evaluations", "psnr_db",
            "error_psnr_db", "error_ring_means_rel", "error_ring_minima_rel", "objective", "open_area", "sample_um",
            "error_profile_rel", "error_peak_to_peak_rel", "turned_peak_to_peak", "turned_rms", "error_turned_rel",
-           "cpu_s", "cpu_gradient_s"]
+           "phases", "exact_sd", "blend_sd", "blend_error_rms", "one_tile_sd", "one_tile_error_rms", "cpu_s",
+           "cpu_gradient_s"]
 
 
 def _cell(v) -> str:
@@ -52,7 +53,7 @@ def markdown(doc: dict) -> str:
         lines.append(f"| {r['steps']} | {r['steps_done']}{' (converged)' if r['converged'] else ''} | "
                      f"{r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | {r['evaluations']} | "
                      f"{r['cpu_s']:.0f} |")
-    return "\n".join(lines + _banding_lines(doc)) + "\n"
+    return "\n".join(lines + _banding_lines(doc) + _field_lines(doc)) + "\n"
 
 
 def _banding_lines(doc: dict) -> list[str]:
@@ -70,12 +71,29 @@ def _banding_lines(doc: dict) -> list[str]:
     return lines
 
 
+def _field_lines(doc: dict) -> list[str]:
+    """Part (d): the engine's field phases of a turned tiling (absent from a study run before it)."""
+    if not doc.get("field"):
+        return []
+    lines = ["", f"## The engine's field phases of a turned tiling (d = {doc['config']['banding_distance_mm']:g} mm, "
+             f"{doc['config'].get('field_wavelength_nm', 520):g} nm, the paper sensor; relative power P / P̄ over the "
+             "whole-sample shifts between the outer phases, against the window's exact P(s); psf-4: the phases over "
+             "one tile, wrapped)", "",
+             "| cell | P | phase step x / y (µm) | shifts ± x / y (µm) | exact sd | blend sd | blend rms error | "
+             "psf-4 sd | psf-4 rms error | CPU s |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in doc["field"]:
+        lines.append(f"| {r['cell']} | {r['phases']} | {_cell(r['phase_step_um'])} | {_cell(r['shifts_um'])} | "
+                     f"{r['exact_sd']:.2e} | {r['blend_sd']:.2e} | {r['blend_error_rms']:.2e} | "
+                     f"{r['one_tile_sd']:.2e} | {r['one_tile_error_rms']:.2e} | {r['cpu_s']:.1f} |")
+    return lines
+
+
 def _figure(doc: dict, out: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
-    fig, (a, b, c) = plt.subplots(1, 3, figsize=(16, 4))
+    fig, (a, b, c, e) = plt.subplots(1, 4, figsize=(21, 4))
     for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
         rows = [r for r in doc["sampling"] if r["cell"] == name][:-1]  # the reference has no error
         t = [r["cpu_gradient_s"] for r in rows]
@@ -98,6 +116,7 @@ def _figure(doc: dict, out: Path) -> None:
         b.annotate(f"{r['cpu_s']:.0f} s", (r["steps"], r["psnr_db"]), fontsize=7)
     b.set_xscale("log")
     _banding_axes(c, doc.get("banding", []))
+    _field_axes(e, doc.get("field", []))
     for axis in (a.xaxis, b.xaxis):
         axis.set_minor_formatter(NullFormatter())
     b.set_xlabel("search steps, accepted swaps (CPU s beside each)")
@@ -124,9 +143,27 @@ def _banding_axes(ax, rows: list[dict]) -> None:
         ax.legend(fontsize=7)
 
 
+def _field_axes(ax, rows: list[dict]) -> None:
+    for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
+        these = [r for r in rows if r["cell"] == name]
+        t = [r["cpu_s"] for r in these]
+        ax.loglog(t, [r["blend_error_rms"] / r["exact_sd"] for r in these], "o-", color=colour,
+                  label=f"{name}: blend (psf-5)")
+        ax.loglog(t, [r["one_tile_error_rms"] / r["exact_sd"] for r in these], "s--", color=colour,
+                  label=f"{name}: one tile, wrapped (psf-4)")
+        for r in these:
+            ax.annotate(f"P = {r['phases']}", (r["cpu_s"], r["blend_error_rms"] / r["exact_sd"]), fontsize=7)
+    ax.set_xlabel("CPU s, kernels at one wavelength")
+    ax.set_ylabel("rms error of P / P̄ over the exact sd")
+    ax.set_title("turned tiling: field phases")
+    if rows:
+        ax.legend(fontsize=7)
+
+
 def write(doc: dict, out: Path) -> list[str]:
     save_json(out / "study_design.json", doc)
-    save_text(out / "study_design.csv", _csv(doc["sampling"] + doc["steps"]))
+    save_text(out / "study_design.csv", _csv(doc["sampling"] + doc["steps"] + doc.get("banding", [])
+                                             + doc.get("field", [])))
     save_text(out / "study_design.md", markdown(doc))
     _figure(doc, out)
     return ["study_design.json", "study_design.csv", "study_design.md", "study_design.png"]

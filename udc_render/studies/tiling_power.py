@@ -24,7 +24,8 @@ from psf.plan import PAPER_SENSOR_UM
 from psf.propagation import angular_spectrum_tf
 from udc_render.errors import UdcError
 
-__all__ = ["SAMPLE_UM", "MAX_SIDE", "shift_span_um", "tiled_cell", "window_tiles", "tiling_power", "band_figures"]
+__all__ = ["SAMPLE_UM", "MAX_SIDE", "shift_span_um", "tiled_cell", "window_tiles", "tiling_power", "raster_power",
+           "band_figures"]
 
 SAMPLE_UM = 2.0  # the raster's step (the design's 8 µm squares in 4; the T-OLED's 2 µm cell as it is)
 MAX_SIDE = 8192  # raster samples per side (a complex128 array of 1.07 GB, 5 of them at once; the paper's rig at
@@ -86,6 +87,22 @@ def tiling_power(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, d
     jx, jy = (int(s // step) for s in span_um)
     rows, cols = np.arange(-jy, jy + 1) % n, np.arange(-jx, jx + 1) % n
     return power[np.ix_(rows, cols)], step
+
+
+def raster_power(plan, wavelength_nm: float) -> np.ndarray:
+    """P(s) [ny, nx] in µm² of the psf engine's own window (a psf.plan.Plan of an aperiodic display at d > 0) at the
+    whole-sample shifts s = (i δx, j δy), indices modulo the window: κ δx δy Σ_r A(r) |u_d(r − s)|², the power of
+    the engine's field phase at s (psf.engine._wavelength), for every s by one correlation of the propagated
+    intensity with the aperture. Circular over the window: P is the engine's where |s| ≤ the window's margin less
+    the spread over d (psf.plan._window)."""
+    if plan.field_raster is None or plan.field_raster.shape != plan.mask.shape:
+        raise UdcError("raster_power needs the plan of an aperiodic display at d > 0 (its field raster is the window)")
+    lam = wavelength_nm * 1e-3
+    field = sfft.ifft2(plan.mask_spec * angular_spectrum_tf(plan.fx, plan.fy, lam, plan.d_um))
+    aperture = np.zeros(field.shape)
+    aperture[plan.sy, plan.sx] = plan.aperture
+    corr = sfft.ifft2(sfft.fft2(aperture) * np.conj(sfft.fft2(np.abs(field) ** 2))).real
+    return plan.kappa * plan.grid.dx_um * plan.grid.dy_um * corr
 
 
 def band_figures(power: np.ndarray) -> dict:
