@@ -1,7 +1,7 @@
 """`udc-render study layout-trained`: pixel layouts compared by restorers through the simulator (issue 48).
 
 For each layout given (a display file, a preset or a micrograph; `@edge` frames its cell with the first open column
-at the tile's edge, `@turned` tiles it with a random D4 turn per tile: udc_render.design.cells.frame_cell,
+at the tile's edge, `@turned` tiles it with a random quarter-turn per tile: udc_render.design.cells.frame_cell,
 psf.MicrographLayout), at equal footing:
     d = 2 mm (the physical profile's), the stack's T(λ) as the display gives it, and a gain of 1 / the layout's
     power transmittance, so that every capture's mean level is glass's;
@@ -13,7 +13,9 @@ psf.MicrographLayout), at equal footing:
    online through that bank (restore.train, --degrade online): one specialist per layout, the same recipe and seeds;
 3. scored on the budget's validation images (colour dead leaves) each degraded once through the layout
    (restore.studies.robustness.score_panel): the packed input, DeP given the layout's own kernels and γ, DeP on the
-   same capture without the sensor's noise, and the UNet; the paper protocol's PSNR and the level-matched PSNR.
+   same capture without the sensor's noise, DeP on the capture without the far field (the light past the kernel
+   window, which DeP's kernel does not hold: dep_nofar), and the UNet; the paper protocol's PSNR and the
+   level-matched PSNR.
 The clean images, noise draws and training seeds are the same for every layout, so the per-image differences to
 the reference layout (the first given) are paired: mean, standard error s_d / √n and the images won.
 Not the spectral synthesis of `udc-render dataset`: the bank's per-channel form (one kernel and one γ per camera
@@ -36,6 +38,7 @@ import numpy as np
 from tqdm import tqdm
 
 from psf.micrograph import MicrographLayout
+from restore.metrics import level_matched_psnr_db, paper_metrics
 from restore.online import clean_images, images_fingerprint
 from restore.studies.robustness import (
     BUDGETS as ROBUSTNESS_BUDGETS,
@@ -70,8 +73,8 @@ DISTANCE_MM = 2.0  # the physical profile's d for the presets, and the issue's b
 MODIFIERS = ("edge", "turned")
 CELL_PIXEL_UM = 1.0  # a preset's cell raster for @edge / @turned (the T-OLED's 168 µm cell: 168² squares)
 NAME = "study_layout_trained"
-ROW_KEYS = ("input", "dep", "dep_noiseless", "unet")
-VERSION = 1
+ROW_KEYS = ("input", "dep", "dep_noiseless", "dep_nofar", "unet")
+VERSION = 2  # 2: the dep_nofar row
 EPOCHS = 80  # the robustness recipe's 240 take 34 min a layout here (8.5 s an epoch on 2 cores with the physical
 # profile's online degradation at d = 2 mm); 80 (3840 steps) take 11 min
 BUDGETS = {"quick": ROBUSTNESS_BUDGETS["quick"], "full": replace(ROBUSTNESS_BUDGETS["full"], epochs=EPOCHS)}
@@ -151,13 +154,23 @@ def _score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
     for name in tqdm([n for n in banks if n not in done], desc="score", unit="layout", disable=not progress):
         t0 = time.perf_counter()
         model = load_model(out / "train" / name / "model.pt", "cpu")[0]
-        per_image = score_panel({"unet": model}, banks[name], 0, images)
+        per_image = {**score_panel({"unet": model}, banks[name], 0, images), **_dep_without_far(banks[name], images)}
         rows.append({"layout": name, "images": len(images), **{f"psnr_{k}_db": float(np.mean(v))
                                                                 for k, v in per_image.items()},
                      "per_image_db": per_image, "seconds": round(time.perf_counter() - t0, 2), FIELD: prints[name]})
         save_text(path, "".join(json.dumps(r) + "\n" for r in rows))
     order = list(banks)
     return sorted(rows, key=lambda r: order.index(r["layout"]))
+
+
+def _dep_without_far(bank, images: list) -> dict:
+    """DeP (PSNR and level-matched) on captures of panel 0 made without its far field: what the light past the kernel
+    window costs DeP, whose kernel holds only the window (the same noise draws as score_panel's)."""
+    panel = replace(bank.panels[0], far=None)
+    pairs = panel_pairs(bank, panel, images)
+    dep = list(zip(dep_outputs(panel, pairs), (gt for _, gt in pairs)))
+    return {"dep_nofar": [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in dep],
+            "dep_nofar_level": [level_matched_psnr_db(y, gt) for y, gt in dep]}
 
 
 def paired(values: list[float], reference: list[float]) -> dict:
@@ -205,14 +218,15 @@ def _markdown(result: dict) -> str:
     lines = [f"# `study layout-trained` ({result['budget']['name']} budget)", "",
              f"Reference for the paired differences: {ref['layout']} ({ref['images']} validation images, "
              "the same noise draws for every layout). PSNR: the paper protocol's; level: level-matched.", "",
-             "| layout | T | input | DeP | DeP, no sensor noise | UNet | UNet level | DeP − ref | UNet − ref |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| layout | T | input | DeP | DeP, no sensor noise | DeP, no far field | UNet | UNet level | DeP − ref | "
+             "UNet − ref |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         p = result["paired"][r["layout"]]
         diff = {k: "—" if r is ref else f"{p[k]['mean_db']:+.2f} ± {p[k]['se_db']:.2f} ({p[k]['wins']}/{p[k]['n']})"
                 for k in ("dep", "unet")}
         lines.append(f"| {r['layout']} | {result['transmission'][r['layout']]:.4f} | {r['psnr_input_db']:.2f} | "
-                     f"{r['psnr_dep_db']:.2f} | {r['psnr_dep_noiseless_db']:.2f} | {r['psnr_unet_db']:.2f} | "
+                     f"{r['psnr_dep_db']:.2f} | {r['psnr_dep_noiseless_db']:.2f} | {r['psnr_dep_nofar_db']:.2f} | "
+                     f"{r['psnr_unet_db']:.2f} | "
                      f"{r['psnr_unet_level_db']:.2f} | {diff['dep']} | {diff['unet']} |")
     seconds = {**result["times"], **{f"train {k}": t["seconds"] for k, t in result["train"].items()}}
     lines += ["", "Seconds (2 cores unless said): " + ", ".join(f"{k} {v:.0f}" for k, v in seconds.items()), ""]

@@ -68,7 +68,7 @@ def register(sub) -> None:
                         "beside the dead leaves, e.g. DIV2K's validation photographs [none]")
     add_display_argument(s, "layout: the display whose layout is scored; layout-trained: the layouts compared, "
                          "comma-separated, each a display with @edge (its cell framed at the tile's edge) and @turned "
-                         "(a random D4 turn per tile) appended as wanted", default="toled",
+                         "(a random quarter-turn per tile) appended as wanted", default="toled",
                          micrograph="pixels of --micrograph-pixel-um, amplitude values")
     s.add_argument("--micrograph-pixel-um", type=positive("--micrograph-pixel-um"), default=1.0,
                    help="layout only: a micrograph's pixel size in µm [1]")
