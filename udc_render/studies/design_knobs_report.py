@@ -56,36 +56,40 @@ def markdown(doc: dict) -> str:
     return "\n".join(lines + _banding_lines(doc) + _field_lines(doc)) + "\n"
 
 
+def _section(title: str, header: list[str], rows: list[list[str]]) -> list[str]:
+    """A markdown section: its title, then a table of header and rows."""
+    return (["", f"## {title}", "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+            + ["| " + " | ".join(r) + " |" for r in rows])
+
+
 def _banding_lines(doc: dict) -> list[str]:
     """Part (c): the sampled banding's raster step (absent from a study run before it)."""
     if not doc.get("banding"):
         return []
-    lines = ["", f"## The sampled banding's raster step (d = {doc['config']['banding_distance_mm']:g} mm, the paper "
-             "sensor's shifts; repeated: against the exact series; turned: against the finest step)", "",
-             "| cell | step (µm) | repeated: profile error | repeated: peak-to-peak error | turned: peak-to-peak | "
-             "turned: sd | turned: error | CPU s |", "|---|---|---|---|---|---|---|---|"]
-    for r in doc["banding"]:
-        lines.append(f"| {r['cell']} | {r['sample_um']:g} | {r['error_profile_rel']:.2g} | "
-                     f"{r['error_peak_to_peak_rel']:.2g} | {_cell(r['turned_peak_to_peak'])} | "
-                     f"{_cell(r['turned_rms'])} | {r['error_turned_rel']:.2g} | {r['cpu_s']:.1f} |")
-    return lines
+    return _section(f"The sampled banding's raster step (d = {doc['config']['banding_distance_mm']:g} mm, the paper "
+                    "sensor's shifts; repeated: against the exact series; turned: against the finest step)",
+                    ["cell", "step (µm)", "repeated: profile error", "repeated: peak-to-peak error",
+                     "turned: peak-to-peak", "turned: sd", "turned: error", "CPU s"],
+                    [[r["cell"], f"{r['sample_um']:g}", f"{r['error_profile_rel']:.2g}",
+                      f"{r['error_peak_to_peak_rel']:.2g}", _cell(r["turned_peak_to_peak"]), _cell(r["turned_rms"]),
+                      f"{r['error_turned_rel']:.2g}", f"{r['cpu_s']:.1f}"] for r in doc["banding"]])
 
 
 def _field_lines(doc: dict) -> list[str]:
     """Part (d): the engine's field phases of a turned tiling (absent from a study run before it)."""
     if not doc.get("field"):
         return []
-    lines = ["", f"## The engine's field phases of a turned tiling (d = {doc['config']['banding_distance_mm']:g} mm, "
-             f"{doc['config'].get('field_wavelength_nm', 520):g} nm, the paper sensor; relative power P / P̄ over the "
-             "whole-sample shifts between the outer phases, against the window's exact P(s); psf-4: the phases over "
-             "one tile, wrapped)", "",
-             "| cell | P | phase step x / y (µm) | shifts ± x / y (µm) | exact sd | blend sd | blend rms error | "
-             "psf-4 sd | psf-4 rms error | CPU s |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for r in doc["field"]:
-        lines.append(f"| {r['cell']} | {r['phases']} | {_cell(r['phase_step_um'])} | {_cell(r['shifts_um'])} | "
-                     f"{r['exact_sd']:.2e} | {r['blend_sd']:.2e} | {r['blend_error_rms']:.2e} | "
-                     f"{r['one_tile_sd']:.2e} | {r['one_tile_error_rms']:.2e} | {r['cpu_s']:.1f} |")
-    return lines
+    c = doc["config"]
+    return _section(f"The engine's field phases of a turned tiling (d = {c['banding_distance_mm']:g} mm, "
+                    f"{c.get('field_wavelength_nm', 520):g} nm, the paper sensor; relative power P / P̄ over the "
+                    "whole-sample shifts between the outer phases, against the window's exact P(s); psf-4: the "
+                    "phases over one tile, wrapped)",
+                    ["cell", "P", "phase step x / y (µm)", "shifts ± x / y (µm)", "exact sd", "blend sd",
+                     "blend rms error", "psf-4 sd", "psf-4 rms error", "CPU s"],
+                    [[r["cell"], str(r["phases"]), _cell(r["phase_step_um"]), _cell(r["shifts_um"]),
+                      f"{r['exact_sd']:.2e}", f"{r['blend_sd']:.2e}", f"{r['blend_error_rms']:.2e}",
+                      f"{r['one_tile_sd']:.2e}", f"{r['one_tile_error_rms']:.2e}", f"{r['cpu_s']:.1f}"]
+                     for r in doc["field"]])
 
 
 def _figure(doc: dict, out: Path) -> None:
