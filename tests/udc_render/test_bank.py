@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from psf.cache import ENGINE_VERSION
 from restore.degrade import Degrader, WideSource
 from restore.degrade_wide import WideLight
 from restore.tensors import region
@@ -167,6 +168,11 @@ def test_bad_bank_options_are_refused_in_one_line(tmp_path, cache, capsys):
     assert _bank(tmp_path / "b1", cache, "--display", "glass", "--profile", "paper") == 0
     _one_line(capsys, ["bank", "--out", str(tmp_path / "b1"), "--cache-dir", cache, *TINY, "--display", "glass",
                        "--profile", "paper", "--kernel-px", "21"], "holds a different bank", "kernel_px")
+    doc = json.loads((tmp_path / "b1" / BANK_FILE).read_text())
+    assert doc["psf_engine"] == ENGINE_VERSION  # kernels of another engine version: refused, not resumed
+    (tmp_path / "b1" / BANK_FILE).write_text(json.dumps({**doc, "psf_engine": "psf-4"}))
+    _one_line(capsys, ["bank", "--out", str(tmp_path / "b1"), "--cache-dir", cache, *TINY, "--display", "glass",
+                       "--profile", "paper"], "holds a different bank", "psf_engine")
     (tmp_path / "b1" / "panel_000_glass.npz").write_bytes(b"not it")
     with pytest.raises(Exception, match="differs from its sha256"):
         read_bank(tmp_path / "b1")

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from psf.cache import ENGINE_VERSION
 from udc_render.cli import main
 from udc_render.dataset import executors, plan as dataset
 
@@ -182,6 +183,7 @@ def test_side_by_side_implies_previews(scene, tmp_path):
     assert {"side_by_side.png", "gt_preview.png", "glass/preview.png", "glass/raw.dng"} <= files
     job = json.loads((out / "job.json").read_text())
     assert job["previews"] is True and job["side_by_side"] is True and job["version"] == 2
+    assert job["psf_engine"] == ENGINE_VERSION  # another engine's kernels: a new job, refused as a resume
 
 
 def test_builtin_images_stay_distinct_past_the_list():

@@ -64,6 +64,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from psf.cache import ENGINE_VERSION
 from udc_render.dataset.executors import Shared, executor
 from udc_render.dataset.plan import (
     BUILTIN_THEN,
@@ -152,7 +153,7 @@ def job_params(job: DatasetJob, shared: Shared, source: str | None, images, view
               "shard_size": job.shard_size, **what,
               "render_seed": job.scene.render.seed, "scene": dataclasses.asdict(shared.scene),
               "displays": [d.describe() for d in shared.displays], "synth": cfg, "side_by_side": shared.side_by_side,
-              "previews": shared.previews}
+              "previews": shared.previews, "psf_engine": ENGINE_VERSION}  # other kernels: a new job, not a resume
     if job.randomize is not None:
         params["randomize"] = job.randomize.describe()
     return json.loads(json.dumps(params, default=str))
