@@ -234,9 +234,10 @@ def _markdown(result: dict) -> str:
 
 
 def run_study(out: Path, specs: list[str], quick: bool = False, cache_dir: str | None = None,
-              progress: bool = True) -> dict:
+              progress: bool = True, train_seed: int = TRAIN_SEED) -> dict:
     """The study (module doc) of the layouts `specs` (DISPLAY[@edge][@turned]; the first is the reference) in `out`,
-    or the rest of an interrupted one; writes the report and returns its JSON document."""
+    or the rest of an interrupted one; writes the report and returns its JSON document. train_seed: the UNets'
+    (the score's images and noise draws do not change with it)."""
     out = Path(out).resolve()
     displays = [entry_display(s, out / "panels") for s in specs]
     names = [d.name for d in displays]
@@ -249,7 +250,8 @@ def run_study(out: Path, specs: list[str], quick: bool = False, cache_dir: str |
     banks = _banks(out, displays, b, times, cache_dir, progress)
     summaries = {}
     for name, bank in banks.items():
-        summaries[name] = train(data, out / "train" / name, train_settings(b, bank, data), device="cpu",
+        summaries[name] = train(data, out / "train" / name, replace(train_settings(b, bank, data), seed=train_seed),
+                                device="cpu",
                                 checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
                                 bank=bank.folder)
     t0 = time.perf_counter()
@@ -259,7 +261,7 @@ def run_study(out: Path, specs: list[str], quick: bool = False, cache_dir: str |
     result = {"budget": dict(asdict(b), steps=b.steps), "distance_mm": DISTANCE_MM, "specs": list(specs),
               "transmission": {d.name: float(d.layout.power_transmittance) for d in displays},
               "gain": {d.name: d.gain for d in displays}, "rows": rows, "times": dict(times.seconds),
-              "train": summaries, "seeds": {"train": TRAIN_SEED, "score": SCORE_SEED},
+              "train": summaries, "seeds": {"train": train_seed, "score": SCORE_SEED},
               "paired": {r["layout"]: {k: paired(r["per_image_db"][k], ref[k]) for k in ROW_KEYS} for r in rows}}
     bad = [(r["layout"], k) for r in rows for k in ROW_KEYS if not math.isfinite(r[f"psnr_{k}_db"])]
     if bad:

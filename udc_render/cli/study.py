@@ -82,6 +82,9 @@ def register(sub) -> None:
                    help="layout only: dep: also restore crops of a natural image through the layout's kernels with "
                         "DeP and report the PSNR (off by default: DeP's Wiener sampler takes about a second per "
                         "plane, 12 planes: 12-14 s more per layout) [off]")
+    s.add_argument("--train-seed", type=int, default=0,
+                   help="layout-trained only: the UNets' training seed (crops, order, initial weights); the scores' "
+                        "images and noise draws stay the same, so two seeds measure the training's spread [0]")
     s.add_argument("--restore-crops", choices=("astronaut", "photos"), default="astronaut",
                    help="layout only, with --restore: the natural crops restored: astronaut, its face and suit (2 "
                         "crops); photos, 8 crops of astronaut, chelsea, coffee and rocket (4x the time) [astronaut]")
@@ -96,6 +99,8 @@ def run(args) -> int:
         raise UserError(f"--frame {args.frame}: only `study layout` takes a framing")
     if args.what != "layout" and args.distance_mm != 2.0:
         raise UserError(f"--distance-mm {args.distance_mm}: only `study layout` takes a distance")
+    if args.train_seed != 0 and args.what != "layout-trained":
+        raise UserError(f"--train-seed {args.train_seed}: only `study layout-trained` trains")
     if args.restore and args.what != "layout":
         raise UserError(f"--restore {args.restore}: only `study layout` restores")
     if args.restore_crops != "astronaut" and not args.restore:
@@ -159,6 +164,6 @@ def _layout_trained(args) -> int:
     entry is refused in one line)."""
     from restore.studies.layout_trained import NAME, run_study
     out = out_dir(args.out)
-    run_study(out, [p for p in args.display.split(",") if p], quick=args.quick)
+    run_study(out, [p for p in args.display.split(",") if p], quick=args.quick, train_seed=args.train_seed)
     print(f"wrote {out}/{NAME}.md, {NAME}.json, {NAME}.png, {NAME}_restored.png")
     return 0
