@@ -232,3 +232,15 @@ def test_a_format_1_bank_is_read_without_far_field_or_haze_and_never_resumed(tmp
     assert differing_settings(old, doc) == [] and differing_settings({**old, "format": BANK_FORMAT}, doc) == ["effects"]
     (paper / BANK_FILE).write_text(json.dumps(old))
     _one_line(capsys, argv, "holds a different bank", "format")
+
+
+def test_a_bank_from_before_the_engine_was_recorded_resumes_only_without_aperiodic_displays():
+    """bank.json records psf_engine from psf-5 on; psf-5 changed only aperiodic displays' kernels (their field phases
+    across the sensor), so a doc without the key names today's bank unless one of its displays is turned per tile."""
+    settings = {"kernel_px": 9, "psf_engine": ENGINE_VERSION,
+                "displays": [{"name": "t", "layout": {"kind": "micrograph", "random_rotation": False}}]}
+    old = {k: v for k, v in settings.items() if k != "psf_engine"}
+    assert differing_settings(old, settings) == []
+    turned = {**settings, "displays": [{"name": "t", "layout": {"kind": "micrograph", "random_rotation": True}}]}
+    assert differing_settings({k: v for k, v in turned.items() if k != "psf_engine"}, turned) == ["psf_engine"]
+    assert differing_settings({**old, "psf_engine": "psf-4"}, settings) == ["psf_engine"]

@@ -311,8 +311,12 @@ def differing_settings(doc: dict, settings: dict) -> list[str]:
     count, complete, panels): none when the bank was made, or begun, with these settings. A format-1 doc is
     compared on the keys that format has (not "effects": its panels carry no far field and no haze, bank.
     FORMAT_1_EFFECTS), so that the carried bank.json of a shipped model still names its bank
-    (restore.studies.random_row.carried_bank); make_bank never resumes one."""
+    (restore.studies.random_row.carried_bank); make_bank never resumes one. A doc without "psf_engine" (made before
+    engine version psf-5 recorded it) names today's kernels unless it holds an aperiodic display, the only kernels
+    psf-5 changed."""
     skip = {"format", "count", "complete", "panels"} | ({"effects"} if doc.get("format") == FORMAT_1 else set())
+    if "psf_engine" not in doc and '"random_rotation": true' not in json.dumps(doc.get("displays", [])):
+        skip.add("psf_engine")  # recorded from psf-5 on, which changed only aperiodic displays' kernels
     return sorted(k for k in settings.keys() | doc.keys() if k not in skip and doc.get(k) != settings.get(k))
 
 
