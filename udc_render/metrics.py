@@ -81,3 +81,11 @@ def display_referred_quarters(quarters: np.ndarray, range_dn: float, balance: np
 def paper_linear(x: np.ndarray) -> np.ndarray:
     """The paper protocol's values: linear, clipped to [0, 1] of the white level, float64."""
     return np.clip(np.asarray(x, np.float64), 0, 1)
+
+
+def paired_differences(d) -> dict:
+    """Paired differences d_i (one per image or crop, the same draws for both sides): their mean, standard error
+    s_d / √n (NaN for n < 2), the count of d_i > 0 and n."""
+    d = np.asarray(d, np.float64)
+    se = float(np.std(d, ddof=1) / math.sqrt(d.size)) if d.size > 1 else math.nan
+    return {"mean": float(d.mean()), "standard_error": se, "wins": int((d > 0).sum()), "n": int(d.size)}

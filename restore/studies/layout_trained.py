@@ -38,7 +38,6 @@ import numpy as np
 from tqdm import tqdm
 
 from psf.micrograph import MicrographLayout
-from restore.metrics import level_matched_psnr_db, paper_metrics
 from restore.online import clean_images, images_fingerprint
 from restore.studies.robustness import (
     BUDGETS as ROBUSTNESS_BUDGETS,
@@ -46,6 +45,7 @@ from restore.studies.robustness import (
     TRAIN_SEED,
     dep_outputs,
     model_outputs,
+    output_scores,
     panel_pairs,
     read_scores,
     score_panel,
@@ -61,6 +61,7 @@ from udc_render.design.cells import frame_cell, layout_cell
 from udc_render.errors import UdcError
 from udc_render.io.exr import save_exr
 from udc_render.io.files import save_figure, save_json, save_text
+from udc_render.metrics import paired_differences
 from udc_render.optics.displays import Display, load_display, micrograph_display
 from udc_render.pipeline import SynthConfig
 from udc_render.profiles import describe, resolve_profile
@@ -168,16 +169,14 @@ def _dep_without_far(bank, images: list) -> dict:
     window costs DeP, whose kernel holds only the window (the same noise draws as score_panel's)."""
     panel = replace(bank.panels[0], far=None)
     pairs = panel_pairs(bank, panel, images)
-    dep = list(zip(dep_outputs(panel, pairs), (gt for _, gt in pairs)))
-    return {"dep_nofar": [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in dep],
-            "dep_nofar_level": [level_matched_psnr_db(y, gt) for y, gt in dep]}
+    return output_scores("dep_nofar", dep_outputs(panel, pairs), pairs)
 
 
 def paired(values: list[float], reference: list[float]) -> dict:
-    """Paired differences d_i = values_i − reference_i: mean, standard error s_d / √n (n ≥ 2) and the wins."""
-    d = np.asarray(values, float) - np.asarray(reference, float)
-    se = float(d.std(ddof=1) / math.sqrt(d.size)) if d.size > 1 else float("nan")
-    return {"mean_db": float(d.mean()), "se_db": se, "wins": int((d > 0).sum()), "n": int(d.size)}
+    """Paired differences d_i = values_i − reference_i: mean, standard error s_d / √n (n ≥ 2) and the wins
+    (udc_render.metrics.paired_differences)."""
+    p = paired_differences(np.asarray(values, float) - np.asarray(reference, float))
+    return {"mean_db": p["mean"], "se_db": p["standard_error"], "wins": p["wins"], "n": p["n"]}
 
 
 def _figure(out: Path, banks: dict, data: Path, rows: list[dict]) -> None:

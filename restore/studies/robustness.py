@@ -297,14 +297,18 @@ def score_panel(models: dict, bank: Bank, index: int, images: list) -> dict[str,
                  "input_level": [level_matched_psnr_db(None, gt, packed=x) for x, gt in pairs]}
     quiet = replace(panel, sensor=replace(panel.sensor, noise="none"), defects=None, fpn=None)
     for key, p, these in (("dep", panel, pairs), ("dep_noiseless", quiet, panel_pairs(bank, quiet, images))):
-        dep = list(zip(dep_outputs(p, these), (gt for _, gt in these)))
-        per_image[key] = [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in dep]
-        per_image[f"{key}_level"] = [level_matched_psnr_db(y, gt) for y, gt in dep]
+        per_image.update(output_scores(key, dep_outputs(p, these), these))
     for key, model in models.items():
-        out = list(zip(model_outputs(model, bank, panel, pairs), (gt for _, gt in pairs)))
-        per_image[key] = [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in out]
-        per_image[f"{key}_level"] = [level_matched_psnr_db(y, gt) for y, gt in out]
+        per_image.update(output_scores(key, model_outputs(model, bank, panel, pairs), pairs))
     return per_image
+
+
+def output_scores(key: str, outputs: list, pairs: list) -> dict[str, list]:
+    """{key: paper-protocol PSNRs, key_level: level-matched PSNRs} of restorations `outputs` against the truths of
+    `pairs` (restore.metrics)."""
+    truths = [gt for _, gt in pairs]
+    return {key: [paper_metrics(y, gt)["psnr_db_paper"] for y, gt in zip(outputs, truths)],
+            f"{key}_level": [level_matched_psnr_db(y, gt) for y, gt in zip(outputs, truths)]}
 
 
 def score_fingerprints(out: Path, banks: dict, data: Path, keys: tuple = UNETS) -> dict[str, str]:

@@ -315,7 +315,8 @@ def differing_settings(doc: dict, settings: dict) -> list[str]:
     engine version psf-5 recorded it) names today's kernels unless it holds an aperiodic display, the only kernels
     psf-5 changed."""
     skip = {"format", "count", "complete", "panels"} | ({"effects"} if doc.get("format") == FORMAT_1 else set())
-    if "psf_engine" not in doc and '"random_rotation": true' not in json.dumps(doc.get("displays", [])):
+    turned = any((d.get("layout") or {}).get("random_rotation") for d in doc.get("displays", []))
+    if "psf_engine" not in doc and not turned:
         skip.add("psf_engine")  # recorded from psf-5 on, which changed only aperiodic displays' kernels
     return sorted(k for k in settings.keys() | doc.keys() if k not in skip and doc.get(k) != settings.get(k))
 

@@ -15,13 +15,13 @@ Each entry is a study folder and one of its tilings (repeated, turned):
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
 
 from udc_render.io.files import save_figure, save_json, save_text
+from udc_render.metrics import paired_differences
 
 __all__ = ["paired", "run_compare"]
 
@@ -45,8 +45,8 @@ def paired(layout: dict, reference: dict) -> dict:
         raise ValueError(f"paired crops differ: {layout['crops']} at {layout['crop_px']} px against "
                          f"{reference['crops']} at {reference['crop_px']} px")
     d = np.mean(layout["crop_psnr_db"], axis=1) - np.mean(reference["crop_psnr_db"], axis=1)
-    se = float(np.std(d, ddof=1) / math.sqrt(d.size)) if d.size > 1 else math.nan
-    return {"mean_db": float(d.mean()), "standard_error_db": se, "wins": int((d > 0).sum()), "crops": int(d.size),
+    p = paired_differences(d)
+    return {"mean_db": p["mean"], "standard_error_db": p["standard_error"], "wins": p["wins"], "crops": p["n"],
             "per_crop_db": d.tolist()}
 
 

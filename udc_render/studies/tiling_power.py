@@ -52,6 +52,11 @@ def _spread_um(distance_um: float, wavelength_um: float, step_um: float) -> floa
     return distance_um * s / math.sqrt(1 - s * s)
 
 
+def _correlation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """C[k] = Σ_x a(x) b(x + k), circular over the window (one FFT correlation)."""
+    return sfft.ifft2(np.conj(sfft.fft2(a)) * sfft.fft2(b)).real
+
+
 def window_tiles(cell_px: int, cell_um: float, lens, wavelength_nm: float, distance_um: float,
                  span_um: tuple[float, float], sample_um: float = SAMPLE_UM) -> tuple[int, int, float]:
     """(tiles per side, even; k squares per cell pixel; δ) of tiling_power's window (module doc): the disc, the
@@ -83,7 +88,7 @@ def tiling_power(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, d
     field = sfft.ifft2(sfft.fft2(mask) * angular_spectrum_tf(f, f, lam, distance_um))
     edges = (np.arange(n + 1) - n / 2) * step
     disc = lens.aperture_area_fraction(edges, edges)
-    power = sfft.ifft2(np.conj(sfft.fft2(disc)) * sfft.fft2(np.abs(field) ** 2)).real * step ** 2
+    power = _correlation(disc, np.abs(field) ** 2) * step ** 2
     jx, jy = (int(s // step) for s in span_um)
     rows, cols = np.arange(-jy, jy + 1) % n, np.arange(-jx, jx + 1) % n
     return power[np.ix_(rows, cols)], step
@@ -101,8 +106,7 @@ def raster_power(plan, wavelength_nm: float) -> np.ndarray:
     field = sfft.ifft2(plan.mask_spec * angular_spectrum_tf(plan.fx, plan.fy, lam, plan.d_um))
     aperture = np.zeros(field.shape)
     aperture[plan.sy, plan.sx] = plan.aperture
-    corr = sfft.ifft2(sfft.fft2(aperture) * np.conj(sfft.fft2(np.abs(field) ** 2))).real
-    return plan.kappa * plan.grid.dx_um * plan.grid.dy_um * corr
+    return plan.kappa * plan.grid.dx_um * plan.grid.dy_um * _correlation(np.abs(field) ** 2, aperture)
 
 
 def band_figures(power: np.ndarray) -> dict:
