@@ -14,7 +14,8 @@ psf.MicrographLayout), at equal footing:
 3. scored on the budget's validation images (colour dead leaves) each degraded once through the layout
    (restore.studies.robustness.score_panel): the packed input, DeP given the layout's own kernels and γ, DeP on the
    same capture without the sensor's noise, DeP on the capture without the far field (the light past the kernel
-   window, which DeP's kernel does not hold: dep_nofar), and the UNet; the paper protocol's PSNR and the
+   window, which DeP's kernel does not hold: dep_nofar), DeP given the far field too (its light taken out of DeP's
+   output on the same capture: restore.dep_far, dep_far), and the UNet; the paper protocol's PSNR and the
    level-matched PSNR.
 The clean images, noise draws and training seeds are the same for every layout, so the per-image differences to
 the reference layout (the first given) are paired: mean, standard error s_d / √n and the images won.
@@ -38,6 +39,7 @@ import numpy as np
 from tqdm import tqdm
 
 from psf.micrograph import MicrographLayout
+from restore.dep_far import subtract_far
 from restore.online import clean_images, images_fingerprint
 from restore.studies.robustness import (
     BUDGETS as ROBUSTNESS_BUDGETS,
@@ -74,8 +76,8 @@ DISTANCE_MM = 2.0  # the physical profile's d for the presets, and the issue's b
 MODIFIERS = ("edge", "turned")
 CELL_PIXEL_UM = 1.0  # a preset's cell raster for @edge / @turned (the T-OLED's 168 µm cell: 168² squares)
 NAME = "study_layout_trained"
-ROW_KEYS = ("input", "dep", "dep_noiseless", "dep_nofar", "unet")
-VERSION = 2  # 2: the dep_nofar row
+ROW_KEYS = ("input", "dep", "dep_noiseless", "dep_nofar", "dep_far", "unet")
+VERSION = 3  # 2: the dep_nofar row; 3: dep_far
 EPOCHS = 80  # the robustness recipe's 240 take 34 min a layout here (8.5 s an epoch on 2 cores with the physical
 # profile's online degradation at d = 2 mm); 80 (3840 steps) take 11 min
 BUDGETS = {"quick": ROBUSTNESS_BUDGETS["quick"], "full": replace(ROBUSTNESS_BUDGETS["full"], epochs=EPOCHS)}
@@ -155,7 +157,7 @@ def _score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
     for name in tqdm([n for n in banks if n not in done], desc="score", unit="layout", disable=not progress):
         t0 = time.perf_counter()
         model = load_model(out / "train" / name / "model.pt", "cpu")[0]
-        per_image = {**score_panel({"unet": model}, banks[name], 0, images), **_dep_without_far(banks[name], images)}
+        per_image = {**score_panel({"unet": model}, banks[name], 0, images), **_dep_and_far(banks[name], images)}
         rows.append({"layout": name, "images": len(images), **{f"psnr_{k}_db": float(np.mean(v))
                                                                 for k, v in per_image.items()},
                      "per_image_db": per_image, "seconds": round(time.perf_counter() - t0, 2), FIELD: prints[name]})
@@ -164,12 +166,15 @@ def _score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
     return sorted(rows, key=lambda r: order.index(r["layout"]))
 
 
-def _dep_without_far(bank, images: list) -> dict:
-    """DeP (PSNR and level-matched) on captures of panel 0 made without its far field: what the light past the kernel
-    window costs DeP, whose kernel holds only the window (the same noise draws as score_panel's)."""
-    panel = replace(bank.panels[0], far=None)
-    pairs = panel_pairs(bank, panel, images)
-    return output_scores("dep_nofar", dep_outputs(panel, pairs), pairs)
+def _dep_and_far(bank, images: list) -> dict:
+    """DeP's scores (PSNR and level-matched) with panel 0's far field: on captures made without it (dep_nofar: what
+    the light past the kernel window costs DeP, whose kernel holds only the window), and on score_panel's captures
+    with it, then taken out of DeP's output (dep_far: restore.dep_far); the same noise draws as score_panel's."""
+    panel, nofar = bank.panels[0], replace(bank.panels[0], far=None)
+    pairs, nofar_pairs = panel_pairs(bank, panel, images), panel_pairs(bank, nofar, images)
+    given = [subtract_far(rgb, panel) for rgb in dep_outputs(panel, pairs)]
+    return {**output_scores("dep_nofar", dep_outputs(nofar, nofar_pairs), nofar_pairs),
+            **output_scores("dep_far", given, pairs)}
 
 
 def paired(values: list[float], reference: list[float]) -> dict:
@@ -202,8 +207,9 @@ def _plot(out: Path, rows: list[dict]) -> None:
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(7, 3.2))
     x = np.arange(len(rows))
-    for j, (key, label) in enumerate((("input", "input"), ("dep", "DeP"), ("unet", "UNet"))):
-        ax.bar(x + (j - 1) * 0.27, [r[f"psnr_{key}_db"] for r in rows], 0.27, label=label)
+    for j, (key, label) in enumerate((("input", "input"), ("dep", "DeP"), ("dep_far", "DeP given the far field"),
+                                      ("unet", "UNet"))):
+        ax.bar(x + (j - 1.5) * 0.2, [r[f"psnr_{key}_db"] for r in rows], 0.2, label=label)
     ax.set_xticks(x, [r["layout"] for r in rows], fontsize=8)
     ax.set_ylabel("PSNR (paper protocol), dB")
     ax.legend(fontsize=8)
@@ -217,16 +223,17 @@ def _markdown(result: dict) -> str:
     lines = [f"# `study layout-trained` ({result['budget']['name']} budget)", "",
              f"Reference for the paired differences: {ref['layout']} ({ref['images']} validation images, "
              "the same noise draws for every layout). PSNR: the paper protocol's; level: level-matched.", "",
-             "| layout | T | input | DeP | DeP, no sensor noise | DeP, no far field | UNet | UNet level | DeP − ref | "
-             "UNet − ref |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| layout | T | input | DeP | DeP, no sensor noise | DeP, no far field | DeP given the far field | UNet | "
+             "UNet level | DeP − ref | DeP given the far field − ref | UNet − ref |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         p = result["paired"][r["layout"]]
         diff = {k: "—" if r is ref else f"{p[k]['mean_db']:+.2f} ± {p[k]['se_db']:.2f} ({p[k]['wins']}/{p[k]['n']})"
-                for k in ("dep", "unet")}
+                for k in ("dep", "dep_far", "unet")}
         lines.append(f"| {r['layout']} | {result['transmission'][r['layout']]:.4f} | {r['psnr_input_db']:.2f} | "
                      f"{r['psnr_dep_db']:.2f} | {r['psnr_dep_noiseless_db']:.2f} | {r['psnr_dep_nofar_db']:.2f} | "
-                     f"{r['psnr_unet_db']:.2f} | "
-                     f"{r['psnr_unet_level_db']:.2f} | {diff['dep']} | {diff['unet']} |")
+                     f"{r['psnr_dep_far_db']:.2f} | {r['psnr_unet_db']:.2f} | "
+                     f"{r['psnr_unet_level_db']:.2f} | {diff['dep']} | {diff['dep_far']} | {diff['unet']} |")
     seconds = {**result["times"], **{f"train {k}": t["seconds"] for k, t in result["train"].items()}}
     lines += ["", "Seconds (2 cores unless said): " + ", ".join(f"{k} {v:.0f}" for k, v in seconds.items()), ""]
     return "\n".join(lines)
