@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from psf.micrograph import MicrographLayout
-from restore.studies.layout_trained import NAME, entry_display, paired, run_study
+from restore.studies.layout_trained import NAME, ROW_KEYS, entry_display, paired, run_study
 from udc_render.cli import main
 from udc_render.errors import UdcError
 
@@ -69,7 +69,7 @@ def test_the_quick_study_compares_two_layouts_and_resumes(tmp_path):
     assert [r["layout"] for r in doc["rows"]] == ["toled168_20", "toled168_20_edge_turned"]
     assert doc["paired"]["toled168_20"]["unet"]["mean_db"] == 0.0
     for r in doc["rows"]:
-        assert all(math.isfinite(r[f"psnr_{k}_db"]) for k in ("input", "dep", "dep_noiseless", "dep_nofar", "dep_far", "unet"))
+        assert all(math.isfinite(r[f"psnr_{k}_db"]) for k in ROW_KEYS)
     again = run_study(tmp_path, specs, quick=True, progress=False)
     assert again["rows"] == doc["rows"]
     assert json.loads((tmp_path / f"{NAME}.json").read_text())["specs"] == specs

@@ -18,6 +18,7 @@ import pytest
 from psf.cache import ENGINE_VERSION
 from udc_render.cli import main
 from udc_render.dataset import executors, plan as dataset
+from udc_render.dataset.store import check_job
 
 pytestmark = pytest.mark.usefixtures("render_cache")
 
@@ -184,6 +185,28 @@ def test_side_by_side_implies_previews(scene, tmp_path):
     job = json.loads((out / "job.json").read_text())
     assert job["previews"] is True and job["side_by_side"] is True and job["version"] == 2
     assert job["psf_engine"] == ENGINE_VERSION  # another engine's kernels: a new job, refused as a resume
+
+
+def test_a_job_from_before_the_engine_was_recorded_resumes_only_without_aperiodic_displays(tmp_path):
+    """job.json records psf_engine from psf-5 on, which changed only aperiodic displays' kernels: a job.json without
+    the key is today's job unless a display, or a randomized job's drawn panel, is turned per tile; another engine's
+    job is refused in one line."""
+    params = {"count": 1, "psf_engine": ENGINE_VERSION,
+              "displays": [{"name": "t", "layout": {"kind": "micrograph", "random_rotation": False}}]}
+    for i, (old, refused) in enumerate((
+            ({k: v for k, v in params.items() if k != "psf_engine"}, False),
+            ({**params, "psf_engine": "psf-4"}, True),
+            ({"count": 1, "displays": params["displays"],
+              "randomize": {"panel_draws": [{"display": {"layout": {"random_rotation": True}}}]}}, True))):
+        out = tmp_path / str(i)
+        out.mkdir()
+        (out / "job.json").write_text(json.dumps(old))
+        new = {**params, "randomize": old["randomize"]} if "randomize" in old else params
+        if refused:
+            with pytest.raises(dataset.DatasetError, match=r"holds a different job \(differs in psf_engine\)"):
+                check_job(out, new)
+        else:
+            check_job(out, new)
 
 
 def test_builtin_images_stay_distinct_past_the_list():

@@ -62,6 +62,7 @@ from udc_render.dataset.randomize import (
     panel_scene,
     scaled_exposure_s,
 )
+from udc_render.dataset.store import unrecorded_engine
 from udc_render.optics import field_basis, field_weights, gamma, live_phases
 from udc_render.optics.displays import PAPER_GAMMA, Display
 from udc_render.pipeline import SynthConfig, auto_exposure_s, sensor_for_scene
@@ -313,11 +314,9 @@ def differing_settings(doc: dict, settings: dict) -> list[str]:
     FORMAT_1_EFFECTS), so that the carried bank.json of a shipped model still names its bank
     (restore.studies.random_row.carried_bank); make_bank never resumes one. A doc without "psf_engine" (made before
     engine version psf-5 recorded it) names today's kernels unless it holds an aperiodic display, the only kernels
-    psf-5 changed."""
-    skip = {"format", "count", "complete", "panels"} | ({"effects"} if doc.get("format") == FORMAT_1 else set())
-    turned = any((d.get("layout") or {}).get("random_rotation") for d in doc.get("displays", []))
-    if "psf_engine" not in doc and not turned:
-        skip.add("psf_engine")  # recorded from psf-5 on, which changed only aperiodic displays' kernels
+    psf-5 changed (store.unrecorded_engine)."""
+    skip = ({"format", "count", "complete", "panels"} | ({"effects"} if doc.get("format") == FORMAT_1 else set())
+            | unrecorded_engine(doc))
     return sorted(k for k in settings.keys() | doc.keys() if k not in skip and doc.get(k) != settings.get(k))
 
 

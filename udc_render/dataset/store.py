@@ -26,16 +26,35 @@ def locked(out: Path):
         yield
 
 
+ENGINE_KEY = "psf_engine"  # recorded from engine psf-5 on, which changed only aperiodic displays' kernels
+
+
+def _holds_aperiodic(record) -> bool:
+    """Whether a JSON record holds a display whose layout tiles with a random turn per tile (random_rotation:
+    the only aperiodic layout), at any depth (a job's displays, a randomized job's panel draws, a bank's)."""
+    if isinstance(record, dict):
+        return record.get("random_rotation") is True or any(_holds_aperiodic(v) for v in record.values())
+    return isinstance(record, list) and any(_holds_aperiodic(v) for v in record)
+
+
+def unrecorded_engine(old: dict) -> set[str]:
+    """{ENGINE_KEY} for a job.json or bank.json made before the engine version was recorded that holds no
+    aperiodic display: its kernels are today's (psf-5 changed only those), so the key is not compared; else none."""
+    return {ENGINE_KEY} if ENGINE_KEY not in old and not _holds_aperiodic(old) else set()
+
+
 def check_job(out: Path, params: dict) -> None:
-    """Write OUT/job.json, or refuse when it holds a different job."""
+    """Write OUT/job.json, or refuse when it holds a different job (a job.json from before the engine version was
+    recorded: unrecorded_engine)."""
     path = out / "job.json"
     if path.exists():
         try:
             old = json.loads(path.read_text())
         except (OSError, ValueError):
             raise DatasetError(f"{path}: unreadable; use another --out or delete the folder") from None
-        if old != params:
-            keys = sorted(k for k in params.keys() | old.keys() if old.get(k) != params.get(k))
+        skip = unrecorded_engine(old)
+        keys = sorted(k for k in params.keys() | old.keys() if k not in skip and old.get(k) != params.get(k))
+        if keys:
             raise DatasetError(f"--out {out} holds a different job (differs in {', '.join(keys)}); "
                             "use another --out or delete the folder")
         return
