@@ -212,7 +212,8 @@ def _plot(out: Path, rows: list[dict]) -> None:
         ax.bar(x + (j - 1.5) * 0.2, [r[f"psnr_{key}_db"] for r in rows], 0.2, label=label)
     ax.set_xticks(x, [r["layout"] for r in rows], fontsize=8)
     ax.set_ylabel("PSNR (paper protocol), dB")
-    ax.legend(fontsize=8)
+    ax.set_ylim(0, 1.3 * max(r[f"psnr_{k}_db"] for r in rows for k in ROW_KEYS))  # room for the legend
+    ax.legend(fontsize=8, ncol=4, loc="upper center")
     ax.set_title("validation images through each layout's bank (d = 2 mm, gain 1/T)", fontsize=9)
     fig.tight_layout()
     save_figure(fig, out / f"{NAME}.png")
