@@ -83,13 +83,15 @@ def test_far_field_sums_to_the_lost_share(size, distance_mm):
 
 
 def test_far_field_float32_against_float64():
-    """Kernels in float32 give the far share of float64 within 3e-7 (measured 7.6e-8) and its kernels within
-    6e-5 of their peak (measured 4.0e-6 here, 2e-5 when the test was written: 3× the larger; float32 rounding
-    that another machine's SIMD sums may change)."""
+    """Kernels in float32 give the far share of float64 within 2e-6 and its kernels within 6e-5 of their peak
+    (measured 4.0e-6 here, 2e-5 when the test was written: 3× the larger; float32 rounding that another machine's
+    SIMD sums may change). The share's tolerance was 3e-7 (measured 7.6e-8 when written) and was loosened after
+    seeing 6.0e-7 on an AMD EPYC machine: about 10 float32 epsilons (6e-8) either way, float32's rounding of a
+    sum over the kernel's 129² pixels; 2e-6 is 3× the larger."""
     f32 = far_field(layouts.poled(), LENS, GRID, _core(129), FRAME_UM, ON)
     f64 = far_field(layouts.poled(), LENS, GRID, _core(129, precision="float64"),
                     FRAME_UM, replace(ON, kernel_precision="float64"))
-    np.testing.assert_allclose(f32.added, f64.added, rtol=3e-7)
+    np.testing.assert_allclose(f32.added, f64.added, rtol=2e-6)
     np.testing.assert_allclose(f32.kernels, f64.kernels, atol=6e-5 * f64.kernels.max())
 
 
