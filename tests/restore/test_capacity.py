@@ -69,6 +69,7 @@ def test_wide_fine_widens_the_two_finest_levels_only():
     assert count_parameters(build_model(dict(UNET_WIDE_FINE_CONFIG, fine_extra_width=0))) == 8_933_292
 
 
+@pytest.mark.slow  # CI time (20-min line): 8 s; the study mechanics end to end
 def test_capacity_study_mechanics(tmp_path, monkeypatch):
     """Three runs from one seed (the 2× run's first epochs are the 1× run's: the same loss), scored, the band's
     share per run, a PNG; run again, nothing is trained or scored again. Tiny stand-ins for the two models."""

@@ -254,6 +254,7 @@ def test_plateau_step_does_not_stop_the_t_oled_unet_that_was_still_rising():
     assert plateau_step(log, 0.1) is None
 
 
+@pytest.mark.slow  # CI time (20-min line): 15 s; plateau_step has its unit test
 def test_training_stops_at_the_plateau_and_says_so(tmp_path):
     data = write_pairs(tmp_path / "pairs", splits=(("train", 4), ("val", 1)), blur_px=1, noise=0.01)
     s = TrainSettings(model=TINY_RESNET, display="blur", epochs=40, batch=2, crop_px=16, lr=1e-6, plateau_db=100.0)

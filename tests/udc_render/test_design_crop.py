@@ -27,6 +27,7 @@ def test_the_posterior_mean_of_a_delta_kernel_on_the_whole_grid_is_the_wiener_fi
     assert np.abs(est - ref).max() < 1e-10 * np.abs(ref).max()
 
 
+@pytest.mark.slow  # CI time (20-min line): 20 s; a study-like claim
 def test_a_kernel_reaching_past_the_crop_restores_it_worse_than_one_that_does_not():
     """The same energy split into a centre and copies 20 px away (a halo) against a delta: on a 24-px crop the
     halo's light comes from outside, the posterior mean's error rises above the delta's by more than the draw's

@@ -67,6 +67,7 @@ def test_compact_kernels_give_the_same_bytes(small):
     assert compact_kernels(full, scene, replace(cfg, field_rank=None)) is full  # exact: every phase kernel
 
 
+@pytest.mark.slow  # CI time (20-min line): 10 s; the same bytes are checked by test_compact_kernels_give_the_same_bytes
 def test_stored_power_maps_are_made_once_and_give_the_same_bytes(small, monkeypatch, tmp_path):
     """A dataset worker makes each d > 0 display's exact-power map once (store_power_maps, in worker_kernels):
     two captures with it call psf.banding.power_lattice no more (a capture without it calls it once per band)
