@@ -241,10 +241,10 @@ def _markdown(result: dict) -> str:
 
 
 def run_study(out: Path, specs: list[str], quick: bool = False, cache_dir: str | None = None,
-              progress: bool = True, train_seed: int = TRAIN_SEED) -> dict:
+              progress: bool = True, train_seed: int = TRAIN_SEED, epochs: int | None = None) -> dict:
     """The study (module doc) of the layouts `specs` (DISPLAY[@edge][@turned]; the first is the reference) in `out`,
     or the rest of an interrupted one; writes the report and returns its JSON document. train_seed: the UNets'
-    (the score's images and noise draws do not change with it)."""
+    (the score's images and noise draws do not change with it); epochs: the UNets' (None: the budget's)."""
     out = Path(out).resolve()
     displays = [entry_display(s, out / "panels") for s in specs]
     names = [d.name for d in displays]
@@ -252,6 +252,7 @@ def run_study(out: Path, specs: list[str], quick: bool = False, cache_dir: str |
         raise UdcError(f"--display {','.join(specs)}: expected distinct layouts, got the names {', '.join(names)}")
     out.mkdir(parents=True, exist_ok=True)
     b = BUDGETS["quick" if quick else "full"]
+    b = b if epochs is None else replace(b, epochs=int(epochs))
     times = StageTimes(out / "times.json")
     data = write_clean_images(out / "clean", b)
     banks = _banks(out, displays, b, times, cache_dir, progress)

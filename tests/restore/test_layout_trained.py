@@ -52,6 +52,14 @@ def test_the_cli_refuses_a_bad_entry_before_any_work(tmp_path, capsys):
     assert not (tmp_path / "o" / "banks").exists()
 
 
+def test_the_cli_refuses_no_epochs_before_any_work(tmp_path, capsys):
+    assert main(["study", "layout-trained", "--display", "toled", "--train-epochs", "0", "--out",
+                 str(tmp_path / "o")]) != 0
+    err = capsys.readouterr().err
+    assert "--train-epochs 0: expected a count ≥ 1" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
 def test_paired_differences():
     p = paired([21.0, 23.0, 22.5], [20.0, 22.0, 23.0])
     d = np.array([1.0, 1.0, -0.5])

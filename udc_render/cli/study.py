@@ -85,6 +85,9 @@ def register(sub) -> None:
     s.add_argument("--train-seed", type=int, default=0,
                    help="layout-trained only: the UNets' training seed (crops, order, initial weights); the scores' "
                         "images and noise draws stay the same, so two seeds measure the training's spread [0]")
+    s.add_argument("--train-epochs", type=int, default=None,
+                   help="layout-trained only: the UNets' epochs (the full budget's 80, the robustness recipe's 240 "
+                        "take about 3x as long) [the budget's]")
     s.add_argument("--restore-crops", choices=("astronaut", "photos"), default="astronaut",
                    help="layout only, with --restore: the natural crops restored: astronaut, its face and suit (2 "
                         "crops); photos, 8 crops of astronaut, chelsea, coffee and rocket (4x the time) [astronaut]")
@@ -101,6 +104,9 @@ def run(args) -> int:
         raise UserError(f"--distance-mm {args.distance_mm}: only `study layout` takes a distance")
     if args.train_seed != 0 and args.what != "layout-trained":
         raise UserError(f"--train-seed {args.train_seed}: only `study layout-trained` trains")
+    if args.train_epochs is not None and (args.what != "layout-trained" or args.train_epochs < 1):
+        raise UserError(f"--train-epochs {args.train_epochs}: expected a count ≥ 1, and only `study layout-trained` "
+                        "trains")
     if args.restore and args.what != "layout":
         raise UserError(f"--restore {args.restore}: only `study layout` restores")
     if args.restore_crops != "astronaut" and not args.restore:
@@ -164,6 +170,7 @@ def _layout_trained(args) -> int:
     entry is refused in one line)."""
     from restore.studies.layout_trained import NAME, run_study
     out = out_dir(args.out)
-    run_study(out, [p for p in args.display.split(",") if p], quick=args.quick, train_seed=args.train_seed)
+    run_study(out, [p for p in args.display.split(",") if p], quick=args.quick, train_seed=args.train_seed,
+              epochs=args.train_epochs)
     print(f"wrote {out}/{NAME}.md, {NAME}.json, {NAME}.png, {NAME}_restored.png")
     return 0
