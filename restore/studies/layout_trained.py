@@ -157,7 +157,8 @@ def _score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
     for name in tqdm([n for n in banks if n not in done], desc="score", unit="layout", disable=not progress):
         t0 = time.perf_counter()
         model = load_model(out / "train" / name / "model.pt", "cpu")[0]
-        per_image = {**score_panel({"unet": model}, banks[name], 0, images), **_dep_and_far(banks[name], images)}
+        per_image = {**score_panel({"unet": model}, banks[name], 0, images, {"dep_far": subtract_far}),
+                     **_dep_without_far(banks[name], images)}
         rows.append({"layout": name, "images": len(images), **{f"psnr_{k}_db": float(np.mean(v))
                                                                 for k, v in per_image.items()},
                      "per_image_db": per_image, "seconds": round(time.perf_counter() - t0, 2), FIELD: prints[name]})
@@ -166,15 +167,12 @@ def _score(out: Path, banks: dict, data: Path, progress: bool) -> list[dict]:
     return sorted(rows, key=lambda r: order.index(r["layout"]))
 
 
-def _dep_and_far(bank, images: list) -> dict:
-    """DeP's scores (PSNR and level-matched) with panel 0's far field: on captures made without it (dep_nofar: what
-    the light past the kernel window costs DeP, whose kernel holds only the window), and on score_panel's captures
-    with it, then taken out of DeP's output (dep_far: restore.dep_far); the same noise draws as score_panel's."""
-    panel, nofar = bank.panels[0], replace(bank.panels[0], far=None)
-    pairs, nofar_pairs = panel_pairs(bank, panel, images), panel_pairs(bank, nofar, images)
-    given = [subtract_far(rgb, panel) for rgb in dep_outputs(panel, pairs)]
-    return {**output_scores("dep_nofar", dep_outputs(nofar, nofar_pairs), nofar_pairs),
-            **output_scores("dep_far", given, pairs)}
+def _dep_without_far(bank, images: list) -> dict:
+    """DeP (PSNR and level-matched) on captures of panel 0 made without its far field: what the light past the kernel
+    window costs DeP, whose kernel holds only the window (the same noise draws as score_panel's)."""
+    panel = replace(bank.panels[0], far=None)
+    pairs = panel_pairs(bank, panel, images)
+    return output_scores("dep_nofar", dep_outputs(panel, pairs), pairs)
 
 
 def paired(values: list[float], reference: list[float]) -> dict:

@@ -288,16 +288,21 @@ def model_outputs(model, bank: Bank, panel, pairs: list) -> list[np.ndarray]:
     return [predict_described(model, x, description, torch.device("cpu")) for x, _ in pairs]
 
 
-def score_panel(models: dict, bank: Bank, index: int, images: list) -> dict[str, dict]:
+def score_panel(models: dict, bank: Bank, index: int, images: list, dep_after: dict | None = None) -> dict[str, dict]:
     """{row key: scores} of the input, DeP with the panel's kernel (on the capture, and on the capture without the
-    sensor's noise) and each model on `images` degraded once through panel `index` (module doc; model_outputs)."""
+    sensor's noise) and each model on `images` degraded once through panel `index` (module doc; model_outputs);
+    dep_after: {row key: f} more rows, f(DeP's output on the capture, panel) (e.g. restore.dep_far.subtract_far)."""
     panel = bank.panels[index]
     pairs = panel_pairs(bank, panel, images)
     per_image = {"input": [paper_metrics(None, gt, packed=x)["psnr_db_paper"] for x, gt in pairs],
                  "input_level": [level_matched_psnr_db(None, gt, packed=x) for x, gt in pairs]}
+    dep = dep_outputs(panel, pairs)
+    per_image.update(output_scores("dep", dep, pairs))
+    for key, after in (dep_after or {}).items():
+        per_image.update(output_scores(key, [after(rgb, panel) for rgb in dep], pairs))
     quiet = replace(panel, sensor=replace(panel.sensor, noise="none"), defects=None, fpn=None)
-    for key, p, these in (("dep", panel, pairs), ("dep_noiseless", quiet, panel_pairs(bank, quiet, images))):
-        per_image.update(output_scores(key, dep_outputs(p, these), these))
+    quiet_pairs = panel_pairs(bank, quiet, images)
+    per_image.update(output_scores("dep_noiseless", dep_outputs(quiet, quiet_pairs), quiet_pairs))
     for key, model in models.items():
         per_image.update(output_scores(key, model_outputs(model, bank, panel, pairs), pairs))
     return per_image
