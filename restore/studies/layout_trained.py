@@ -78,8 +78,9 @@ CELL_PIXEL_UM = 1.0  # a preset's cell raster for @edge / @turned (the T-OLED's 
 NAME = "study_layout_trained"
 ROW_KEYS = ("input", "dep", "dep_noiseless", "dep_nofar", "dep_far", "unet")
 VERSION = 3  # 2: the dep_nofar row; 3: dep_far
-EPOCHS = 80  # the robustness recipe's 240 take 34 min a layout here (8.5 s an epoch on 2 cores with the physical
-# profile's online degradation at d = 2 mm); 80 (3840 steps) take 11 min
+EPOCHS = 80  # by time: 80 (3840 steps) take 5-6 min a layout on 2 cores with nothing beside them (3.7-4.7 s an epoch
+# with the physical profile's online degradation at d = 2 mm; 8.5 s beside other work), the robustness recipe's 240
+# take 17 min (--train-epochs 240: docs/guides/design.md has both)
 BUDGETS = {"quick": ROBUSTNESS_BUDGETS["quick"], "full": replace(ROBUSTNESS_BUDGETS["full"], epochs=EPOCHS)}
 
 

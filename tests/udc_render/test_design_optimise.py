@@ -12,7 +12,8 @@ import torch
 from psf import Lens, compute_kernels
 from psf.micrograph import MicrographLayout
 from udc_render import cli
-from udc_render.design import job, metrics, torch_psf as tp
+from udc_render.design import job, metrics, torch_psf as tp, upc
+from udc_render.design.cells import RINGS
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer, scatter
 from udc_render.optics.displays import DisplayError, load_display
 
@@ -40,6 +41,35 @@ def test_the_wiener_objective_is_the_restorability_of_the_engines_kernels():
     ref = np.mean(metrics.restorability(engine.kernels, kept)["wiener_mse"])
     assert abs(parts["objective"] / ref - 1) < 1e-10 and abs(parts["open_area"] - 6 / 25) < 1e-15
     assert abs(parts["psnr_db"] + 10 * np.log10(ref)) < 1e-9
+
+
+def test_the_rings_objective_is_upcs_statistic_in_their_sampling():
+    """--optics upc --objective rings scores −mean log of metrics.ring_summary's mean ring minima (numpy masks) of
+    upc.psf on the held-out tiling, over the channels asked; in the rig's optics, of the engine-exact kernels."""
+    cell = _binary(21, 88, 1)
+    full = Designer(DesignConfig(objective="rings", optics="upc", scatters=1))
+    blue = Designer(DesignConfig(objective="rings", optics="upc", channels="B", scatters=1))
+    with torch.no_grad():
+        k = upc.psf(torch.tensor(cell), full.transforms("final")).numpy()
+    minima = np.array(metrics.ring_summary(k, RINGS)["mean_of_ring_minima"])
+    assert abs(full.score(cell)["objective"] / -np.mean(np.log(minima)) - 1) < 1e-12
+    assert abs(blue.score(cell)["objective"] / -np.log(minima[2]) - 1) < 1e-12 and blue.score(cell)["psnr_db"] is None
+    rig = Designer(DesignConfig(**{**TINY, "objective": "rings", "channels": "GB"}))
+    small = _binary(5, 6, 2)
+    with torch.no_grad():
+        kernels = tp.kernels(torch.tensor(small), rig.grid, rig.transforms("final")).numpy()
+    ring_minima = metrics.ring_summary(kernels[1:])["mean_of_ring_minima"]
+    assert abs(rig.score(small)["objective"] / -np.mean(np.log(ring_minima)) - 1) < 1e-12
+
+
+def test_a_checkpoint_from_before_the_optics_option_resumes():
+    """A state saved without 'optics' and 'channels' (the settings' defaults then) loads into the default run only."""
+    d = Designer(DesignConfig(**TINY))
+    state = d.state()
+    old = {**state, "config": {k: v for k, v in state["config"].items() if k not in ("optics", "channels")}}
+    Designer(DesignConfig(**TINY)).load(old)
+    with pytest.raises(tp.DesignError, match=r"other settings \(channels\)"):
+        Designer(DesignConfig(**{**TINY, "channels": "B"})).load(old)
 
 
 @pytest.mark.parametrize("tiling", ["repeated", pytest.param("turned", marks=pytest.mark.slow)])  # turned: 9 s, CI time
@@ -123,6 +153,11 @@ def test_the_designed_display_files_are_displays(tmp_path):
     (["--objective", "crop", "--crop-px", "1"], "--crop-px 1: expected an integer ≥ 2"),
     (["--contrast", "0"], "--contrast"),
     (["--init", "poled"], "--init"),
+    (["--optics", "upc"], "--optics upc takes --objective upc or rings, got wiener"),
+    (["--optics", "upc", "--objective", "rings", "--cell-um", "160"],
+     "--optics upc: UPC's sampling takes their 168 µm cell of 8 µm features, got --cell-um 160"),
+    (["--channels", "BX"], "--channels BX: expected some of RGB, each once"),
+    (["--channels", "GG"], "--channels GG"),
 ])
 def test_design_refuses_in_one_line(tmp_path, capsys, argv, says):
     assert cli.main(["design", *argv, "--out", str(tmp_path / "never")]) == 2

@@ -6,11 +6,13 @@ from pathlib import Path
 
 from udc_render.cli.args import out_dir, positive
 from udc_render.design.options import (
+    CHANNELS,
     CROP_PX,
     DEFAULT_FEATURE_UM,
     INITS,
     LITHOGRAPHY_UM,
     OBJECTIVES,
+    OPTICS,
     TILINGS,
 )
 
@@ -30,7 +32,13 @@ def register(sub) -> None:
     p.add_argument("--objective", choices=OBJECTIVES, default="wiener",
                    help="wiener: the Wiener estimate's expected error under the sensor's noise; upc: UPC's "
                         "Wiener-response term (lowest 30 %% of |H|²/(|H|² + 0.015)); crop: wiener on a --crop-px crop, "
-                        "the kernel's light reaching past it interference [wiener]")
+                        "the kernel's light reaching past it interference; rings: UPC's mean ring minima of the MTF, "
+                        "their figure of merit (−mean log over the channels) [wiener]")
+    p.add_argument("--optics", choices=OPTICS, default="rig",
+                   help="rig: the paper's rig, the engine's exact kernels; upc: UPC's sampling (610 / 530 / 470 nm, "
+                        "f = 10 mm, their 168 µm cell of 8 µm), with --objective upc or rings [rig]")
+    p.add_argument("--channels", default=CHANNELS,
+                   help=f"the channels the objective averages, some of {CHANNELS} (e.g. B) [{CHANNELS}]")
     p.add_argument("--crop-px", type=positive("--crop-px", int), default=CROP_PX,
                    help=f"--objective crop: the restorer's crop in px [{CROP_PX}: study layout --restore dep's]")
     p.add_argument("--contrast", type=positive("--contrast"), default=None,
@@ -62,7 +70,7 @@ def run(args) -> int:
     from udc_render.design.optimise import DesignConfig
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
-                          args.contrast, args.init)
+                          args.contrast, args.init, args.optics, args.channels)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]

@@ -29,6 +29,7 @@ from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 __all__ = ["CHECKPOINT_STEPS", "run_design", "scatter_baseline", "upc_comparison"]
 
 CHECKPOINT_STEPS = 10
+WIENER_OBJECTIVES = ("wiener", "crop")  # scored as a PSNR in dB (higher is better); the others as the objective
 
 
 def _save_state(designer: Designer, path: Path) -> None:
@@ -46,9 +47,9 @@ def _display_toml(name: str, image: str, pixel_um: float, open_area: float, turn
 def scatter_baseline(designer: Designer, design: dict) -> dict:
     """N random scatters of the same open squares (streams 'design', 'scatter', k), scored as the design is (held-
     out tiling, float64): their objectives, mean, standard deviation, best, and the design's margin over the best
-    (in dB for 'wiener' and 'crop', in the objective's units for 'upc'; positive: the design is better)."""
+    (in dB for 'wiener' and 'crop', in the objective's units for 'upc' and 'rings'; positive: the design is better)."""
     scores = [designer.score(scatter(designer.config, "scatter", k)) for k in range(designer.config.scatters)]
-    key = "objective" if designer.config.objective == "upc" else "psnr_db"
+    key = "psnr_db" if designer.config.objective in WIENER_OBJECTIVES else "objective"
     values = np.array([s[key] for s in scores])
     best = float(values.max() if key == "psnr_db" else values.min())
     margin = design[key] - best if key == "psnr_db" else best - design[key]
@@ -82,7 +83,7 @@ def _loss_figure(doc: dict, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6, 4))
-    wiener = doc["config"]["objective"] != "upc"
+    wiener = doc["config"]["objective"] in WIENER_OBJECTIVES
     values = [doc["initial"]["search_objective"]] + [r["objective"] for r in doc["losses"]]
     ax.plot(np.arange(len(values)), -10 * np.log10(values) if wiener else values, label="the search (its tiling)")
     base = doc["scatters"]
@@ -91,8 +92,8 @@ def _loss_figure(doc: dict, out: Path) -> None:
     ax.axhline(base["best"], color="C3", label="the best scatter")
     ax.plot([len(values) - 1], [doc["final"]["psnr_db" if wiener else "objective"]], "ko", label="the design, held out")
     ax.set_xlabel("step (accepted swaps)")
-    ax.set_ylabel({"wiener": "Wiener PSNR (dB)", "crop": "Wiener PSNR on the crop (dB)"}.get(doc["config"]["objective"],
-                                                                                             "UPC objective"))
+    ax.set_ylabel({"wiener": "Wiener PSNR (dB)", "crop": "Wiener PSNR on the crop (dB)",
+                   "rings": "−mean log of the mean ring minimum"}.get(doc["config"]["objective"], "UPC objective"))
     ax.legend(fontsize=8)
     save_figure(fig, out / "design_loss.png")
     plt.close(fig)

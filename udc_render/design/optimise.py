@@ -30,7 +30,13 @@ tiled plainly or by one fixed random D4 tiling (the search's; the final scores t
   the exact posterior mean on finite crops (crop.crop_mse): the designed cell of 'wiener' restores 9 dB below the
   T-OLED in DeP on 192-px crops because its light reaches ±96 px and more (docs/guides/design.md);
 - 'upc': UPC's first term, −0.01 × the mean of the lowest 30 % of |H|² / (|H|² + 0.015) (their image L2 term,
-  which needs an image set, is left out; their open-area term is met exactly by the swaps).
+  which needs an image set, is left out; their open-area term is met exactly by the swaps);
+- 'rings': UPC's figure of merit itself, −mean over the channels of log(the mean over rings k = 1 … S/2 − 1 of the
+  ring minimum of the MTF) (metrics.ring_summary's statistic; its gradient reaches only each ring's minimum).
+Each objective takes the channels given (default R, G, B; e.g. 'B' alone). optics 'upc' computes the kernels in
+UPC's sampling instead (udc_render.design.upc: 610 / 530 / 470 nm, f = 10 mm, their 21 × 21 cell of 8 µm, the
+display tiled over 73 × 73 cells): their loss or their statistic in their optics, the comparison with their
+optimised cell. It takes the objectives 'upc' and 'rings' (the Wiener objectives need the rig's sensor sampling).
 The search scores in float32 (a swap is taken only if it lowers J by more than IMPROVE_REL of J, well above
 float32's rounding); every reported score is float64.
 
@@ -46,15 +52,17 @@ import numpy as np
 import torch
 
 from psf.lens import Lens
-from udc_render.design import metrics, torch_psf as tp
+from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.design.crop import near_window, split_kernel
 from udc_render.design.options import (
+    CHANNELS,
     CONTRAST_DEFAULTS,
     CROP_PX,
     DEFAULT_FEATURE_UM,
     INITS,
     LITHOGRAPHY_UM,
     OBJECTIVES,
+    OPTICS,
     TILINGS,
 )
 from udc_render.sensor.config import SensorConfig
@@ -65,6 +73,7 @@ __all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig"
 
 IMPROVE_REL = 1e-5
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
+_BEFORE_OPTICS = {"optics": "rig", "channels": CHANNELS}
 
 
 @dataclass(frozen=True)
@@ -84,6 +93,8 @@ class DesignConfig:
     crop_px: int = CROP_PX
     contrast: float | None = None  # None: the objective's (options.CONTRAST_DEFAULTS)
     init: str = "scatter"
+    optics: str = "rig"
+    channels: str = CHANNELS
 
     def __post_init__(self):
         if self.contrast is None:
@@ -104,12 +115,31 @@ class DesignConfig:
             raise tp.DesignError(f"--crop-px {self.crop_px}: expected an integer ≥ 2")
         if not self.contrast > 0:
             raise tp.DesignError(f"--contrast {self.contrast}: expected an RMS contrast > 0")
-        for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES), ("init", INITS)):
+        for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES), ("init", INITS), ("optics", OPTICS)):
             if getattr(self, key) not in allowed:
                 raise tp.DesignError(f"--{key} {getattr(self, key)}: expected one of {', '.join(allowed)}")
+        if not (self.channels and set(self.channels) <= set(CHANNELS) and len(set(self.channels)) == len(
+                self.channels)):
+            raise tp.DesignError(f"--channels {self.channels}: expected some of {CHANNELS}, each once")
+        if self.optics == "upc":
+            self._check_upc()
         for key in ("steps", "candidates", "scatters"):
             if not (isinstance(getattr(self, key), int) and getattr(self, key) >= 1):
                 raise tp.DesignError(f"--{key} {getattr(self, key)}: expected an integer ≥ 1")
+
+    def _check_upc(self) -> None:
+        if self.objective not in ("upc", "rings"):
+            raise tp.DesignError(f"--optics upc takes --objective upc or rings, got {self.objective} (the Wiener "
+                                 "objectives need the rig's sensor sampling: --optics rig)")
+        if (self.cell_um, self.feature_um) != (upc.CELL_PX * upc.PUPIL_UM, upc.PUPIL_UM):
+            raise tp.DesignError(f"--optics upc: UPC's sampling takes their {upc.CELL_PX * upc.PUPIL_UM:g} µm cell "
+                                 f"of {upc.PUPIL_UM:g} µm features, got --cell-um {self.cell_um:g} --feature-um "
+                                 f"{self.feature_um:g}")
+
+    @property
+    def channel_index(self) -> list[int]:
+        """The objective's channels as indices into the kernels' R, G, B."""
+        return [CHANNELS.index(c) for c in self.channels]
 
     @property
     def cell_px(self) -> int:
@@ -130,6 +160,25 @@ def scatter(config: DesignConfig, *keys) -> np.ndarray:
 
 def _spectrum(k: torch.Tensor) -> torch.Tensor:
     return torch.fft.fft2(torch.fft.ifftshift(k, dim=(-2, -1)))
+
+
+def ring_index(size: int) -> torch.Tensor:
+    """[size²] each MTF bin's ring k = round(|ν|) about the DC at size // 2 (metrics.ring_stats'), rings past
+    size // 2 − 1 pooled into one index that the statistic drops."""
+    i = np.abs(np.arange(size) - size // 2)
+    dist = np.rint(np.hypot(i[None, :], i[:, None])).astype(np.int64).ravel()
+    return torch.as_tensor(np.minimum(dist, size // 2))
+
+
+def mean_ring_minima(k: torch.Tensor, rings: torch.Tensor) -> torch.Tensor:
+    """[C] the mean over k = 1 … S/2 − 1 of each ring's minimum of the MTF |fft2| of unit-sum kernels k [C, S, S]
+    (metrics.ring_summary's 'mean_of_ring_minima', in torch: differentiable at each ring's minimum)."""
+    m = torch.fft.fftshift(_spectrum(k), dim=(-2, -1)).abs().flatten(1)
+    n = int(rings.max()) + 1
+    index = rings.to(m.device).expand(m.shape[0], -1)
+    minima = torch.full((m.shape[0], n), torch.inf, dtype=m.dtype, device=m.device)
+    minima = minima.scatter_reduce(1, index, m, "amin", include_self=True)
+    return minima[:, 1:-1].mean(dim=1)
 
 
 def toled_cell(config: DesignConfig) -> np.ndarray:
@@ -155,8 +204,13 @@ class Designer:
 
     def __init__(self, config: DesignConfig, sensor: SensorConfig | None = None, device: str = "cpu"):
         self.config, self.sensor, self.device = config, sensor or SensorConfig(), device
-        self.grid = tp.cell_grid(config.cell_px, config.feature_um, Lens(), RIG_WAVELENGTHS_NM, 3.1,
-                                 config.kernel_px, config.pupil_samples)
+        if config.optics == "upc":
+            self.grid, self.tiles, size = None, upc.tiles_for(upc.grid_sizes()[0]), upc.PSF_PX
+        else:
+            self.grid = tp.cell_grid(config.cell_px, config.feature_um, Lens(), RIG_WAVELENGTHS_NM, 3.1,
+                                     config.kernel_px, config.pupil_samples)
+            self.tiles, size = self.grid.tiles, config.kernel_px
+        self.rings = ring_index(size)
         variance = (config.contrast * metrics.MEAN_LEVEL) ** 2
         self.signal = torch.tensor(metrics.natural_spectrum(config.kernel_px, variance), device=device)
         self.window = torch.tensor(near_window(config.kernel_px, config.crop_px), device=device)
@@ -169,12 +223,17 @@ class Designer:
         """The search's fixed D4 tiling ('search') or the held-out one of the final scores ('final')."""
         if self.config.tiling == "repeated":
             return None
-        return tp.tile_transforms(self.grid.tiles, self.config.seed, keys=("design", which))
+        return tp.tile_transforms(self.tiles, self.config.seed, keys=("design", which))
 
     def objective(self, cell: torch.Tensor, transforms) -> torch.Tensor:
         """J of a cell of amplitudes (module doc): wiener (crop: its light split by the crop's near_window) at the
         transmission K / c² (the swaps keep it) × the fraction of the light inside the kernel's window."""
-        k, inside = tp.kernels_and_window(cell, self.grid, transforms)
+        channels = self.config.channel_index
+        if self.config.optics == "upc":
+            k = upc.psf(cell, transforms)[channels]
+        else:
+            k, inside = tp.kernels_and_window(cell, self.grid, transforms)
+            k, inside = k[channels], inside[channels]
         if self.config.objective in ("wiener", "crop"):
             near, far = split_kernel(k, self.window.to(k.dtype)) if self.config.objective == "crop" else (k, None)
             h, h_far = _spectrum(near), (None if far is None else _spectrum(far))
@@ -183,6 +242,8 @@ class Designer:
                                                                                        t), t,
                                                    None if h_far is None else h_far[c])
                                 for c, t in enumerate(kept)]).mean()
+        if self.config.objective == "rings":
+            return -torch.log(mean_ring_minima(k, self.rings)).mean()
         h = _spectrum(k)
         w = (h.abs() ** 2 / (h.abs() ** 2 + 0.015)).flatten()
         return -0.01 * torch.topk(w, int(0.3 * w.numel()), largest=False).values.mean()
@@ -242,8 +303,9 @@ class Designer:
                 "losses": self.losses}
 
     def load(self, state: dict) -> None:
-        if state["config"] != asdict(self.config):
-            changed = sorted(k for k, v in asdict(self.config).items() if state["config"].get(k) != v)
+        saved = {**_BEFORE_OPTICS, **state["config"]}  # checkpoints from before --optics and --channels
+        if saved != asdict(self.config):
+            changed = sorted(k for k, v in asdict(self.config).items() if saved.get(k) != v)
             raise tp.DesignError(f"the output folder holds a run with other settings ({', '.join(changed)}); "
                                  "use another --out or the same settings to resume")
         self.cell, self.current = np.asarray(state["cell"], np.float64), float(state["current"])

@@ -3,11 +3,13 @@ from __future__ import annotations
 
 LITHOGRAPHY_UM = 1.5  # LTPS lithography's resolution: the smallest --feature-um allowed
 DEFAULT_FEATURE_UM = 8.0  # UPC's pupil sampling (their 21 × 21 cell at 8 µm)
-OBJECTIVES = ("wiener", "upc", "crop")
+OBJECTIVES = ("wiener", "upc", "crop", "rings")
+OPTICS = ("rig", "upc")  # rig: the paper's rig, exact kernels; upc: UPC's sampling (udc_render.design.upc)
+CHANNELS = "RGB"
 INITS = ("scatter", "toled")
 CROP_PX = 192  # the objective 'crop's crop: `study layout --restore dep`'s
 # The scene's RMS contrast per objective when --contrast is not given. wiener: 0.3 (not studied). crop: 1.0, the
 # photographs' (astronaut's crops 0.6-1.6): from the T-OLED at 192 px its designs restore by DeP, paired against the
 # turned T-OLED on 8 photo crops, -0.46 / -0.20 / -0.06 dB at contrast 0.3 / 0.5 / 1.0 (docs/guides/design.md)
-CONTRAST_DEFAULTS = {"wiener": 0.3, "crop": 1.0, "upc": 0.3}  # upc does not use it
+CONTRAST_DEFAULTS = {"wiener": 0.3, "crop": 1.0, "upc": 0.3, "rings": 0.3}  # upc and rings do not use it
 TILINGS = ("repeated", "turned")

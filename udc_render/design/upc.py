@@ -22,8 +22,8 @@ import torch
 
 from udc_render.design.torch_psf import DesignError, tile
 
-__all__ = ["WAVELENGTHS_NM", "CELL_PX", "PUPIL_UM", "FOCAL_UM", "APERTURE_UM", "CROP_PX", "BOX_PX", "grid_sizes",
-           "display", "psf"]
+__all__ = ["WAVELENGTHS_NM", "CELL_PX", "PUPIL_UM", "FOCAL_UM", "APERTURE_UM", "CROP_PX", "BOX_PX", "PSF_PX",
+           "grid_sizes", "display", "psf"]
 
 WAVELENGTHS_NM = (610.0, 530.0, 470.0)
 CELL_PX = 21
@@ -33,6 +33,7 @@ FOCAL_UM = 10000.0
 APERTURE_UM = 4000.0
 CROP_PX = 1174
 BOX_PX = 4
+PSF_PX = -(-CROP_PX // BOX_PX)  # 294: the decimated PSF's side
 
 
 def grid_sizes(wavelengths_nm=WAVELENGTHS_NM) -> tuple[int, ...]:
