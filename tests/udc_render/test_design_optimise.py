@@ -128,6 +128,9 @@ def test_the_baseline_scatters_are_scored_as_the_design_is(tmp_path):
     upc = doc["upc"]
     assert all(t > 3 * r for t, r in zip(upc["turned"]["toled_edge"], upc["repeated"]["toled_edge"]))
     assert upc["turned"]["ratio"] == list(np.divide(upc["turned"]["design"], upc["turned"]["toled_edge"]))
+    for name in ("design", "toled_edge"):  # a ring's minimum is at most its mean; B's crop is its whole grid
+        assert np.all(np.array(upc["turned"]["ring_means"][name]) >= upc["turned"][name])
+        assert abs(upc["turned"]["kept"][name][2] - 1) < 1e-9 and 0 < upc["turned"]["kept"][name][0] < 1
 
 
 def test_the_designed_display_files_are_displays(tmp_path):

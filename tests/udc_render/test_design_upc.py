@@ -46,6 +46,19 @@ def test_a_d4_symmetric_cell_is_the_same_turned_or_not():
     assert np.abs(turned - plain).max() < 1e-12 * plain.max()
 
 
+def test_the_crops_share_of_a_comb_counts_its_orders():
+    """One open 8 µm sample per 168 µm cell: a comb of 21 equal orders per axis M / 21 bins apart (aliased: their
+    field is sampled at 8 µm), each an Airy spot of the 4 mm disc. The 1174² crop keeps the orders within ±587 bins:
+    (17 / 21)² in R, (19 / 21)² in G, all of B's (M = 1174). Measured −0.70 / −0.12 / 0 %: R's outer order lies
+    6 bins inside the crop's edge, and its spot's tail falls outside."""
+    cell = torch.zeros(21, 21, dtype=torch.float64)
+    cell[10, 10] = 1.0
+    kept = upc.kept_fraction(cell).numpy()
+    orders = [2 * np.floor(upc.CROP_PX // 2 / (m / 21)) + 1 for m in upc.grid_sizes()]
+    assert orders == [17, 19, 21]
+    assert np.all(np.abs(kept / (np.array(orders) / 21) ** 2 - 1) < 0.015) and abs(kept[2] - 1) < 1e-12
+
+
 def test_repeated_toled_reproduces_their_numbers():
     """Measured: ring means .149 / .164 / .153 (3–5 % above theirs), minima .0096 / .0123 / .0133 (≤ 2.5 %)."""
     s = metrics.ring_summary(upc.psf(_toled(False)).numpy(), 147)

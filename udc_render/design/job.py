@@ -61,7 +61,8 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
     """UPC's mean ring minima (R / G / B, their sampling) of the designed cell and of the preset T-OLED at the same
     open area in the same cell, its slit at the tile's edge (the framing that reproduces their turned baseline),
     turned (D4 tiles, seed config.seed) and repeated, each cell taken to 21 × 21 as `study layout` takes it; the
-    designed / T-OLED ratios."""
+    designed / T-OLED ratios; beside them the mean ring means and the share of the power inside UPC's crop
+    (upc.kept_fraction)."""
     from psf import layouts
     from udc_render.design import metrics, torch_psf as tp, upc
     from udc_render.design.cells import RINGS, frame_cell, layout_cell, upc_cell
@@ -71,10 +72,13 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
     for tiling, seed in (("turned", config.seed), ("repeated", None)):
         turns = tp.tile_transforms(upc.tiles_for(upc.grid_sizes()[0]), seed)
         with torch.no_grad():
-            minima = {name: metrics.ring_summary(upc.psf(torch.tensor(c), turns).numpy(), RINGS)["mean_of_ring_minima"]
-                      for name, c in cells.items()}
+            rings = {name: metrics.ring_summary(upc.psf(torch.tensor(c), turns).numpy(), RINGS)
+                     for name, c in cells.items()}
+            kept = {name: upc.kept_fraction(torch.tensor(c), turns).tolist() for name, c in cells.items()}
+        minima = {name: r["mean_of_ring_minima"] for name, r in rings.items()}
         ratio = np.divide(minima["design"], minima["toled_edge"])
-        out[tiling] = {**minima, "ratio": ratio.tolist(), "ratio_mean": float(ratio.mean())}
+        out[tiling] = {**minima, "ratio": ratio.tolist(), "ratio_mean": float(ratio.mean()),
+                       "ring_means": {name: r["mean_of_ring_means"] for name, r in rings.items()}, "kept": kept}
     return out
 
 

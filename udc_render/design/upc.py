@@ -23,7 +23,7 @@ import torch
 from udc_render.design.torch_psf import DesignError, tile
 
 __all__ = ["WAVELENGTHS_NM", "CELL_PX", "PUPIL_UM", "FOCAL_UM", "APERTURE_UM", "CROP_PX", "BOX_PX", "PSF_PX",
-           "grid_sizes", "display", "psf"]
+           "grid_sizes", "display", "psf", "kept_fraction"]
 
 WAVELENGTHS_NM = (610.0, 530.0, 470.0)
 CELL_PX = 21
@@ -73,17 +73,29 @@ def _box_decimate(p: torch.Tensor) -> torch.Tensor:
     return (s / BOX_PX ** 2)[::BOX_PX, ::BOX_PX]
 
 
-def psf(cell: torch.Tensor, transforms: np.ndarray | None = None) -> torch.Tensor:
-    """[3, 294, 294] unit-sum PSFs at 610 / 530 / 470 nm of a 21 × 21 cell (module doc)."""
+def _powers(cell: torch.Tensor, transforms: np.ndarray | None):
+    """Per wavelength: (the power |FFT|² over the M × M grid, its central CROP_PX² crop)."""
     sizes = grid_sizes()
     m0 = sizes[0]
     field = display(cell, m0, transforms) * _disc(m0, cell.dtype, cell.device)
-    out = []
     for m in sizes:
         a = (m0 - m) // 2
-        u = torch.fft.fftshift(torch.fft.fft2(field[a:a + m, a:a + m]))
+        p = torch.fft.fftshift(torch.fft.fft2(field[a:a + m, a:a + m])).abs() ** 2
         b = (m - CROP_PX) // 2
-        p = u[b:b + CROP_PX, b:b + CROP_PX].abs() ** 2
+        yield p, p[b:b + CROP_PX, b:b + CROP_PX]
+
+
+def psf(cell: torch.Tensor, transforms: np.ndarray | None = None) -> torch.Tensor:
+    """[3, 294, 294] unit-sum PSFs at 610 / 530 / 470 nm of a 21 × 21 cell (module doc)."""
+    out = []
+    for _, p in _powers(cell, transforms):
         p = _box_decimate(p)
         out.append(p / p.sum())
     return torch.stack(out)
+
+
+def kept_fraction(cell: torch.Tensor, transforms: np.ndarray | None = None) -> torch.Tensor:
+    """[3] the share of each wavelength's power inside the 1174² crop. The PSF is normalised after the crop, so its
+    MTF at every frequency ≠ 0 is the uncropped one's over this share (a PSF's light thrown past the crop raises
+    UPC's statistic). At 470 nm the crop is the whole grid (M = 1174): the share is 1."""
+    return torch.stack([crop.sum() / whole.sum() for whole, crop in _powers(cell, transforms)])
