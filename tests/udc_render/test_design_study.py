@@ -37,6 +37,9 @@ def test_study_layout_writes_its_tables_and_figures(tmp_path, capsys):
     assert all(len(c) == 147 for c in rep["ring_minima"])
     assert all(p > 0 for p in doc["restorability"]["turned"]["wiener_psnr_db"])
     assert "| UPC-compatible | turned |" in (out / "study_layout.md").read_text()
+    # UPC's crop keeps all of blue's light (their 470 nm grid is the crop) and less of red's
+    assert abs(turned["kept"][2] - 1) < 1e-9 and 0 < turned["kept"][0] < turned["kept"][1] <= 1
+    assert "1174² crop" in (out / "study_layout.md").read_text()
     # the banding at d = 2 mm: a vertical slit bands along x far more than along y (measured 4.7–5.0e-3
     # against 0.85–0.94e-3)
     band = doc["banding"]
@@ -108,3 +111,42 @@ def test_the_design_guide_prints_the_committed_designs_margin_over_the_scatters(
                    _rgb(upc["ratio"], ".2f") + " ×"):
         assert phrase in text, phrase
     assert base["margin"] > 5 * base["std"]  # the design beats the best scatter well outside the scatters' spread
+
+
+@pytest.mark.parametrize("folder, row, swaps", [
+    ("design_upc_B", "UPC's crop: searched for blue's ring minima, from a scatter", 23),
+    ("design_upc_B_toled", "UPC's crop: searched for blue's ring minima, from the T-OLED", 51),
+])
+def test_the_design_guide_prints_the_committed_blue_searches(folder, row, swaps):
+    """docs/guides/design.md's blue searches (`--optics upc --objective rings --channels B`) are the committed
+    design.json's: the table's shares, ring means and minima, the ratio to the T-OLED of the same run, the swaps."""
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8")
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+    doc = json.loads((root / "docs" / "figures" / "design" / folder / "design.json").read_text())
+    cfg, upc = doc["config"], doc["upc"]["turned"]
+    assert (cfg["optics"], cfg["objective"], cfg["channels"]) == ("upc", "rings", "B") and doc["converged"]
+    assert doc["steps_done"] == swaps and abs(np.exp(-doc["final"]["objective"]) / upc["design"][2] - 1) < 0.01
+    kept = " / ".join(f"{v:.3f}".lstrip("0") for v in upc["kept"]["design"][:2]) + " / 1"
+    for number in (kept, _rgb(upc["ring_means"]["design"], ".3f", True), _rgb(upc["design"], ".3f", True)):
+        assert number in rows[row], (rows[row], number)
+    flat = " ".join(text.split())
+    held_out = f"{np.exp(-doc['final']['objective']):.3f}".lstrip("0")
+    assert f"**{upc['ratio'][2]:.2f} ×**" in flat and f"({held_out} after {swaps} swaps" in flat
+
+
+@pytest.mark.parametrize("folder, row", [
+    ("study_toled168_20_edge", "UPC's crop: T-OLED 20 %, slit at the edge"),
+    ("study_design", "UPC's crop: designed for `wiener`"),
+    ("crop_studies/design", "UPC's crop: designed for `crop`"),
+])
+def test_the_design_guide_prints_the_committed_shares_kept_by_upcs_crop(folder, row):
+    """docs/guides/design.md's table of UPC's crop: the committed `study layout` JSONs' turned rows."""
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8")
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| ")}
+    t = json.loads((root / "docs" / "figures" / "design" / folder / "study_layout.json").read_text())["upc"]["turned"]
+    assert abs(t["kept"][2] - 1) < 1e-9
+    kept = " / ".join(f"{v:.3f}".lstrip("0") for v in t["kept"][:2]) + " / 1"
+    for number in (kept, _rgb(t["mean_of_ring_means"], ".3f", True), _rgb(t["mean_of_ring_minima"], ".3f", True)):
+        assert number in rows[row], (rows[row], number)

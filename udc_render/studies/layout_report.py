@@ -40,6 +40,10 @@ def markdown(s: LayoutScores) -> str:
         t = THEIRS[tiling]
         lines.append(f"| UPC's saved T-OLED | {tiling} | {_rgb(t['mean_of_ring_means'])} | "
                      f"{_rgb(t['mean_of_ring_minima'])} |")
+    if "kept" in s.upc["turned"]:  # reports from before the share was recorded lack it
+        lines += ["", "UPC-compatible mode: the share of the power inside their 1174² crop (the PSF is normalised "
+                  f"after it, raising its MTF by 1 / share): turned {_rgb(s.upc['turned']['kept'])}, repeated "
+                  f"{_rgb(s.upc['repeated']['kept'])}."]
     lines += ["", "## Wiener restorability on the paper's rig (PSNR in dB, R / G / B; 640 / 520 / 450 nm)", "",
               "| tiling | Wiener PSNR | light inside the 255-px window | Wiener PSNR, the light outside lost |",
               "|---|---|---|---|"]
