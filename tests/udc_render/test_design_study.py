@@ -150,3 +150,14 @@ def test_the_design_guide_prints_the_committed_shares_kept_by_upcs_crop(folder, 
     kept = " / ".join(f"{v:.3f}".lstrip("0") for v in t["kept"][:2]) + " / 1"
     for number in (kept, _rgb(t["mean_of_ring_means"], ".3f", True), _rgb(t["mean_of_ring_minima"], ".3f", True)):
         assert number in rows[row], (rows[row], number)
+
+
+def test_the_design_guide_prints_the_committed_upc_loss_run():
+    """docs/guides/design.md's run of UPC's loss in their optics is the committed design.json's."""
+    root = Path(__file__).resolve().parents[2]
+    text = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    doc = json.loads((root / "docs" / "figures" / "design" / "design_upc_loss" / "design.json").read_text())
+    upc = doc["upc"]["turned"]
+    assert (doc["config"]["optics"], doc["config"]["objective"]) == ("upc", "upc") and doc["converged"]
+    assert f"converged after {doc['steps_done']} swaps at **{_rgb(upc['ratio'], '.2f')} ×**" in text
+    assert f"keeping {' / '.join(f'{v:.3f}'.lstrip('0') for v in upc['kept']['design'][:2])} / 1" in text
