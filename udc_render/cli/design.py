@@ -37,6 +37,9 @@ def register(sub) -> None:
     p.add_argument("--optics", choices=OPTICS, default="rig",
                    help="rig: the paper's rig, the engine's exact kernels; upc: UPC's sampling (610 / 530 / 470 nm, "
                         "f = 10 mm, their 168 µm cell of 8 µm), with --objective upc or rings [rig]")
+    p.add_argument("--far-veil", action="store_true",
+                   help="wiener and crop: add the squared bias ((1 − f) / f)² μ² of the light past the kernel's window "
+                        "(share f inside), the veil a restorer with the window's kernel leaves (plain DeP)")
     p.add_argument("--channels", default=CHANNELS,
                    help=f"the channels the objective averages, some of {CHANNELS} (e.g. B) [{CHANNELS}]")
     p.add_argument("--crop-px", type=positive("--crop-px", int), default=CROP_PX,
@@ -70,7 +73,7 @@ def run(args) -> int:
     from udc_render.design.optimise import DesignConfig
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
-                          args.contrast, args.init, args.optics, args.channels)
+                          args.contrast, args.init, args.optics, args.channels, args.far_veil)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]

@@ -33,7 +33,10 @@ tiled plainly or by one fixed random D4 tiling (the search's; the final scores t
   which needs an image set, is left out; their open-area term is met exactly by the swaps);
 - 'rings': UPC's figure of merit itself, −mean over the channels of log(the mean over rings k = 1 … S/2 − 1 of the
   ring minimum of the MTF) (metrics.ring_summary's statistic; its gradient reaches only each ring's minimum).
-Each objective takes the channels given (default R, G, B; e.g. 'B' alone). optics 'upc' computes the kernels in
+With far_veil, 'wiener' and 'crop' add the squared bias of the light past the kernel's window, ((1 − f) / f)² μ²
+per channel (far_veil_mse): the veil a restorer whose kernel holds only the window leaves in its estimate (plain DeP
+in `study layout-trained`, where the bank adds that light as its far field). Without it that light only counts as
+lost. Each objective takes the channels given (default R, G, B; e.g. 'B' alone). optics 'upc' computes the kernels in
 UPC's sampling instead (udc_render.design.upc: 610 / 530 / 470 nm, f = 10 mm, their 21 × 21 cell of 8 µm, the
 display tiled over 73 × 73 cells): their loss or their statistic in their optics, the comparison with their
 optimised cell. It takes the objectives 'upc' and 'rings' (the Wiener objectives need the rig's sensor sampling).
@@ -73,7 +76,7 @@ __all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig"
 
 IMPROVE_REL = 1e-5
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
-_BEFORE_OPTICS = {"optics": "rig", "channels": CHANNELS}
+_BEFORE_OPTICS = {"optics": "rig", "channels": CHANNELS, "far_veil": False}
 
 
 @dataclass(frozen=True)
@@ -95,6 +98,7 @@ class DesignConfig:
     init: str = "scatter"
     optics: str = "rig"
     channels: str = CHANNELS
+    far_veil: bool = False
 
     def __post_init__(self):
         if self.contrast is None:
@@ -123,6 +127,9 @@ class DesignConfig:
             raise tp.DesignError(f"--channels {self.channels}: expected some of {CHANNELS}, each once")
         if self.optics == "upc":
             self._check_upc()
+        if self.far_veil and self.objective not in ("wiener", "crop"):
+            raise tp.DesignError(f"--far-veil: takes --objective wiener or crop (the light past the kernel's window), "
+                                 f"got {self.objective}")
         for key in ("steps", "candidates", "scatters"):
             if not (isinstance(getattr(self, key), int) and getattr(self, key) >= 1):
                 raise tp.DesignError(f"--{key} {getattr(self, key)}: expected an integer ≥ 1")
@@ -160,6 +167,13 @@ def scatter(config: DesignConfig, *keys) -> np.ndarray:
 
 def _spectrum(k: torch.Tensor) -> torch.Tensor:
     return torch.fft.fft2(torch.fft.ifftshift(k, dim=(-2, -1)))
+
+
+def far_veil_mse(inside: torch.Tensor, mean_level: float = metrics.MEAN_LEVEL) -> torch.Tensor:
+    """[C] the squared bias ((1 − f) / f)² μ² that the light past the kernel's window leaves in a restorer whose
+    kernel holds only the window (f: the share inside it): that light lands as a veil of about the scene's mean,
+    relative to the window's light, and passes the restorer's filter at its DC gain of 1 (restore.dep_far)."""
+    return ((1 - inside) / inside) ** 2 * mean_level ** 2
 
 
 def ring_index(size: int) -> torch.Tensor:
@@ -238,10 +252,11 @@ class Designer:
             near, far = split_kernel(k, self.window.to(k.dtype)) if self.config.objective == "crop" else (k, None)
             h, h_far = _spectrum(near), (None if far is None else _spectrum(far))
             signal, kept = self.signal.to(cell.dtype), self.transmission * inside
-            return torch.stack([metrics.wiener_mse(h[c], signal, metrics.noise_variance(self.sensor, metrics.MEAN_LEVEL,
-                                                                                       t), t,
-                                                   None if h_far is None else h_far[c])
-                                for c, t in enumerate(kept)]).mean()
+            mse = torch.stack([metrics.wiener_mse(h[c], signal, metrics.noise_variance(self.sensor, metrics.MEAN_LEVEL,
+                                                                                      t), t,
+                                                  None if h_far is None else h_far[c])
+                               for c, t in enumerate(kept)])
+            return (mse + far_veil_mse(inside) if self.config.far_veil else mse).mean()
         if self.config.objective == "rings":
             return -torch.log(mean_ring_minima(k, self.rings)).mean()
         h = _spectrum(k)
