@@ -161,3 +161,50 @@ def test_the_design_guide_prints_the_committed_upc_loss_run():
     assert (doc["config"]["optics"], doc["config"]["objective"]) == ("upc", "upc") and doc["converged"]
     assert f"converged after {doc['steps_done']} swaps at **{_rgb(upc['ratio'], '.2f')} ×**" in text
     assert f"keeping {' / '.join(f'{v:.3f}'.lstrip('0') for v in upc['kept']['design'][:2])} / 1" in text
+
+
+@pytest.mark.parametrize("seed, folder", [(0, "layout_trained_e240"), (1, "layout_trained_e240_seed1"),
+                                          (2, "layout_trained_e240_seed2")])
+def test_the_design_guide_prints_the_committed_240_epoch_margins(seed, folder):
+    """docs/guides/design.md's UNet margins at 240 epochs are the committed runs' (design − turned T-OLED, paired)."""
+    root = Path(__file__).resolve().parents[2]
+    text = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    doc = json.loads((root / "docs" / "figures" / "design" / folder / "study_layout_trained.json").read_text())
+    assert doc["seeds"]["train"] == seed and doc["budget"]["epochs"] == 240
+    p = doc["paired"]["design_turned"]["unet"]
+    margin = f"{p['mean_db']:+.2f} ± {p['se_db']:.2f} dB (seed {seed}, {p['wins']} of {p['n']})"
+    assert margin.replace("-", "−") in text, margin
+
+
+def test_the_design_guide_prints_the_committed_veil_design():
+    """docs/guides/design.md's design with --far-veil: its run, its UPC ratios, and its paired margins through the
+    simulator are the committed JSONs'."""
+    root = Path(__file__).resolve().parents[2]
+    text = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    figures = root / "docs" / "figures" / "design"
+    design = json.loads((figures / "design_veil" / "design.json").read_text())
+    assert design["config"]["far_veil"] and design["converged"]
+    assert f"converged after {design['steps_done']} swaps and {design['evaluations']} exact scores" in text
+    assert f"{_rgb(design['upc']['turned']['ratio'], '.2f')} × the T-OLED in UPC's mode" in text
+    study = json.loads((figures / "layout_trained_veil" / "study_layout_trained.json").read_text())
+    row = next(r for r in study["rows"] if r["layout"] == "design_turned")
+    paired = study["paired"]["design_turned"]
+    for key in ("dep", "dep_far", "unet"):
+        p = paired[key]
+        assert f"{p['mean_db']:+.2f} ± {p['se_db']:.2f} dB ({p['wins']} of {p['n']})" in text, key
+    assert f"| {row['psnr_input_db']:.2f} | **{row['psnr_dep_db']:.2f}** | {row['psnr_dep_nofar_db']:.2f} |" in text
+
+
+def test_the_design_guide_prints_the_veil_designs_unet_seeds():
+    """The veil design's UNet margins per training seed (80 epochs) and their mean are the committed runs'."""
+    root = Path(__file__).resolve().parents[2]
+    text = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    margins = []
+    for seed, folder in enumerate(sorted((root / "docs" / "figures" / "design").glob("layout_trained_veil*"))):
+        doc = json.loads((folder / "study_layout_trained.json").read_text())
+        assert doc["seeds"]["train"] == seed and doc["budget"]["epochs"] == 80
+        p = doc["paired"]["design_turned"]["unet"]
+        assert f"{p['mean_db']:+.2f} ± {p['se_db']:.2f} dB ({p['wins']} of {p['n']})" in text
+        margins.append(p["mean_db"])
+    se = np.std(margins, ddof=1) / np.sqrt(len(margins))
+    assert f"{np.mean(margins):+.2f} ± {se:.2f} dB over the {['two', 'three', 'four'][len(margins) - 2]} seeds" in text
