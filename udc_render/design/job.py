@@ -72,9 +72,9 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
     for tiling, seed in (("turned", config.seed), ("repeated", None)):
         turns = tp.tile_transforms(upc.tiles_for(upc.grid_sizes()[0]), seed)
         with torch.no_grad():
-            rings = {name: metrics.ring_summary(upc.psf(torch.tensor(c), turns).numpy(), RINGS)
-                     for name, c in cells.items()}
-            kept = {name: upc.kept_fraction(torch.tensor(c), turns).tolist() for name, c in cells.items()}
+            both = {name: upc.psf_and_kept(torch.tensor(c), turns) for name, c in cells.items()}
+        rings = {name: metrics.ring_summary(p.numpy(), RINGS) for name, (p, _) in both.items()}
+        kept = {name: k.tolist() for name, (_, k) in both.items()}
         minima = {name: r["mean_of_ring_minima"] for name, r in rings.items()}
         ratio = np.divide(minima["design"], minima["toled_edge"])
         out[tiling] = {**minima, "ratio": ratio.tolist(), "ratio_mean": float(ratio.mean()),

@@ -23,7 +23,7 @@ import torch
 from udc_render.design.torch_psf import DesignError, tile
 
 __all__ = ["WAVELENGTHS_NM", "CELL_PX", "PUPIL_UM", "FOCAL_UM", "APERTURE_UM", "CROP_PX", "BOX_PX", "PSF_PX",
-           "grid_sizes", "display", "psf", "kept_fraction"]
+           "grid_sizes", "display", "psf", "kept_fraction", "psf_and_kept"]
 
 WAVELENGTHS_NM = (610.0, 530.0, 470.0)
 CELL_PX = 21
@@ -85,17 +85,23 @@ def _powers(cell: torch.Tensor, transforms: np.ndarray | None):
         yield p, p[b:b + CROP_PX, b:b + CROP_PX]
 
 
+def psf_and_kept(cell: torch.Tensor, transforms: np.ndarray | None = None) -> tuple[torch.Tensor, torch.Tensor]:
+    """(psf, kept_fraction) from one pass of the FFTs."""
+    out, kept = [], []
+    for whole, crop in _powers(cell, transforms):
+        p = _box_decimate(crop)
+        out.append(p / p.sum())
+        kept.append(crop.sum() / whole.sum())
+    return torch.stack(out), torch.stack(kept)
+
+
 def psf(cell: torch.Tensor, transforms: np.ndarray | None = None) -> torch.Tensor:
     """[3, 294, 294] unit-sum PSFs at 610 / 530 / 470 nm of a 21 × 21 cell (module doc)."""
-    out = []
-    for _, p in _powers(cell, transforms):
-        p = _box_decimate(p)
-        out.append(p / p.sum())
-    return torch.stack(out)
+    return psf_and_kept(cell, transforms)[0]
 
 
 def kept_fraction(cell: torch.Tensor, transforms: np.ndarray | None = None) -> torch.Tensor:
     """[3] the share of each wavelength's power inside the 1174² crop. The PSF is normalised after the crop, so its
     MTF at every frequency ≠ 0 is the uncropped one's over this share (a PSF's light thrown past the crop raises
     UPC's statistic). At 470 nm the crop is the whole grid (M = 1174): the share is 1."""
-    return torch.stack([crop.sum() / whole.sum() for whole, crop in _powers(cell, transforms)])
+    return psf_and_kept(cell, transforms)[1]

@@ -103,8 +103,9 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
         for tiling in TILINGS:
             s = seed if tiling == "turned" else None
             turns = tp.tile_transforms(upc.tiles_for(upc.grid_sizes()[0]), s)
-            p = upc.psf(small, turns).numpy()
-            out["upc"][tiling] = {**metrics.ring_summary(p, RINGS), "kept": upc.kept_fraction(small, turns).tolist()}
+            p, kept = upc.psf_and_kept(small, turns)
+            p = p.numpy()
+            out["upc"][tiling] = {**metrics.ring_summary(p, RINGS), "kept": kept.tolist()}
             k = tp.kernels(big, upc_grid, tp.tile_transforms(upc_grid.tiles, s)).numpy()
             out["exact"][tiling] = metrics.ring_summary(k, min(RINGS, upc_grid.size_px // 2))
             r, inside = (v.numpy() for v in tp.kernels_and_window(big, rig_grid, tp.tile_transforms(rig_grid.tiles, s)))
