@@ -40,6 +40,11 @@ def register(sub) -> None:
     p.add_argument("--far-veil", action="store_true",
                    help="wiener and crop: add the squared bias ((1 − f) / f)² μ² of the light past the kernel's window "
                         "(share f inside), the veil a restorer with the window's kernel leaves (plain DeP)")
+    p.add_argument("--upc-floor", type=positive("--upc-floor"), default=None,
+                   help="wiener and crop: hold UPC's mean ring minima (their sampling) at this ratio to the T-OLED's "
+                        "in --floor-channels, by a hinge on the objective (udc_render.design.floor) [off]")
+    p.add_argument("--floor-channels", default="G",
+                   help=f"the channels --upc-floor holds, some of {CHANNELS} [G: UPC's headline ratio, 1.26 ×]")
     p.add_argument("--channels", default=CHANNELS,
                    help=f"the channels the objective averages, some of {CHANNELS} (e.g. B) [{CHANNELS}]")
     p.add_argument("--crop-px", type=positive("--crop-px", int), default=CROP_PX,
@@ -47,9 +52,10 @@ def register(sub) -> None:
     p.add_argument("--contrast", type=positive("--contrast"), default=None,
                    help="the scene's RMS contrast in the wiener and crop objectives [0.3 with wiener; 1.0 with crop: "
                         "its designs restore best by DeP at 1.0 of 0.3, 0.5, 1.0 (docs/guides/design.md)]")
-    p.add_argument("--init", choices=INITS, default="scatter",
-                   help="the search's start: scatter: a random scatter; toled: the preset T-OLED on the squares, its "
-                        "slit at the tile's edge [scatter]")
+    p.add_argument("--init", default="scatter",
+                   help=f"the search's start, one of {', '.join(INITS)} or a cell PNG: scatter: a random scatter; "
+                        "toled: the preset T-OLED on the squares, its slit at the tile's edge; PATH: a former design's "
+                        "cell.png (0 / 255, the same squares and open area) [scatter]")
     p.add_argument("--steps", type=positive("--steps", int), default=150,
                    help="at most this many swaps of an open and an opaque square; the search stops earlier at a "
                         "local optimum [150]")
@@ -73,7 +79,8 @@ def run(args) -> int:
     from udc_render.design.optimise import DesignConfig
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
-                          args.contrast, args.init, args.optics, args.channels, args.far_veil)
+                          args.contrast, args.init, args.optics, args.channels, args.far_veil,
+                          args.upc_floor, args.floor_channels)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]

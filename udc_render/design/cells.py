@@ -36,8 +36,37 @@ def frame_cell(cell: np.ndarray, frame: str = "as_given") -> np.ndarray:
 
 def upc_cell(cell: np.ndarray) -> np.ndarray:
     """The cell resampled (exact area weighting of its squares) to UPC's 21 × 21."""
-    c = cell.shape[0]
-    edges_in, edges_out = np.linspace(0, 1, c + 1), np.linspace(0, 1, upc.CELL_PX + 1)
-    w = np.clip(np.minimum(edges_out[1:, None], edges_in[None, 1:])
-                - np.maximum(edges_out[:-1, None], edges_in[None, :-1]), 0, None) * upc.CELL_PX
+    w = resample_matrix(cell.shape[0])
     return w @ cell @ w.T
+
+
+def toled_reference(cell_um: float, open_fraction: float) -> np.ndarray:
+    """The preset T-OLED at the open area in a cell_um cell, its slit at the tile's edge, in UPC's 21 × 21: the
+    reference of the design's UPC ratios (job.upc_comparison, floor.UpcFloor)."""
+    from psf import layouts
+    toled, _ = layout_cell(layouts.toled(pitch_um=cell_um, open_fraction=open_fraction))
+    return upc_cell(frame_cell(toled, "edge"))
+
+
+def resample_matrix(c: int) -> np.ndarray:
+    """[21, c] W with upc_cell(cell) = W cell Wᵀ (exact area weighting of the squares)."""
+    edges_in, edges_out = np.linspace(0, 1, c + 1), np.linspace(0, 1, upc.CELL_PX + 1)
+    return np.clip(np.minimum(edges_out[1:, None], edges_in[None, 1:])
+                   - np.maximum(edges_out[:-1, None], edges_in[None, :-1]), 0, None) * upc.CELL_PX
+
+
+def read_cell(path: str, cell_px: int, open_squares: int) -> np.ndarray:
+    """A binary cell from a PNG of cell_px² pixels, 0 (opaque) or 255 (open), with open_squares open: a former
+    design's cell.png as the search's start (design --init PATH)."""
+    import imageio.v3 as iio
+    try:
+        image = np.asarray(iio.imread(path))
+    except (OSError, ValueError) as err:
+        raise tp.DesignError(f"--init {path}: cannot read a PNG ({err})") from None
+    if image.shape != (cell_px, cell_px) or not np.isin(image, (0, 255)).all():
+        raise tp.DesignError(f"--init {path}: expected a {cell_px} × {cell_px} grey PNG of 0 and 255 (a design's "
+                             f"cell.png), got shape {image.shape}")
+    if int((image == 255).sum()) != open_squares:
+        raise tp.DesignError(f"--init {path}: {int((image == 255).sum())} open squares; the open area needs "
+                             f"{open_squares}")
+    return (image == 255).astype(np.float64)

@@ -63,11 +63,9 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
     turned (D4 tiles, seed config.seed) and repeated, each cell taken to 21 × 21 as `study layout` takes it; the
     designed / T-OLED ratios; beside them the mean ring means and the share of the power inside UPC's crop
     (upc.kept_fraction)."""
-    from psf import layouts
     from udc_render.design import metrics, torch_psf as tp, upc
-    from udc_render.design.cells import RINGS, frame_cell, layout_cell, upc_cell
-    toled, _ = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
-    cells = {"design": upc_cell(cell), "toled_edge": upc_cell(frame_cell(toled, "edge"))}
+    from udc_render.design.cells import RINGS, toled_reference, upc_cell
+    cells = {"design": upc_cell(cell), "toled_edge": toled_reference(config.cell_um, config.open_fraction)}
     out = {}
     for tiling, seed in (("turned", config.seed), ("repeated", None)):
         turns = tp.tile_transforms(upc.tiles_for(upc.grid_sizes()[0]), seed)

@@ -40,6 +40,9 @@ lost. Each objective takes the channels given (default R, G, B; e.g. 'B' alone).
 UPC's sampling instead (udc_render.design.upc: 610 / 530 / 470 nm, f = 10 mm, their 21 × 21 cell of 8 µm, the
 display tiled over 73 × 73 cells): their loss or their statistic in their optics, the comparison with their
 optimised cell. It takes the objectives 'upc' and 'rings' (the Wiener objectives need the rig's sensor sampling).
+With upc_floor R, 'wiener' and 'crop' are searched times a hinge that holds UPC's mean ring minima at R × the
+T-OLED's in the floor's channels (udc_render.design.floor): the restoration objective under UPC's target. init takes
+'scatter', 'toled' or a former design's cell.png (a search from another start).
 The search scores in float32 (a swap is taken only if it lowers J by more than IMPROVE_REL of J, well above
 float32's rounding); every reported score is float64.
 
@@ -56,7 +59,10 @@ import torch
 
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp, upc
+from udc_render.design.cells import read_cell
 from udc_render.design.crop import near_window, split_kernel
+from udc_render.design.floor import UpcFloor
+from udc_render.design.mtf import mean_ring_minima, ring_index, spectrum
 from udc_render.design.options import (
     CHANNELS,
     CONTRAST_DEFAULTS,
@@ -76,7 +82,7 @@ __all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig"
 
 IMPROVE_REL = 1e-5
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
-_BEFORE_OPTICS = {"optics": "rig", "channels": CHANNELS, "far_veil": False}
+_BEFORE_OPTICS = {"optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G"}
 
 
 @dataclass(frozen=True)
@@ -99,6 +105,8 @@ class DesignConfig:
     optics: str = "rig"
     channels: str = CHANNELS
     far_veil: bool = False
+    upc_floor: float | None = None
+    floor_channels: str = "G"
 
     def __post_init__(self):
         if self.contrast is None:
@@ -119,14 +127,17 @@ class DesignConfig:
             raise tp.DesignError(f"--crop-px {self.crop_px}: expected an integer ≥ 2")
         if not self.contrast > 0:
             raise tp.DesignError(f"--contrast {self.contrast}: expected an RMS contrast > 0")
-        for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES), ("init", INITS), ("optics", OPTICS)):
+        for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES), ("optics", OPTICS)):
             if getattr(self, key) not in allowed:
                 raise tp.DesignError(f"--{key} {getattr(self, key)}: expected one of {', '.join(allowed)}")
         if not (self.channels and set(self.channels) <= set(CHANNELS) and len(set(self.channels)) == len(
                 self.channels)):
             raise tp.DesignError(f"--channels {self.channels}: expected some of {CHANNELS}, each once")
+        if self.init not in INITS:
+            read_cell(self.init, self.cell_px, self.open_squares)
         if self.optics == "upc":
             self._check_upc()
+        self._check_floor()
         if self.far_veil and self.objective not in ("wiener", "crop"):
             raise tp.DesignError(f"--far-veil: takes --objective wiener or crop (the light past the kernel's window), "
                                  f"got {self.objective}")
@@ -142,6 +153,18 @@ class DesignConfig:
             raise tp.DesignError(f"--optics upc: UPC's sampling takes their {upc.CELL_PX * upc.PUPIL_UM:g} µm cell "
                                  f"of {upc.PUPIL_UM:g} µm features, got --cell-um {self.cell_um:g} --feature-um "
                                  f"{self.feature_um:g}")
+
+    def _check_floor(self) -> None:
+        if not set(self.floor_channels) <= set(CHANNELS) or len(set(self.floor_channels)) != len(
+                self.floor_channels) or not self.floor_channels:
+            raise tp.DesignError(f"--floor-channels {self.floor_channels}: expected some of {CHANNELS}, each once")
+        if self.upc_floor is None:
+            return
+        if not self.upc_floor > 0:
+            raise tp.DesignError(f"--upc-floor {self.upc_floor}: expected a ratio to the T-OLED's > 0")
+        if self.objective not in ("wiener", "crop") or self.optics != "rig":
+            raise tp.DesignError(f"--upc-floor: takes --objective wiener or crop in --optics rig (the rings objective "
+                                 f"is UPC's statistic itself), got --objective {self.objective} --optics {self.optics}")
 
     @property
     def channel_index(self) -> list[int]:
@@ -165,34 +188,11 @@ def scatter(config: DesignConfig, *keys) -> np.ndarray:
     return flat.reshape(c, c)
 
 
-def _spectrum(k: torch.Tensor) -> torch.Tensor:
-    return torch.fft.fft2(torch.fft.ifftshift(k, dim=(-2, -1)))
-
-
 def far_veil_mse(inside: torch.Tensor, mean_level: float = metrics.MEAN_LEVEL) -> torch.Tensor:
     """[C] the squared bias ((1 − f) / f)² μ² that the light past the kernel's window leaves in a restorer whose
     kernel holds only the window (f: the share inside it): that light lands as a veil of about the scene's mean,
     relative to the window's light, and passes the restorer's filter at its DC gain of 1 (restore.dep_far)."""
     return ((1 - inside) / inside) ** 2 * mean_level ** 2
-
-
-def ring_index(size: int) -> torch.Tensor:
-    """[size²] each MTF bin's ring k = round(|ν|) about the DC at size // 2 (metrics.ring_stats'), rings past
-    size // 2 − 1 pooled into one index that the statistic drops."""
-    i = np.abs(np.arange(size) - size // 2)
-    dist = np.rint(np.hypot(i[None, :], i[:, None])).astype(np.int64).ravel()
-    return torch.as_tensor(np.minimum(dist, size // 2))
-
-
-def mean_ring_minima(k: torch.Tensor, rings: torch.Tensor) -> torch.Tensor:
-    """[C] the mean over k = 1 … S/2 − 1 of each ring's minimum of the MTF |fft2| of unit-sum kernels k [C, S, S]
-    (metrics.ring_summary's 'mean_of_ring_minima', in torch: differentiable at each ring's minimum)."""
-    m = torch.fft.fftshift(_spectrum(k), dim=(-2, -1)).abs().flatten(1)
-    n = int(rings.max()) + 1
-    index = rings.to(m.device).expand(m.shape[0], -1)
-    minima = torch.full((m.shape[0], n), torch.inf, dtype=m.dtype, device=m.device)
-    minima = minima.scatter_reduce(1, index, m, "amin", include_self=True)
-    return minima[:, 1:-1].mean(dim=1)
 
 
 def toled_cell(config: DesignConfig) -> np.ndarray:
@@ -209,8 +209,12 @@ def toled_cell(config: DesignConfig) -> np.ndarray:
 
 
 def initial_cell(config: DesignConfig) -> np.ndarray:
-    """The search's start: a random scatter (stream 'design', 'init') or the T-OLED (toled_cell), by config.init."""
-    return toled_cell(config) if config.init == "toled" else scatter(config, "init")
+    """The search's start by config.init: a random scatter (stream 'design', 'init'), the T-OLED (toled_cell), or a
+    cell PNG (cells.read_cell: a former design's cell.png)."""
+    if config.init == "toled":
+        return toled_cell(config)
+    return scatter(config, "init") if config.init == "scatter" else read_cell(config.init, config.cell_px,
+                                                                               config.open_squares)
 
 
 class Designer:
@@ -229,6 +233,9 @@ class Designer:
         self.signal = torch.tensor(metrics.natural_spectrum(config.kernel_px, variance), device=device)
         self.window = torch.tensor(near_window(config.kernel_px, config.crop_px), device=device)
         self.transmission = config.open_squares / config.cell_px ** 2
+        self.floor = None if config.upc_floor is None else UpcFloor(
+            config.upc_floor, config.floor_channels, config.cell_px, config.cell_um, config.open_fraction,
+            config.seed, config.tiling == "turned", device)
         self.cell = initial_cell(config)
         self.current = self.search_score(self.cell)
         self.step_done, self.converged, self.evaluations, self.losses = 0, False, 1, []
@@ -250,7 +257,7 @@ class Designer:
             k, inside = k[channels], inside[channels]
         if self.config.objective in ("wiener", "crop"):
             near, far = split_kernel(k, self.window.to(k.dtype)) if self.config.objective == "crop" else (k, None)
-            h, h_far = _spectrum(near), (None if far is None else _spectrum(far))
+            h, h_far = spectrum(near), (None if far is None else spectrum(far))
             signal, kept = self.signal.to(cell.dtype), self.transmission * inside
             mse = torch.stack([metrics.wiener_mse(h[c], signal, metrics.noise_variance(self.sensor, metrics.MEAN_LEVEL,
                                                                                       t), t,
@@ -259,28 +266,34 @@ class Designer:
             return (mse + far_veil_mse(inside) if self.config.far_veil else mse).mean()
         if self.config.objective == "rings":
             return -torch.log(mean_ring_minima(k, self.rings)).mean()
-        h = _spectrum(k)
+        h = spectrum(k)
         w = (h.abs() ** 2 / (h.abs() ** 2 + 0.015)).flatten()
         return -0.01 * torch.topk(w, int(0.3 * w.numel()), largest=False).values.mean()
 
+    def searched(self, cell: torch.Tensor, which: str) -> torch.Tensor:
+        """What the search lowers on a tiling: J, times the UPC floor's factor with --upc-floor (floor.UpcFloor)."""
+        j = self.objective(cell, self.transforms(which))
+        return j if self.floor is None else j * self.floor.factor(cell, which)
+
     def score(self, cell: np.ndarray, which: str = "final") -> dict:
-        """The float64 objective of a binary cell on the held-out ('final') or the search's tiling, with its PSNR
-        (wiener: −10 log10 J) and open area."""
+        """The float64 objective J of a binary cell on the held-out ('final') or the search's tiling, with its PSNR
+        (wiener: −10 log10 J) and open area; with --upc-floor, the floor's ratios (its channels) on that tiling."""
+        x = torch.tensor(cell, dtype=torch.float64, device=self.device)
         with torch.no_grad():
-            j = float(self.objective(torch.tensor(cell, dtype=torch.float64, device=self.device),
-                                     self.transforms(which)))
+            j = float(self.objective(x, self.transforms(which)))
+            floor = None if self.floor is None else self.floor.ratios(x, which).tolist()
         psnr = float(-10 * np.log10(j)) if self.config.objective in ("wiener", "crop") else None
-        return {"objective": j, "psnr_db": psnr, "open_area": float(np.mean(cell))}
+        out = {"objective": j, "psnr_db": psnr, "open_area": float(np.mean(cell))}
+        return out if floor is None else {**out, "upc_floor_ratios": floor}
 
     def search_score(self, cell: np.ndarray) -> float:
         with torch.no_grad():
-            return float(self.objective(torch.tensor(cell, dtype=torch.float32, device=self.device),
-                                        self.transforms("search")))
+            return float(self.searched(torch.tensor(cell, dtype=torch.float32, device=self.device), "search"))
 
     def _predicted(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(open squares, opaque squares, predicted change [open, opaque] of each swap: g_j − g_i)."""
         x = torch.tensor(self.cell, dtype=torch.float32, device=self.device, requires_grad=True)
-        self.objective(x, self.transforms("search")).backward()
+        self.searched(x, "search").backward()
         g = x.grad.double().cpu().numpy().ravel()
         flat = self.cell.ravel()
         opened, closed = np.flatnonzero(flat > 0.5), np.flatnonzero(flat < 0.5)
@@ -318,7 +331,7 @@ class Designer:
                 "losses": self.losses}
 
     def load(self, state: dict) -> None:
-        saved = {**_BEFORE_OPTICS, **state["config"]}  # checkpoints from before --optics and --channels
+        saved = {**_BEFORE_OPTICS, **state["config"]}  # checkpoints from before the later options
         if saved != asdict(self.config):
             changed = sorted(k for k, v in asdict(self.config).items() if saved.get(k) != v)
             raise tp.DesignError(f"the output folder holds a run with other settings ({', '.join(changed)}); "

@@ -1,0 +1,59 @@
+"""`design --upc-floor R`: hold UPC's statistic at R × the T-OLED's while the search lowers the rig's objective.
+
+The rig's objectives J ('wiener', 'crop', with or without the far veil) become
+
+    J · (1 + FLOOR_WEIGHT Σ_c max(0, log(R m_c^ref) − log m_c)),
+
+m_c the mean ring minimum of the cell's MTF in UPC's sampling (upc.psf, mtf.mean_ring_minima) in the floor's
+channels, m^ref the same of the preset T-OLED at the open area with its slit at the tile's edge (cells.toled_reference:
+design.json's UPC reference), both on the search's D4 tiling of UPC's display. FLOOR_WEIGHT = 10: a cell 1 % below the
+floor costs 10 % of J, twice the whole gain of the far-veil search over the T-OLED (4.6 %, docs/figures/design/
+design_veil), so every swap the search takes keeps a floor that holds; from below it the hinge's gradient ranks the
+swaps that climb. The held-out tiling's ratio is design.json's `upc` (the issue's target: green, 1.26 ×).
+"""
+from __future__ import annotations
+
+import torch
+
+from udc_render.design import torch_psf as tp, upc
+from udc_render.design.cells import resample_matrix, toled_reference
+from udc_render.design.mtf import mean_ring_minima, ring_index
+from udc_render.design.options import CHANNELS
+
+__all__ = ["FLOOR_WEIGHT", "UpcFloor"]
+
+FLOOR_WEIGHT = 10.0
+
+
+class UpcFloor:
+    """The floor's factor 1 + FLOOR_WEIGHT · hinge (module doc) of a cell on a named tiling ('search', 'final')."""
+
+    def __init__(self, ratio: float, channels: str, cell_px: int, cell_um: float, open_fraction: float,
+                 seed: int, turned: bool, device: str = "cpu"):
+        self.ratio, self.seed, self.turned, self.device = ratio, seed, turned, device
+        self.index = [CHANNELS.index(c) for c in channels]
+        self.tiles = upc.tiles_for(upc.grid_sizes()[0])
+        self.rings = ring_index(upc.PSF_PX)
+        self.weights = torch.tensor(resample_matrix(cell_px), device=device)
+        self.reference = torch.tensor(toled_reference(cell_um, open_fraction), device=device)
+        self._ref_minima: dict[str, torch.Tensor] = {}
+
+    def transforms(self, which: str):
+        return tp.tile_transforms(self.tiles, self.seed, keys=("design", which)) if self.turned else None
+
+    def minima(self, cell21: torch.Tensor, which: str) -> torch.Tensor:
+        """[channels] UPC's mean ring minima of a 21 × 21 cell on the tiling."""
+        return mean_ring_minima(upc.psf(cell21, self.transforms(which))[self.index], self.rings)
+
+    def ratios(self, cell: torch.Tensor, which: str) -> torch.Tensor:
+        """[channels] the cell's mean ring minima over the T-OLED's, on the tiling."""
+        if which not in self._ref_minima:
+            with torch.no_grad():
+                self._ref_minima[which] = self.minima(self.reference, which)
+        w = self.weights.to(cell.dtype)
+        return self.minima(w @ cell @ w.T, which) / self._ref_minima[which].to(cell.dtype)
+
+    def factor(self, cell: torch.Tensor, which: str) -> torch.Tensor:
+        """1 + FLOOR_WEIGHT Σ_c max(0, log R − log ratio_c)."""
+        hinge = torch.relu(torch.log(torch.tensor(self.ratio, dtype=cell.dtype)) - torch.log(self.ratios(cell, which)))
+        return 1 + FLOOR_WEIGHT * hinge.sum()
