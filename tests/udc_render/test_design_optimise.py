@@ -150,6 +150,8 @@ def test_the_baseline_scatters_are_scored_as_the_design_is(tmp_path):
     for name in ("design", "toled_edge"):  # a ring's minimum is at most its mean; B's crop is its whole grid
         assert np.all(np.array(upc["turned"]["ring_means"][name]) >= upc["turned"][name])
         assert abs(upc["turned"]["kept"][name][2] - 1) < 1e-9 and 0 < upc["turned"]["kept"][name][0] < 1
+    draws = upc["turned"]["draws"]
+    assert draws["n"] == job.UPC_DRAWS and np.all(np.array(draws["min"]) <= draws["mean"])
 
 
 def test_the_designed_display_files_are_displays(tmp_path):

@@ -62,7 +62,7 @@ def read_cell(path: str, cell_px: int, open_squares: int) -> np.ndarray:
     try:
         image = np.asarray(iio.imread(path))
     except (OSError, ValueError) as err:
-        raise tp.DesignError(f"--init {path}: cannot read a PNG ({err})") from None
+        raise tp.DesignError(f"--init {path}: not scatter or toled, and not a readable cell PNG ({err})") from None
     if image.shape != (cell_px, cell_px) or not np.isin(image, (0, 255)).all():
         raise tp.DesignError(f"--init {path}: expected a {cell_px} × {cell_px} grey PNG of 0 and 255 (a design's "
                              f"cell.png), got shape {image.shape}")
