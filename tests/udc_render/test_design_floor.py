@@ -42,6 +42,21 @@ def test_the_floors_ratio_is_upcs_statistic_over_the_toleds_on_the_same_tiling()
     assert np.allclose(got, expected, rtol=1e-10) and np.allclose(itself, 1, rtol=1e-12)
 
 
+def test_the_uncropped_floor_takes_out_the_share_upcs_crop_drops():
+    """floor_uncropped: ring_summary's minima times the share inside UPC's crop (its sum of |FFT|², a closed form of
+    the power in the crop, not the normalised PSF); blue's crop is its whole grid, so there the two floors agree."""
+    cell, ref = _binary21(88, 8), toled_reference(168.0, 0.2)
+    floor = UpcFloor(1.26, "RGB", 21, 168.0, 0.2, seed=1, turned=True, uncropped=True)
+    plain = UpcFloor(1.26, "RGB", 21, 168.0, 0.2, seed=1, turned=True)
+    turns = floor.transforms("search")
+    with torch.no_grad():
+        shares = [upc.kept_fraction(torch.tensor(c), turns).numpy() for c in (cell, ref)]
+        got, cropped = (f.ratios(torch.tensor(cell), "search").numpy() for f in (floor, plain))
+    expected = _numpy_minima(cell, turns) * shares[0] / (_numpy_minima(ref, turns) * shares[1])
+    assert np.allclose(got, expected, rtol=1e-10) and abs(got[2] / cropped[2] - 1) < 1e-12
+    assert np.all(shares[0][:2] < 1)
+
+
 def test_the_floor_multiplies_the_objective_by_its_hinge():
     """searched = J (1 + FLOOR_WEIGHT Σ max(0, log R − log ratio)): J at or above the floor, the closed form below."""
     cell = _binary21(88, 5)
@@ -84,6 +99,7 @@ def test_a_bad_start_cell_is_refused_in_one_line(tmp_path, capsys, image, says):
     (["--optics", "upc", "--objective", "upc", "--upc-floor", "1.3"], "--upc-floor: takes --objective wiener or crop"),
     (["--upc-floor", "1.3", "--floor-channels", "GX"], "--floor-channels GX: expected some of RGB, each once"),
     (["--upc-floor", "0"], "--upc-floor"),
+    (["--floor-uncropped"], "--floor-uncropped: takes --upc-floor"),
 ])
 def test_the_floor_refuses_in_one_line(tmp_path, capsys, argv, says):
     assert cli.main(["design", *argv, "--out", str(tmp_path / "never")]) == 2

@@ -150,6 +150,8 @@ def test_the_baseline_scatters_are_scored_as_the_design_is(tmp_path):
     for name in ("design", "toled_edge"):  # a ring's minimum is at most its mean; B's crop is its whole grid
         assert np.all(np.array(upc["turned"]["ring_means"][name]) >= upc["turned"][name])
         assert abs(upc["turned"]["kept"][name][2] - 1) < 1e-9 and 0 < upc["turned"]["kept"][name][0] < 1
+    ratio_kept = np.divide(upc["turned"]["kept"]["design"], upc["turned"]["kept"]["toled_edge"])
+    assert np.allclose(upc["turned"]["ratio_uncropped"], np.multiply(upc["turned"]["ratio"], ratio_kept))
     draws = upc["turned"]["draws"]
     assert draws["n"] == job.UPC_DRAWS and np.all(np.array(draws["min"]) <= draws["mean"])
 

@@ -45,6 +45,9 @@ def register(sub) -> None:
                         "in --floor-channels, by a hinge on the objective (udc_render.design.floor) [off]")
     p.add_argument("--floor-channels", default="G",
                    help=f"the channels --upc-floor holds, some of {CHANNELS} [G: UPC's headline ratio, 1.26 ×]")
+    p.add_argument("--floor-uncropped", action="store_true",
+                   help="--upc-floor holds the statistic times the share of the light inside UPC's crop, which their "
+                        "normalisation after the crop cannot inflate")
     p.add_argument("--channels", default=CHANNELS,
                    help=f"the channels the objective averages, some of {CHANNELS} (e.g. B) [{CHANNELS}]")
     p.add_argument("--crop-px", type=positive("--crop-px", int), default=CROP_PX,
@@ -80,7 +83,7 @@ def run(args) -> int:
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
-                          args.upc_floor, args.floor_channels)
+                          args.upc_floor, args.floor_channels, args.floor_uncropped)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]

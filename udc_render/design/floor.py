@@ -10,6 +10,10 @@ design.json's UPC reference), both on the search's D4 tiling of UPC's display. F
 floor costs 10 % of J, twice the whole gain of the far-veil search over the T-OLED (4.6 %, docs/figures/design/
 design_veil), so every swap the search takes keeps a floor that holds; from below it the hinge's gradient ranks the
 swaps that climb. The held-out tiling's ratio is design.json's `upc` (the issue's target: green, 1.26 ×).
+
+UPC's PSF is normalised after their crop, so a cell that throws light past it raises the statistic by 1 / share
+(upc.kept_fraction); floor_uncropped holds m · share instead, the statistic of the PSF normalised before the crop,
+which the crop cannot inflate.
 """
 from __future__ import annotations
 
@@ -29,8 +33,8 @@ class UpcFloor:
     """The floor's factor 1 + FLOOR_WEIGHT · hinge (module doc) of a cell on a named tiling ('search', 'final')."""
 
     def __init__(self, ratio: float, channels: str, cell_px: int, cell_um: float, open_fraction: float,
-                 seed: int, turned: bool, device: str = "cpu"):
-        self.ratio, self.seed, self.turned, self.device = ratio, seed, turned, device
+                 seed: int, turned: bool, uncropped: bool = False, device: str = "cpu"):
+        self.ratio, self.seed, self.turned, self.uncropped, self.device = ratio, seed, turned, uncropped, device
         self.index = [CHANNELS.index(c) for c in channels]
         self.tiles = upc.tiles_for(upc.grid_sizes()[0])
         self.rings = ring_index(upc.PSF_PX)
@@ -42,8 +46,11 @@ class UpcFloor:
         return tp.tile_transforms(self.tiles, self.seed, keys=("design", which)) if self.turned else None
 
     def minima(self, cell21: torch.Tensor, which: str) -> torch.Tensor:
-        """[channels] UPC's mean ring minima of a 21 × 21 cell on the tiling."""
-        return mean_ring_minima(upc.psf(cell21, self.transforms(which))[self.index], self.rings)
+        """[channels] UPC's mean ring minima of a 21 × 21 cell on the tiling (uncropped: times the share inside
+        their crop, the statistic of the PSF normalised before the crop)."""
+        p, kept = upc.psf_and_kept(cell21, self.transforms(which))
+        m = mean_ring_minima(p[self.index], self.rings)
+        return m * kept[self.index] if self.uncropped else m
 
     def ratios(self, cell: torch.Tensor, which: str) -> torch.Tensor:
         """[channels] the cell's mean ring minima over the T-OLED's, on the tiling."""

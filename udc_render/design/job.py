@@ -63,7 +63,8 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
     open area in the same cell, its slit at the tile's edge (the framing that reproduces their turned baseline),
     turned (D4 tiles, seed config.seed) and repeated, each cell taken to 21 × 21 as `study layout` takes it; the
     designed / T-OLED ratios; beside them the mean ring means and the share of the power inside UPC's crop
-    (upc.kept_fraction); turned, the ratio over UPC_DRAWS more tilings (ratio_over_draws)."""
+    (upc.kept_fraction) and the ratio of the PSFs normalised before the crop (ratio × the shares' ratio: what UPC's
+    crop does not inflate); turned, the ratio over UPC_DRAWS more tilings (ratio_over_draws)."""
     from udc_render.design import metrics, torch_psf as tp, upc
     from udc_render.design.cells import RINGS, toled_reference, upc_cell
     cells = {"design": upc_cell(cell), "toled_edge": toled_reference(config.cell_um, config.open_fraction)}
@@ -76,7 +77,9 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
         kept = {name: k.tolist() for name, (_, k) in both.items()}
         minima = {name: r["mean_of_ring_minima"] for name, r in rings.items()}
         ratio = np.divide(minima["design"], minima["toled_edge"])
+        uncropped = ratio * np.divide(kept["design"], kept["toled_edge"])
         out[tiling] = {**minima, "ratio": ratio.tolist(), "ratio_mean": float(ratio.mean()),
+                       "ratio_uncropped": uncropped.tolist(),
                        "ring_means": {name: r["mean_of_ring_means"] for name, r in rings.items()}, "kept": kept}
     out["turned"]["draws"] = ratio_over_draws(cells, config.seed)
     return out

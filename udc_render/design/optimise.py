@@ -82,7 +82,8 @@ __all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig"
 
 IMPROVE_REL = 1e-5
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
-_BEFORE_OPTICS = {"optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G"}
+_BEFORE_OPTICS = {"optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
+                  "floor_uncropped": False}
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,7 @@ class DesignConfig:
     far_veil: bool = False
     upc_floor: float | None = None
     floor_channels: str = "G"
+    floor_uncropped: bool = False
 
     def __post_init__(self):
         if self.contrast is None:
@@ -159,6 +161,8 @@ class DesignConfig:
                 self.floor_channels) or not self.floor_channels:
             raise tp.DesignError(f"--floor-channels {self.floor_channels}: expected some of {CHANNELS}, each once")
         if self.upc_floor is None:
+            if self.floor_uncropped:
+                raise tp.DesignError("--floor-uncropped: takes --upc-floor")
             return
         if not self.upc_floor > 0:
             raise tp.DesignError(f"--upc-floor {self.upc_floor}: expected a ratio to the T-OLED's > 0")
@@ -235,7 +239,7 @@ class Designer:
         self.transmission = config.open_squares / config.cell_px ** 2
         self.floor = None if config.upc_floor is None else UpcFloor(
             config.upc_floor, config.floor_channels, config.cell_px, config.cell_um, config.open_fraction,
-            config.seed, config.tiling == "turned", device)
+            config.seed, config.tiling == "turned", config.floor_uncropped, device)
         self.cell = initial_cell(config)
         self.current = self.search_score(self.cell)
         self.step_done, self.converged, self.evaluations, self.losses = 0, False, 1, []
