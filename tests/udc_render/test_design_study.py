@@ -208,3 +208,36 @@ def test_the_design_guide_prints_the_veil_designs_unet_seeds():
         margins.append(p["mean_db"])
     se = np.std(margins, ddof=1) / np.sqrt(len(margins))
     assert f"{np.mean(margins):+.2f} ± {se:.2f} dB over the {['two', 'three', 'four'][len(margins) - 2]} seeds" in text
+
+
+def test_the_design_guide_prints_the_floored_designs():
+    """docs/guides/design.md's `--upc-floor` runs: the table's objective, UPC ratios, draws, shares and the ratio
+    normalised before the crop are the committed design.json's; the simulator's margins and the banding ratio are
+    the committed studies'."""
+    root = Path(__file__).resolve().parents[2]
+    text = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    lines = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").splitlines()
+    figures = root / "docs" / "figures" / "design"
+    for folder in sorted((figures / "floor").iterdir()):
+        doc = json.loads((folder / "design.json").read_text())
+        t = doc["upc"]["turned"]
+        uncropped = np.multiply(t["ratio"], np.divide(t["kept"]["design"], t["kept"]["toled_edge"]))
+        assert np.allclose(uncropped, t["ratio_uncropped"], rtol=1e-12)
+        if doc["config"]["floor_uncropped"]:
+            assert f"green {uncropped[1]:.2f} × normalised before the crop ({t['ratio'][1]:.2f} × as UPC" in text
+            continue
+        d = t["draws"]
+        row = (f"| `{folder.name}` | {doc['initial']['squares_moved']} / {doc['steps_done']} | "
+               f"{doc['final']['psnr_db']:.2f} | {_rgb(t['ratio'], '.2f')} | {d['mean'][1]:.3f} ± {d['sd'][1]:.3f} "
+               f"(min {d['min'][1]:.3f}) | {t['kept']['design'][0]:.3f} / {t['kept']['design'][1]:.3f} | "
+               f"{uncropped[1]:.2f} |")
+        printed = next(line for line in lines if line.startswith(f"| `{folder.name}` |"))
+        assert all(f" {c.strip('| ')} |" in printed for c in row.split(" | ")[1:]), (folder.name, row)
+    study = json.loads((figures / "layout_trained_floor" / "study_layout_trained.json").read_text())
+    for key in ("dep", "dep_far", "unet"):
+        p = study["paired"]["design_turned"][key]
+        assert f"{p['mean_db']:+.2f} ± {p['se_db']:.2f} dB ({p['wins']} of {p['n']})".replace("-", "−") in text, key
+    floor = json.loads((figures / "study_floor_veil130" / "study_layout.json").read_text())["banding"]["sampled"]
+    toled = json.loads((figures / "study_toled168_20_edge" / "study_layout.json").read_text())["banding"]["sampled"]
+    ratio = np.divide(floor["turned"]["rms"], toled["turned"]["rms"])
+    assert f"{ratio.min():.3f}–{ratio.max():.3f} × the turned T-OLED's" in text
