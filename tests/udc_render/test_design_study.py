@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -241,3 +242,32 @@ def test_the_design_guide_prints_the_floored_designs():
     toled = json.loads((figures / "study_toled168_20_edge" / "study_layout.json").read_text())["banding"]["sampled"]
     ratio = np.divide(floor["turned"]["rms"], toled["turned"]["rms"])
     assert f"{ratio.min():.3f}–{ratio.max():.3f} × the turned T-OLED's" in text
+
+
+def _turned_sd(md: Path) -> list[float]:
+    """The turned tiling's sampled sd per wavelength from a `study layout` report's "Both tilings" table."""
+    part = md.read_text(encoding="utf-8").split("Both tilings")[1]
+    return [float(m.group(1)) for m in re.finditer(r"^\| \d+ \| [^|]+\| [0-9.e+-]+, ([0-9.e+-]+) \|", part, re.M)]
+
+
+def test_the_design_guide_prints_the_banding_over_five_draws():
+    """The banding table over D4 draws 0–4: each draw's report (tile seed and framing as named), the sd ratios to
+    the turned T-OLED's on the same draw, their mean ± se and the count below 1."""
+    root = Path(__file__).resolve().parents[2]
+    lines = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").splitlines()
+    figures = root / "docs" / "figures" / "design"
+    draw0 = {"toled": "study_toled168_20_edge", "veil": "study_design_veil", "veil130": "study_floor_veil130"}
+
+    def reports(name: str) -> list[Path]:
+        first = figures / draw0[name] if name in draw0 else figures / "banding_draws" / f"{name}_s0"
+        return [first / "study_layout.md"] + [figures / "banding_draws" / f"{name}_s{k}" / "study_layout.md"
+                                               for k in (1, 2, 3, 4)]
+
+    for k, md in enumerate(reports("toled")):
+        assert f"turned tilings: seed {k} " in md.read_text() and "cell framing: edge" in md.read_text()
+    toled = np.array([_turned_sd(md) for md in reports("toled")])
+    for name, label in (("crop", "`crop` design"), ("veil", "veil design"), ("veil130", "`veil130`")):
+        q = (np.array([_turned_sd(md) for md in reports(name)]) / toled).mean(axis=1)
+        row = (f"| {label} | {' / '.join(f'{v:.2f}' for v in q)} | {q.mean():.2f} ± {q.std(ddof=1) / np.sqrt(5):.2f} "
+               f"| {(q < 1).sum()} of 5 |")
+        assert row in lines, row
