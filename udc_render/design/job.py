@@ -110,7 +110,9 @@ def _loss_figure(doc: dict, out: Path) -> None:
     fig, ax = plt.subplots(figsize=(6, 4))
     wiener = doc["config"]["objective"] in WIENER_OBJECTIVES
     values = [doc["initial"]["search_objective"]] + [r["objective"] for r in doc["losses"]]
-    ax.plot(np.arange(len(values)), -10 * np.log10(values) if wiener else values, label="the search (its tiling)")
+    floored = "; J × the UPC floor's factor" if doc["config"].get("upc_floor") else ""
+    ax.plot(np.arange(len(values)), -10 * np.log10(values) if wiener else values,
+            label=f"the search (its tiling{floored})")
     base = doc["scatters"]
     ax.axhspan(base["mean"] - base["std"], base["mean"] + base["std"], color="C3", alpha=0.2,
                label=f"{base['n']} random scatters: mean ± sd (held-out tiling)")
