@@ -107,16 +107,6 @@ def test_the_floor_refuses_in_one_line(tmp_path, capsys, argv, says):
     assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()
 
 
-def test_a_checkpoint_from_before_the_floor_resumes():
-    """A state saved without 'upc_floor' and 'floor_channels' loads into the run without a floor only."""
-    d = Designer(DesignConfig(**FLOORED))
-    state = d.state()
-    old = {**state, "config": {k: v for k, v in state["config"].items() if k not in ("upc_floor", "floor_channels")}}
-    Designer(DesignConfig(**FLOORED)).load(old)
-    with pytest.raises(tp.DesignError, match=r"other settings \(upc_floor\)"):
-        Designer(DesignConfig(**FLOORED, upc_floor=1.3)).load(old)
-
-
 def test_upcs_ratio_over_more_tilings_is_each_draws_ratio():
     """design.json's draws: draw k is the tiling of stream keys ('upc', k); the T-OLED over itself is 1 on each."""
     ref, cell = toled_reference(168.0, 0.2), _binary21(88, 7)

@@ -81,14 +81,17 @@ def test_the_rings_objective_is_upcs_statistic_in_their_sampling():
     assert abs(rig.score(small)["objective"] / -np.mean(np.log(ring_minima)) - 1) < 1e-12
 
 
-def test_a_checkpoint_from_before_the_optics_option_resumes():
-    """A state saved without 'optics' and 'channels' (the settings' defaults then) loads into the default run only."""
-    d = Designer(DesignConfig(**TINY))
-    state = d.state()
-    old = {**state, "config": {k: v for k, v in state["config"].items() if k not in ("optics", "channels")}}
+@pytest.mark.parametrize("dropped, changed", [
+    (("optics", "channels"), {"channels": "B"}),
+    (("upc_floor", "floor_channels", "floor_uncropped"), {"upc_floor": 1.3}),
+])
+def test_a_checkpoint_from_before_a_later_option_resumes(dropped, changed):
+    """A state saved without a later option's settings (their defaults then) loads into the default run only."""
+    state = Designer(DesignConfig(**TINY)).state()
+    old = {**state, "config": {k: v for k, v in state["config"].items() if k not in dropped}}
     Designer(DesignConfig(**TINY)).load(old)
-    with pytest.raises(tp.DesignError, match=r"other settings \(channels\)"):
-        Designer(DesignConfig(**{**TINY, "channels": "B"})).load(old)
+    with pytest.raises(tp.DesignError, match=rf"other settings \({next(iter(changed))}\)"):
+        Designer(DesignConfig(**{**TINY, **changed})).load(old)
 
 
 @pytest.mark.parametrize("tiling", ["repeated", pytest.param("turned", marks=pytest.mark.slow)])  # turned: 9 s, CI time
