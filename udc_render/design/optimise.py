@@ -86,6 +86,11 @@ _BEFORE_OPTICS = {"optics": "rig", "channels": CHANNELS, "far_veil": False, "upc
                   "floor_uncropped": False}
 
 
+def _check_channels(option: str, channels: str) -> None:
+    if not (channels and set(channels) <= set(CHANNELS) and len(set(channels)) == len(channels)):
+        raise tp.DesignError(f"{option} {channels}: expected some of {CHANNELS}, each once")
+
+
 @dataclass(frozen=True)
 class DesignConfig:
     """Every setting of one design run (the checkpoint keeps it: a resumed run must match)."""
@@ -132,9 +137,7 @@ class DesignConfig:
         for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES), ("optics", OPTICS)):
             if getattr(self, key) not in allowed:
                 raise tp.DesignError(f"--{key} {getattr(self, key)}: expected one of {', '.join(allowed)}")
-        if not (self.channels and set(self.channels) <= set(CHANNELS) and len(set(self.channels)) == len(
-                self.channels)):
-            raise tp.DesignError(f"--channels {self.channels}: expected some of {CHANNELS}, each once")
+        _check_channels("--channels", self.channels)
         if self.init not in INITS:
             read_cell(self.init, self.cell_px, self.open_squares)
         if self.optics == "upc":
@@ -157,9 +160,7 @@ class DesignConfig:
                                  f"{self.feature_um:g}")
 
     def _check_floor(self) -> None:
-        if not set(self.floor_channels) <= set(CHANNELS) or len(set(self.floor_channels)) != len(
-                self.floor_channels) or not self.floor_channels:
-            raise tp.DesignError(f"--floor-channels {self.floor_channels}: expected some of {CHANNELS}, each once")
+        _check_channels("--floor-channels", self.floor_channels)
         if self.upc_floor is None:
             if self.floor_uncropped:
                 raise tp.DesignError("--floor-uncropped: takes --upc-floor")
