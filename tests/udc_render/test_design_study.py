@@ -238,6 +238,16 @@ def test_the_design_guide_prints_the_floored_designs():
     for key in ("dep", "dep_far", "unet"):
         p = study["paired"]["design_turned"][key]
         assert f"{p['mean_db']:+.2f} ± {p['se_db']:.2f} dB ({p['wins']} of {p['n']})".replace("-", "−") in text, key
+    margins = []
+    for seed, folder in enumerate(sorted(figures.glob("layout_trained_floor*"))):
+        doc = json.loads((folder / "study_layout_trained.json").read_text())
+        assert doc["seeds"]["train"] == seed and doc["budget"]["epochs"] == 80
+        p = doc["paired"]["design_turned"]["unet"]
+        margin = f"{p['mean_db']:+.2f} ± {p['se_db']:.2f} dB (seed {seed}, {p['wins']} of {p['n']}"
+        assert margin.replace("-", "−") in text, margin
+        margins.append(p["mean_db"])
+    se = np.std(margins, ddof=1) / np.sqrt(len(margins))
+    assert f"{np.mean(margins):+.2f} ± {se:.2f} dB over the three seeds" in text
     floor = json.loads((figures / "study_floor_veil130" / "study_layout.json").read_text())["banding"]["sampled"]
     toled = json.loads((figures / "study_toled168_20_edge" / "study_layout.json").read_text())["banding"]["sampled"]
     ratio = np.divide(floor["turned"]["rms"], toled["turned"]["rms"])
