@@ -299,3 +299,18 @@ def test_physics_page_states_the_poled_orders_spacing():
     geom = camera_geometry(load_scene("monitor"))
     spacing_um = 0.55 * geom.image_distance_um / layouts.poled().pitch_x_um
     assert round(spacing_um) == 52 and round(spacing_um / geom.pitch_um) == 33
+
+
+def test_defaults_of_the_layout_design(defaults):
+    """concepts/defaults.md's design rows against udc_render.design's constants."""
+    from udc_render.design import floor, job, metrics, options
+    _says(defaults["minimum feature size (`--feature-um`)"], "8 µm; at least 1.5 µm")
+    assert options.DEFAULT_FEATURE_UM == 8.0 and options.LITHOGRAPHY_UM == 1.5
+    _says(defaults["the `crop` objective's scene contrast (`--contrast`)"], "| 1.0 (RMS) |")
+    assert options.CONTRAST_DEFAULTS["crop"] == 1.0
+    _says(defaults["the far veil's level (`--far-veil`)"], "μ = 0.5 of the full well")
+    assert metrics.MEAN_LEVEL == 0.5
+    _says(defaults["the UPC floor's weight (`design.floor.FLOOR_WEIGHT`)"], "| 10 |")
+    assert floor.FLOOR_WEIGHT == 10.0
+    _says(defaults["UPC's ratio over more tilings (`design.job.UPC_DRAWS`)"], "| 8 D4 draws |")
+    assert job.UPC_DRAWS == 8

@@ -29,7 +29,7 @@ from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 __all__ = ["CHECKPOINT_STEPS", "UPC_DRAWS", "run_design", "scatter_baseline", "upc_comparison", "ratio_over_draws"]
 
 CHECKPOINT_STEPS = 10
-UPC_DRAWS = 8  # more D4 tilings for UPC's ratio (ratio_over_draws): its sd to about a third
+UPC_DRAWS = 8  # more D4 tilings for UPC's ratio (ratio_over_draws): the mean's sd to about a third of one draw's
 WIENER_OBJECTIVES = ("wiener", "crop")  # scored as a PSNR in dB (higher is better); the others as the objective
 
 
@@ -88,7 +88,7 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
 def ratio_over_draws(cells: dict, seed: int, n: int = UPC_DRAWS) -> dict:
     """The design / T-OLED ratio of UPC's mean ring minima over n more D4 tilings (stream keys 'upc', k: neither the
     search's nor the held-out one): per channel its mean, sample sd and minimum. One random tiling's ratio varies
-    by about 1.5 % (sd); a target of 1.26 × is met on the draws, not on one."""
+    by about 1 % (sd); a target of 1.26 × is judged on the draws, not on one."""
     from udc_render.design import metrics, torch_psf as tp, upc
     from udc_render.design.cells import RINGS
     tiles = upc.tiles_for(upc.grid_sizes()[0])
