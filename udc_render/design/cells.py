@@ -2,6 +2,7 @@
 (the tile D4 turns), resampled to UPC's 21 × 21 (udc_render.design.upc), and UPC's ring count."""
 from __future__ import annotations
 
+import imageio.v3 as iio
 import numpy as np
 
 from psf.micrograph import MicrographLayout
@@ -58,7 +59,6 @@ def resample_matrix(c: int) -> np.ndarray:
 def read_cell(path: str, cell_px: int, open_squares: int) -> np.ndarray:
     """A binary cell from a PNG of cell_px² pixels, 0 (opaque) or 255 (open), with open_squares open: a former
     design's cell.png as the search's start (design --init PATH)."""
-    import imageio.v3 as iio
     try:
         image = np.asarray(iio.imread(path))
     except (OSError, ValueError) as err:
