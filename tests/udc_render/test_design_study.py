@@ -8,9 +8,11 @@ from pathlib import Path
 import imageio.v3 as iio
 import numpy as np
 import pytest
+import torch
 
 from psf import layouts
 from udc_render import cli
+from udc_render.design.floor import UpcFloor
 from udc_render.studies.layout import frame_cell, upc_cell
 
 
@@ -224,9 +226,16 @@ def test_the_design_guide_prints_the_floored_designs():
         t = doc["upc"]["turned"]
         uncropped = np.multiply(t["ratio"], np.divide(t["kept"]["design"], t["kept"]["toled_edge"]))
         assert np.allclose(uncropped, t["ratio_uncropped"], rtol=1e-12)
+        floor = UpcFloor(doc["config"]["upc_floor"], doc["config"]["floor_channels"], 21, 168.0, 0.2,
+                         doc["config"]["seed"], True, doc["config"]["floor_uncropped"])
+        cell = np.asarray(iio.imread(folder / "cell.png")) / 255.0
+        with torch.no_grad():
+            held = float(floor.ratios(torch.tensor(cell), "search")[0]) / doc["config"]["upc_floor"] - 1
         if doc["config"]["floor_uncropped"]:
+            assert held < -0.01  # the uncropped floor was not reached
             assert f"green {uncropped[1]:.2f} × normalised before the crop ({t['ratio'][1]:.2f} × as UPC" in text
             continue
+        assert held > -6e-4, (folder.name, held)  # at the floor or above, none more than 0.06 % below
         d = t["draws"]
         row = (f"| `{folder.name}` | {doc['initial']['squares_moved']} / {doc['steps_done']} | "
                f"{doc['final']['psnr_db']:.2f} | {_rgb(t['ratio'], '.2f')} | {d['mean'][1]:.3f} ± {d['sd'][1]:.3f} "
@@ -234,6 +243,10 @@ def test_the_design_guide_prints_the_floored_designs():
                f"{uncropped[1]:.2f} |")
         printed = next(line for line in lines if line.startswith(f"| `{folder.name}` |"))
         assert all(f" {c.strip('| ')} |" in printed for c in row.split(" | ")[1:]), (folder.name, row)
+    starts = {name: json.loads((figures / "floor" / name / "design.json").read_text())["initial"]["psnr_db"]
+              for name in ("crop130", "toled130")}
+    assert (f"The `crop` design scores {starts['crop130']:.2f} dB in this objective, the turned T-OLED "
+            f"{starts['toled130']:.2f} dB") in text
     study = json.loads((figures / "layout_trained_floor" / "study_layout_trained.json").read_text())
     for key in ("dep", "dep_far", "unet"):
         p = study["paired"]["design_turned"][key]
