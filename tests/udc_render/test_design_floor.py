@@ -111,9 +111,8 @@ def test_upcs_ratio_over_more_tilings_is_each_draws_ratio():
     """design.json's draws: draw k is the tiling of stream keys ('upc', k); the T-OLED over itself is 1 on each."""
     ref, cell = toled_reference(168.0, 0.2), _binary21(88, 7)
     draws = job.ratio_over_draws({"design": cell, "toled_edge": ref}, seed=2, n=2)
-    tiles = upc.tiles_for(upc.grid_sizes()[0])
     ratios = [_numpy_minima(cell, t) / _numpy_minima(ref, t)
-              for t in (tp.tile_transforms(tiles, 2, keys=("upc", k)) for k in range(2))]
+              for t in (tp.tile_transforms(upc.TILES, 2, keys=("upc", k)) for k in range(2))]
     assert np.allclose(draws["mean"], np.mean(ratios, axis=0), rtol=1e-12)
     assert np.allclose(draws["min"], np.min(ratios, axis=0), rtol=1e-12)
     itself = job.ratio_over_draws({"design": ref, "toled_edge": ref}, seed=2, n=2)

@@ -36,16 +36,15 @@ class UpcFloor:
 
     def __init__(self, ratio: float, channels: str, cell_px: int, cell_um: float, open_fraction: float,
                  seed: int, turned: bool, uncropped: bool = False, device: str = "cpu"):
-        self.ratio, self.seed, self.turned, self.uncropped, self.device = ratio, seed, turned, uncropped, device
+        self.ratio, self.seed, self.turned, self.uncropped = ratio, seed, turned, uncropped
         self.index = [CHANNELS.index(c) for c in channels]
-        self.tiles = upc.tiles_for(upc.grid_sizes()[0])
         self.rings = ring_index(upc.PSF_PX)
         self.weights = torch.tensor(resample_matrix(cell_px), device=device)
         self.reference = torch.tensor(toled_reference(cell_um, open_fraction), device=device)
         self._ref_minima: dict[str, torch.Tensor] = {}
 
     def transforms(self, which: str):
-        return tp.tile_transforms(self.tiles, self.seed, keys=("design", which)) if self.turned else None
+        return tp.tile_transforms(upc.TILES, self.seed, keys=("design", which)) if self.turned else None
 
     def minima(self, cell21: torch.Tensor, which: str) -> torch.Tensor:
         """[channels] UPC's mean ring minima of a 21 × 21 cell on the tiling (uncropped: times the share inside

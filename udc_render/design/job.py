@@ -58,6 +58,17 @@ def scatter_baseline(designer: Designer, design: dict) -> dict:
             "std": float(values.std(ddof=1)) if len(values) > 1 else 0.0, "best": best, "margin": float(margin)}
 
 
+def _upc_scores(cells: dict, turns: np.ndarray) -> tuple[dict, dict]:
+    """({name: metrics.ring_summary of UPC's PSF}, {name: the share inside UPC's crop}) of 21 × 21 cells on a
+    tiling, from one pass of upc.psf_and_kept each."""
+    from udc_render.design import metrics, upc
+    from udc_render.design.cells import RINGS
+    with torch.no_grad():
+        both = {name: upc.psf_and_kept(torch.tensor(c), turns) for name, c in cells.items()}
+    return ({name: metrics.ring_summary(p.numpy(), RINGS) for name, (p, _) in both.items()},
+            {name: k.tolist() for name, (_, k) in both.items()})
+
+
 def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
     """UPC's mean ring minima (R / G / B, their sampling) of the designed cell and of the preset T-OLED at the same
     open area in the same cell, its slit at the tile's edge (the framing that reproduces their turned baseline),
@@ -65,16 +76,12 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
     designed / T-OLED ratios; beside them the mean ring means and the share of the power inside UPC's crop
     (upc.kept_fraction) and the ratio of the PSFs normalised before the crop (ratio × the shares' ratio: what UPC's
     crop does not inflate); turned, the ratio over UPC_DRAWS more tilings (ratio_over_draws)."""
-    from udc_render.design import metrics, torch_psf as tp, upc
-    from udc_render.design.cells import RINGS, toled_reference, upc_cell
+    from udc_render.design import torch_psf as tp, upc
+    from udc_render.design.cells import toled_reference, upc_cell
     cells = {"design": upc_cell(cell), "toled_edge": toled_reference(config.cell_um, config.open_fraction)}
     out = {}
     for tiling, seed in (("turned", config.seed), ("repeated", None)):
-        turns = tp.tile_transforms(upc.tiles_for(upc.grid_sizes()[0]), seed)
-        with torch.no_grad():
-            both = {name: upc.psf_and_kept(torch.tensor(c), turns) for name, c in cells.items()}
-        rings = {name: metrics.ring_summary(p.numpy(), RINGS) for name, (p, _) in both.items()}
-        kept = {name: k.tolist() for name, (_, k) in both.items()}
+        rings, kept = _upc_scores(cells, tp.tile_transforms(upc.TILES, seed))
         minima = {name: r["mean_of_ring_minima"] for name, r in rings.items()}
         ratio = np.divide(minima["design"], minima["toled_edge"])
         uncropped = ratio * np.divide(kept["design"], kept["toled_edge"])
@@ -89,16 +96,11 @@ def ratio_over_draws(cells: dict, seed: int, n: int = UPC_DRAWS) -> dict:
     """The design / T-OLED ratio of UPC's mean ring minima over n more D4 tilings (stream keys 'upc', k: neither the
     search's nor the held-out one): per channel its mean, sample sd and minimum. One random tiling's ratio varies
     by about 1 % (sd); a target of 1.26 × is judged on the draws, not on one."""
-    from udc_render.design import metrics, torch_psf as tp, upc
-    from udc_render.design.cells import RINGS
-    tiles = upc.tiles_for(upc.grid_sizes()[0])
+    from udc_render.design import torch_psf as tp, upc
     ratios = []
     for k in range(n):
-        turns = tp.tile_transforms(tiles, seed, keys=("upc", k))
-        with torch.no_grad():
-            minima = {name: metrics.ring_summary(upc.psf(torch.tensor(c), turns).numpy(), RINGS)["mean_of_ring_minima"]
-                      for name, c in cells.items()}
-        ratios.append(np.divide(minima["design"], minima["toled_edge"]))
+        rings, _ = _upc_scores(cells, tp.tile_transforms(upc.TILES, seed, keys=("upc", k)))
+        ratios.append(np.divide(rings["design"]["mean_of_ring_minima"], rings["toled_edge"]["mean_of_ring_minima"]))
     r = np.array(ratios)
     return {"n": n, "mean": r.mean(0).tolist(), "sd": r.std(0, ddof=1).tolist(), "min": r.min(0).tolist()}
 

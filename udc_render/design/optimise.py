@@ -82,8 +82,9 @@ __all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig"
 
 IMPROVE_REL = 1e-5
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
-_BEFORE_OPTICS = {"optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
-                  "floor_uncropped": False}
+_LATER_DEFAULTS = {  # options added after the first checkpoints, at the settings those runs had
+    "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
+    "floor_uncropped": False}
 
 
 def _check_channels(option: str, channels: str) -> None:
@@ -228,7 +229,7 @@ class Designer:
     def __init__(self, config: DesignConfig, sensor: SensorConfig | None = None, device: str = "cpu"):
         self.config, self.sensor, self.device = config, sensor or SensorConfig(), device
         if config.optics == "upc":
-            self.grid, self.tiles, size = None, upc.tiles_for(upc.grid_sizes()[0]), upc.PSF_PX
+            self.grid, self.tiles, size = None, upc.TILES, upc.PSF_PX
         else:
             self.grid = tp.cell_grid(config.cell_px, config.feature_um, Lens(), RIG_WAVELENGTHS_NM, 3.1,
                                      config.kernel_px, config.pupil_samples)
@@ -336,7 +337,7 @@ class Designer:
                 "losses": self.losses}
 
     def load(self, state: dict) -> None:
-        saved = {**_BEFORE_OPTICS, **state["config"]}  # checkpoints from before the later options
+        saved = {**_LATER_DEFAULTS, **state["config"]}
         if saved != asdict(self.config):
             changed = sorted(k for k, v in asdict(self.config).items() if saved.get(k) != v)
             raise tp.DesignError(f"the output folder holds a run with other settings ({', '.join(changed)}); "

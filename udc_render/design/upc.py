@@ -23,7 +23,7 @@ import torch
 from udc_render.design.torch_psf import DesignError, tile
 
 __all__ = ["WAVELENGTHS_NM", "CELL_PX", "PUPIL_UM", "FOCAL_UM", "APERTURE_UM", "CROP_PX", "BOX_PX", "PSF_PX",
-           "grid_sizes", "display", "psf", "kept_fraction", "psf_and_kept"]
+           "TILES", "grid_sizes", "display", "psf", "kept_fraction", "psf_and_kept"]
 
 WAVELENGTHS_NM = (610.0, 530.0, 470.0)
 CELL_PX = 21
@@ -44,6 +44,9 @@ def grid_sizes(wavelengths_nm=WAVELENGTHS_NM) -> tuple[int, ...]:
 def tiles_for(m: int) -> int:
     """⌈M δ1 / (21 δ1)⌉ tiles per side (load_aperture's repNum)."""
     return math.ceil(m * PUPIL_UM / (CELL_PX * PUPIL_UM))
+
+
+TILES = tiles_for(grid_sizes()[0])  # the display's tiles per side over the red grid, which the others are cut from
 
 
 def display(cell: torch.Tensor, m: int, transforms: np.ndarray | None = None) -> torch.Tensor:

@@ -102,7 +102,7 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
     with torch.no_grad():
         for tiling in TILINGS:
             s = seed if tiling == "turned" else None
-            turns = tp.tile_transforms(upc.tiles_for(upc.grid_sizes()[0]), s)
+            turns = tp.tile_transforms(upc.TILES, s)
             p, kept = upc.psf_and_kept(small, turns)
             p = p.numpy()
             out["upc"][tiling] = {**metrics.ring_summary(p, RINGS), "kept": kept.tolist()}
