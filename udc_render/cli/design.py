@@ -48,6 +48,10 @@ def register(sub) -> None:
     p.add_argument("--floor-uncropped", action="store_true",
                    help="--upc-floor holds the statistic times the share of the light inside UPC's crop, which their "
                         "normalisation after the crop cannot inflate")
+    p.add_argument("--banding-ceiling", type=positive("--banding-ceiling"), default=None,
+                   help="wiener and crop: hold the bands at d = 2 mm (the relative sd of the power over the paper "
+                        "sensor's mask shifts) at most this ratio to the T-OLED's in R, G and B, by a hinge on the "
+                        "objective (udc_render.design.bands) [off]")
     p.add_argument("--channels", default=CHANNELS,
                    help=f"the channels the objective averages, some of {CHANNELS} (e.g. B) [{CHANNELS}]")
     p.add_argument("--crop-px", type=positive("--crop-px", int), default=CROP_PX,
@@ -83,7 +87,7 @@ def run(args) -> int:
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
-                          args.upc_floor, args.floor_channels, args.floor_uncropped)
+                          args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]

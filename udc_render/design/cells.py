@@ -41,19 +41,21 @@ def upc_cell(cell: np.ndarray) -> np.ndarray:
     return w @ cell @ w.T
 
 
-def toled_reference(cell_um: float, open_fraction: float) -> np.ndarray:
-    """The preset T-OLED at the open area in a cell_um cell, its slit at the tile's edge, in UPC's 21 × 21: the
-    reference of the design's UPC ratios (job.upc_comparison, floor.UpcFloor)."""
+def toled_reference(cell_um: float, open_fraction: float, px: int = upc.CELL_PX) -> np.ndarray:
+    """The preset T-OLED at the open area in a cell_um cell, its slit at the tile's edge, on px × px squares (UPC's
+    21 × 21 by default): the reference of the design's UPC ratios (job.upc_comparison, floor.UpcFloor) and of its
+    banding (bands.BandingCeiling)."""
     from psf import layouts
     toled, _ = layout_cell(layouts.toled(pitch_um=cell_um, open_fraction=open_fraction))
-    return upc_cell(frame_cell(toled, "edge"))
+    w = resample_matrix(toled.shape[0], px)
+    return w @ frame_cell(toled, "edge") @ w.T
 
 
-def resample_matrix(c: int) -> np.ndarray:
-    """[21, c] W with upc_cell(cell) = W cell Wᵀ (exact area weighting of the squares)."""
-    edges_in, edges_out = np.linspace(0, 1, c + 1), np.linspace(0, 1, upc.CELL_PX + 1)
+def resample_matrix(c: int, px: int = upc.CELL_PX) -> np.ndarray:
+    """[px, c] W with W cell Wᵀ the cell on px × px squares (exact area weighting; upc_cell's at px = 21)."""
+    edges_in, edges_out = np.linspace(0, 1, c + 1), np.linspace(0, 1, px + 1)
     return np.clip(np.minimum(edges_out[1:, None], edges_in[None, 1:])
-                   - np.maximum(edges_out[:-1, None], edges_in[None, :-1]), 0, None) * upc.CELL_PX
+                   - np.maximum(edges_out[:-1, None], edges_in[None, :-1]), 0, None) * px
 
 
 def read_cell(path: str, cell_px: int, open_squares: int) -> np.ndarray:

@@ -10,7 +10,9 @@ CHECKPOINT_STEPS steps and at the end), a progress bar, and what it writes:
     design.json       the settings, the record, and in the same run on the held-out tiling: the designed cell's and
                       the initial scatter's scores, N random scatters at the same open area (their spread, the best,
                       the margin of the design over it), and UPC's mean ring minima of the designed cell and of the
-                      T-OLED at the same open area in the same cell (slit at the tile's edge), turned and repeated
+                      T-OLED at the same open area in the same cell (slit at the tile's edge), turned and repeated;
+                      with --banding-ceiling, the banding of both on `study layout`'s raster and draws
+                      (banding_comparison)
     design_loss.png   the objective's PSNR against the step, the scatters' spread beside it
 """
 from __future__ import annotations
@@ -26,10 +28,12 @@ from tqdm import tqdm
 from udc_render.design.optimise import DesignConfig, Designer, initial_cell, scatter
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 
-__all__ = ["CHECKPOINT_STEPS", "UPC_DRAWS", "run_design", "scatter_baseline", "upc_comparison", "ratio_over_draws"]
+__all__ = ["CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "scatter_baseline", "upc_comparison",
+           "ratio_over_draws", "banding_comparison"]
 
 CHECKPOINT_STEPS = 10
 UPC_DRAWS = 8  # more D4 tilings for UPC's ratio (ratio_over_draws): the mean's sd to about a third of one draw's
+BANDING_SEEDS = (0, 1, 2, 3, 4)  # banding_comparison's draws: `study layout --tile-seed N`'s, held out from the search
 WIENER_OBJECTIVES = ("wiener", "crop")  # scored as a PSNR in dB (higher is better); the others as the objective
 
 
@@ -105,6 +109,29 @@ def ratio_over_draws(cells: dict, seed: int, n: int = UPC_DRAWS) -> dict:
     return {"n": n, "mean": r.mean(0).tolist(), "sd": r.std(0, ddof=1).tolist(), "min": r.min(0).tolist()}
 
 
+def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=BANDING_SEEDS) -> dict:
+    """The relative sd of the power at d = 2 mm over the paper sensor's shifts (layout_banding.sampled_banding on its
+    2 µm raster, R / G / B) of the designed cell and of the preset T-OLED at the open area (84 × 84 at 2 µm, slit at
+    the tile's edge), tiled as the design is, on `study layout --tile-seed N`'s draws: per draw, and their ratio's
+    mean, sample sd, largest, and the draws below 1 per channel."""
+    from psf import layouts
+    from psf.lens import Lens
+    from udc_render.design.cells import frame_cell, layout_cell
+    from udc_render.design.optimise import RIG_WAVELENGTHS_NM
+    from udc_render.studies.layout_banding import sampled_banding
+    toled, toled_um = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
+    cells = {"design": (cell, config.feature_um), "toled_edge": (frame_cell(toled, "edge"), toled_um)}
+    sd = {name: [] for name in cells}
+    for seed in seeds:
+        for name, (c, pixel_um) in cells.items():
+            doc = sampled_banding(c, pixel_um, Lens(), RIG_WAVELENGTHS_NM, seed=seed, tilings=(config.tiling,))
+            sd[name].append(doc[config.tiling]["rms"])
+    r = np.divide(sd["design"], sd["toled_edge"])
+    return {"tiling": config.tiling, "seeds": list(seeds), "sd": sd, "ratio": r.tolist(), "mean": r.mean(0).tolist(),
+            "sd_of_ratio": (r.std(0, ddof=1) if len(seeds) > 1 else np.zeros(r.shape[1])).tolist(),
+            "max": r.max(0).tolist(), "below": (r < 1).sum(0).tolist()}
+
+
 def _loss_figure(doc: dict, out: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -112,7 +139,9 @@ def _loss_figure(doc: dict, out: Path) -> None:
     fig, ax = plt.subplots(figsize=(6, 4))
     wiener = doc["config"]["objective"] in WIENER_OBJECTIVES
     values = [doc["initial"]["search_objective"]] + [r["objective"] for r in doc["losses"]]
-    floored = "; J × the UPC floor's factor" if doc["config"].get("upc_floor") else ""
+    factors = [name for key, name in (("upc_floor", "the UPC floor's"), ("banding_ceiling", "the banding ceiling's"))
+               if doc["config"].get(key)]
+    floored = f"; J × {' and '.join(factors)} factor" if factors else ""
     ax.plot(np.arange(len(values)), -10 * np.log10(values) if wiener else values,
             label=f"the search (its tiling{floored})")
     base = doc["scatters"]
@@ -144,6 +173,7 @@ def _write(designer: Designer, out: Path, compare: bool) -> dict:
            "initial": {**designer.score(initial), "search_objective": designer.search_score(initial),
                        "squares_moved": int(np.sum(initial != cell) // 2)},
            "scatters": scatter_baseline(designer, final), "upc": upc_comparison(cell, cfg) if compare else None,
+           "banding": banding_comparison(cell, cfg) if compare and cfg.banding_ceiling else None,
            "open_squares": int(cell.sum()), "cell_px": cfg.cell_px, "steps_done": designer.step_done,
            "converged": designer.converged, "evaluations": designer.evaluations, "losses": designer.losses}
     save_json(out / "design.json", doc)

@@ -41,8 +41,9 @@ UPC's sampling instead (udc_render.design.upc: 610 / 530 / 470 nm, f = 10 mm, th
 display tiled over 73 × 73 cells): their loss or their statistic in their optics, the comparison with their
 optimised cell. It takes the objectives 'upc' and 'rings' (the Wiener objectives need the rig's sensor sampling).
 With upc_floor R, 'wiener' and 'crop' are searched times a hinge that holds UPC's mean ring minima at R × the
-T-OLED's in the floor's channels (udc_render.design.floor): the restoration objective under UPC's target. init takes
-'scatter', 'toled' or a former design's cell.png (a search from another start).
+T-OLED's in the floor's channels (udc_render.design.floor): the restoration objective under UPC's target. With
+banding_ceiling R, times a hinge that holds the bands at d = 2 mm at most R × the T-OLED's (udc_render.design.bands).
+init takes 'scatter', 'toled' or a former design's cell.png (a search from another start).
 The search scores in float32 (a swap is taken only if it lowers J by more than IMPROVE_REL of J, well above
 float32's rounding); every reported score is float64.
 
@@ -59,6 +60,7 @@ import torch
 
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp, upc
+from udc_render.design.bands import BandingCeiling
 from udc_render.design.cells import read_cell
 from udc_render.design.crop import near_window, split_kernel
 from udc_render.design.floor import UpcFloor
@@ -84,7 +86,7 @@ IMPROVE_REL = 1e-5
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
 _LATER_DEFAULTS = {  # options added after the first checkpoints, at the settings those runs had
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
-    "floor_uncropped": False}
+    "floor_uncropped": False, "banding_ceiling": None}
 
 
 def _check_channels(option: str, channels: str) -> None:
@@ -115,6 +117,7 @@ class DesignConfig:
     upc_floor: float | None = None
     floor_channels: str = "G"
     floor_uncropped: bool = False
+    banding_ceiling: float | None = None
 
     def __post_init__(self):
         if self.contrast is None:
@@ -144,6 +147,7 @@ class DesignConfig:
         if self.optics == "upc":
             self._check_upc()
         self._check_floor()
+        self._check_ceiling()
         if self.far_veil and self.objective not in ("wiener", "crop"):
             raise tp.DesignError(f"--far-veil: takes --objective wiener or crop (the light past the kernel's window), "
                                  f"got {self.objective}")
@@ -171,6 +175,15 @@ class DesignConfig:
         if self.objective not in ("wiener", "crop") or self.optics != "rig":
             raise tp.DesignError(f"--upc-floor: takes --objective wiener or crop in --optics rig (the rings objective "
                                  f"is UPC's statistic itself), got --objective {self.objective} --optics {self.optics}")
+
+    def _check_ceiling(self) -> None:
+        if self.banding_ceiling is None:
+            return
+        if not self.banding_ceiling > 0:
+            raise tp.DesignError(f"--banding-ceiling {self.banding_ceiling}: expected a ratio to the T-OLED's > 0")
+        if self.objective not in ("wiener", "crop") or self.optics != "rig":
+            raise tp.DesignError(f"--banding-ceiling: takes --objective wiener or crop in --optics rig, got "
+                                 f"--objective {self.objective} --optics {self.optics}")
 
     @property
     def channel_index(self) -> list[int]:
@@ -242,6 +255,9 @@ class Designer:
         self.floor = None if config.upc_floor is None else UpcFloor(
             config.upc_floor, config.floor_channels, config.cell_px, config.cell_um, config.open_fraction,
             config.seed, config.tiling == "turned", config.floor_uncropped, device)
+        self.ceiling = None if config.banding_ceiling is None else BandingCeiling(
+            config.banding_ceiling, config.cell_px, config.cell_um, config.open_fraction, RIG_WAVELENGTHS_NM,
+            config.seed, config.tiling == "turned", device=device)
         self.cell = initial_cell(config)
         self.current = self.search_score(self.cell)
         self.step_done, self.converged, self.evaluations, self.losses = 0, False, 1, []
@@ -277,20 +293,27 @@ class Designer:
         return -0.01 * torch.topk(w, int(0.3 * w.numel()), largest=False).values.mean()
 
     def searched(self, cell: torch.Tensor, which: str) -> torch.Tensor:
-        """What the search lowers on a tiling: J, times the UPC floor's factor with --upc-floor (floor.UpcFloor)."""
+        """What the search lowers on a tiling: J, times the UPC floor's factor with --upc-floor (floor.UpcFloor) and
+        the banding ceiling's with --banding-ceiling (bands.BandingCeiling)."""
         j = self.objective(cell, self.transforms(which))
-        return j if self.floor is None else j * self.floor.factor(cell, which)
+        if self.floor is not None:
+            j = j * self.floor.factor(cell, which)
+        return j if self.ceiling is None else j * self.ceiling.factor(cell, which)
 
     def score(self, cell: np.ndarray, which: str = "final") -> dict:
         """The float64 objective J of a binary cell on the held-out ('final') or the search's tiling, with its PSNR
-        (wiener: −10 log10 J) and open area; with --upc-floor, the floor's ratios (its channels) on that tiling."""
+        (wiener: −10 log10 J) and open area; with --upc-floor, the floor's ratios (its channels) on that tiling; with
+        --banding-ceiling, the ceiling's ratios (R, G, B) on that tiling's draws."""
         x = torch.tensor(cell, dtype=torch.float64, device=self.device)
         with torch.no_grad():
             j = float(self.objective(x, self.transforms(which)))
-            floor = None if self.floor is None else self.floor.ratios(x, which).tolist()
-        psnr = float(-10 * np.log10(j)) if self.config.objective in ("wiener", "crop") else None
-        out = {"objective": j, "psnr_db": psnr, "open_area": float(np.mean(cell))}
-        return out if floor is None else {**out, "upc_floor_ratios": floor}
+            psnr = float(-10 * np.log10(j)) if self.config.objective in ("wiener", "crop") else None
+            out = {"objective": j, "psnr_db": psnr, "open_area": float(np.mean(cell))}
+            if self.floor is not None:
+                out["upc_floor_ratios"] = self.floor.ratios(x, which).tolist()
+            if self.ceiling is not None:
+                out["banding_ratios"] = self.ceiling.ratios(x, which).tolist()
+        return out
 
     def search_score(self, cell: np.ndarray) -> float:
         with torch.no_grad():

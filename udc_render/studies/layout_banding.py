@@ -109,10 +109,10 @@ def _sampled_channel(cell, cell_um, lens, wavelength_nm, distance_um, span_um, t
 
 
 def sampled_banding(cell: np.ndarray, cell_um: float, lens, wavelengths_nm, distance_mm: float = DEFAULT_DISTANCE_MM,
-                    seed: int = 0, sample_um: float = SAMPLE_UM) -> dict:
+                    seed: int = 0, sample_um: float = SAMPLE_UM, tilings=("repeated", "turned")) -> dict:
     """The module doc's sampled figures of the cell (amplitude on cell_um squares, framed as the study takes it)
     repeated and turned (the centre of tile_transforms(DRAW_TILES, seed, keys=('banding',))), per wavelength, at
-    distance_mm in front of the lens."""
+    distance_mm in front of the lens; tilings: the ones computed."""
     from udc_render.design.torch_psf import tile_transforms  # torch: not at this module's import
     d_um = distance_mm * 1000.0
     span = shift_span_um(lens, d_um)
@@ -124,7 +124,8 @@ def sampled_banding(cell: np.ndarray, cell_um: float, lens, wavelengths_nm, dist
         return tile_transforms(n, seed, keys=("banding",))[o:o + tiles, o:o + tiles]
 
     plans = {"repeated": None, "turned": turned}
-    for tiling, plan in plans.items():
+    for tiling in tilings:
+        plan = plans[tiling]
         chans = [_sampled_channel(cell, cell_um, lens, wl, d_um, span, plan, sample_um) for wl in wavelengths_nm]
         doc[tiling] = {key: [c[key] for c in chans] for key in chans[0]}
     doc["wavelengths_nm"] = [float(w) for w in wavelengths_nm]
