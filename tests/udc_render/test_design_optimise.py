@@ -84,6 +84,7 @@ def test_the_rings_objective_is_upcs_statistic_in_their_sampling():
 @pytest.mark.parametrize("dropped, changed", [
     (("optics", "channels"), {"channels": "B"}),
     (("upc_floor", "floor_channels", "floor_uncropped"), {"upc_floor": 1.3}),
+    (("banding_ceiling",), {"banding_ceiling": 0.95}),
 ])
 def test_a_checkpoint_from_before_a_later_option_resumes(dropped, changed):
     """A state saved without a later option's settings (their defaults then) loads into the default run only."""

@@ -109,16 +109,17 @@ def ratio_over_draws(cells: dict, seed: int, n: int = UPC_DRAWS) -> dict:
     return {"n": n, "mean": r.mean(0).tolist(), "sd": r.std(0, ddof=1).tolist(), "min": r.min(0).tolist()}
 
 
-def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=BANDING_SEEDS) -> dict:
+def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=None) -> dict:
     """The relative sd of the power at d = 2 mm over the paper sensor's shifts (layout_banding.sampled_banding on its
     2 µm raster, R / G / B) of the designed cell and of the preset T-OLED at the open area (84 × 84 at 2 µm, slit at
     the tile's edge), tiled as the design is, on `study layout --tile-seed N`'s draws: per draw, and their ratio's
-    mean, sample sd, largest, and the draws below 1 per channel."""
+    mean, sample sd, largest, and the draws below 1 per channel (seeds: BANDING_SEEDS by default)."""
     from psf import layouts
     from psf.lens import Lens
     from udc_render.design.cells import frame_cell, layout_cell
     from udc_render.design.optimise import RIG_WAVELENGTHS_NM
     from udc_render.studies.layout_banding import sampled_banding
+    seeds = BANDING_SEEDS if seeds is None else seeds
     toled, toled_um = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
     cells = {"design": (cell, config.feature_um), "toled_edge": (frame_cell(toled, "edge"), toled_um)}
     sd = {name: [] for name in cells}
