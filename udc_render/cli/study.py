@@ -1,5 +1,5 @@
 """`udc-render study {psf,render,capture,far_field,realism,defocus,banding,gap,robustness,layout,layout-trained,
-design} --out DIR [--quick]`:
+layout-dipole,design} --out DIR [--quick]`:
 error-versus-run-time studies of the approximation knobs, the defocus and banding studies users run, and the
 robustness of a restorer trained on one panel or on randomized panels (restore.studies.robustness)."""
 from __future__ import annotations
@@ -25,6 +25,8 @@ STUDIES = {
     "layout-trained": "layouts compared by DeP and a small UNet trained online through a bank of each (--display: "
                       "comma-separated, each DISPLAY[@edge][@turned]; the first is the reference; about 20 min a "
                       "layout on 2 cores, minutes with --quick)",
+    "layout-dipole": "a turned tiling's bands at d = 2 mm, UPC's statistic and the veil objective as the T-OLED's "
+                     "slit moves across its cell: the cell's dipole (about 4 min; seconds with --quick)",
     "design": "the layout designer's knobs (the torch PSF's pupil samples, the optimiser's steps): error against "
               "CPU time",
     "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
@@ -134,6 +136,8 @@ def run(args) -> int:
         from udc_render.studies.capture_far import run_study
     elif args.what == "design":
         from udc_render.studies.design_knobs import run_study
+    elif args.what == "layout-dipole":
+        from udc_render.studies.layout_dipole import run_study
     elif args.what == "robustness":
         from restore.studies.robustness import run_study
         run_study = partial(run_study, conditioned=args.conditioned)
@@ -142,7 +146,7 @@ def run(args) -> int:
     else:
         from udc_render.studies.psf_knobs import run_study
     run_study(out, quick=args.quick)
-    name = f"study_{args.what}"
+    name = f"study_{args.what.replace('-', '_')}"
     print(f"wrote {out}/{name}.csv, {name}.md, {name}.png")
     return 0
 
