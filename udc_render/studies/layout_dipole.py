@@ -13,8 +13,9 @@ tile along the aperture's rim, a variance (|μ|² / 2) P_0² Σ_t |∇A(c_t − 
 The same dipole decorrelates the turned tiles' far fields at low angles: the diffuse light between the diffraction
 orders that UPC's ring minima read.
 
-The study moves the preset T-OLED's slit across its cell (cells.toled_reference: the 21 × 21 cell of 8 µm squares
-at the open area, rolled k = 0 … 10 squares along x from the slit at the tile's edge: |μ| from 64 to 0 µm) and
+The study moves the preset T-OLED's slit across its cell (optimise.toled_cell: the T-OLED on the design's 21 × 21
+squares of 8 µm at the open area, `design --init toled`, rolled k = 0 … 10 squares along x from the slit at the
+tile's edge: |μ| from 64 to 2 µm) and
 reports per framing |μ|; the bands of the turned and the repeated tiling (layout_banding.sampled_banding: the
 relative sd of P over the paper sensor's shifts at d = 2 mm; turned, the root mean square over `draws` draws of
 `study layout --tile-seed N`); UPC's mean ring minima over the edge-framed T-OLED's (their sampling, turned, the mean
@@ -66,14 +67,15 @@ def framing_rows(cfg: dict, progress=None) -> list[dict]:
     """One row per roll k (module doc): |μ|, the bands, UPC's ratio, the veil objective's PSNR (R, G, B each)."""
     from udc_render.design.cells import toled_reference
     from udc_render.design.job import ratio_over_draws
-    from udc_render.design.optimise import DesignConfig, Designer
+    from udc_render.design.optimise import DesignConfig, Designer, toled_cell
     ref = toled_reference(CELL_UM, OPEN)
-    designer = Designer(DesignConfig(objective="crop", contrast=1.0, far_veil=True, kernel_px=cfg["kernel_px"],
-                                     pupil_samples=cfg["pupil_samples"], scatters=1))
+    config = DesignConfig(objective="crop", contrast=1.0, far_veil=True, kernel_px=cfg["kernel_px"],
+                          pupil_samples=cfg["pupil_samples"], scatters=1)
+    designer, toled = Designer(config), toled_cell(config)
     rows = []
     for k in cfg["rolls"]:
         start = time.perf_counter()
-        cell = np.roll(ref, k, axis=1)
+        cell = np.roll(toled, k, axis=1)
         turned, repeated = _bands(cell, cfg)
         upc = ratio_over_draws({"design": cell, "toled_edge": ref}, 0, n=cfg["draws"])["mean"]
         rows.append({"roll": k, "centroid_um": centroid_um(cell), "bands_turned": turned, "bands_repeated": repeated,
@@ -128,10 +130,12 @@ def _markdown(doc: dict) -> str:
     fit = doc["fit"]
     f2 = lambda v: f"{v:.2f}"  # noqa: E731
     lines = ["# Layout study: the cell's dipole", "",
-             f"The preset T-OLED at {OPEN:.0%} open area in a {CELL_UM:g} µm cell of {FEATURE_UM:g} µm squares, its "
-             "slit rolled along x from the tile's edge; bands at d = 2 mm over the paper sensor's shifts "
+             f"The preset T-OLED at {OPEN:.0%} open area on a {CELL_UM:g} µm cell's {FEATURE_UM:g} µm squares "
+             "(`design --init toled`), its slit rolled along x from the tile's edge; bands at d = 2 mm over the paper "
+             "sensor's shifts "
              f"({doc['config']['sample_um']:g} µm raster; turned: root mean square over {doc['config']['draws']} "
-             "draws); UPC's ratio to the edge-framed T-OLED, turned, mean over as many draws; the veil objective "
+             "draws); UPC's ratio to design.json's edge-framed T-OLED (area-weighted, not on the squares), turned, "
+             "mean over as many draws; the veil objective "
              "(design --objective crop --contrast 1 --far-veil) on the held-out tiling. Green shown; the JSON holds "
              "R, G, B.", "",
              *md_table(rows, [("roll", "roll (squares)"), ("mu", "centroid offset (µm)"), ("t", "turned sd (×10⁻³)"),
