@@ -303,7 +303,7 @@ def test_physics_page_states_the_poled_orders_spacing():
 
 def test_defaults_of_the_layout_design(defaults):
     """concepts/defaults.md's design rows against udc_render.design's constants."""
-    from udc_render.design import floor, job, metrics, options
+    from udc_render.design import bands, floor, job, metrics, options
     _says(defaults["minimum feature size (`--feature-um`)"], "8 µm; at least 1.5 µm")
     assert options.DEFAULT_FEATURE_UM == 8.0 and options.LITHOGRAPHY_UM == 1.5
     _says(defaults["the `crop` objective's scene contrast (`--contrast`)"], "| 1.0 (RMS) |")
@@ -314,3 +314,7 @@ def test_defaults_of_the_layout_design(defaults):
     assert floor.FLOOR_WEIGHT == 10.0
     _says(defaults["UPC's ratio over more tilings (`design.job.UPC_DRAWS`)"], "| 8 D4 draws |")
     assert job.UPC_DRAWS == 8
+    _says(defaults["the banding ceiling's weight (`design.bands.BANDING_WEIGHT`)"], "| 10, the floor's |")
+    assert bands.BANDING_WEIGHT == floor.FLOOR_WEIGHT == 10.0
+    _says(defaults["the ceiling's search draws (`design.bands.BANDING_DRAWS`)"], "| 8 D4 draws |")
+    assert bands.BANDING_DRAWS == 8

@@ -37,7 +37,7 @@ from udc_render.studies.tiling_power import shift_span_um, window_tiles
 __all__ = ["BANDING_WEIGHT", "BANDING_DRAWS", "BandingCeiling", "relative_sd"]
 
 BANDING_WEIGHT = FLOOR_WEIGHT
-BANDING_DRAWS = 8  # the search's D4 draws (mean variance): one draw's ratio to the T-OLED varies by about 4 % (sd)
+BANDING_DRAWS = 8  # the search's D4 draws (mean variance): one draw's ratio to the T-OLED varies by 2-8 % (sd)
 
 
 class _Channel:
