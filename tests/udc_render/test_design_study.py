@@ -294,3 +294,70 @@ def test_the_design_guide_prints_the_banding_over_five_draws():
         row = (f"| {label} | {' / '.join(f'{v:.2f}' for v in q)} | {q.mean():.2f} ± {q.std(ddof=1) / np.sqrt(5):.2f} "
                f"| {(q < 1).sum()} of 5 |")
         assert row in lines, row
+
+
+def test_the_design_guide_prints_the_dipole_study_and_the_ceiling_runs():
+    """The dipole section: the study's rows, fit and extremes are the committed JSON's; the designs' centroid offsets
+    are their cell.png's, the predictions the fit's; the ceiling runs' table is their design.json's (the bands on
+    draws 0–4: per draw the mean over R, G, B of the ratio to the T-OLED), the veil design's and `veil130`'s the
+    committed `study layout` reports'."""
+    from udc_render.studies.layout_dipole import centroid_um
+    root = Path(__file__).resolve().parents[2]
+    raw = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8")
+    text, lines = " ".join(raw.split()), raw.splitlines()
+    figures = root / "docs" / "figures" / "design"
+    study = json.loads((figures / "dipole" / "study_layout_dipole.json").read_text())
+    rows = {r["roll"]: r for r in study["rows"]}
+    labels = {0: "0 (at the tile's edge)", 8: "8 (centred)"}
+    for k in (0, 2, 4, 6, 8):
+        r = rows[k]
+        row = (f"| {labels.get(k, k)} | {r['centroid_um']:.1f} | {1e3 * r['bands_turned'][1]:.2f} | "
+               f"{1e3 * r['bands_repeated'][1]:.2f} | {r['upc_ratio'][1]:.3f} | {r['veil_psnr_db']:.2f} |")
+        assert row in lines, row
+    fit = study["fit"]
+    assert (f"to within {100 * fit['max_rel_misfit_sd']:.1f} % of sd (sd_0 = {1e3 * fit['sd0']:.2f} × 10⁻³, "
+            f"κ = {1e9 * fit['kappa_per_um2']:.2f} × 10⁻⁹ per µm²)") in text
+    repeated = [1e3 * r["bands_repeated"][1] for r in study["rows"]]
+    assert f"({min(repeated):.2f}–{max(repeated):.2f} × 10⁻³)" in text
+    centred, edge = rows[8], rows[0]
+    assert (f"Centred, it bands {1e3 * centred['bands_turned'][1]:.2f} × 10⁻³ against the repeated "
+            f"{1e3 * centred['bands_repeated'][1]:.2f} × 10⁻³") in text
+    assert (f"({centred['veil_psnr_db']:.2f} against {edge['veil_psnr_db']:.2f} dB) and two thirds of UPC's ratio "
+            f"({centred['upc_ratio'][1]:.2f} ×)") in text
+    toled = np.array([_turned_sd(figures / f) for f in ["study_toled168_20_edge/study_layout.md"] + [
+        f"banding_draws/toled_s{k}/study_layout.md" for k in (1, 2, 3, 4)]])
+
+    def measured(first: str, name: str) -> np.ndarray:
+        mds = [figures / first / "study_layout.md"] + [figures / "banding_draws" / f"{name}_s{k}" / "study_layout.md"
+                                                        for k in (1, 2, 3, 4)]
+        return (np.array([_turned_sd(md) for md in mds]) / toled).mean(axis=1)
+
+    ceiling = {name: json.loads((figures / "ceiling" / name / "design.json").read_text())
+               for name in ("veil_b90", "veil130_b90")}
+    per_draw = {"crop": measured("banding_draws/crop_s0", "crop"), "veil": measured("study_design_veil", "veil"),
+                "veil130": measured("study_floor_veil130", "veil130"),
+                **{n: np.mean(d["banding"]["ratio"], axis=1) for n, d in ceiling.items()}}
+    cells = {"crop": "design_crop", "veil": "design_veil", "veil130": "floor/veil130", "veil_b90": "ceiling/veil_b90",
+             "veil130_b90": "ceiling/veil130_b90"}
+    mu = {n: centroid_um(np.asarray(iio.imread(figures / c / "cell.png")) / 255.0) for n, c in cells.items()}
+    law = {n: np.sqrt((fit["a"] + fit["kappa_per_um2"] * m ** 2) / (fit["a"] + fit["kappa_per_um2"] * edge[
+        "centroid_um"] ** 2)) for n, m in mu.items()}
+    assert (f"{mu['crop']:.1f} µm (the `crop` design), {mu['veil']:.1f} µm (the veil design), {mu['veil130']:.1f} µm "
+            f"(`veil130`), {mu['veil_b90']:.1f} µm (`veil_b90`, below) and {mu['veil130_b90']:.1f} µm") in text
+    assert f"predicts bands of {' / '.join(f'{law[n]:.2f}' for n in cells)} × the edge-framed T-OLED" in text
+    assert f"they are {' / '.join(f'{per_draw[n].mean():.2f}' for n in cells)} ×" in text
+    for name, d in ceiling.items():
+        dr, q = d["upc"]["turned"]["draws"], per_draw[name]
+        assert d["banding"]["seeds"] == [0, 1, 2, 3, 4] and d["config"]["banding_ceiling"] == 0.9
+        row = (f"| {d['initial']['squares_moved']} | {d['final']['psnr_db']:.2f} | {dr['mean'][1]:.3f} ± "
+               f"{dr['sd'][1]:.3f} (min {dr['min'][1]:.3f}) | {' / '.join(f'{v:.2f}' for v in q)} | {q.mean():.2f} | "
+               f"{(q < 1).sum()} of 5 |")
+        printed = next(line for line in lines if line.startswith(f"| `{name}` |"))
+        assert printed.endswith(row), (printed, row)
+        assert " / ".join(f"{v:.2f}" for v in d["final"]["banding_ratios"]) in text
+    for name in ("veil", "veil130"):
+        q = per_draw[name]
+        assert f"| {' / '.join(f'{v:.2f}' for v in q)} | {q.mean():.2f} | {(q < 1).sum()} of 5 |" in raw
+    both = ceiling["veil130_b90"]["final"]["psnr_db"]
+    assert (f"both at {both:.2f} dB (`veil130_b90`), {edge['veil_psnr_db'] - both:.2f} dB below the turned T-OLED's "
+            f"{edge['veil_psnr_db']:.2f} dB") in text
