@@ -114,3 +114,24 @@ def test_the_study_keeps_a_part_made_with_the_same_settings(tmp_path):
     assert set(dk._kept_parts(tmp_path, {**config, "phases": [2, 4]})) == {"sampling", "steps", "banding"}
     assert dk._kept_parts(tmp_path, {**config, "threads": 2}) == {}
     assert dk._kept_parts(tmp_path / "none", config) == {}
+
+
+def test_the_ceilings_block_error_in_closed_form():
+    """Draws alternating variances v1, v2: blocks of 1 err by √(v/m) − 1 against m = (v1 + v2) / 2, RMS times
+    √(M / (M − 1)); blocks of 2 hold both and do not err; equal draws never err; a ratio to itself never errs."""
+    v1, v2 = 4.0, 9.0
+    var = np.array([[v1], [v2], [v1], [v2]])
+    m = (v1 + v2) / 2
+    expected = np.sqrt(((np.sqrt(v1 / m) - 1) ** 2 + (np.sqrt(v2 / m) - 1) ** 2) / 2 * 4 / 3)
+    assert abs(dk._block_error(var, 1) - expected) < 1e-12
+    assert dk._block_error(var, 2) < 1e-12 and dk._block_error(np.full((4, 3), 2.0), 1) < 1e-12
+    assert dk._block_error(var, 1, var) < 1e-12
+
+
+def test_the_ceiling_rows_cover_the_draw_counts():
+    """Part (e) on the quick setting: one row per draw count, its blocks of the truth's draws, finite errors."""
+    rows = dk.ceiling_rows({"cell_um": 96.0, "ceiling_draws": (1, 2), "ceiling_truth": 4})
+    assert [(r["draws"], r["blocks"]) for r in rows] == [(1, 4), (2, 2)]
+    for r in rows:
+        assert r["cpu_s"] > 0 and all(0 <= r[k] < 1 for k in ("error_toled_rel", "error_scatter_rel",
+                                                              "error_ratio_rel"))

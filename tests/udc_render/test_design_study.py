@@ -361,3 +361,21 @@ def test_the_design_guide_prints_the_dipole_study_and_the_ceiling_runs():
     both = ceiling["veil130_b90"]["final"]["psnr_db"]
     assert (f"both at {both:.2f} dB (`veil130_b90`), {edge['veil_psnr_db'] - both:.2f} dB below the turned T-OLED's "
             f"{edge['veil_psnr_db']:.2f} dB") in text
+
+
+def test_the_design_guide_prints_the_ceilings_draws():
+    """Part (e) of the committed `study design`: the guide's table and the defaults' row are its JSON's."""
+    root = Path(__file__).resolve().parents[2]
+    lines = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").splitlines()
+    defaults = " ".join((root / "docs" / "concepts" / "defaults.md").read_text(encoding="utf-8").split())
+    study = root / "docs" / "figures" / "design" / "study_knobs" / "study_design.json"
+    rows = json.loads(study.read_text())["ceiling"]
+
+    def pct(v: float) -> str:
+        return f"{float(f'{100 * v:.2g}'):g} %"
+    for r in rows:
+        row = (f"| {r['draws']}{', the default' if r['draws'] == 8 else ''} | {pct(r['error_toled_rel'])} | "
+               f"{pct(r['error_scatter_rel'])} | {pct(r['error_ratio_rel'])} | {r['cpu_s']:.2f} |")
+        assert row in lines, row
+    ratio = " / ".join(pct(r["error_ratio_rel"])[:-2] for r in rows)
+    assert f"the ratio's error {ratio} % at 1 / 2 / 4 / 8 / 16 draws" in defaults

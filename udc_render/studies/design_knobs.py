@@ -29,11 +29,19 @@ phases (tiling_power.raster_power: the same tiles). Also what engine version psf
 P phases over one tile, interpolated periodically. Each P is its own window (its margin holds its shifts), so its
 own draw of turns. CPU seconds of the kernels (one wavelength).
 
+(e) The banding ceiling's draws (udc_render.design.bands.BANDING_DRAWS): the relative sd of P of each cell on the
+ceiling's raster (the cell's own squares), as the root mean variance over N D4 draws of the window's tiles, and the
+ratio scatter / T-OLED the ceiling holds, against the same over all M = `ceiling_truth` draws: the RMS over disjoint
+blocks of N draws of the relative error, times √(M / (M − N)) (a block is part of the M draws: its error against
+them is √(1 − N / M) of its error against the expectation), the largest over R, G, B; CPU seconds of one forward
+pass over N draws (the scatter, 3 channels).
+
 Outputs: study_design.json (every figure), study_design.csv (one row per setting), study_design.md,
-study_design.png (error against CPU time; objective against steps; banding error against CPU time; field phases).
+study_design.png (error against CPU time; objective against steps; banding error against CPU time; field phases;
+the ceiling's draws).
 A part already in OUT's study_design.json with the same settings is kept (the study resumes part by part).
 quick: a 96 µm cell, 31-px kernels, three settings and 2 and 4 steps from 128 pupil samples, raster steps of 8 and
-4 µm, 2 field phases (a smoke run).
+4 µm, 2 field phases, 1 and 2 of 4 draws (a smoke run).
 """
 from __future__ import annotations
 
@@ -61,20 +69,22 @@ from udc_render.studies.layout_banding import sampled_banding
 from udc_render.studies.tiling_power import band_figures, raster_power, shift_span_um, tiling_power
 
 __all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "banding_rows", "field_profiles", "field_rows",
-           "run_study"]
+           "ceiling_rows", "run_study"]
 
 FULL = {"cell_um": 168.0, "kernel_px": 127, "samples": (128, 256, 384, 512, 768, 1024, 2048),
         "steps": (10, 20, 40, 80, 150), "design_pupil_samples": DesignConfig().pupil_samples,
-        "sample_um": (8.0, 4.0, 2.0, 1.0), "phases": (2, 3, 4, 6, 8)}
+        "sample_um": (8.0, 4.0, 2.0, 1.0), "phases": (2, 3, 4, 6, 8), "ceiling_draws": (1, 2, 4, 8, 16),
+        "ceiling_truth": 32}
 QUICK = {"cell_um": 96.0, "kernel_px": 31, "samples": (64, 128, 256), "steps": (2, 4), "design_pupil_samples": 128,
-         "sample_um": (8.0, 4.0), "phases": (2,)}
+         "sample_um": (8.0, 4.0), "phases": (2,), "ceiling_draws": (1, 2), "ceiling_truth": 4}
 FEATURE_UM = 8.0
 OPEN = 0.20
 SEED = 0
 BANDING_DISTANCE_UM = 2000.0
 FIELD_WAVELENGTH_NM = 520.0
 PART_KEYS = {"sampling": ("samples",), "steps": ("steps", "design_pupil_samples"), "banding": ("sample_um",),
-             "field": ("phases",)}  # besides the shared keys: what decides each part (run_study resumes by them)
+             "field": ("phases",), "ceiling": ("ceiling_draws", "ceiling_truth")}
+# besides the shared keys: what decides each part (run_study resumes by them)
 SHARED_KEYS = ("cell_um", "kernel_px", "feature_um", "open_fraction", "seed", "wavelengths_nm", "threads",
                "banding_distance_mm")
 
@@ -240,6 +250,43 @@ def field_rows(cfg: dict, progress=None) -> list[dict]:
     return rows
 
 
+def _draw_sds(ceiling, cell: np.ndarray, draws: int) -> np.ndarray:
+    """[draws, channels] the relative sd of P of the cell on each of the ceiling's raster draws (keys 'study', k)."""
+    from udc_render.design.bands import relative_sd
+    with torch.no_grad():
+        return np.array([[float(relative_sd(p)) for p in ceiling.power(torch.tensor(cell), tp.tile_transforms(
+            ceiling.tiles, SEED, keys=("design", "banding", "study", k)))] for k in range(draws)])
+
+
+def _block_error(var: np.ndarray, n: int, ref_var: np.ndarray | None = None) -> float:
+    """The RMS over disjoint blocks of n draws of the relative error of √(mean variance) (of the ratio to ref_var's,
+    on the same draws, when given) against all M draws', times √(M / (M − n)), the largest over the channels."""
+    def estimate(rows: slice) -> np.ndarray:
+        e = np.sqrt(var[rows].mean(0))
+        return e if ref_var is None else e / np.sqrt(ref_var[rows].mean(0))
+    full = estimate(slice(None))
+    errors = [estimate(slice(b * n, (b + 1) * n)) / full - 1 for b in range(len(var) // n)]
+    return float(np.max(np.sqrt(np.mean(np.square(errors), axis=0) * len(var) / (len(var) - n))))
+
+
+def ceiling_rows(cfg: dict, progress=None) -> list[dict]:
+    """Part (e): one row per draw count N (module doc)."""
+    from udc_render.design.bands import BandingCeiling
+    cs = cells(cfg["cell_um"])
+    ceiling = BandingCeiling(1.0, cs["scatter"].shape[0], cfg["cell_um"], OPEN, RIG_WAVELENGTHS_NM, SEED, True)
+    var = {name: _draw_sds(ceiling, cell, cfg["ceiling_truth"]) ** 2 for name, cell in cs.items()}
+    rows = []
+    for n in cfg["ceiling_draws"]:
+        _, cpu_s = _timed(lambda: _draw_sds(ceiling, cs["scatter"], n))
+        rows.append({"part": "ceiling", "draws": n, "blocks": cfg["ceiling_truth"] // n, "cpu_s": cpu_s,
+                     "error_toled_rel": _block_error(var["toled_edge"], n),
+                     "error_scatter_rel": _block_error(var["scatter"], n),
+                     "error_ratio_rel": _block_error(var["scatter"], n, var["toled_edge"])})
+        if progress:
+            progress(1)
+    return rows
+
+
 def _kept_parts(out: Path, config: dict) -> dict:
     """The parts of OUT's study_design.json made with these settings (PART_KEYS and SHARED_KEYS)."""
     try:
@@ -261,7 +308,8 @@ def run_study(out: Path, quick: bool = False) -> dict:
                                     "field_wavelength_nm": FIELD_WAVELENGTH_NM}))
     kept = _kept_parts(Path(out), config)
     makers = {"sampling": (sampling_rows, 2 * len(cfg["samples"])), "steps": (steps_rows, len(cfg["steps"]) + 1),
-              "banding": (banding_rows, 2 * len(cfg["sample_um"])), "field": (field_rows, 2 * len(cfg["phases"]))}
+              "banding": (banding_rows, 2 * len(cfg["sample_um"])), "field": (field_rows, 2 * len(cfg["phases"])),
+              "ceiling": (ceiling_rows, len(cfg["ceiling_draws"]))}
     total = sum(n for part, (_, n) in makers.items() if part not in kept)
     with tqdm(total=total, desc="study design") as bar:
         doc = {"config": config, **{part: kept[part] if part in kept else make(cfg, bar.update)

@@ -13,8 +13,8 @@ __all__ = ["COLUMNS", "markdown", "write"]
 COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "steps_done", "evaluations", "psnr_db",
            "error_psnr_db", "error_ring_means_rel", "error_ring_minima_rel", "objective", "open_area", "sample_um",
            "error_profile_rel", "error_peak_to_peak_rel", "turned_peak_to_peak", "turned_rms", "error_turned_rel",
-           "phases", "exact_sd", "blend_sd", "blend_error_rms", "one_tile_sd", "one_tile_error_rms", "cpu_s",
-           "cpu_gradient_s"]
+           "phases", "exact_sd", "blend_sd", "blend_error_rms", "one_tile_sd", "one_tile_error_rms", "draws", "blocks",
+           "error_toled_rel", "error_scatter_rel", "error_ratio_rel", "cpu_s", "cpu_gradient_s"]
 
 
 def _cell(v) -> str:
@@ -53,7 +53,7 @@ def markdown(doc: dict) -> str:
         lines.append(f"| {r['steps']} | {r['steps_done']}{' (converged)' if r['converged'] else ''} | "
                      f"{r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | {r['evaluations']} | "
                      f"{r['cpu_s']:.0f} |")
-    return "\n".join(lines + _banding_lines(doc) + _field_lines(doc)) + "\n"
+    return "\n".join(lines + _banding_lines(doc) + _field_lines(doc) + _ceiling_lines(doc)) + "\n"
 
 
 def _section(title: str, header: list[str], rows: list[list[str]]) -> list[str]:
@@ -92,12 +92,40 @@ def _field_lines(doc: dict) -> list[str]:
                      for r in doc["field"]])
 
 
+def _ceiling_lines(doc: dict) -> list[str]:
+    """Part (e): the banding ceiling's draws (absent from a study run before it)."""
+    if not doc.get("ceiling"):
+        return []
+    return _section(f"The banding ceiling's draws (d = {doc['config']['banding_distance_mm']:g} mm, the cell's own "
+                    f"squares; errors against the expectation, from {doc['config']['ceiling_truth']} draws in disjoint "
+                    "blocks)",
+                    ["draws", "blocks", "T-OLED's sd: error", "scatter's sd: error", "ratio: error",
+                     "CPU s, one pass"],
+                    [[str(r["draws"]), str(r["blocks"]), f"{r['error_toled_rel']:.2g}",
+                      f"{r['error_scatter_rel']:.2g}", f"{r['error_ratio_rel']:.2g}", f"{r['cpu_s']:.2f}"]
+                     for r in doc["ceiling"]])
+
+
+def _ceiling_axes(ax, rows: list[dict]) -> None:
+    t = [r["cpu_s"] for r in rows]
+    for key, label, style in (("error_ratio_rel", "scatter / T-OLED: the ceiling's ratio", "o-"),
+                              ("error_toled_rel", "T-OLED's sd", "s--"), ("error_scatter_rel", "scatter's sd", "^:")):
+        ax.loglog(t, [max(r[key], 1e-6) for r in rows], style, label=label)
+    for r in rows:
+        ax.annotate(f"{r['draws']}", (r["cpu_s"], max(r["error_ratio_rel"], 1e-6)), fontsize=7)
+    ax.set_xlabel("CPU s, one forward pass (3 channels)")
+    ax.set_ylabel("relative error (RMS over blocks)")
+    ax.set_title("banding ceiling: D4 draws")
+    if rows:
+        ax.legend(fontsize=7)
+
+
 def _figure(doc: dict, out: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
-    fig, (a, b, c, e) = plt.subplots(1, 4, figsize=(21, 4))
+    fig, (a, b, c, e, f) = plt.subplots(1, 5, figsize=(26, 4))
     for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
         rows = [r for r in doc["sampling"] if r["cell"] == name][:-1]  # the reference has no error
         t = [r["cpu_gradient_s"] for r in rows]
@@ -121,6 +149,7 @@ def _figure(doc: dict, out: Path) -> None:
     b.set_xscale("log")
     _banding_axes(c, doc.get("banding", []))
     _field_axes(e, doc.get("field", []))
+    _ceiling_axes(f, doc.get("ceiling", []))
     for axis in (a.xaxis, b.xaxis):
         axis.set_minor_formatter(NullFormatter())
     b.set_xlabel("search steps, accepted swaps (CPU s beside each)")
@@ -167,7 +196,7 @@ def _field_axes(ax, rows: list[dict]) -> None:
 def write(doc: dict, out: Path) -> list[str]:
     save_json(out / "study_design.json", doc)
     save_text(out / "study_design.csv", _csv(doc["sampling"] + doc["steps"] + doc.get("banding", [])
-                                             + doc.get("field", [])))
+                                             + doc.get("field", []) + doc.get("ceiling", [])))
     save_text(out / "study_design.md", markdown(doc))
     _figure(doc, out)
     return ["study_design.json", "study_design.csv", "study_design.md", "study_design.png"]
