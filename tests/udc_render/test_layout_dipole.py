@@ -31,12 +31,15 @@ def test_the_fit_recovers_a_dipole_law():
 def test_the_quick_study_writes_its_rows(tmp_path):
     """Three framings of the T-OLED on the design's squares (88 open): the slit at the edge (|μ| 64 µm) and near the
     centre (2 µm, its 88th square off the axis); the centred slit bands less turned, by the dipole's share, and has
-    the lower UPC ratio and veil objective."""
+    the lower UPC ratio and veil objective; tiled plainly, a framing is a shift of the display, and the objective
+    stays within 0.05 dB."""
     assert cli.main(["study", "layout-dipole", "--quick", "--out", str(tmp_path)]) == 0
     doc = json.loads((tmp_path / f"{NAME}.json").read_text())
     rows = {r["roll"]: r for r in doc["rows"]}
     assert rows[0]["centroid_um"] > 60 and rows[8]["centroid_um"] < 3
     assert all(rows[8]["bands_turned"][c] < rows[0]["bands_turned"][c] for c in range(3))
     assert rows[8]["upc_ratio"][1] < rows[0]["upc_ratio"][1] and rows[8]["veil_psnr_db"] < rows[0]["veil_psnr_db"]
+    plain = [r["veil_psnr_repeated_db"] for r in rows.values()]
+    assert max(plain) - min(plain) < 0.05
     for suffix in (".csv", ".md", ".png"):
         assert (tmp_path / f"{NAME}{suffix}").is_file()
