@@ -312,7 +312,8 @@ def test_the_design_guide_prints_the_dipole_study_and_the_ceiling_runs():
     for k in (0, 2, 4, 6, 8):
         r = rows[k]
         row = (f"| {labels.get(k, k)} | {r['centroid_um']:.1f} | {1e3 * r['bands_turned'][1]:.2f} | "
-               f"{1e3 * r['bands_repeated'][1]:.2f} | {r['upc_ratio'][1]:.3f} | {r['veil_psnr_db']:.2f} |")
+               f"{1e3 * r['bands_repeated'][1]:.2f} | {r['upc_ratio'][1]:.3f} | {r['veil_psnr_db']:.2f} | "
+               f"{r['veil_psnr_repeated_db']:.2f} |")
         assert row in lines, row
     fit = study["fit"]
     assert (f"to within {100 * fit['max_rel_misfit_sd']:.1f} % of sd (sd_0 = {1e3 * fit['sd0']:.2f} × 10⁻³, "
@@ -332,23 +333,24 @@ def test_the_design_guide_prints_the_dipole_study_and_the_ceiling_runs():
                                                         for k in (1, 2, 3, 4)]
         return (np.array([_turned_sd(md) for md in mds]) / toled).mean(axis=1)
 
-    ceiling = {name: json.loads((figures / "ceiling" / name / "design.json").read_text())
-               for name in ("veil_b90", "veil130_b90")}
+    ceilings = {"veil_b90": 0.9, "veil130_b90": 0.9, "veil_b55": 0.55}
+    ceiling = {name: json.loads((figures / "ceiling" / name / "design.json").read_text()) for name in ceilings}
     per_draw = {"crop": measured("banding_draws/crop_s0", "crop"), "veil": measured("study_design_veil", "veil"),
                 "veil130": measured("study_floor_veil130", "veil130"),
                 **{n: np.mean(d["banding"]["ratio"], axis=1) for n, d in ceiling.items()}}
     cells = {"crop": "design_crop", "veil": "design_veil", "veil130": "floor/veil130", "veil_b90": "ceiling/veil_b90",
-             "veil130_b90": "ceiling/veil130_b90"}
+             "veil130_b90": "ceiling/veil130_b90", "veil_b55": "ceiling/veil_b55"}
     mu = {n: centroid_um(np.asarray(iio.imread(figures / c / "cell.png")) / 255.0) for n, c in cells.items()}
     law = {n: np.sqrt((fit["a"] + fit["kappa_per_um2"] * m ** 2) / (fit["a"] + fit["kappa_per_um2"] * edge[
         "centroid_um"] ** 2)) for n, m in mu.items()}
     assert (f"{mu['crop']:.1f} µm (the `crop` design), {mu['veil']:.1f} µm (the veil design), {mu['veil130']:.1f} µm "
-            f"(`veil130`), {mu['veil_b90']:.1f} µm (`veil_b90`, below) and {mu['veil130_b90']:.1f} µm") in text
+            f"(`veil130`), {mu['veil_b90']:.1f} µm (`veil_b90`, below), {mu['veil130_b90']:.1f} µm (`veil130_b90`, "
+            f"below) and {mu['veil_b55']:.1f} µm (`veil_b55`, below)") in text
     assert f"predicts bands of {' / '.join(f'{law[n]:.2f}' for n in cells)} × the edge-framed T-OLED" in text
     assert f"they are {' / '.join(f'{per_draw[n].mean():.2f}' for n in cells)} ×" in text
     for name, d in ceiling.items():
         dr, q = d["upc"]["turned"]["draws"], per_draw[name]
-        assert d["banding"]["seeds"] == [0, 1, 2, 3, 4] and d["config"]["banding_ceiling"] == 0.9
+        assert d["banding"]["seeds"] == [0, 1, 2, 3, 4] and d["config"]["banding_ceiling"] == ceilings[name]
         row = (f"| {d['initial']['squares_moved']} | {d['final']['psnr_db']:.2f} | {dr['mean'][1]:.3f} ± "
                f"{dr['sd'][1]:.3f} (min {dr['min'][1]:.3f}) | {' / '.join(f'{v:.2f}' for v in q)} | {q.mean():.2f} | "
                f"{(q < 1).sum()} of 5 |")
@@ -358,6 +360,25 @@ def test_the_design_guide_prints_the_dipole_study_and_the_ceiling_runs():
     for name in ("veil", "veil130"):
         q = per_draw[name]
         assert f"| {' / '.join(f'{v:.2f}' for v in q)} | {q.mean():.2f} | {(q < 1).sum()} of 5 |" in raw
+    b55 = ceiling["veil_b55"]
+    repeated_sd = float(re.search(r"^\| 520 \| [0-9.e+-]+, ([0-9.e+-]+) \|", (figures / "study_toled168_20_edge" /
+                                  "study_layout.md").read_text().split("Both tilings")[1], re.M).group(1))
+    sd = np.array(b55["banding"]["sd"]["design"])[:, 1]
+    share = repeated_sd / toled[:, 1]
+    objective = b55["final"]["psnr_db"]
+    assert (f"The repeated T-OLED's bands ({1e3 * repeated_sd:.2f} × 10⁻³ in green) are {share.min():.2f}–"
+            f"{share.max():.2f} × the turned T-OLED's over draws 0–4") in text
+    assert (f"moved {b55['initial']['squares_moved']} squares, its centroid from {mu['veil']:.1f} to "
+            f"{mu['veil_b55']:.1f} µm") in text
+    assert (f"bands {1e3 * np.sqrt(np.mean(sd ** 2)):.2f} × 10⁻³ in green (root mean square; {1e3 * sd.min():.2f}–"
+            f"{1e3 * sd.max():.2f} per draw), level with the repeated T-OLED (below it on {(sd < repeated_sd).sum()} "
+            "of 5 draws)") in text
+    assert (f"Its objective is {objective:.2f} dB: {edge['veil_psnr_db'] - objective:.2f} dB below the turned T-OLED, "
+            f"{objective - rows[4]['veil_psnr_db']:.2f} dB above the T-OLED with its slit at the same centroid "
+            f"({rows[4]['veil_psnr_db']:.2f} dB, the table above), and {objective - edge['veil_psnr_repeated_db']:.1f} "
+            f"dB above the repeated T-OLED ({edge['veil_psnr_repeated_db']:.2f} dB") in text
+    assert f"{rows[4]['centroid_um']:.1f}" == f"{mu['veil_b55']:.1f}"  # "the same centroid": as printed, 0.1 µm
+    assert f"UPC's green falls to {b55['upc']['turned']['draws']['mean'][1]:.2f} ×" in text
     both = ceiling["veil130_b90"]["final"]["psnr_db"]
     assert (f"both at {both:.2f} dB (`veil130_b90`), {edge['veil_psnr_db'] - both:.2f} dB below the turned T-OLED's "
             f"{edge['veil_psnr_db']:.2f} dB") in text
