@@ -379,6 +379,15 @@ def test_the_design_guide_prints_the_dipole_study_and_the_ceiling_runs():
             f"dB above the repeated T-OLED ({edge['veil_psnr_repeated_db']:.2f} dB") in text
     assert f"{rows[4]['centroid_um']:.1f}" == f"{mu['veil_b55']:.1f}"  # "the same centroid": as printed, 0.1 µm
     assert f"UPC's green falls to {b55['upc']['turned']['draws']['mean'][1]:.2f} ×" in text
+    trained = json.loads((figures / "layout_trained_ceiling" / "study_layout_trained.json").read_text())
+    assert trained["seeds"]["train"] == 0 and trained["budget"]["epochs"] == 80
+    margins = [f"{p['mean_db']:+.2f} ± {p['se_db']:.2f} dB".replace("-", "−") for p in
+               (trained["paired"]["design_turned"][k] for k in ("dep", "dep_far", "unet"))]
+    wins = [trained["paired"]["design_turned"][k]["wins"] for k in ("dep", "dep_far", "unet")]
+    assert (f"plain DeP {margins[0]} ({wins[0]} of 8), DeP given the far field {margins[1]} ({wins[1]} of 8), the UNet "
+            f"{margins[2]} ({wins[2]} of 8)") in text
+    assert (f"plain DeP {margins[0]} (0 of 8), DeP given the far field {margins[1]}, the UNet {margins[2]} "
+            "(one seed)") in text
     both = ceiling["veil130_b90"]["final"]["psnr_db"]
     assert (f"both at {both:.2f} dB (`veil130_b90`), {edge['veil_psnr_db'] - both:.2f} dB below the turned T-OLED's "
             f"{edge['veil_psnr_db']:.2f} dB") in text
