@@ -170,20 +170,19 @@ class DesignConfig:
             if self.floor_uncropped:
                 raise tp.DesignError("--floor-uncropped: takes --upc-floor")
             return
-        if not self.upc_floor > 0:
-            raise tp.DesignError(f"--upc-floor {self.upc_floor}: expected a ratio to the T-OLED's > 0")
-        if self.objective not in ("wiener", "crop") or self.optics != "rig":
-            raise tp.DesignError(f"--upc-floor: takes --objective wiener or crop in --optics rig (the rings objective "
-                                 f"is UPC's statistic itself), got --objective {self.objective} --optics {self.optics}")
+        self._check_bound("--upc-floor", self.upc_floor, " (the rings objective is UPC's statistic itself)")
 
     def _check_ceiling(self) -> None:
-        if self.banding_ceiling is None:
-            return
-        if not self.banding_ceiling > 0:
-            raise tp.DesignError(f"--banding-ceiling {self.banding_ceiling}: expected a ratio to the T-OLED's > 0")
+        if self.banding_ceiling is not None:
+            self._check_bound("--banding-ceiling", self.banding_ceiling)
+
+    def _check_bound(self, option: str, ratio: float, why: str = "") -> None:
+        """A ratio to the T-OLED's that bounds the rig's objectives: > 0, with wiener or crop in the rig's optics."""
+        if not ratio > 0:
+            raise tp.DesignError(f"{option} {ratio}: expected a ratio to the T-OLED's > 0")
         if self.objective not in ("wiener", "crop") or self.optics != "rig":
-            raise tp.DesignError(f"--banding-ceiling: takes --objective wiener or crop in --optics rig, got "
-                                 f"--objective {self.objective} --optics {self.optics}")
+            raise tp.DesignError(f"{option}: takes --objective wiener or crop in --optics rig{why}, got --objective "
+                                 f"{self.objective} --optics {self.optics}")
 
     @property
     def channel_index(self) -> list[int]:

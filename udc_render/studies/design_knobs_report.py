@@ -106,6 +106,14 @@ def _ceiling_lines(doc: dict) -> list[str]:
                      for r in doc["ceiling"]])
 
 
+def _label(ax, xlabel: str, ylabel: str, title: str, legend: bool) -> None:
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
+    if legend:
+        ax.legend(fontsize=7)
+
+
 def _ceiling_axes(ax, rows: list[dict]) -> None:
     t = [r["cpu_s"] for r in rows]
     for key, label, style in (("error_ratio_rel", "scatter / T-OLED: the ceiling's ratio", "o-"),
@@ -113,11 +121,8 @@ def _ceiling_axes(ax, rows: list[dict]) -> None:
         ax.loglog(t, [max(r[key], 1e-6) for r in rows], style, label=label)
     for r in rows:
         ax.annotate(f"{r['draws']}", (r["cpu_s"], max(r["error_ratio_rel"], 1e-6)), fontsize=7)
-    ax.set_xlabel("CPU s, one forward pass (3 channels)")
-    ax.set_ylabel("relative error (RMS over blocks)")
-    ax.set_title("banding ceiling: D4 draws")
-    if rows:
-        ax.legend(fontsize=7)
+    _label(ax, "CPU s, one forward pass (3 channels)", "relative error (RMS over blocks)", "banding ceiling: D4 draws",
+           bool(rows))
 
 
 def _figure(doc: dict, out: Path) -> None:
@@ -169,11 +174,7 @@ def _banding_axes(ax, rows: list[dict]) -> None:
                   label=f"{name}: turned, figures vs finest")
         for r in these:
             ax.annotate(f"{r['sample_um']:g} µm", (r["cpu_s"], max(r["error_profile_rel"], 1e-9)), fontsize=7)
-    ax.set_xlabel("CPU s, both tilings, 3 channels")
-    ax.set_ylabel("relative error")
-    ax.set_title("sampled banding: raster step")
-    if rows:
-        ax.legend(fontsize=7)
+    _label(ax, "CPU s, both tilings, 3 channels", "relative error", "sampled banding: raster step", bool(rows))
 
 
 def _field_axes(ax, rows: list[dict]) -> None:
@@ -186,11 +187,8 @@ def _field_axes(ax, rows: list[dict]) -> None:
                   label=f"{name}: one tile, wrapped (psf-4)")
         for r in these:
             ax.annotate(f"P = {r['phases']}", (r["cpu_s"], r["blend_error_rms"] / r["exact_sd"]), fontsize=7)
-    ax.set_xlabel("CPU s, kernels at one wavelength")
-    ax.set_ylabel("rms error of P / P̄ over the exact sd")
-    ax.set_title("turned tiling: field phases")
-    if rows:
-        ax.legend(fontsize=7)
+    _label(ax, "CPU s, kernels at one wavelength", "rms error of P / P̄ over the exact sd",
+           "turned tiling: field phases", bool(rows))
 
 
 def write(doc: dict, out: Path) -> list[str]:
