@@ -388,6 +388,15 @@ def test_the_design_guide_prints_the_dipole_study_and_the_ceiling_runs():
             f"{margins[2]} ({wins[2]} of 8)") in text
     assert (f"plain DeP {margins[0]} (0 of 8), DeP given the far field {margins[1]}, the UNet {margins[2]} "
             "(one seed)") in text
+    assert f"which bands {1 / share.max():.1f}–{1 / share.min():.1f} × as much" in text
+    b55_trained = json.loads((figures / "layout_trained_b55" / "study_layout_trained.json").read_text())
+    per = {r["layout"]: r["per_image_db"] for r in b55_trained["rows"]}
+    for key in ("dep", "dep_far", "unet"):
+        diff = np.subtract(per["design_turned"][key], per["toled168_20_edge"][key])
+        p = b55_trained["paired"]["design_turned"][key]
+        assert (diff > 0).all() and p["wins"] == 0
+        assert f"{diff.mean():+.2f} ± {diff.std(ddof=1) / np.sqrt(len(diff)):.2f} dB" in text, key
+        assert f"{p['mean_db']:+.2f} ± {p['se_db']:.2f} dB".replace("-", "−") in text, key
     both = ceiling["veil130_b90"]["final"]["psnr_db"]
     assert (f"both at {both:.2f} dB (`veil130_b90`), {edge['veil_psnr_db'] - both:.2f} dB below the turned T-OLED's "
             f"{edge['veil_psnr_db']:.2f} dB") in text
