@@ -318,6 +318,9 @@ def test_the_design_guide_prints_the_dipole_study_and_the_ceiling_runs():
     fit = study["fit"]
     assert (f"to within {100 * fit['max_rel_misfit_sd']:.1f} % of sd (sd_0 = {1e3 * fit['sd0']:.2f} × 10⁻³, "
             f"κ = {1e9 * fit['kappa_per_um2']:.2f} × 10⁻⁹ per µm²)") in text
+    for r in study["rows"]:  # "at 16 µm and below ... less than the repeated one (at 24 µm and above, more)"
+        if r["centroid_um"] < 17 or r["centroid_um"] > 24:
+            assert (r["bands_turned"][1] < r["bands_repeated"][1]) == (r["centroid_um"] < 17), r["roll"]
     repeated = [1e3 * r["bands_repeated"][1] for r in study["rows"]]
     assert f"({min(repeated):.2f}–{max(repeated):.2f} × 10⁻³)" in text
     centred, edge = rows[8], rows[0]
