@@ -213,6 +213,25 @@ def test_the_design_guide_prints_the_veil_designs_unet_seeds():
     assert f"{np.mean(margins):+.2f} ± {se:.2f} dB over the {['two', 'three', 'four'][len(margins) - 2]} seeds" in text
 
 
+def test_the_design_guide_prints_the_veil_designs_240_epochs():
+    """The veil design's UNet at 240 epochs (seed 0): margin, scores and the gap to DeP are the committed run's;
+    the turned T-OLED scores as in the `crop` design's 240-epoch run."""
+    root = Path(__file__).resolve().parents[2]
+    text = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    figures = root / "docs" / "figures" / "design"
+    doc = json.loads((figures / "layout_trained_e240_veil" / "study_layout_trained.json").read_text())
+    crop = json.loads((figures / "layout_trained_e240" / "study_layout_trained.json").read_text())
+    assert doc["seeds"]["train"] == 0 and doc["budget"]["epochs"] == 240
+    rows = {r["layout"]: r for r in doc["rows"]}
+    ref = rows["toled168_20_edge_turned"]
+    p = doc["paired"]["design_turned"]["unet"]
+    assert (f"{rows['design_turned']['psnr_unet_db']:.2f} dB against the turned T-OLED's {ref['psnr_unet_db']:.2f} dB, "
+            f"**+{p['mean_db']:.2f} ± {p['se_db']:.2f} dB ({p['wins']} of {p['n']})**") in text
+    other = {r["layout"]: r for r in crop["rows"]}["toled168_20_edge_turned"]["psnr_unet_db"]
+    assert f"{other:.2f}" == f"{ref['psnr_unet_db']:.2f}"
+    assert f"still {ref['psnr_dep_db'] - ref['psnr_unet_db']:.2f} dB below DeP" in text
+
+
 def test_the_design_guide_prints_the_floored_designs():
     """docs/guides/design.md's `--upc-floor` runs: the table's objective, UPC ratios, draws, shares and the ratio
     normalised before the crop are the committed design.json's; the simulator's margins and the banding ratio are
