@@ -83,7 +83,7 @@ def test_the_raster_power_is_the_engines_phase_power_and_the_blend_passes_throug
     """Part (d)'s exact P(s) (one FFT correlation over the engine's window) at the phases' whole-sample shifts
     equals the engine's phase powers (its shift ramps and gather); the blend's profile passes through the phases;
     psf-4's profile repeats with the tile (p = 21 samples)."""
-    from udc_render.studies.tiling_power import raster_power
+    from udc_render.design.tiling_power import raster_power
     display, ks, plan = _aperiodic_rig(tmp_path)
     power = raster_power(plan, 520.0)
     ny, nx = power.shape

@@ -1,4 +1,4 @@
-"""The sampled power of a tiling (udc_render.studies.tiling_power) against the geometric shadow, the exact series of
+"""The sampled power of a tiling (udc_render.design.tiling_power) against the geometric shadow, the exact series of
 the repeated tiling, a D4 symmetry and Parseval."""
 from __future__ import annotations
 
@@ -10,9 +10,8 @@ import pytest
 from psf.banding import PowerSeries, power_grid
 from psf.lens import Lens
 from psf.micrograph import MicrographLayout
+from udc_render.design.tiling_power import sampled_banding, tiled_cell, tiling_power, window_tiles
 from udc_render.errors import UdcError
-from udc_render.studies.layout_banding import sampled_banding
-from udc_render.studies.tiling_power import tiled_cell, tiling_power, window_tiles
 
 LENS = Lens(focal_length_um=6000.0, aperture_um=900.0)  # a small disc: fast, still ~8 cells across
 SPAN_UM = (120.0, 80.0)  # beyond the cells' 72 µm period on both axes

@@ -5,7 +5,7 @@ The rig's objectives J ('wiener', 'crop', with or without the far veil, with or 
     J · (1 + BANDING_WEIGHT Σ_c max(0, log b_c − log(R b_c^ref))),
 
 b_c the relative standard deviation of the transmitted power P(s) over the mask shifts the paper's sensor sees
-(udc_render.studies.tiling_power, the figure `study layout`'s sampled banding reports), per channel at the rig's
+(udc_render.design.tiling_power, the figure `study layout`'s sampled banding reports), per channel at the rig's
 wavelengths (640 / 520 / 450 nm), the cell tiled as the design is (turned: BANDING_DRAWS fixed D4 draws of the
 window's tiles, the variances averaged); b^ref the same of the preset T-OLED at the open area with its slit at the
 tile's edge (cells.toled_reference, in UPC's 21 × 21) on the same draws. P is computed here in torch, differentiable
@@ -31,8 +31,7 @@ from psf.propagation import angular_spectrum_tf
 from udc_render.design import torch_psf as tp
 from udc_render.design.cells import toled_reference
 from udc_render.design.floor import FLOOR_WEIGHT
-from udc_render.studies.layout_banding import DEFAULT_DISTANCE_MM
-from udc_render.studies.tiling_power import shift_span_um, window_tiles
+from udc_render.design.tiling_power import DEFAULT_DISTANCE_MM, shift_span_um, window_tiles
 
 __all__ = ["BANDING_WEIGHT", "BANDING_DRAWS", "BandingCeiling", "relative_sd"]
 

@@ -25,7 +25,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from udc_render.design.optimise import DesignConfig, Designer, initial_cell, scatter
+from psf.lens import Lens
+from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer, initial_cell, scatter
+from udc_render.design.tiling_power import sampled_banding
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 
 __all__ = ["CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "scatter_baseline", "upc_comparison",
@@ -115,10 +117,7 @@ def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=None) -> di
     the tile's edge), tiled as the design is, on `study layout --tile-seed N`'s draws: per draw, and their ratio's
     mean, sample sd, largest, and the draws below 1 per channel (seeds: BANDING_SEEDS by default)."""
     from psf import layouts
-    from psf.lens import Lens
     from udc_render.design.cells import frame_cell, layout_cell
-    from udc_render.design.optimise import RIG_WAVELENGTHS_NM
-    from udc_render.studies.layout_banding import sampled_banding
     seeds = BANDING_SEEDS if seeds is None else seeds
     toled, toled_um = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
     cells = {"design": (cell, config.feature_um), "toled_edge": (frame_cell(toled, "edge"), toled_um)}

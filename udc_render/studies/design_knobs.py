@@ -15,11 +15,11 @@ optimiser step pays for its PSF).
 after 0, 10, 20, 40, 80 and 150 steps (accepted swaps) scored as design.json's 'final' (the mean Wiener MSE over
 channels on the held-out tiling, and its PSNR), with the search's CPU seconds so far; 0 steps is the initial
 random scatter, the baseline the search has to beat.
-(c) The sampled banding's raster step (udc_render.studies.tiling_power's sample_um: the layout study's banding of a
+(c) The sampled banding's raster step (udc_render.design.tiling_power's sample_um: the layout study's banding of a
 turned tiling), on the rig's lens at d = 2 mm over the paper sensor's shifts, for both cells: the repeated tiling's
 relative P(s) against the exact power series (psf.banding.PowerSeries; the largest |P/P̄ − S/S̄| over the shifts
 and the relative error of the peak-to-peak), and the turned tiling's peak-to-peak and sd against the finest step
-(the same tiles at every step: layout_banding.DRAW_TILES); CPU seconds of both tilings (3 channels).
+(the same tiles at every step: tiling_power.DRAW_TILES); CPU seconds of both tilings (3 channels).
 
 (d) The engine's field phases of a turned tiling (psf.engine.compute_kernels' field_phases P for a
 psf.MicrographLayout with random quarter-turns, seed 0), on the rig's lens at d = 2 mm over the paper sensor, at
@@ -62,11 +62,10 @@ from psf.plan import PAPER_SENSOR_UM, make_plan
 from udc_render.design import metrics, torch_psf as tp
 from udc_render.design.cells import frame_cell
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer
+from udc_render.design.tiling_power import band_figures, raster_power, sampled_banding, shift_span_um, tiling_power
 from udc_render.optics.field import phase_weights
 from udc_render.streams import stream
 from udc_render.studies.design_knobs_report import write
-from udc_render.studies.layout_banding import sampled_banding
-from udc_render.studies.tiling_power import band_figures, raster_power, shift_span_um, tiling_power
 
 __all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "banding_rows", "field_profiles", "field_rows",
            "ceiling_rows", "run_study"]

@@ -31,10 +31,10 @@ import torch
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.design.cells import RINGS, frame_cell, layout_cell, upc_cell
+from udc_render.design.tiling_power import DEFAULT_DISTANCE_MM, SAMPLE_UM, sampled_banding
 from udc_render.sensor.config import SensorConfig
-from udc_render.studies.layout_banding import DEFAULT_DISTANCE_MM, layout_banding, sampled_banding
+from udc_render.studies.layout_banding import layout_banding
 from udc_render.studies.layout_restore import CROP_PX, CROP_SETS, QUICK_CROP_PX, RESTORERS, restored_psnr
-from udc_render.studies.tiling_power import SAMPLE_UM
 
 __all__ = ["UPC_LENS", "FRAMES", "LayoutScores", "layout_cell", "frame_cell", "upc_cell", "score_layout"]
 

@@ -16,8 +16,8 @@ per channel (one wavelength each):
 
 The weights are psf.banding.PowerSeries.truncated (|P − P_box| ≤ 1e-5 of the mean at every shift).
 
-A tiling with a random D4 turn per tile has no period and no power series: sampled_banding computes P(s) of both
-tilings in space (udc_render.studies.tiling_power) over every shift the paper's sensor sees (|s_x| ≤ 529 µm,
+A tiling with a random D4 turn per tile has no period and no power series: udc_render.design.tiling_power's
+sampled_banding computes P(s) of both tilings in space over every shift the paper's sensor sees (|s_x| ≤ 529 µm,
 |s_y| ≤ 265 µm at d = 2 mm), and reports per channel the relative peak-to-peak and standard deviation over that
 span and over one period of shifts (what a model that repeats the power of one period, as the engine's field
 blend does for a turned tiling, can print).
@@ -30,16 +30,12 @@ import numpy as np
 
 from psf.banding import PowerSeries, power_grid
 from psf.micrograph import MicrographLayout
+from udc_render.design.tiling_power import DEFAULT_DISTANCE_MM
 from udc_render.studies.banding_fit import kernel_otf
-from udc_render.studies.tiling_power import SAMPLE_UM, band_figures, shift_span_um, tiling_power
 
-__all__ = ["DEFAULT_DISTANCE_MM", "LATTICE", "periodic_layout", "strongest_harmonic", "layout_banding",
-           "sampled_banding", "DRAW_TILES"]
+__all__ = ["LATTICE", "periodic_layout", "strongest_harmonic", "layout_banding"]
 
-DEFAULT_DISTANCE_MM = 2.0
 LATTICE = 64
-DRAW_TILES = 256  # the turned tiling's D4 draw: one 256² draw, its centre cropped to the window's tiles (so that
-# windows of any raster step see the same tiles; a window of more tiles draws its own)
 
 
 def periodic_layout(layout):
@@ -96,37 +92,4 @@ def layout_banding(layout, lens, wavelengths_nm, distance_mm: float = DEFAULT_DI
     if kernels is not None:
         doc["after_psf"] = [_after_psf(np.asarray(k, np.float64), pixel_um, band_um, c)
                             for k, c in zip(kernels, chans)]
-    return doc
-
-
-def _sampled_channel(cell, cell_um, lens, wavelength_nm, distance_um, span_um, transforms, sample_um) -> dict:
-    power, step = tiling_power(cell, cell_um, lens, wavelength_nm, distance_um, span_um, transforms, sample_um)
-    n = round(cell.shape[0] * cell_um / step)  # one period of shifts from s = 0 (the span, if shorter)
-    cy, cx = power.shape[0] // 2, power.shape[1] // 2
-    period = band_figures(power[cy:cy + n, cx:cx + n])
-    return {**band_figures(power), "peak_to_peak_one_period": period["peak_to_peak"],
-            "rms_one_period": period["rms"], "mean_power_one_period_um2": period["mean_power_um2"]}
-
-
-def sampled_banding(cell: np.ndarray, cell_um: float, lens, wavelengths_nm, distance_mm: float = DEFAULT_DISTANCE_MM,
-                    seed: int = 0, sample_um: float = SAMPLE_UM, tilings=("repeated", "turned")) -> dict:
-    """The module doc's sampled figures of the cell (amplitude on cell_um squares, framed as the study takes it)
-    repeated and turned (the centre of tile_transforms(DRAW_TILES, seed, keys=('banding',))), per wavelength, at
-    distance_mm in front of the lens; tilings: the ones computed."""
-    from udc_render.design.torch_psf import tile_transforms  # torch: not at this module's import
-    d_um = distance_mm * 1000.0
-    span = shift_span_um(lens, d_um)
-    doc = {"span_um": list(span), "sample_um": float(sample_um), "seed": int(seed),
-           "sensor": "the paper's, 2048 × 1024 px of 1.55 µm (psf.plan.PAPER_SENSOR_UM)"}
-    def turned(tiles: int) -> np.ndarray:
-        n = max(tiles, DRAW_TILES)
-        o = (n - tiles) // 2
-        return tile_transforms(n, seed, keys=("banding",))[o:o + tiles, o:o + tiles]
-
-    plans = {"repeated": None, "turned": turned}
-    for tiling in tilings:
-        plan = plans[tiling]
-        chans = [_sampled_channel(cell, cell_um, lens, wl, d_um, span, plan, sample_um) for wl in wavelengths_nm]
-        doc[tiling] = {key: [c[key] for c in chans] for key in chans[0]}
-    doc["wavelengths_nm"] = [float(w) for w in wavelengths_nm]
     return doc

@@ -2,7 +2,7 @@
 cell's dipole (issue 48).
 
 Why the dipole (leading order in the tile over the aperture): P(s) = ∫ A(r − s) I(r) dr, I the transmitted intensity
-at d (udc_render.studies.tiling_power). Taking I as the sum of the tiles' own intensities (cross-tile interference
+at d (udc_render.design.tiling_power). Taking I as the sum of the tiles' own intensities (cross-tile interference
 left out), a tile at c_t turned by the D4 element g_t adds
 
     ∫ A(r − s) I_0(g_t⁻¹(r − c_t)) dr ≈ P_0 A(c_t − s) + P_0 (g_t μ) · ∇A(c_t − s) + …,
@@ -34,8 +34,8 @@ import numpy as np
 from tqdm import tqdm
 
 from psf.lens import Lens
+from udc_render.design.tiling_power import sampled_banding
 from udc_render.io.files import save_json
-from udc_render.studies.layout_banding import sampled_banding
 from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
 
 __all__ = ["NAME", "FULL", "QUICK", "centroid_um", "framing_rows", "fit_dipole", "run_study"]

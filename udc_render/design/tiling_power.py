@@ -24,10 +24,13 @@ from psf.plan import PAPER_SENSOR_UM
 from psf.propagation import angular_spectrum_tf
 from udc_render.errors import UdcError
 
-__all__ = ["SAMPLE_UM", "MAX_SIDE", "shift_span_um", "tiled_cell", "window_tiles", "tiling_power", "raster_power",
-           "band_figures"]
+__all__ = ["SAMPLE_UM", "MAX_SIDE", "DEFAULT_DISTANCE_MM", "DRAW_TILES", "shift_span_um", "tiled_cell", "window_tiles",
+           "tiling_power", "raster_power", "band_figures", "sampled_banding"]
 
 SAMPLE_UM = 2.0  # the raster's step (the design's 8 µm squares in 4; the T-OLED's 2 µm cell as it is)
+DEFAULT_DISTANCE_MM = 2.0  # the display-to-lens distance of the layout study's and the designer's banding
+DRAW_TILES = 256  # the turned tiling's D4 draw: one 256² draw, its centre cropped to the window's tiles (so that
+# windows of any raster step see the same tiles; a window of more tiles draws its own)
 MAX_SIDE = 8192  # raster samples per side (a complex128 array of 1.07 GB, 5 of them at once; the paper's rig at
 # d = 2 mm takes 2.9 k at 2 µm and 6.4 k at 1 µm)
 
@@ -114,3 +117,37 @@ def band_figures(power: np.ndarray) -> dict:
     mean = float(power.mean())
     return {"peak_to_peak": float((power.max() - power.min()) / mean), "rms": float(power.std() / mean),
             "mean_power_um2": mean}
+
+
+def _sampled_channel(cell, cell_um, lens, wavelength_nm, distance_um, span_um, transforms, sample_um) -> dict:
+    power, step = tiling_power(cell, cell_um, lens, wavelength_nm, distance_um, span_um, transforms, sample_um)
+    n = round(cell.shape[0] * cell_um / step)  # one period of shifts from s = 0 (the span, if shorter)
+    cy, cx = power.shape[0] // 2, power.shape[1] // 2
+    period = band_figures(power[cy:cy + n, cx:cx + n])
+    return {**band_figures(power), "peak_to_peak_one_period": period["peak_to_peak"],
+            "rms_one_period": period["rms"], "mean_power_one_period_um2": period["mean_power_um2"]}
+
+
+def sampled_banding(cell: np.ndarray, cell_um: float, lens, wavelengths_nm, distance_mm: float = DEFAULT_DISTANCE_MM,
+                    seed: int = 0, sample_um: float = SAMPLE_UM, tilings=("repeated", "turned")) -> dict:
+    """The sampled figures of udc_render.studies.layout_banding's doc (band_figures of P(s) over the sensor's shifts
+    and over one period of them) of the cell (amplitude on cell_um squares, framed as the study takes it) repeated
+    and turned (the centre of tile_transforms(DRAW_TILES, seed, keys=('banding',))), per wavelength, at distance_mm
+    in front of the lens; tilings: the ones computed."""
+    from udc_render.design.torch_psf import tile_transforms  # torch: not at this module's import
+    d_um = distance_mm * 1000.0
+    span = shift_span_um(lens, d_um)
+    doc = {"span_um": list(span), "sample_um": float(sample_um), "seed": int(seed),
+           "sensor": "the paper's, 2048 × 1024 px of 1.55 µm (psf.plan.PAPER_SENSOR_UM)"}
+    def turned(tiles: int) -> np.ndarray:
+        n = max(tiles, DRAW_TILES)
+        o = (n - tiles) // 2
+        return tile_transforms(n, seed, keys=("banding",))[o:o + tiles, o:o + tiles]
+
+    plans = {"repeated": None, "turned": turned}
+    for tiling in tilings:
+        plan = plans[tiling]
+        chans = [_sampled_channel(cell, cell_um, lens, wl, d_um, span, plan, sample_um) for wl in wavelengths_nm]
+        doc[tiling] = {key: [c[key] for c in chans] for key in chans[0]}
+    doc["wavelengths_nm"] = [float(w) for w in wavelengths_nm]
+    return doc
