@@ -8,13 +8,13 @@ b_c the relative standard deviation of the transmitted power P(s) over the mask 
 (udc_render.design.tiling_power, the figure `study layout`'s sampled banding reports), per channel at the rig's
 wavelengths (640 / 520 / 450 nm), the cell tiled as the design is (turned: BANDING_DRAWS fixed D4 draws of the
 window's tiles, the variances averaged); b^ref the same of the preset T-OLED at the open area with its slit at the
-tile's edge (cells.toled_reference, in UPC's 21 × 21) on the same draws. P is computed here in torch, differentiable
-in the cell: the cell on its own squares (one raster sample per feature square: the cell is exact on them; orders
-beyond 1/2δ are lost), tiled over tiling_power's window, propagated over d by the angular spectrum and correlated
-with the area-weighted aperture by FFTs. On 8 µm squares the turned ratios of the `crop` and veil designs to the
-T-OLED come out .856 and 1.119 against .829 and 1.129 on tiling_power's 2 µm raster (one draw, G): the search's
-ratio is good to about 3 %; design.json scores the result on the 2 µm raster over the study's own draws
-(job.banding_comparison).
+tile's edge (cells.toled_reference, on the cell's squares: UPC's 21 × 21 at 8 µm) on the same draws. P is computed
+here in torch, differentiable in the cell: the cell on its own squares (one raster sample per feature square: the
+cell is exact on them; orders beyond 1/2δ are lost), tiled over tiling_power's window, propagated over d by the
+angular spectrum and correlated with the area-weighted aperture by FFTs. On 8 µm squares the turned ratios of the
+`crop` and veil designs to the T-OLED come out .856 and 1.119 against .829 and 1.129 on tiling_power's 2 µm raster
+(one draw, G): the search's ratio is good to about 3 %; design.json scores the result on the 2 µm raster over the
+study's own draws (job.banding_comparison).
 
 BANDING_WEIGHT = floor.FLOOR_WEIGHT, for the same reason: 1 % above the ceiling costs more than the veil search's
 whole gain, so taken swaps keep a ceiling once it holds; from above, the hinge's gradient ranks the swaps that
