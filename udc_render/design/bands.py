@@ -52,6 +52,13 @@ class _Channel:
         jx, jy = (int(s // step_um) for s in span_um)
         self.rows = torch.tensor(np.arange(-jy, jy + 1) % n, device=device)
         self.cols = torch.tensor(np.arange(-jx, jx + 1) % n, device=device)
+        self._cast: dict[torch.dtype, tuple[torch.Tensor, torch.Tensor]] = {}
+
+    def spectra(self, dtype: torch.dtype) -> tuple[torch.Tensor, torch.Tensor]:
+        """(H, the aperture's conjugate spectrum) in the search's complex dtype, cast once."""
+        if dtype not in self._cast:
+            self._cast[dtype] = (self.h.to(dtype), self.disc.to(dtype))
+        return self._cast[dtype]
 
 
 def relative_sd(power: torch.Tensor) -> torch.Tensor:
@@ -74,13 +81,16 @@ class BandingCeiling:
         self.channels = [_Channel(n, step, wl, d_um, span, lens, device) for wl in wavelengths_nm]
         self.reference = torch.tensor(toled_reference(cell_um, open_fraction, cell_px), device=device)
         self._ref: dict[str, torch.Tensor] = {}
+        self._draws: dict[str, list] = {}
 
     def transforms(self, which: str) -> list:
-        """The tiling's draws (keys 'design', 'banding', which, k); one plain tiling when repeated."""
+        """The tiling's draws (keys 'design', 'banding', which, k), drawn once; one plain tiling when repeated."""
         if not self.turned:
             return [None]
-        return [tp.tile_transforms(self.tiles, self.seed, keys=("design", "banding", which, k))
-                for k in range(BANDING_DRAWS)]
+        if which not in self._draws:
+            self._draws[which] = [tp.tile_transforms(self.tiles, self.seed, keys=("design", "banding", which, k))
+                                  for k in range(BANDING_DRAWS)]
+        return self._draws[which]
 
     def power(self, cell: torch.Tensor, transforms) -> list[torch.Tensor]:
         """P(s) in µm² per channel [2 J_y + 1, 2 J_x + 1] of the cell tiled as transforms (None: plainly)."""
@@ -89,8 +99,9 @@ class BandingCeiling:
                                                           else torch.complex64))
         out = []
         for ch in self.channels:
-            field = torch.fft.ifft2(spec * ch.h.to(spec.dtype))
-            power = torch.fft.ifft2(ch.disc.to(spec.dtype) * torch.fft.fft2(field.abs() ** 2)).real * self.area_um2
+            h, disc = ch.spectra(spec.dtype)
+            field = torch.fft.ifft2(spec * h)
+            power = torch.fft.ifft2(disc * torch.fft.fft2(field.abs() ** 2)).real * self.area_um2
             out.append(power[ch.rows][:, ch.cols])
         return out
 
