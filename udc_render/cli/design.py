@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from udc_render.cli.args import out_dir, positive
+from udc_render.cli.args import number, out_dir, positive
 from udc_render.design.options import (
     CHANNELS,
     CROP_PX,
@@ -68,6 +68,11 @@ def register(sub) -> None:
                         "local optimum [150]")
     p.add_argument("--candidates", type=positive("--candidates", int), default=40,
                    help="swaps scored exactly per step, the most promising by the gradient first [40]")
+    p.add_argument("--kicks", type=number("--kicks", int, 0, lo_open=False), default=0,
+                   help="iterated local search: at each local optimum, kick the best cell by --kick-swaps random "
+                        "swaps and descend again, this many times (each descent counts toward --steps) [0]")
+    p.add_argument("--kick-swaps", type=positive("--kick-swaps", int), default=4,
+                   help="random swaps of one kick [4]")
     p.add_argument("--scatters", type=positive("--scatters", int), default=20,
                    help="random scatters at the same open area scored beside the design, the baseline [20]")
     p.add_argument("--seed", type=int, default=0, help="seed of the initial cell, the scatters and the tilings [0]")
@@ -87,7 +92,8 @@ def run(args) -> int:
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
-                          args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling)
+                          args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
+                          args.kicks, args.kick_swaps)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]

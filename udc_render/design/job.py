@@ -144,12 +144,19 @@ def _loss_figure(doc: dict, out: Path) -> None:
     floored = f"; J × {' and '.join(factors)} factor" if factors else ""
     ax.plot(np.arange(len(values)), -10 * np.log10(values) if wiener else values,
             label=f"the search (its tiling{floored})")
+    kicks = [i + 1 for i, r in enumerate(doc["losses"]) if "kick" in r]
+    if kicks:
+        best = np.array([doc["initial"]["search_objective"]] + [r["best"] for r in doc["losses"]])
+        ax.plot(np.arange(len(best)), -10 * np.log10(best) if wiener else best, "k--", lw=1, label="the best so far")
+        for k in kicks:
+            ax.axvline(k, color="0.7", lw=0.5)
+        ax.plot([], [], color="0.7", lw=0.5, label=f"{len(kicks)} kicks of {doc['config']['kick_swaps']} random swaps")
     base = doc["scatters"]
     ax.axhspan(base["mean"] - base["std"], base["mean"] + base["std"], color="C3", alpha=0.2,
                label=f"{base['n']} random scatters: mean ± sd (held-out tiling)")
     ax.axhline(base["best"], color="C3", label="the best scatter")
     ax.plot([len(values) - 1], [doc["final"]["psnr_db" if wiener else "objective"]], "ko", label="the design, held out")
-    ax.set_xlabel("step (accepted swaps)")
+    ax.set_xlabel("step (swaps tried; a kick after each local optimum)" if kicks else "step (accepted swaps)")
     ax.set_ylabel({"wiener": "Wiener PSNR (dB)", "crop": "Wiener PSNR on the crop (dB)",
                    "rings": "−mean log of the mean ring minimum"}.get(doc["config"]["objective"], "UPC objective"))
     ax.legend(fontsize=8)
@@ -159,7 +166,7 @@ def _loss_figure(doc: dict, out: Path) -> None:
 
 def _write(designer: Designer, out: Path, compare: bool) -> dict:
     cfg = designer.config
-    cell = designer.cell
+    cell = designer.best_cell
     with atomic_path(out / "cell.png") as tmp:
         iio.imwrite(tmp, (cell * 255).astype(np.uint8), extension=".png")
     open_area = float(cell.mean())
@@ -169,13 +176,14 @@ def _write(designer: Designer, out: Path, compare: bool) -> dict:
                                                             True, cfg.seed))
     initial = initial_cell(cfg)
     final = designer.score(cell)
-    doc = {"config": asdict(cfg), "final": final, "search_objective": designer.current,
+    doc = {"config": asdict(cfg), "final": final, "search_objective": designer.best,
            "initial": {**designer.score(initial), "search_objective": designer.search_score(initial),
                        "squares_moved": int(np.sum(initial != cell) // 2)},
            "scatters": scatter_baseline(designer, final), "upc": upc_comparison(cell, cfg) if compare else None,
            "banding": banding_comparison(cell, cfg) if compare and cfg.banding_ceiling else None,
            "open_squares": int(cell.sum()), "cell_px": cfg.cell_px, "steps_done": designer.step_done,
-           "converged": designer.converged, "evaluations": designer.evaluations, "losses": designer.losses}
+           "converged": designer.converged, "evaluations": designer.evaluations, "kicks_done": designer.kicks_done,
+           "losses": designer.losses}
     save_json(out / "design.json", doc)
     _loss_figure(doc, out)
     return doc

@@ -11,6 +11,11 @@ an open and an opaque square, which keep K:
     predicted change are scored exactly, in that order, and the first that lowers J is taken;
     none lowers J: a local optimum of this neighbourhood, and the run stops early (converged).
 
+With kicks N (iterated local search, Lourenço, Martin & Stützle, "Iterated Local Search", Handbook of
+Metaheuristics 2003): at each local optimum the best cell so far takes kick_swaps random swaps (stream 'design',
+'kick', n) and the swaps above descend again, N times; the design is the best local optimum. The swaps alone stop
+at the first optimum of their neighbourhood (the veil design with both targets: 10 swaps from its start).
+
 Why not a relaxation: a sigmoid-relaxed cell's optimum is a uniform grey cell (an attenuator that does not
 diffract: 37.0 dB against 27.8 dB for a binary scatter at 20 %), so the gradient of a relaxed cell flattens its
 transmissions instead of reordering them, and projecting back to binary returns the initial scatter (the former
@@ -80,13 +85,13 @@ from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
 
 __all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig", "Designer", "scatter",
-           "toled_cell", "initial_cell"]
+           "toled_cell", "initial_cell", "kicked"]
 
 IMPROVE_REL = 1e-5
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
 _LATER_DEFAULTS = {  # options added after the first checkpoints, at the settings those runs had
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
-    "floor_uncropped": False, "banding_ceiling": None}
+    "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4}
 
 
 def _check_channels(option: str, channels: str) -> None:
@@ -118,6 +123,8 @@ class DesignConfig:
     floor_channels: str = "G"
     floor_uncropped: bool = False
     banding_ceiling: float | None = None
+    kicks: int = 0
+    kick_swaps: int = 4
 
     def __post_init__(self):
         if self.contrast is None:
@@ -151,9 +158,15 @@ class DesignConfig:
         if self.far_veil and self.objective not in ("wiener", "crop"):
             raise tp.DesignError(f"--far-veil: takes --objective wiener or crop (the light past the kernel's window), "
                                  f"got {self.objective}")
-        for key in ("steps", "candidates", "scatters"):
+        for key in ("steps", "candidates", "scatters", "kick_swaps"):
             if not (isinstance(getattr(self, key), int) and getattr(self, key) >= 1):
-                raise tp.DesignError(f"--{key} {getattr(self, key)}: expected an integer ≥ 1")
+                raise tp.DesignError(f"--{key.replace('_', '-')} {getattr(self, key)}: expected an integer ≥ 1")
+        if not (isinstance(self.kicks, int) and self.kicks >= 0):
+            raise tp.DesignError(f"--kicks {self.kicks}: expected an integer ≥ 0")
+        most = min(self.open_squares, self.cell_px ** 2 - self.open_squares)
+        if self.kick_swaps > most:
+            raise tp.DesignError(f"--kick-swaps {self.kick_swaps}: the cell has {most} squares to swap; expected "
+                                 f"1 … {most}")
 
     def _check_upc(self) -> None:
         if self.objective not in ("upc", "rings"):
@@ -204,6 +217,15 @@ def scatter(config: DesignConfig, *keys) -> np.ndarray:
     flat = np.zeros(c * c)
     flat[stream(config.seed, "design", *keys).permutation(c * c)[: config.open_squares]] = 1.0
     return flat.reshape(c, c)
+
+
+def kicked(cell: np.ndarray, swaps: int, rng: np.random.Generator) -> np.ndarray:
+    """The cell with `swaps` random open squares closed and as many opaque ones opened (the open area kept)."""
+    flat = cell.ravel().copy()
+    opened, closed = np.flatnonzero(flat > 0.5), np.flatnonzero(flat < 0.5)
+    flat[rng.choice(opened, swaps, replace=False)] = 0.0
+    flat[rng.choice(closed, swaps, replace=False)] = 1.0
+    return flat.reshape(cell.shape)
 
 
 def far_veil_mse(inside: torch.Tensor, mean_level: float = metrics.MEAN_LEVEL) -> torch.Tensor:
@@ -259,7 +281,8 @@ class Designer:
             config.seed, config.tiling == "turned", device=device)
         self.cell = initial_cell(config)
         self.current = self.search_score(self.cell)
-        self.step_done, self.converged, self.evaluations, self.losses = 0, False, 1, []
+        self.best_cell, self.best = self.cell, self.current
+        self.step_done, self.converged, self.evaluations, self.losses, self.kicks_done = 0, False, 1, [], 0
 
     def transforms(self, which: str):
         """The search's fixed D4 tiling ('search') or the held-out one of the final scores ('final')."""
@@ -343,11 +366,27 @@ class Designer:
                 rec["swap"] = [int(opened[i]), int(closed[j])]
                 break
         self.evaluations += rec["tried"] + 1
-        self.converged = rec["swap"] is None
+        if self.current < self.best:
+            self.best_cell, self.best = self.cell, self.current
+        if rec["swap"] is None:
+            self._at_optimum(rec)
         self.step_done += 1
-        rec["objective"] = self.current
+        rec["objective"], rec["best"] = self.current, self.best
         self.losses.append(rec)
         return rec
+
+    def _at_optimum(self, rec: dict) -> None:
+        """A local optimum: kick the best cell by kick_swaps random swaps while kicks remain (module doc), else stop
+        there (converged)."""
+        if self.kicks_done >= self.config.kicks:
+            self.cell, self.current, self.converged = self.best_cell, self.best, True
+            return
+        self.kicks_done += 1
+        self.cell = kicked(self.best_cell, self.config.kick_swaps, stream(self.config.seed, "design", "kick",
+                                                                          self.kicks_done))
+        self.current = self.search_score(self.cell)
+        self.evaluations += 1
+        rec["kick"] = self.kicks_done
 
     @property
     def finished(self) -> bool:
@@ -356,7 +395,8 @@ class Designer:
     def state(self) -> dict:
         return {"config": asdict(self.config), "cell": self.cell.copy(), "current": self.current,
                 "step": self.step_done, "converged": self.converged, "evaluations": self.evaluations,
-                "losses": self.losses}
+                "losses": self.losses, "best_cell": self.best_cell.copy(), "best": self.best,
+                "kicks_done": self.kicks_done}
 
     def load(self, state: dict) -> None:
         saved = {**_LATER_DEFAULTS, **state["config"]}
@@ -367,3 +407,5 @@ class Designer:
         self.cell, self.current = np.asarray(state["cell"], np.float64), float(state["current"])
         self.step_done, self.converged = int(state["step"]), bool(state["converged"])
         self.evaluations, self.losses = int(state["evaluations"]), list(state["losses"])
+        self.best_cell = np.asarray(state.get("best_cell", self.cell), np.float64)
+        self.best, self.kicks_done = float(state.get("best", self.current)), int(state.get("kicks_done", 0))
