@@ -14,7 +14,7 @@ from psf.micrograph import MicrographLayout
 from udc_render import cli
 from udc_render.design import job, metrics, torch_psf as tp, upc
 from udc_render.design.cells import RINGS
-from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer, scatter
+from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer, kicked, scatter
 from udc_render.optics.displays import DisplayError, load_display
 
 TINY = dict(cell_um=200.0, feature_um=40.0, open_fraction=0.24, steps=4, pupil_samples=64, kernel_px=31, scatters=3,
@@ -85,6 +85,7 @@ def test_the_rings_objective_is_upcs_statistic_in_their_sampling():
     (("optics", "channels"), {"channels": "B"}),
     (("upc_floor", "floor_channels", "floor_uncropped"), {"upc_floor": 1.3}),
     (("banding_ceiling",), {"banding_ceiling": 0.95}),
+    (("kicks", "kick_swaps"), {"kicks": 2}),
 ])
 def test_a_checkpoint_from_before_a_later_option_resumes(dropped, changed):
     """A state saved without a later option's settings (their defaults then) loads into the default run only."""
@@ -116,6 +117,63 @@ def test_the_search_ends_in_a_local_optimum_of_all_swaps(tiling):
             trial = flat.copy()
             trial[i], trial[j] = 0.0, 1.0
             assert d.search_score(trial.reshape(3, 3)) >= d.current * (1 - 1e-5)
+
+
+def test_a_kick_moves_the_given_swaps_and_keeps_the_open_area():
+    cell = _binary(21, 88, 4)
+    for swaps in (1, 4, 88):
+        out = kicked(cell, swaps, np.random.default_rng(swaps))
+        assert out.sum() == 88 and np.sum((cell > 0.5) & (out < 0.5)) == swaps and cell.sum() == 88
+
+
+def test_kicks_end_at_the_best_local_optimum_and_never_above_the_plain_search():
+    """With every swap a candidate (a 3 × 3 cell, 3 open): the plain search's optimum is the kicked run's first one
+    (same start, same steps); each kick starts kick_swaps swaps from the best cell so far; the design is the best of
+    the optima and a local optimum of all swaps (checked exhaustively); its objective ≤ the plain search's."""
+    base = {**TINY, "cell_um": 120.0, "open_fraction": 0.34, "tiling": "repeated", "steps": 100, "candidates": 18}
+    plain = Designer(DesignConfig(**base))
+    while not plain.finished:
+        plain.step()
+    d = Designer(DesignConfig(**base, kicks=3, kick_swaps=1))
+    optima, best = [], d.cell
+    while not d.finished:
+        before = d.best_cell
+        rec = d.step()
+        if rec["swap"] is None:
+            optima.append(rec["best"])
+            if "kick" in rec:
+                assert np.sum((before > 0.5) & (d.cell < 0.5)) == 1 and d.cell.sum() == 3
+        best = d.best_cell
+    assert d.kicks_done == 3 and d.converged and len(optima) == 4 and optima[0] == plain.current
+    assert d.current == d.best == min(r["objective"] for r in d.losses) <= plain.current
+    assert np.array_equal(d.cell, best)
+    flat = d.cell.ravel()
+    for i in np.flatnonzero(flat):
+        for j in np.flatnonzero(flat == 0):
+            trial = flat.copy()
+            trial[i], trial[j] = 0.0, 1.0
+            assert d.search_score(trial.reshape(3, 3)) >= d.current * (1 - 1e-5)
+
+
+def test_an_interrupted_kicked_run_resumes_to_the_same_result(tmp_path, monkeypatch):
+    config = DesignConfig(**{**TINY, "steps": 12, "kicks": 2, "kick_swaps": 2, "candidates": 6})
+    whole = job.run_design(config, tmp_path / "whole", quiet=True, compare=False)
+    kicks = [i for i, r in enumerate(whole["losses"]) if "kick" in r]
+    assert kicks and whole["kicks_done"] >= 1
+    monkeypatch.setattr(job, "CHECKPOINT_STEPS", 1)
+    real_step = Designer.step
+
+    def interrupt(self):
+        if self.step_done == kicks[0] + 1:
+            raise KeyboardInterrupt
+        return real_step(self)
+    monkeypatch.setattr(Designer, "step", interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        job.run_design(config, tmp_path / "cut", quiet=True, compare=False)
+    monkeypatch.setattr(Designer, "step", real_step)
+    again = job.run_design(config, tmp_path / "cut", quiet=True, compare=False)
+    assert again["losses"] == whole["losses"] and again["final"] == whole["final"]
+    assert whole["search_objective"] == min(r["best"] for r in whole["losses"])
 
 
 def test_an_interrupted_run_resumes_to_the_same_result(tmp_path, monkeypatch):
@@ -189,6 +247,9 @@ def test_the_designed_display_files_are_displays(tmp_path):
     (["--channels", "BX"], "--channels BX: expected some of RGB, each once"),
     (["--channels", "GG"], "--channels GG"),
     (["--objective", "upc", "--far-veil"], "--far-veil: takes --objective wiener or crop"),
+    (["--kicks", "-1"], "--kicks must be ≥ 0, got -1"),
+    (["--kick-swaps", "0"], "--kick-swaps must be > 0, got 0"),
+    (["--kicks", "1", "--kick-swaps", "89"], "--kick-swaps 89: the cell has 88 squares to swap; expected 1 … 88"),
 ])
 def test_design_refuses_in_one_line(tmp_path, capsys, argv, says):
     assert cli.main(["design", *argv, "--out", str(tmp_path / "never")]) == 2

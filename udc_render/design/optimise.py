@@ -164,7 +164,7 @@ class DesignConfig:
         if not (isinstance(self.kicks, int) and self.kicks >= 0):
             raise tp.DesignError(f"--kicks {self.kicks}: expected an integer ≥ 0")
         most = min(self.open_squares, self.cell_px ** 2 - self.open_squares)
-        if self.kick_swaps > most:
+        if self.kicks and self.kick_swaps > most:
             raise tp.DesignError(f"--kick-swaps {self.kick_swaps}: the cell has {most} squares to swap; expected "
                                  f"1 … {most}")
 
