@@ -135,3 +135,19 @@ def test_the_ceiling_rows_cover_the_draw_counts():
     for r in rows:
         assert r["cpu_s"] > 0 and all(0 <= r[k] < 1 for k in ("error_toled_rel", "error_scatter_rel",
                                                               "error_ratio_rel"))
+
+
+def test_the_kicks_rows_start_at_the_plain_optimum_and_never_fall():
+    """Part (f) on a tiny setting: the 0-kick row is the plain search's converged cell (the same run without kicks),
+    the best on the search's tiling never falls as kicks are added, the open area is kept, CPU time grows."""
+    cfg = {**TINY, "kicks": (1, 2), "kick_swaps": (2,)}
+    rows = dk.kicks_rows(cfg)
+    plain = Designer(DesignConfig(cell_um=96.0, kernel_px=15, pupil_samples=64, steps=100_000))
+    while not plain.finished:
+        plain.step()
+    assert [(r["kick_swaps"], r["kicks"]) for r in rows] == [(2, 0), (2, 1), (2, 2)]
+    assert abs(rows[0]["search_psnr_db"] + 10 * np.log10(plain.current)) < 1e-12
+    assert abs(rows[0]["psnr_db"] - plain.score(plain.cell)["psnr_db"]) < 1e-12
+    search = [r["search_psnr_db"] for r in rows]
+    assert search == sorted(search) and all(abs(r["open_area"] - 29 / 144) < 1e-12 for r in rows)
+    assert rows[0]["cpu_s"] < rows[1]["cpu_s"] <= rows[2]["cpu_s"]

@@ -36,12 +36,17 @@ blocks of N draws of the relative error, times √(M / (M − N)) (a block is pa
 them is √(1 − N / M) of its error against the expectation), the largest over R, G, B; CPU seconds of one forward
 pass over N draws (the scatter, 3 channels).
 
+(f) The search's kicks (udc_render.design.optimise's iterated local search): the run of part (b) (DesignConfig's
+defaults) with kicks of 2, 4 and 8 random swaps, its best cell after 0, 1, 2, 4, 8 and 16 kicks scored as
+design.json's 'final' (held-out tiling) and on the search's own tiling, with the search's CPU seconds so far and its
+exact scores; 0 kicks is part (b)'s converged cell.
+
 Outputs: study_design.json (every figure), study_design.csv (one row per setting), study_design.md,
 study_design.png (error against CPU time; objective against steps; banding error against CPU time; field phases;
-the ceiling's draws).
+the ceiling's draws; the kicks).
 A part already in OUT's study_design.json with the same settings is kept (the study resumes part by part).
 quick: a 96 µm cell, 31-px kernels, three settings and 2 and 4 steps from 128 pupil samples, raster steps of 8 and
-4 µm, 2 field phases, 1 and 2 of 4 draws (a smoke run).
+4 µm, 2 field phases, 1 and 2 of 4 draws, 1 and 2 kicks of 2 swaps (a smoke run).
 """
 from __future__ import annotations
 
@@ -68,21 +73,23 @@ from udc_render.streams import stream
 from udc_render.studies.design_knobs_report import write
 
 __all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "banding_rows", "field_profiles", "field_rows",
-           "ceiling_rows", "run_study"]
+           "ceiling_rows", "kicks_rows", "run_study"]
 
 FULL = {"cell_um": 168.0, "kernel_px": 127, "samples": (128, 256, 384, 512, 768, 1024, 2048),
         "steps": (10, 20, 40, 80, 150), "design_pupil_samples": DesignConfig().pupil_samples,
         "sample_um": (8.0, 4.0, 2.0, 1.0), "phases": (2, 3, 4, 6, 8), "ceiling_draws": (1, 2, 4, 8, 16),
-        "ceiling_truth": 32}
+        "ceiling_truth": 32, "kicks": (1, 2, 4, 8, 16), "kick_swaps": (2, 4, 8)}
 QUICK = {"cell_um": 96.0, "kernel_px": 31, "samples": (64, 128, 256), "steps": (2, 4), "design_pupil_samples": 128,
-         "sample_um": (8.0, 4.0), "phases": (2,), "ceiling_draws": (1, 2), "ceiling_truth": 4}
+         "sample_um": (8.0, 4.0), "phases": (2,), "ceiling_draws": (1, 2), "ceiling_truth": 4, "kicks": (1, 2),
+         "kick_swaps": (2,)}
 FEATURE_UM = 8.0
 OPEN = 0.20
 SEED = 0
 BANDING_DISTANCE_UM = 2000.0
 FIELD_WAVELENGTH_NM = 520.0
 PART_KEYS = {"sampling": ("samples",), "steps": ("steps", "design_pupil_samples"), "banding": ("sample_um",),
-             "field": ("phases",), "ceiling": ("ceiling_draws", "ceiling_truth")}
+             "field": ("phases",), "ceiling": ("ceiling_draws", "ceiling_truth"),
+             "kicks": ("kicks", "kick_swaps", "design_pupil_samples")}
 # besides the shared keys: what decides each part (run_study resumes by them)
 SHARED_KEYS = ("cell_um", "kernel_px", "feature_um", "open_fraction", "seed", "wavelengths_nm", "threads",
                "banding_distance_mm")
@@ -156,6 +163,27 @@ def steps_rows(cfg: dict, progress=None) -> list[dict]:
                      "evaluations": designer.evaluations, "pupil_samples": base.pupil_samples})
         if progress:
             progress(1)
+    return rows
+
+
+def kicks_rows(cfg: dict, progress=None) -> list[dict]:
+    """Part (f): per kick size, one kicked run (part (b)'s settings, steps uncapped in practice), its best cell after
+    each kick count: the best of that many + 1 local optima, scored held out and on the search's tiling."""
+    rows = []
+    for swaps in cfg["kick_swaps"]:
+        config = DesignConfig(cell_um=cfg["cell_um"], kernel_px=cfg["kernel_px"], steps=100_000,
+                              pupil_samples=cfg["design_pupil_samples"], kicks=max(cfg["kicks"]), kick_swaps=swaps)
+        designer, cpu_s = Designer(config), 0.0
+        for kicks in (0, *cfg["kicks"]):
+            start = time.process_time()
+            while not designer.finished and designer.kicks_done <= kicks:
+                designer.step()
+            cpu_s += time.process_time() - start
+            rows.append({"part": "kicks", "kick_swaps": swaps, "kicks": kicks, "steps_done": designer.step_done,
+                         **designer.score(designer.best_cell), "search_psnr_db": float(-10 * np.log10(designer.best)),
+                         "cpu_s": cpu_s, "evaluations": designer.evaluations})
+            if progress:
+                progress(1)
     return rows
 
 
@@ -298,7 +326,7 @@ def _kept_parts(out: Path, config: dict) -> dict:
 
 
 def run_study(out: Path, quick: bool = False) -> dict:
-    """The four parts, written to out (udc_render.studies.design_knobs_report); parts already there with the same
+    """The six parts, written to out (udc_render.studies.design_knobs_report); parts already there with the same
     settings are kept."""
     cfg = QUICK if quick else FULL
     config = json.loads(json.dumps({**cfg, "feature_um": FEATURE_UM, "open_fraction": OPEN, "seed": SEED,
@@ -308,7 +336,8 @@ def run_study(out: Path, quick: bool = False) -> dict:
     kept = _kept_parts(Path(out), config)
     makers = {"sampling": (sampling_rows, 2 * len(cfg["samples"])), "steps": (steps_rows, len(cfg["steps"]) + 1),
               "banding": (banding_rows, 2 * len(cfg["sample_um"])), "field": (field_rows, 2 * len(cfg["phases"])),
-              "ceiling": (ceiling_rows, len(cfg["ceiling_draws"]))}
+              "ceiling": (ceiling_rows, len(cfg["ceiling_draws"])),
+              "kicks": (kicks_rows, len(cfg["kick_swaps"]) * (len(cfg["kicks"]) + 1))}
     total = sum(n for part, (_, n) in makers.items() if part not in kept)
     with tqdm(total=total, desc="study design") as bar:
         doc = {"config": config, **{part: kept[part] if part in kept else make(cfg, bar.update)

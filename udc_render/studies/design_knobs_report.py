@@ -14,7 +14,8 @@ COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "steps_
            "error_psnr_db", "error_ring_means_rel", "error_ring_minima_rel", "objective", "open_area", "sample_um",
            "error_profile_rel", "error_peak_to_peak_rel", "turned_peak_to_peak", "turned_rms", "error_turned_rel",
            "phases", "exact_sd", "blend_sd", "blend_error_rms", "one_tile_sd", "one_tile_error_rms", "draws", "blocks",
-           "error_toled_rel", "error_scatter_rel", "error_ratio_rel", "cpu_s", "cpu_gradient_s"]
+           "error_toled_rel", "error_scatter_rel", "error_ratio_rel", "kick_swaps", "kicks", "search_psnr_db", "cpu_s",
+           "cpu_gradient_s"]
 
 
 def _cell(v) -> str:
@@ -53,7 +54,8 @@ def markdown(doc: dict) -> str:
         lines.append(f"| {r['steps']} | {r['steps_done']}{' (converged)' if r['converged'] else ''} | "
                      f"{r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | {r['evaluations']} | "
                      f"{r['cpu_s']:.0f} |")
-    return "\n".join(lines + _banding_lines(doc) + _field_lines(doc) + _ceiling_lines(doc)) + "\n"
+    return "\n".join(lines + _banding_lines(doc) + _field_lines(doc) + _ceiling_lines(doc)
+                     + _kicks_lines(doc)) + "\n"
 
 
 def _section(title: str, header: list[str], rows: list[list[str]]) -> list[str]:
@@ -106,6 +108,30 @@ def _ceiling_lines(doc: dict) -> list[str]:
                      for r in doc["ceiling"]])
 
 
+def _kicks_lines(doc: dict) -> list[str]:
+    """Part (f): the search's kicks (absent from a study run before it)."""
+    if not doc.get("kicks"):
+        return []
+    return _section("The search's kicks (iterated local search from part (b)'s start; the best cell after each kick "
+                    "count, held out and on the search's tiling)",
+                    ["swaps a kick", "kicks", "steps done", "held-out PSNR (dB)", "search's PSNR (dB)",
+                     "exact scores", "CPU s"],
+                    [[str(r["kick_swaps"]), str(r["kicks"]), str(r["steps_done"]), f"{r['psnr_db']:.3f}",
+                      f"{r['search_psnr_db']:.3f}", str(r["evaluations"]), f"{r['cpu_s']:.0f}"]
+                     for r in doc["kicks"]])
+
+
+def _kicks_axes(ax, rows: list[dict]) -> None:
+    for i, swaps in enumerate(sorted({r["kick_swaps"] for r in rows})):
+        these = [r for r in rows if r["kick_swaps"] == swaps]
+        t = [r["cpu_s"] for r in these]
+        ax.plot(t, [r["psnr_db"] for r in these], "o-", color=f"C{i}", label=f"{swaps} swaps a kick: held out")
+        ax.plot(t, [r["search_psnr_db"] for r in these], "x:", color=f"C{i}", label=f"{swaps}: the search's tiling")
+        for r in these:
+            ax.annotate(str(r["kicks"]), (r["cpu_s"], r["psnr_db"]), fontsize=7)
+    _label(ax, "CPU s of the search (kicks beside each)", "best cell: Wiener PSNR (dB)", "design: kicks", bool(rows))
+
+
 def _label(ax, xlabel: str, ylabel: str, title: str, legend: bool) -> None:
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
@@ -130,7 +156,7 @@ def _figure(doc: dict, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
-    fig, (a, b, c, e, f) = plt.subplots(1, 5, figsize=(26, 4))
+    fig, (a, b, c, e, f, g) = plt.subplots(1, 6, figsize=(31, 4))
     for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
         rows = [r for r in doc["sampling"] if r["cell"] == name][:-1]  # the reference has no error
         t = [r["cpu_gradient_s"] for r in rows]
@@ -155,6 +181,7 @@ def _figure(doc: dict, out: Path) -> None:
     _banding_axes(c, doc.get("banding", []))
     _field_axes(e, doc.get("field", []))
     _ceiling_axes(f, doc.get("ceiling", []))
+    _kicks_axes(g, doc.get("kicks", []))
     for axis in (a.xaxis, b.xaxis):
         axis.set_minor_formatter(NullFormatter())
     b.set_xlabel("search steps, accepted swaps (CPU s beside each)")
@@ -194,7 +221,7 @@ def _field_axes(ax, rows: list[dict]) -> None:
 def write(doc: dict, out: Path) -> list[str]:
     save_json(out / "study_design.json", doc)
     save_text(out / "study_design.csv", _csv(doc["sampling"] + doc["steps"] + doc.get("banding", [])
-                                             + doc.get("field", []) + doc.get("ceiling", [])))
+                                             + doc.get("field", []) + doc.get("ceiling", []) + doc.get("kicks", [])))
     save_text(out / "study_design.md", markdown(doc))
     _figure(doc, out)
     return ["study_design.json", "study_design.csv", "study_design.md", "study_design.png"]
