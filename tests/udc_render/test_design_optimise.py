@@ -85,7 +85,7 @@ def test_the_rings_objective_is_upcs_statistic_in_their_sampling():
     (("optics", "channels"), {"channels": "B"}),
     (("upc_floor", "floor_channels", "floor_uncropped"), {"upc_floor": 1.3}),
     (("banding_ceiling",), {"banding_ceiling": 0.95}),
-    (("kicks", "kick_swaps"), {"kicks": 2}),
+    (("kicks", "kick_swaps"), {"kick_swaps": 2}),
 ])
 def test_a_checkpoint_from_before_a_later_option_resumes(dropped, changed):
     """A state saved without a later option's settings (their defaults then) loads into the default run only."""
@@ -174,6 +174,19 @@ def test_an_interrupted_kicked_run_resumes_to_the_same_result(tmp_path, monkeypa
     again = job.run_design(config, tmp_path / "cut", quiet=True, compare=False)
     assert again["losses"] == whole["losses"] and again["final"] == whole["final"]
     assert whole["search_objective"] == min(r["best"] for r in whole["losses"])
+
+
+def test_a_finished_run_resumed_with_more_kicks_is_the_longer_run(tmp_path):
+    """Raising --kicks (or --steps) on a finished run's folder goes on from its last optimum: the record and the
+    design equal a run with the larger budget from the start; lowering the budget is refused."""
+    short, long = ({**TINY, "steps": 40, "kicks": k, "kick_swaps": 2, "candidates": 6} for k in (1, 3))
+    job.run_design(DesignConfig(**short), tmp_path / "grown", quiet=True, compare=False)
+    grown = job.run_design(DesignConfig(**long), tmp_path / "grown", quiet=True, compare=False)
+    whole = job.run_design(DesignConfig(**long), tmp_path / "whole", quiet=True, compare=False)
+    assert grown["kicks_done"] == whole["kicks_done"] == 3 and grown["converged"]
+    assert grown["losses"] == whole["losses"] and grown["final"] == whole["final"]
+    with pytest.raises(tp.DesignError, match=r"other settings \(kicks\)"):
+        job.run_design(DesignConfig(**short), tmp_path / "whole", quiet=True, compare=False)
 
 
 def test_an_interrupted_run_resumes_to_the_same_result(tmp_path, monkeypatch):

@@ -88,6 +88,7 @@ __all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig"
            "toled_cell", "initial_cell", "kicked"]
 
 IMPROVE_REL = 1e-5
+RAISABLE = ("steps", "kicks")  # the search's budget: a resumed run may raise it and go on
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
 _LATER_DEFAULTS = {  # options added after the first checkpoints, at the settings those runs had
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
@@ -399,13 +400,21 @@ class Designer:
                 "kicks_done": self.kicks_done}
 
     def load(self, state: dict) -> None:
+        """Resume a checkpoint of the same settings; its budget (RAISABLE: steps, kicks) may be raised, and a run
+        that stopped at its last kick's optimum then kicks again as the longer run would have."""
         saved = {**_LATER_DEFAULTS, **state["config"]}
-        if saved != asdict(self.config):
-            changed = sorted(k for k, v in asdict(self.config).items() if saved.get(k) != v)
+        changed = sorted(k for k, v in asdict(self.config).items()
+                         if saved.get(k) != v and not (k in RAISABLE and v > saved[k]))
+        if changed:
             raise tp.DesignError(f"the output folder holds a run with other settings ({', '.join(changed)}); "
-                                 "use another --out or the same settings to resume")
+                                 "use another --out or the same settings to resume (--steps and --kicks may be "
+                                 "raised)")
         self.cell, self.current = np.asarray(state["cell"], np.float64), float(state["current"])
         self.step_done, self.converged = int(state["step"]), bool(state["converged"])
         self.evaluations, self.losses = int(state["evaluations"]), list(state["losses"])
         self.best_cell = np.asarray(state.get("best_cell", self.cell), np.float64)
         self.best, self.kicks_done = float(state.get("best", self.current)), int(state.get("kicks_done", 0))
+        if self.converged and self.kicks_done < self.config.kicks and self.losses:
+            self.converged = False
+            self._at_optimum(self.losses[-1])
+            self.losses[-1]["objective"] = self.current
