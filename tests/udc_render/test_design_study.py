@@ -440,3 +440,25 @@ def test_the_design_guide_prints_the_ceilings_draws():
         assert row in lines, row
     ratio = " / ".join(pct(r["error_ratio_rel"])[:-2] for r in rows)
     assert f"the ratio's error {ratio} % at 1 / 2 / 4 / 8 / 16 draws" in defaults
+
+
+def test_the_design_guide_prints_the_kicks():
+    """Part (f) of the committed `study design`: the guide's table is its JSON's gains over the 0-kick row, and the
+    defaults' row its largest held-out gain."""
+    root = Path(__file__).resolve().parents[2]
+    lines = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").splitlines()
+    defaults = " ".join((root / "docs" / "concepts" / "defaults.md").read_text(encoding="utf-8").split())
+    rows = json.loads((root / "docs" / "figures" / "design" / "study_knobs" / "study_design.json").read_text())["kicks"]
+    gains = []
+    for swaps in (2, 4, 8):
+        these = [r for r in rows if r["kick_swaps"] == swaps]
+        base = these[0]
+        assert [r["kicks"] for r in these] == [0, 1, 2, 4, 8, 16]
+        held = " / ".join(f"{r['psnr_db'] - base['psnr_db']:+.3f}" for r in these[1:])
+        search = " / ".join(f"{r['search_psnr_db'] - base['search_psnr_db']:+.3f}" for r in these[1:])
+        row = (f"| {swaps}{', the default' if swaps == 4 else ''} | {held} | {search} | {these[-1]['cpu_s']:.0f} "
+               f"({base['cpu_s']:.0f}) |")
+        assert row in lines, row
+        gains += [r["psnr_db"] - base["psnr_db"] for r in these]
+    assert f"16 kicks gain at most {max(gains):.3f} dB" in " ".join(lines)
+    assert f"at most {max(gains):.3f} dB held out" in defaults
