@@ -156,7 +156,7 @@ def _loss_figure(doc: dict, out: Path) -> None:
                label=f"{base['n']} random scatters: mean ± sd (held-out tiling)")
     ax.axhline(base["best"], color="C3", label="the best scatter")
     ax.plot([len(values) - 1], [doc["final"]["psnr_db" if wiener else "objective"]], "ko", label="the design, held out")
-    ax.set_xlabel("step (swaps tried; a kick after each local optimum)" if kicks else "step (accepted swaps)")
+    ax.set_xlabel("step (an accepted swap, or a local optimum and its kick)" if kicks else "step (accepted swaps)")
     ax.set_ylabel({"wiener": "Wiener PSNR (dB)", "crop": "Wiener PSNR on the crop (dB)",
                    "rings": "−mean log of the mean ring minimum"}.get(doc["config"]["objective"], "UPC objective"))
     ax.legend(fontsize=8)
