@@ -462,3 +462,38 @@ def test_the_design_guide_prints_the_kicks():
         gains += [r["psnr_db"] - base["psnr_db"] for r in these]
     assert f"16 kicks gain at most {max(gains):.3f} dB" in " ".join(lines)
     assert f"at most {max(gains):.3f} dB held out" in defaults
+
+
+def test_the_design_guide_prints_the_kicked_designs():
+    """The guide's kicks table and its claims are the committed design.json's: each row's squares, scores,
+    objective, UPC's draws and bands; the kicked runs keep veil130_b90's settings but the kicks, and never end below
+    it; k16 is above the turned T-OLED's objective (the dipole study's edge row)."""
+    root = Path(__file__).resolve().parents[2]
+    figures = root / "docs" / "figures" / "design"
+    text = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8")
+    lines, flat = text.splitlines(), " ".join(text.split())
+    base = json.loads((figures / "ceiling" / "veil130_b90" / "design.json").read_text())
+    edge = json.loads((figures / "dipole" / "study_layout_dipole.json").read_text())["rows"][0]
+    runs = {"`veil130_b90` (no kicks)": base}
+    for name in ("k8_swaps8", "k8", "k16", "k8_then_swaps3"):
+        d = json.loads((figures / "kicks" / name / "design.json").read_text())
+        assert {k: v for k, v in d["config"].items() if k not in ("kicks", "kick_swaps", "init", "steps")} == {
+            k: v for k, v in base["config"].items() if k not in ("init", "steps")}
+        assert d["kicks_done"] == d["config"]["kicks"] and d["converged"]
+        assert d["final"]["psnr_db"] > base["final"]["psnr_db"]
+        runs[f"`{name}`{' (from `k8`)' if name == 'k8_then_swaps3' else ''}"] = d
+    for name, d in runs.items():
+        dr, q = d["upc"]["turned"]["draws"], np.mean(d["banding"]["ratio"], axis=1)
+        kicks = f"{d['config']['kicks']} × {d['config']['kick_swaps']}" if d["config"].get("kicks") else "—"
+        row = (f"| {name} | {kicks} | {d['initial']['squares_moved']} | {d['evaluations']} | "
+               f"{d['final']['psnr_db']:.2f} | {dr['mean'][1]:.3f} ± {dr['sd'][1]:.3f} (min {dr['min'][1]:.3f}) | "
+               f"{' / '.join(f'{v:.2f}' for v in q)} | {q.mean():.2f} | {(q < 1).sum()} of 5 |")
+        assert row in lines, row
+    k16 = runs["`k16`"]
+    assert k16["final"]["psnr_db"] > edge["veil_psnr_db"]
+    assert (f"from {base['final']['psnr_db']:.2f} to {k16['final']['psnr_db']:.2f} dB held out, "
+            f"{k16['final']['psnr_db'] - edge['veil_psnr_db']:.2f} dB above the turned T-OLED's "
+            f"{edge['veil_psnr_db']:.2f} dB") in flat
+    assert f"{k16['evaluations'] / base['evaluations']:.0f} × the exact scores of the first optimum" in flat
+    cells = [np.asarray(iio.imread(figures / "kicks" / n / "cell.png")) for n in ("k16", "k8_then_swaps3")]
+    assert f"another cell, {np.sum(cells[0] != cells[1]) // 2} squares apart" in flat
