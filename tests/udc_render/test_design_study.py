@@ -495,5 +495,11 @@ def test_the_design_guide_prints_the_kicked_designs():
             f"{k16['final']['psnr_db'] - edge['veil_psnr_db']:.2f} dB above the turned T-OLED's "
             f"{edge['veil_psnr_db']:.2f} dB") in flat
     assert f"{k16['evaluations'] / base['evaluations']:.0f} × the exact scores of the first optimum" in flat
+    defaults = " ".join((root / "docs" / "concepts" / "defaults.md").read_text(encoding="utf-8").split())
+    gain = k16["final"]["psnr_db"] - base["final"]["psnr_db"]
+    assert (f"16 kicks of 4 swaps gained {gain:.2f} dB held out ({base['final']['psnr_db']:.2f} to "
+            f"{k16['final']['psnr_db']:.2f} dB, past the turned T-OLED's {edge['veil_psnr_db']:.2f}") in defaults
+    eight = runs["`k8`"]["final"]["psnr_db"] - runs["`k8_swaps8`"]["final"]["psnr_db"]
+    assert f"8 kicks of 4 swaps ended {eight:.2f} dB above 8 kicks of 8 (held out)" in defaults
     cells = [np.asarray(iio.imread(figures / "kicks" / n / "cell.png")) for n in ("k16", "k8_then_swaps3")]
     assert f"another cell, {np.sum(cells[0] != cells[1]) // 2} squares apart" in flat
