@@ -503,3 +503,26 @@ def test_the_design_guide_prints_the_kicked_designs():
     assert f"8 kicks of 4 swaps ended {eight:.2f} dB above 8 kicks of 8 (held out)" in defaults
     cells = [np.asarray(iio.imread(figures / "kicks" / n / "cell.png")) for n in ("k16", "k8_then_swaps3")]
     assert f"another cell, {np.sum(cells[0] != cells[1]) // 2} squares apart" in flat
+
+
+def test_the_design_guide_prints_the_kicked_design_through_the_simulator():
+    """The guide's table of k16 and veil130_b90 against the turned T-OLED through `study layout-trained` is the
+    committed JSON's (seed 0, 80 epochs, the same display files), and its stated changes are their differences."""
+    root = Path(__file__).resolve().parents[2]
+    figures = root / "docs" / "figures" / "design"
+    text = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8")
+    lines, flat = text.splitlines(), " ".join(text.split())
+    runs = {name: json.loads((figures / folder / "study_layout_trained.json").read_text())
+            for name, folder in (("base", "layout_trained_ceiling"), ("k16", "layout_trained_kicks"))}
+    for d in runs.values():
+        assert d["seeds"]["train"] == 0 and d["budget"]["epochs"] == 80
+    paired = {n: d["paired"]["design_turned"] for n, d in runs.items()}
+
+    def cell(p: dict) -> str:
+        return f"{p['mean_db']:+.2f} ± {p['se_db']:.2f} dB ({p['wins']} of 8)".replace("-", "−")
+    for key, label in (("dep", "plain DeP"), ("dep_far", "DeP given the far field"), ("unet", "UNet")):
+        row = f"| {label} | {cell(paired['base'][key])} | {cell(paired['k16'][key])} |"
+        assert row in lines, row
+    change = {k: paired["k16"][k]["mean_db"] - paired["base"][k]["mean_db"] for k in ("dep", "dep_far", "unet")}
+    assert f"plain DeP by {change['dep']:+.2f} dB" in flat
+    assert f"lost {-change['dep_far']:.2f} dB each" in flat and f"{-change['unet']:.2f}" == f"{-change['dep_far']:.2f}"
