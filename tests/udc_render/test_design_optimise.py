@@ -96,6 +96,16 @@ def test_a_checkpoint_from_before_a_later_option_resumes(dropped, changed):
         Designer(DesignConfig(**{**TINY, **changed})).load(old)
 
 
+def _assert_no_swap_lowers(d: Designer) -> None:
+    """Every swap of an open and an opaque square of d's 3 × 3 cell scores no lower than its current objective."""
+    flat = d.cell.ravel()
+    for i in np.flatnonzero(flat):
+        for j in np.flatnonzero(flat == 0):
+            trial = flat.copy()
+            trial[i], trial[j] = 0.0, 1.0
+            assert d.search_score(trial.reshape(3, 3)) >= d.current * (1 - 1e-5)
+
+
 @pytest.mark.parametrize("tiling", ["repeated", pytest.param("turned", marks=pytest.mark.slow)])  # turned: 9 s, CI time
 def test_the_search_ends_in_a_local_optimum_of_all_swaps(tiling):
     """With every swap a candidate (3 open × 6 opaque squares of a 3 × 3 cell), the search lowers its objective at
@@ -111,12 +121,7 @@ def test_the_search_ends_in_a_local_optimum_of_all_swaps(tiling):
             assert rec["objective"] < previous and flat[rec["swap"][1]] == 1 and flat[rec["swap"][0]] == 0
             previous = rec["objective"]
     assert d.converged and 0 < d.step_done < 100 and d.current == d.search_score(d.cell)
-    flat = d.cell.ravel()
-    for i in np.flatnonzero(flat):
-        for j in np.flatnonzero(flat == 0):
-            trial = flat.copy()
-            trial[i], trial[j] = 0.0, 1.0
-            assert d.search_score(trial.reshape(3, 3)) >= d.current * (1 - 1e-5)
+    _assert_no_swap_lowers(d)
 
 
 def test_a_kick_moves_the_given_swaps_and_keeps_the_open_area():
@@ -147,12 +152,23 @@ def test_kicks_end_at_the_best_local_optimum_and_never_above_the_plain_search():
     assert d.kicks_done == 3 and d.converged and len(optima) == 4 and optima[0] == plain.current
     assert d.current == d.best == min(r["objective"] for r in d.losses) <= plain.current
     assert np.array_equal(d.cell, best)
-    flat = d.cell.ravel()
-    for i in np.flatnonzero(flat):
-        for j in np.flatnonzero(flat == 0):
-            trial = flat.copy()
-            trial[i], trial[j] = 0.0, 1.0
-            assert d.search_score(trial.reshape(3, 3)) >= d.current * (1 - 1e-5)
+    _assert_no_swap_lowers(d)
+
+
+def _cut_and_resumed(config: DesignConfig, out, monkeypatch, at_step: int, checkpoint_steps: int) -> dict:
+    """A design run interrupted before step at_step (checkpoints every checkpoint_steps), then resumed to its end."""
+    monkeypatch.setattr(job, "CHECKPOINT_STEPS", checkpoint_steps)
+    real_step = Designer.step
+
+    def interrupt(self):
+        if self.step_done == at_step:
+            raise KeyboardInterrupt
+        return real_step(self)
+    monkeypatch.setattr(Designer, "step", interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        job.run_design(config, out, quiet=True, compare=False)
+    monkeypatch.setattr(Designer, "step", real_step)
+    return job.run_design(config, out, quiet=True, compare=False)
 
 
 def test_an_interrupted_kicked_run_resumes_to_the_same_result(tmp_path, monkeypatch):
@@ -160,18 +176,7 @@ def test_an_interrupted_kicked_run_resumes_to_the_same_result(tmp_path, monkeypa
     whole = job.run_design(config, tmp_path / "whole", quiet=True, compare=False)
     kicks = [i for i, r in enumerate(whole["losses"]) if "kick" in r]
     assert kicks and whole["kicks_done"] >= 1
-    monkeypatch.setattr(job, "CHECKPOINT_STEPS", 1)
-    real_step = Designer.step
-
-    def interrupt(self):
-        if self.step_done == kicks[0] + 1:
-            raise KeyboardInterrupt
-        return real_step(self)
-    monkeypatch.setattr(Designer, "step", interrupt)
-    with pytest.raises(KeyboardInterrupt):
-        job.run_design(config, tmp_path / "cut", quiet=True, compare=False)
-    monkeypatch.setattr(Designer, "step", real_step)
-    again = job.run_design(config, tmp_path / "cut", quiet=True, compare=False)
+    again = _cut_and_resumed(config, tmp_path / "cut", monkeypatch, kicks[0] + 1, 1)
     assert again["losses"] == whole["losses"] and again["final"] == whole["final"]
     assert whole["search_objective"] == min(r["best"] for r in whole["losses"])
 
@@ -193,18 +198,7 @@ def test_an_interrupted_run_resumes_to_the_same_result(tmp_path, monkeypatch):
     config = DesignConfig(**TINY)
     whole = job.run_design(config, tmp_path / "whole", quiet=True, compare=False)
     assert whole["steps_done"] == 4 and not whole["converged"]  # the interrupt below falls inside the run
-    monkeypatch.setattr(job, "CHECKPOINT_STEPS", 2)
-    real_step = Designer.step
-
-    def interrupt(self):
-        if self.step_done == 3:
-            raise KeyboardInterrupt
-        return real_step(self)
-    monkeypatch.setattr(Designer, "step", interrupt)
-    with pytest.raises(KeyboardInterrupt):
-        job.run_design(config, tmp_path / "cut", quiet=True, compare=False)
-    monkeypatch.setattr(Designer, "step", real_step)
-    again = job.run_design(config, tmp_path / "cut", quiet=True, compare=False)
+    again = _cut_and_resumed(config, tmp_path / "cut", monkeypatch, 3, 2)
     assert again["losses"] == whole["losses"] and again["final"] == whole["final"]
     with pytest.raises(Exception, match="other settings"):
         job.run_design(DesignConfig(**{**TINY, "seed": 1}), tmp_path / "cut", quiet=True, compare=False)
