@@ -14,7 +14,7 @@ an open and an opaque square, which keep K:
 With kicks N (iterated local search, Lourenço, Martin & Stützle, "Iterated Local Search", Handbook of
 Metaheuristics 2003): at each local optimum the best cell so far takes kick_swaps random swaps (stream 'design',
 'kick', n) and the swaps above descend again, N times; the design is the best local optimum. The swaps alone stop
-at the first optimum of their neighbourhood (the veil design with both targets: 10 swaps from its start).
+at the first optimum of their neighbourhood (veil130_b90, the veil design with both targets: 9 swaps from its start).
 
 Why not a relaxation: a sigmoid-relaxed cell's optimum is a uniform grey cell (an attenuator that does not
 diffract: 37.0 dB against 27.8 dB for a binary scatter at 20 %), so the gradient of a relaxed cell flattens its
