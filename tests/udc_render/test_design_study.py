@@ -526,3 +526,10 @@ def test_the_design_guide_prints_the_kicked_design_through_the_simulator():
     change = {k: paired["k16"][k]["mean_db"] - paired["base"][k]["mean_db"] for k in ("dep", "dep_far", "unet")}
     assert f"plain DeP by {change['dep']:+.2f} dB" in flat
     assert f"lost {-change['dep_far']:.2f} dB each" in flat and f"{-change['unet']:.2f}" == f"{-change['dep_far']:.2f}"
+    seed1 = json.loads((figures / "layout_trained_kicks_seed1" / "study_layout_trained.json").read_text())
+    assert seed1["seeds"]["train"] == 1 and seed1["budget"]["epochs"] == 80
+    unet = [paired["k16"]["unet"], seed1["paired"]["design_turned"]["unet"]]
+    assert f"UNet at {cell(unet[1])}" in flat
+    assert f"(mean {np.mean([u['mean_db'] for u in unet]):+.2f} dB)".replace("-", "−") in flat
+    assert (f"the UNet is level ({unet[0]['mean_db']:+.2f} and {unet[1]['mean_db']:+.2f} dB, two seeds)".replace(
+        "-", "−") in flat)
