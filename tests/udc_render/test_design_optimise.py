@@ -192,6 +192,10 @@ def test_a_finished_run_resumed_with_more_kicks_is_the_longer_run(tmp_path):
     assert grown["losses"] == whole["losses"] and grown["final"] == whole["final"]
     with pytest.raises(tp.DesignError, match=r"other settings \(kicks\)"):
         job.run_design(DesignConfig(**short), tmp_path / "whole", quiet=True, compare=False)
+    capped = job.run_design(DesignConfig(**{**TINY, "steps": 2}), tmp_path / "steps", quiet=True, compare=False)
+    more = job.run_design(DesignConfig(**TINY), tmp_path / "steps", quiet=True, compare=False)
+    four = job.run_design(DesignConfig(**TINY), tmp_path / "four", quiet=True, compare=False)
+    assert capped["steps_done"] == 2 and more["losses"] == four["losses"] and more["final"] == four["final"]
 
 
 def test_an_interrupted_run_resumes_to_the_same_result(tmp_path, monkeypatch):
