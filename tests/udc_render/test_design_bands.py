@@ -17,7 +17,8 @@ from udc_render import cli
 from udc_render.design import job
 from udc_render.design.bands import BANDING_WEIGHT, BandingCeiling
 from udc_render.design.cells import toled_reference
-from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer
+from udc_render.design.config import DesignConfig
+from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.tiling_power import shift_span_um, tiling_power
 
 CEILED = dict(objective="crop", contrast=1.0, pupil_samples=64, kernel_px=31, scatters=1, steps=1, candidates=2,

@@ -10,7 +10,9 @@ import pytest
 import torch
 
 from udc_render.design import crop, metrics
-from udc_render.design.optimise import DesignConfig, Designer, toled_cell
+from udc_render.design.config import DesignConfig
+from udc_render.design.optimise import Designer
+from udc_render.design.starts import toled_cell
 
 TINY = dict(cell_um=200.0, feature_um=40.0, open_fraction=0.24, steps=2, pupil_samples=64, kernel_px=31, scatters=2,
             seed=3)

@@ -10,8 +10,9 @@ import torch
 from udc_render import cli
 from udc_render.design import job, metrics, torch_psf as tp, upc
 from udc_render.design.cells import RINGS, toled_reference
+from udc_render.design.config import DesignConfig
 from udc_render.design.floor import FLOOR_WEIGHT, UpcFloor
-from udc_render.design.optimise import DesignConfig, Designer
+from udc_render.design.optimise import Designer
 
 FLOORED = dict(objective="crop", contrast=1.0, pupil_samples=64, kernel_px=31, scatters=1, steps=2, candidates=3,
                far_veil=True)

@@ -6,7 +6,8 @@ import pytest
 import torch
 
 from udc_render.design import metrics, torch_psf as tp
-from udc_render.design.optimise import DesignConfig, Designer
+from udc_render.design.config import DesignConfig
+from udc_render.design.optimise import Designer
 from udc_render.studies import design_knobs as dk
 from udc_render.studies.design_knobs_report import write
 

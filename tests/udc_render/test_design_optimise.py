@@ -14,7 +14,9 @@ from psf.micrograph import MicrographLayout
 from udc_render import cli
 from udc_render.design import job, metrics, torch_psf as tp, upc
 from udc_render.design.cells import RINGS
-from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer, kicked, scatter
+from udc_render.design.config import DesignConfig
+from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
+from udc_render.design.starts import kicked, scatter
 from udc_render.optics.displays import DisplayError, load_display
 
 TINY = dict(cell_um=200.0, feature_um=40.0, open_fraction=0.24, steps=4, pupil_samples=64, kernel_px=31, scatters=3,

@@ -87,8 +87,8 @@ def register(sub) -> None:
 
 
 def run(args) -> int:
+    from udc_render.design.config import DesignConfig
     from udc_render.design.job import run_design
-    from udc_render.design.optimise import DesignConfig
     config = DesignConfig(args.cell_um, args.feature_um, args.open_area, args.tiling, args.objective, args.steps,
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,

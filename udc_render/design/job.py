@@ -26,7 +26,9 @@ import torch
 from tqdm import tqdm
 
 from psf.lens import Lens
-from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer, initial_cell, scatter
+from udc_render.design.config import DesignConfig
+from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
+from udc_render.design.starts import initial_cell, scatter
 from udc_render.design.tiling_power import sampled_banding
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 

@@ -58,7 +58,7 @@ feature sizes down to 1.5 µm, amorphous silicon 3 to 5 µm). Smaller features d
 """
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 
 import numpy as np
 import torch
@@ -66,26 +66,16 @@ import torch
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.design.bands import BandingCeiling
-from udc_render.design.cells import read_cell
+from udc_render.design.config import DesignConfig
 from udc_render.design.crop import near_window, split_kernel
 from udc_render.design.floor import UpcFloor
 from udc_render.design.mtf import mean_ring_minima, ring_index, spectrum
-from udc_render.design.options import (
-    CHANNELS,
-    CONTRAST_DEFAULTS,
-    CROP_PX,
-    DEFAULT_FEATURE_UM,
-    INITS,
-    LITHOGRAPHY_UM,
-    OBJECTIVES,
-    OPTICS,
-    TILINGS,
-)
+from udc_render.design.options import CHANNELS
+from udc_render.design.starts import initial_cell, kicked
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
 
-__all__ = ["LITHOGRAPHY_UM", "DEFAULT_FEATURE_UM", "IMPROVE_REL", "DesignConfig", "Designer", "scatter",
-           "toled_cell", "initial_cell", "kicked"]
+__all__ = ["IMPROVE_REL", "RIG_WAVELENGTHS_NM", "Designer", "far_veil_mse"]
 
 IMPROVE_REL = 1e-5
 RAISABLE = ("steps", "kicks")  # the search's budget: a resumed run may raise it and go on
@@ -95,167 +85,11 @@ _LATER_DEFAULTS = {  # options added after the first checkpoints, at the setting
     "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4}
 
 
-def _check_channels(option: str, channels: str) -> None:
-    if not (channels and set(channels) <= set(CHANNELS) and len(set(channels)) == len(channels)):
-        raise tp.DesignError(f"{option} {channels}: expected some of {CHANNELS}, each once")
-
-
-@dataclass(frozen=True)
-class DesignConfig:
-    """Every setting of one design run (the checkpoint keeps it: a resumed run must match)."""
-    cell_um: float = 168.0
-    feature_um: float = DEFAULT_FEATURE_UM
-    open_fraction: float = 0.20
-    tiling: str = "turned"
-    objective: str = "wiener"
-    steps: int = 150
-    candidates: int = 40
-    seed: int = 0
-    pupil_samples: int = 512
-    kernel_px: int = 127
-    scatters: int = 20
-    crop_px: int = CROP_PX
-    contrast: float | None = None  # None: the objective's (options.CONTRAST_DEFAULTS)
-    init: str = "scatter"
-    optics: str = "rig"
-    channels: str = CHANNELS
-    far_veil: bool = False
-    upc_floor: float | None = None
-    floor_channels: str = "G"
-    floor_uncropped: bool = False
-    banding_ceiling: float | None = None
-    kicks: int = 0
-    kick_swaps: int = 4
-
-    def __post_init__(self):
-        if self.contrast is None:
-            object.__setattr__(self, "contrast", CONTRAST_DEFAULTS.get(self.objective, metrics.RMS_CONTRAST))
-        if not 0 < self.open_fraction < 1:
-            raise tp.DesignError(f"--open-area {self.open_fraction}: expected a fraction in (0, 1)")
-        if not self.feature_um >= LITHOGRAPHY_UM:
-            raise tp.DesignError(f"--feature-um {self.feature_um}: below the {LITHOGRAPHY_UM} µm that backplane "
-                                 "lithography patterns (LTPS); expected ≥ 1.5")
-        n = self.cell_um / self.feature_um
-        if not (self.cell_um > 0 and abs(n - round(n)) < 1e-9 and round(n) >= 3):
-            raise tp.DesignError(f"--cell-um {self.cell_um}: the minimum feature size {self.feature_um} µm cannot "
-                                 f"tile it; expected a multiple (≥ 3 ×) of the feature size")
-        if round(self.open_fraction * self.cell_px ** 2) < 1:
-            raise tp.DesignError(f"--open-area {self.open_fraction}: less than one {self.feature_um} µm square of "
-                                 f"the {self.cell_px} × {self.cell_px} cell")
-        if not (isinstance(self.crop_px, int) and self.crop_px >= 2):
-            raise tp.DesignError(f"--crop-px {self.crop_px}: expected an integer ≥ 2")
-        if not self.contrast > 0:
-            raise tp.DesignError(f"--contrast {self.contrast}: expected an RMS contrast > 0")
-        for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES), ("optics", OPTICS)):
-            if getattr(self, key) not in allowed:
-                raise tp.DesignError(f"--{key} {getattr(self, key)}: expected one of {', '.join(allowed)}")
-        _check_channels("--channels", self.channels)
-        if self.init not in INITS:
-            read_cell(self.init, self.cell_px, self.open_squares)
-        if self.optics == "upc":
-            self._check_upc()
-        self._check_floor()
-        self._check_ceiling()
-        if self.far_veil and self.objective not in ("wiener", "crop"):
-            raise tp.DesignError(f"--far-veil: takes --objective wiener or crop (the light past the kernel's window), "
-                                 f"got {self.objective}")
-        for key in ("steps", "candidates", "scatters", "kick_swaps"):
-            if not (isinstance(getattr(self, key), int) and getattr(self, key) >= 1):
-                raise tp.DesignError(f"--{key.replace('_', '-')} {getattr(self, key)}: expected an integer ≥ 1")
-        if not (isinstance(self.kicks, int) and self.kicks >= 0):
-            raise tp.DesignError(f"--kicks {self.kicks}: expected an integer ≥ 0")
-        most = min(self.open_squares, self.cell_px ** 2 - self.open_squares)
-        if self.kicks and self.kick_swaps > most:
-            raise tp.DesignError(f"--kick-swaps {self.kick_swaps}: the cell has {most} squares to swap; expected "
-                                 f"1 … {most}")
-
-    def _check_upc(self) -> None:
-        if self.objective not in ("upc", "rings"):
-            raise tp.DesignError(f"--optics upc takes --objective upc or rings, got {self.objective} (the Wiener "
-                                 "objectives need the rig's sensor sampling: --optics rig)")
-        if (self.cell_um, self.feature_um) != (upc.CELL_PX * upc.PUPIL_UM, upc.PUPIL_UM):
-            raise tp.DesignError(f"--optics upc: UPC's sampling takes their {upc.CELL_PX * upc.PUPIL_UM:g} µm cell "
-                                 f"of {upc.PUPIL_UM:g} µm features, got --cell-um {self.cell_um:g} --feature-um "
-                                 f"{self.feature_um:g}")
-
-    def _check_floor(self) -> None:
-        _check_channels("--floor-channels", self.floor_channels)
-        if self.upc_floor is None:
-            if self.floor_uncropped:
-                raise tp.DesignError("--floor-uncropped: takes --upc-floor")
-            return
-        self._check_bound("--upc-floor", self.upc_floor, " (the rings objective is UPC's statistic itself)")
-
-    def _check_ceiling(self) -> None:
-        if self.banding_ceiling is not None:
-            self._check_bound("--banding-ceiling", self.banding_ceiling)
-
-    def _check_bound(self, option: str, ratio: float, why: str = "") -> None:
-        """A ratio to the T-OLED's that bounds the rig's objectives: > 0, with wiener or crop in the rig's optics."""
-        if not ratio > 0:
-            raise tp.DesignError(f"{option} {ratio}: expected a ratio to the T-OLED's > 0")
-        if self.objective not in ("wiener", "crop") or self.optics != "rig":
-            raise tp.DesignError(f"{option}: takes --objective wiener or crop in --optics rig{why}, got --objective "
-                                 f"{self.objective} --optics {self.optics}")
-
-    @property
-    def channel_index(self) -> list[int]:
-        """The objective's channels as indices into the kernels' R, G, B."""
-        return [CHANNELS.index(c) for c in self.channels]
-
-    @property
-    def cell_px(self) -> int:
-        return round(self.cell_um / self.feature_um)
-
-    @property
-    def open_squares(self) -> int:
-        return round(self.open_fraction * self.cell_px ** 2)
-
-
-def scatter(config: DesignConfig, *keys) -> np.ndarray:
-    """A random binary cell of config.open_squares open squares, from stream(seed, 'design', *keys)."""
-    c = config.cell_px
-    flat = np.zeros(c * c)
-    flat[stream(config.seed, "design", *keys).permutation(c * c)[: config.open_squares]] = 1.0
-    return flat.reshape(c, c)
-
-
-def kicked(cell: np.ndarray, swaps: int, rng: np.random.Generator) -> np.ndarray:
-    """The cell with `swaps` random open squares closed and as many opaque ones opened (the open area kept)."""
-    flat = cell.ravel().copy()
-    opened, closed = np.flatnonzero(flat > 0.5), np.flatnonzero(flat < 0.5)
-    flat[rng.choice(opened, swaps, replace=False)] = 0.0
-    flat[rng.choice(closed, swaps, replace=False)] = 1.0
-    return flat.reshape(cell.shape)
-
-
 def far_veil_mse(inside: torch.Tensor, mean_level: float = metrics.MEAN_LEVEL) -> torch.Tensor:
     """[C] the squared bias ((1 − f) / f)² μ² that the light past the kernel's window leaves in a restorer whose
     kernel holds only the window (f: the share inside it): that light lands as a veil of about the scene's mean,
     relative to the window's light, and passes the restorer's filter at its DC gain of 1 (restore.dep_far)."""
     return ((1 - inside) / inside) ** 2 * mean_level ** 2
-
-
-def toled_cell(config: DesignConfig) -> np.ndarray:
-    """The preset T-OLED (psf.layouts.toled) in the config's cell at its open area, on the feature squares: the
-    config.open_squares squares of the largest area-weighted amplitude (ties in raster order), its slit moved to
-    the tile's edge (cells.frame_cell: the framing that reproduces UPC's turned T-OLED)."""
-    from psf import layouts
-    from udc_render.design.cells import frame_cell
-    raster = tp.preset_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction),
-                            config.cell_px)
-    flat = np.zeros(raster.size)
-    flat[np.argsort(-raster.ravel(), kind="stable")[: config.open_squares]] = 1.0
-    return frame_cell(flat.reshape(raster.shape), "edge")
-
-
-def initial_cell(config: DesignConfig) -> np.ndarray:
-    """The search's start by config.init: a random scatter (stream 'design', 'init'), the T-OLED (toled_cell), or a
-    cell PNG (cells.read_cell: a former design's cell.png)."""
-    if config.init == "toled":
-        return toled_cell(config)
-    return scatter(config, "init") if config.init == "scatter" else read_cell(config.init, config.cell_px,
-                                                                               config.open_squares)
 
 
 class Designer:

@@ -11,7 +11,7 @@ over R, G, B; udc_render.design.metrics.restorability, the transmission the cell
 error of the mean of ring means and of ring minima (the largest over channels; metrics.ring_summary). Cost: CPU
 seconds (time.process_time, all threads) of the kernels, and of kernels plus the gradient to the cell (what one
 optimiser step pays for its PSF).
-(b) The search's steps: one `udc-render design` run (udc_render.design.optimise.DesignConfig's defaults), its cell
+(b) The search's steps: one `udc-render design` run (udc_render.design.config.DesignConfig's defaults), its cell
 after 0, 10, 20, 40, 80 and 150 steps (accepted swaps) scored as design.json's 'final' (the mean Wiener MSE over
 channels on the held-out tiling, and its PSNR), with the search's CPU seconds so far; 0 steps is the initial
 random scatter, the baseline the search has to beat.
@@ -66,7 +66,8 @@ from psf.micrograph import MicrographLayout
 from psf.plan import PAPER_SENSOR_UM, make_plan
 from udc_render.design import metrics, torch_psf as tp
 from udc_render.design.cells import frame_cell
-from udc_render.design.optimise import RIG_WAVELENGTHS_NM, DesignConfig, Designer
+from udc_render.design.config import DesignConfig
+from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.tiling_power import band_figures, raster_power, sampled_banding, shift_span_um, tiling_power
 from udc_render.optics.field import phase_weights
 from udc_render.streams import stream

@@ -13,7 +13,7 @@ tile along the aperture's rim, a variance (|μ|² / 2) P_0² Σ_t |∇A(c_t − 
 The same dipole decorrelates the turned tiles' far fields at low angles: the diffuse light between the diffraction
 orders that UPC's ring minima read.
 
-The study moves the preset T-OLED's slit across its cell (optimise.toled_cell: the T-OLED on the design's 21 × 21
+The study moves the preset T-OLED's slit across its cell (starts.toled_cell: the T-OLED on the design's 21 × 21
 squares of 8 µm at the open area, `design --init toled`, rolled k = 0 … 10 squares along x from the slit at the
 tile's edge: |μ| from 64 to 2 µm) and
 reports per framing |μ|; the bands of the turned and the repeated tiling (layout_banding.sampled_banding: the
@@ -69,8 +69,10 @@ def framing_rows(cfg: dict, progress=None) -> list[dict]:
     """One row per roll k (module doc): |μ|, the bands and UPC's ratio (R, G, B each), the veil objective's PSNR
     turned and repeated."""
     from udc_render.design.cells import toled_reference
+    from udc_render.design.config import DesignConfig
     from udc_render.design.job import ratio_over_draws
-    from udc_render.design.optimise import DesignConfig, Designer, toled_cell
+    from udc_render.design.optimise import Designer
+    from udc_render.design.starts import toled_cell
     ref = toled_reference(CELL_UM, OPEN)
     config = DesignConfig(objective="crop", contrast=1.0, far_veil=True, kernel_px=cfg["kernel_px"],
                           pupil_samples=cfg["pupil_samples"], scatters=1)
