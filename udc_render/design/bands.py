@@ -30,7 +30,7 @@ from psf.lens import Lens
 from psf.propagation import angular_spectrum_tf
 from udc_render.design import torch_psf as tp
 from udc_render.design.cells import toled_reference
-from udc_render.design.floor import FLOOR_WEIGHT
+from udc_render.design.floor import FLOOR_WEIGHT, hinge_factor
 from udc_render.design.tiling_power import DEFAULT_DISTANCE_MM, shift_span_um, window_tiles
 
 __all__ = ["BANDING_WEIGHT", "BANDING_DRAWS", "BandingCeiling", "relative_sd"]
@@ -119,6 +119,5 @@ class BandingCeiling:
         return self.bands(cell, which) / self._ref[which].to(cell.dtype)
 
     def factor(self, cell: torch.Tensor, which: str) -> torch.Tensor:
-        """1 + BANDING_WEIGHT Σ_c max(0, log ratio_c − log R)."""
-        hinge = torch.relu(torch.log(self.ratios(cell, which)) - torch.log(torch.tensor(self.ratio, dtype=cell.dtype)))
-        return 1 + BANDING_WEIGHT * hinge.sum()
+        """1 + BANDING_WEIGHT Σ_c max(0, log ratio_c − log R) (floor.hinge_factor)."""
+        return hinge_factor(self.ratios(cell, which), self.ratio, BANDING_WEIGHT, ceiling=True)

@@ -26,9 +26,16 @@ from udc_render.design.cells import resample_matrix, toled_reference
 from udc_render.design.mtf import mean_ring_minima, ring_index
 from udc_render.design.options import CHANNELS
 
-__all__ = ["FLOOR_WEIGHT", "UpcFloor"]
+__all__ = ["FLOOR_WEIGHT", "UpcFloor", "hinge_factor"]
 
 FLOOR_WEIGHT = 10.0
+
+
+def hinge_factor(ratios: torch.Tensor, bound: float, weight: float, ceiling: bool = False) -> torch.Tensor:
+    """1 + weight Σ_c max(0, log bound − log ratio_c) (a floor), or max(0, log ratio_c − log bound) (a ceiling): the
+    factor by which a bound on ratios to the T-OLED multiplies the objective (this floor, design.bands' ceiling)."""
+    below = torch.log(torch.tensor(bound, dtype=ratios.dtype)) - torch.log(ratios)
+    return 1 + weight * torch.relu(-below if ceiling else below).sum()
 
 
 class UpcFloor:
@@ -62,6 +69,5 @@ class UpcFloor:
         return self.minima(w @ cell @ w.T, which) / self._ref_minima[which].to(cell.dtype)
 
     def factor(self, cell: torch.Tensor, which: str) -> torch.Tensor:
-        """1 + FLOOR_WEIGHT Σ_c max(0, log R − log ratio_c)."""
-        hinge = torch.relu(torch.log(torch.tensor(self.ratio, dtype=cell.dtype)) - torch.log(self.ratios(cell, which)))
-        return 1 + FLOOR_WEIGHT * hinge.sum()
+        """1 + FLOOR_WEIGHT Σ_c max(0, log R − log ratio_c) (hinge_factor)."""
+        return hinge_factor(self.ratios(cell, which), self.ratio, FLOOR_WEIGHT)
