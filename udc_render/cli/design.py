@@ -73,6 +73,9 @@ def register(sub) -> None:
                         "swaps and descend again, this many times (each descent counts toward --steps) [0]")
     p.add_argument("--kick-swaps", type=positive("--kick-swaps", int), default=4,
                    help="random swaps of one kick [4]")
+    p.add_argument("--search-tilings", type=positive("--search-tilings", int), default=1,
+                   help="--tiling turned: the search's objective is the mean over this many fixed D4 draws (one "
+                        "draw's objective is fitted to that draw; study design part g) [1]")
     p.add_argument("--scatters", type=positive("--scatters", int), default=20,
                    help="random scatters at the same open area scored beside the design, the baseline [20]")
     p.add_argument("--seed", type=int, default=0, help="seed of the initial cell, the scatters and the tilings [0]")
@@ -93,7 +96,7 @@ def run(args) -> int:
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
-                          args.kicks, args.kick_swaps)
+                          args.kicks, args.kick_swaps, args.search_tilings)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet)
     f, b = doc["final"], doc["scatters"]

@@ -52,6 +52,7 @@ class DesignConfig:
     banding_ceiling: float | None = None
     kicks: int = 0
     kick_swaps: int = 4
+    search_tilings: int = 1
 
     def __post_init__(self):
         if self.contrast is None:
@@ -80,12 +81,15 @@ class DesignConfig:
             read_cell(self.init, self.cell_px, self.open_squares)
         if self.optics == "upc":
             self._check_upc()
+        if self.search_tilings > 1 and self.tiling != "turned":
+            raise tp.DesignError(f"--search-tilings {self.search_tilings}: takes --tiling turned (a repeated tiling "
+                                 "has one draw)")
         self._check_floor()
         self._check_ceiling()
         if self.far_veil and self.objective not in ("wiener", "crop"):
             raise tp.DesignError(f"--far-veil: takes --objective wiener or crop (the light past the kernel's window), "
                                  f"got {self.objective}")
-        for key in ("steps", "candidates", "scatters", "kick_swaps"):
+        for key in ("steps", "candidates", "scatters", "kick_swaps", "search_tilings"):
             if not (isinstance(getattr(self, key), int) and getattr(self, key) >= 1):
                 raise tp.DesignError(f"--{key.replace('_', '-')} {getattr(self, key)}: expected an integer ≥ 1")
         if not (isinstance(self.kicks, int) and self.kicks >= 0):

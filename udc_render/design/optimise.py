@@ -82,7 +82,7 @@ RAISABLE = ("steps", "kicks")  # the search's budget: a resumed run may raise it
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
 _LATER_DEFAULTS = {  # options added after the first checkpoints, at the settings those runs had
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
-    "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4}
+    "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1}
 
 
 def far_veil_mse(inside: torch.Tensor, mean_level: float = metrics.MEAN_LEVEL) -> torch.Tensor:
@@ -119,11 +119,12 @@ class Designer:
         self.best_cell, self.best = self.cell, self.current
         self.step_done, self.converged, self.evaluations, self.losses, self.kicks_done = 0, False, 1, [], 0
 
-    def transforms(self, which: str):
-        """The search's fixed D4 tiling ('search') or the held-out one of the final scores ('final')."""
+    def transforms(self, which: str, m: int = 0):
+        """The search's fixed D4 tiling ('search'; m ≥ 1: its m-th further draw) or the held-out one of the final
+        scores ('final')."""
         if self.config.tiling == "repeated":
             return None
-        return tp.tile_transforms(self.tiles, self.config.seed, keys=("design", which))
+        return tp.tile_transforms(self.tiles, self.config.seed, keys=("design", which) + ((m,) if m else ()))
 
     def objective(self, cell: torch.Tensor, transforms) -> torch.Tensor:
         """J of a cell of amplitudes (module doc): wiener (crop: its light split by the crop's near_window) at the
@@ -151,8 +152,10 @@ class Designer:
 
     def searched(self, cell: torch.Tensor, which: str) -> torch.Tensor:
         """What the search lowers on a tiling: J, times the UPC floor's factor with --upc-floor (floor.UpcFloor) and
-        the banding ceiling's with --banding-ceiling (bands.BandingCeiling)."""
-        j = self.objective(cell, self.transforms(which))
+        the banding ceiling's with --banding-ceiling (bands.BandingCeiling). The search's J is the mean over its
+        search_tilings fixed D4 draws (one draw's J is the cell's on that draw: the search fits it)."""
+        n = self.config.search_tilings if which == "search" else 1
+        j = sum(self.objective(cell, self.transforms(which, m)) for m in range(n)) / n
         if self.floor is not None:
             j = j * self.floor.factor(cell, which)
         return j if self.ceiling is None else j * self.ceiling.factor(cell, which)
