@@ -41,7 +41,8 @@ exclude_patterns = ["_build", "Thumbs.db", ".DS_Store",
                     # the layout and design-knob studies' own reports (guides/design.md quotes their tables)
                     "figures/design/**/study_layout.md", "figures/design/**/study_design.md",
                     "figures/design/**/layout_crop.md", "figures/design/**/study_layout_compare.md",
-                    "figures/design/**/study_layout_trained.md", "figures/design/**/study_layout_dipole.md"]
+                    "figures/design/**/study_layout_trained.md", "figures/design/**/study_layout_dipole.md",
+                    "figures/design/**/study_held_out.md"]
 templates_path = ["_templates"]
 
 # MyST: the project's Markdown is included as is (docs/*.md, RESULTS.md, scenes/README.md,

@@ -78,6 +78,9 @@ def register(sub) -> None:
                         "draw's objective is fitted to that draw; study design part g) [1]")
     p.add_argument("--scatters", type=positive("--scatters", int), default=20,
                    help="random scatters at the same open area scored beside the design, the baseline [20]")
+    p.add_argument("--held-out-tilings", type=number("--held-out-tilings", int, 0, lo_open=False), default=16,
+                   help="wiener and crop, turned: the design and the T-OLEDs scored on this many more held-out "
+                        "tilings, paired (design.json's held_out; 0: none) [16]")
     p.add_argument("--seed", type=int, default=0, help="seed of the initial cell, the scatters and the tilings [0]")
     p.add_argument("--pupil-samples", type=positive("--pupil-samples", int), default=512,
                    help="pupil samples across the aperture of the objective's kernels [512]")
@@ -98,11 +101,15 @@ def run(args) -> int:
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
                           args.kicks, args.kick_swaps, args.search_tilings)
     out = out_dir(args.out)
-    doc = run_design(config, out, args.device, args.quiet)
+    doc = run_design(config, out, args.device, args.quiet, held_out_tilings=args.held_out_tilings)
     f, b = doc["final"], doc["scatters"]
     unit = " dB" if b["key"] == "psnr_db" else ""
     print(f"open area {f['open_area']:.4f} ({doc['open_squares']} of {doc['cell_px']}² squares), {b['key']} "
           f"{f[b['key']]:.4g}{unit} after {doc['steps_done']} steps{' (converged)' if doc['converged'] else ''}; "
           f"{b['n']} random scatters {b['mean']:.4g} ± {b['std']:.2g}{unit}, the best {b['best']:.4g}{unit}, margin "
           f"{b['margin']:.3g}{unit}; wrote {out}/design.toml, cell.png, design.json, design_loss.png")
+    if doc["held_out"]:
+        v = doc["held_out"]["d4"]["vs"]["design"]["toled_preset"]
+        print(f"on {doc['held_out']['n']} held-out tilings, the design − the preset T-OLED: {v['mean']:+.3f} ± "
+              f"{v['se']:.3f} dB (se; leads on {v['leads']})")
     return 0

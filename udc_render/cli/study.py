@@ -29,6 +29,8 @@ STUDIES = {
                      "slit moves across its cell: the cell's dipole (about 4 min; seconds with --quick)",
     "design": "the layout designer's knobs (the torch PSF's pupil samples, the optimiser's steps): error against "
               "CPU time",
+    "held-out": "committed designs (--designs) re-scored on 16 held-out tilings, paired with the T-OLED the simulator "
+                "takes and the T-OLED on the design's squares (about a minute a design at the veil objective)",
     "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
                   "held-out and out-of-family panels (trains both: minutes with --quick, hours without)",
 }
@@ -50,6 +52,16 @@ def image_files(text: str) -> tuple[str, ...]:
     if not parts or missing:
         raise argparse.ArgumentTypeError(f"--images {text}: no such file {missing[0] if missing else '(empty)'}; "
                                          "expected image files, comma-separated, or a folder of them")
+    return tuple(parts)
+
+
+def design_folders(text: str) -> tuple[Path, ...]:
+    """An argument type: comma-separated folders, each holding a design.json."""
+    parts = [Path(p) for p in text.split(",") if p]
+    missing = [p for p in parts if not (p / "design.json").is_file()]
+    if not parts or missing:
+        raise argparse.ArgumentTypeError(f"--designs {text}: {missing[0] if missing else '(empty)'} holds no "
+                                         "design.json; expected `udc-render design` output folders, comma-separated")
     return tuple(parts)
 
 
@@ -90,6 +102,8 @@ def register(sub) -> None:
     s.add_argument("--train-epochs", type=int, default=None,
                    help="layout-trained only: the UNets' epochs (the full budget's 80, the robustness recipe's 240 "
                         "take about 3x as long) [the budget's]")
+    s.add_argument("--designs", type=design_folders, default=(),
+                   help="held-out only: `udc-render design` output folders, comma-separated [none]")
     s.add_argument("--restore-crops", choices=("astronaut", "photos"), default="astronaut",
                    help="layout only, with --restore: the natural crops restored: astronaut, its face and suit (2 "
                         "crops); photos, 8 crops of astronaut, chelsea, coffee and rocket (4x the time) [astronaut]")
@@ -115,6 +129,10 @@ def run(args) -> int:
         raise UserError(f"--restore-crops {args.restore_crops}: only with --restore dep")
     if args.conditioned and args.what != "robustness":
         raise UserError("--conditioned: only `study robustness` trains a conditioned restorer")
+    if bool(args.designs) != (args.what == "held-out"):
+        raise UserError("--designs: `study held-out` takes it, and only it (design folders, comma-separated)")
+    if args.what == "held-out":
+        return _held_out(args)
     if args.what == "layout":
         return _layout(args)
     if args.what == "layout-trained":
@@ -148,6 +166,16 @@ def run(args) -> int:
     run_study(out, quick=args.quick)
     name = f"study_{args.what.replace('-', '_')}"
     print(f"wrote {out}/{name}.csv, {name}.md, {name}.png")
+    return 0
+
+
+def _held_out(args) -> int:
+    """`study held-out`: every folder read before the output folder is made."""
+    from udc_render.studies.design_held_out import NAME, check, run_study
+    check(list(args.designs))
+    out = out_dir(args.out)
+    run_study(out, list(args.designs), quick=args.quick)
+    print(f"wrote {out}/{NAME}.json, {NAME}.csv, {NAME}.md, {NAME}.png")
     return 0
 
 

@@ -27,6 +27,7 @@ from tqdm import tqdm
 
 from psf.lens import Lens
 from udc_render.design.config import DesignConfig
+from udc_render.design.held_out import HELD_OUT_TILINGS, held_out_comparison
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.starts import initial_cell, scatter
 from udc_render.design.tiling_power import sampled_banding
@@ -166,7 +167,15 @@ def _loss_figure(doc: dict, out: Path) -> None:
     plt.close(fig)
 
 
-def _write(designer: Designer, out: Path, compare: bool) -> dict:
+def _held_out(designer: Designer, cell: np.ndarray, n: int) -> dict | None:
+    """held_out.held_out_comparison of the design (n draws) where it applies (the rig's wiener or crop, turned)."""
+    cfg = designer.config
+    if n < 1 or cfg.optics != "rig" or cfg.objective not in WIENER_OBJECTIVES or cfg.tiling != "turned":
+        return None
+    return held_out_comparison(designer, {"design": cell}, n)
+
+
+def _write(designer: Designer, out: Path, compare: bool, held_out_tilings: int) -> dict:
     cfg = designer.config
     cell = designer.best_cell
     with atomic_path(out / "cell.png") as tmp:
@@ -183,6 +192,7 @@ def _write(designer: Designer, out: Path, compare: bool) -> dict:
                        "squares_moved": int(np.sum(initial != cell) // 2)},
            "scatters": scatter_baseline(designer, final), "upc": upc_comparison(cell, cfg) if compare else None,
            "banding": banding_comparison(cell, cfg) if compare and cfg.banding_ceiling else None,
+           "held_out": _held_out(designer, cell, held_out_tilings) if compare else None,
            "open_squares": int(cell.sum()), "cell_px": cfg.cell_px, "steps_done": designer.step_done,
            "converged": designer.converged, "evaluations": designer.evaluations, "kicks_done": designer.kicks_done,
            "losses": designer.losses}
@@ -191,10 +201,10 @@ def _write(designer: Designer, out: Path, compare: bool) -> dict:
     return doc
 
 
-def run_design(config: DesignConfig, out: Path, device: str = "cpu", quiet: bool = False, compare: bool = True
-               ) -> dict:
+def run_design(config: DesignConfig, out: Path, device: str = "cpu", quiet: bool = False, compare: bool = True,
+               held_out_tilings: int = HELD_OUT_TILINGS) -> dict:
     """Search (resuming design_state.pt when the folder holds this run) and write the module doc's files (compare:
-    False leaves out UPC's comparison, a few seconds)."""
+    False leaves out UPC's comparison and the held-out draws; held_out_tilings: their number, 0 none)."""
     designer = Designer(config, device=device)
     state_path = out / "design_state.pt"
     if state_path.is_file():
@@ -206,4 +216,4 @@ def run_design(config: DesignConfig, out: Path, device: str = "cpu", quiet: bool
             bar.set_postfix(objective=f"{rec['objective']:.4g}", tried=rec["tried"])
             if designer.finished or designer.step_done % CHECKPOINT_STEPS == 0:
                 _save_state(designer, state_path)
-    return _write(designer, out, compare)
+    return _write(designer, out, compare, held_out_tilings)

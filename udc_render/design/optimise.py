@@ -126,9 +126,10 @@ class Designer:
             return None
         return tp.tile_transforms(self.tiles, self.config.seed, keys=("design", which) + ((m,) if m else ()))
 
-    def objective(self, cell: torch.Tensor, transforms) -> torch.Tensor:
+    def objective(self, cell: torch.Tensor, transforms, transmission: float | None = None) -> torch.Tensor:
         """J of a cell of amplitudes (module doc): wiener (crop: its light split by the crop's near_window) at the
-        transmission K / c² (the swaps keep it) × the fraction of the light inside the kernel's window."""
+        transmission K / c² (the swaps keep it; a grey cell's own Σ|a|² / c² given) × the fraction of the light
+        inside the kernel's window."""
         channels = self.config.channel_index
         if self.config.optics == "upc":
             k = upc.psf(cell, transforms)[channels]
@@ -138,7 +139,8 @@ class Designer:
         if self.config.objective in ("wiener", "crop"):
             near, far = split_kernel(k, self.window.to(k.dtype)) if self.config.objective == "crop" else (k, None)
             h, h_far = spectrum(near), (None if far is None else spectrum(far))
-            signal, kept = self.signal.to(cell.dtype), self.transmission * inside
+            signal = self.signal.to(cell.dtype)
+            kept = (self.transmission if transmission is None else transmission) * inside
             mse = torch.stack([metrics.wiener_mse(h[c], signal, metrics.noise_variance(self.sensor, metrics.MEAN_LEVEL,
                                                                                       t), t,
                                                   None if h_far is None else h_far[c])

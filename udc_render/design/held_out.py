@@ -1,0 +1,92 @@
+"""The design's objective over many held-out D4 tilings, paired with the T-OLED the simulator takes (issue 48).
+
+A turned tiling's kernels are one random draw of quarter-turns and flips, so one draw's objective J is a sample:
+over draws the veil designs' J spreads by about 0.04 dB (sd), and the search, which fits one fixed draw, scores
+about 0.05 dB higher on it than on others. `design.json`'s "final" is one held-out draw; this module scores n more
+(stream keys 'design', 'held_out', k), the same draws for every cell, and pairs each cell with two T-OLEDs:
+- 'toled_squares': the preset T-OLED on the design's feature squares (`--init toled`, starts.toled_cell), the
+  search's start and its former reference;
+- 'toled_preset': the preset T-OLED on its own ≈ 2 µm area-weighted raster (cells.layout_cell), slit at the tile's
+  edge, at its own transmission Σ|a|² / c² (0.194 at 20 %: its grey edges): the T-OLED that `study layout-trained`
+  and `study layout` take (toled168_20.toml@edge@turned), scored by the same objective on a Designer of its pixel.
+The paired difference per draw (cell − T-OLED, dB) has a far smaller spread than either (the draws are shared), so
+its mean and standard error say whether a design leads in expectation.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import torch
+
+from udc_render.design.config import DesignConfig
+from udc_render.design.optimise import Designer
+
+__all__ = ["HELD_OUT_TILINGS", "held_out_draws", "preset_toled", "held_out_comparison"]
+
+HELD_OUT_TILINGS = 16  # the paired difference's se ≈ 0.025 dB / √n: 0.006 dB at 16 (committed veil designs)
+
+
+def held_out_draws(designer: Designer, n: int, flips: bool = True) -> list[np.ndarray]:
+    """n tilings of the designer's tiles (stream keys 'design', 'held_out', k): neither the search's nor 'final';
+    flips: the 8 D4 elements (the search's), else the 4 quarter-turns (the engine's tile_rotation)."""
+    from udc_render.design import torch_psf as tp
+    return [tp.tile_transforms(designer.tiles, designer.config.seed, flips, keys=("design", "held_out", k))
+            for k in range(n)]
+
+
+def preset_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
+    """(the preset T-OLED's amplitude cell on its ≈ 2 µm raster, slit at the tile's edge; the config that scores it:
+    the design's objective settings at that pixel, no search options)."""
+    from psf import layouts
+    from udc_render.design.cells import frame_cell, layout_cell
+    raster, pixel_um = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
+    scoring = replace(config, feature_um=pixel_um, init="scatter", upc_floor=None, banding_ceiling=None, kicks=0,
+                      search_tilings=1, scatters=1)
+    return frame_cell(raster, "edge"), scoring
+
+
+def _psnr_db(designer: Designer, cell: np.ndarray, draws: list, transmission: float | None = None) -> list[float]:
+    x = torch.tensor(cell, dtype=torch.float64, device=designer.device)
+    with torch.no_grad():
+        return [float(-10 * np.log10(float(designer.objective(x, t, transmission)))) for t in draws]
+
+
+def _paired(a: list[float], b: list[float]) -> dict:
+    d = np.subtract(a, b)
+    se = float(d.std(ddof=1) / np.sqrt(len(d))) if len(d) > 1 else 0.0
+    return {"mean": float(d.mean()), "se": se, "leads": int((d > 0).sum()), "n": len(d)}
+
+
+def _compare(designer: Designer, cells: dict, preset: tuple, draws: list, progress) -> dict:
+    from udc_render.design.starts import toled_cell
+    psnr = {}
+    for name, c in {**cells, "toled_squares": toled_cell(designer.config)}.items():
+        psnr[name] = _psnr_db(designer, c, draws)
+        progress(1)
+    cell, scorer = preset
+    psnr["toled_preset"] = _psnr_db(scorer, cell, draws, float(np.mean(cell ** 2)))
+    progress(1)
+    n = len(draws)
+    return {"psnr_db": psnr, "mean": {k: float(np.mean(v)) for k, v in psnr.items()},
+            "sd": {k: float(np.std(v, ddof=1)) if n > 1 else 0.0 for k, v in psnr.items()},
+            "vs": {name: {ref: _paired(psnr[name], psnr[ref]) for ref in ("toled_preset", "toled_squares")}
+                   for name in cells}}
+
+
+def held_out_comparison(designer: Designer, cells: dict[str, np.ndarray], n: int = HELD_OUT_TILINGS,
+                        progress=lambda k: None) -> dict:
+    """The objective as a PSNR (dB) of each named cell of the designer's squares and of the two T-OLEDs (module
+    doc) on n held-out draws, of the 8 D4 elements (the search's, 'd4') and of the 4 quarter-turns (the engine's,
+    'quarter_turns'): per draw, mean and sd, and each cell's paired difference to each T-OLED (mean, se, the draws
+    it leads). Takes the rig's objectives 'wiener' and 'crop' on a turned tiling; progress(1) after each cell's
+    draws."""
+    config = designer.config
+    if config.optics != "rig" or config.objective not in ("wiener", "crop") or config.tiling != "turned":
+        raise ValueError("held_out_comparison: takes --objective wiener or crop, --optics rig, --tiling turned")
+    cell, scoring = preset_toled(config)
+    preset = (cell, Designer(scoring, designer.sensor, designer.device))
+    out = {"n": n, "keys": ["design", "held_out", "k"], "toled_preset_transmission": float(np.mean(cell ** 2))}
+    for group, flips in (("d4", True), ("quarter_turns", False)):
+        out[group] = _compare(designer, cells, preset, held_out_draws(designer, n, flips), progress)
+    return out

@@ -1,0 +1,140 @@
+"""`udc-render study held-out --designs DIR,DIR`: committed designs re-scored on many held-out tilings, paired with
+the T-OLED the simulator takes (udc_render.design.held_out; issue 48).
+
+The first folder's design.json gives the objective's settings (the search's own options: start, budget, floor,
+ceiling, kicks, are left out: they do not change the objective), and every design's cell (the same squares and open
+area) is scored by it on the same draws beside the two T-OLEDs, so the designs rank on one objective. Writes
+study_held_out.{json,csv,md,png}: per design, its objective's mean over the draws and its paired difference to the
+preset T-OLED and to the T-OLED on the squares (mean ± se, the draws it leads), on the search's D4 draws and on the
+engine's quarter-turns; the figure draws the paired differences per design.
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, fields, replace
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from udc_render.errors import UdcError
+from udc_render.io.files import save_json
+from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
+
+__all__ = ["NAME", "QUICK_TILINGS", "objective_config", "check", "run_study"]
+
+NAME = "study_held_out"
+QUICK_TILINGS = 2
+SEARCH_ONLY = {"init": "scatter", "steps": 1, "candidates": 1, "scatters": 1, "upc_floor": None,
+               "floor_channels": "G", "floor_uncropped": False, "banding_ceiling": None, "kicks": 0,
+               "kick_swaps": 1, "search_tilings": 1}  # the options that do not change the objective
+
+
+def objective_config(folder: Path):
+    """The DesignConfig of a design folder's objective (design.json's settings, SEARCH_ONLY's reset), and its cell."""
+    from udc_render.design.cells import read_cell
+    from udc_render.design.config import DesignConfig
+    path = folder / "design.json"
+    if not path.is_file():
+        raise UdcError(f"--designs {folder}: no design.json there; expected a `udc-render design` output folder")
+    saved = json.loads(path.read_text())["config"]
+    known = {f.name for f in fields(DesignConfig)}
+    config = replace(DesignConfig(**{k: v for k, v in saved.items() if k in known and k not in SEARCH_ONLY}),
+                     **SEARCH_ONLY)
+    if config.optics != "rig" or config.objective not in ("wiener", "crop") or config.tiling != "turned":
+        raise UdcError(f"--designs {folder}: its design is {config.objective} in --optics {config.optics}, "
+                       f"--tiling {config.tiling}; expected --objective wiener or crop, --optics rig, --tiling turned")
+    return config, read_cell(str(folder / "cell.png"), config.cell_px, config.open_squares)
+
+
+def check(folders: list[Path]) -> None:
+    """Every folder read and its cell matched to the first's (one line on the first that fails)."""
+    config = objective_config(folders[0])[0]
+    for folder in folders:
+        _cell(folder, config)
+
+
+def _rows(folders: list[Path], n: int, progress) -> tuple[list[dict], dict]:
+    """(one row per design, the T-OLEDs' means), every cell scored by the first folder's objective."""
+    from udc_render.design.held_out import held_out_comparison
+    from udc_render.design.optimise import Designer
+    config = objective_config(folders[0])[0]
+    cells = {str(f): _cell(f, config) for f in folders}
+    doc = held_out_comparison(Designer(config), cells, n, progress)
+    rows = []
+    for name in cells:
+        row = {"design": name, "psnr_db": doc["d4"]["mean"][name]}
+        for g in ("d4", "quarter_turns"):
+            for ref, v in doc[g]["vs"][name].items():
+                row.update({f"{g}_{ref}": v["mean"], f"{g}_{ref}_se": v["se"], f"{g}_{ref}_leads": v["leads"]})
+        rows.append({**row, "draws": doc["d4"]["psnr_db"][name]})
+    toleds = {f"{g}_{t}": doc[g]["mean"][t] for g in ("d4", "quarter_turns") for t in ("toled_preset", "toled_squares")}
+    return rows, {"objective": {k: v for k, v in asdict(config).items() if k not in SEARCH_ONLY}, **toleds}
+
+
+def _cell(folder: Path, config) -> np.ndarray:
+    """A folder's cell, refused in one line when its cell differs from the objective's (size, squares, open area)."""
+    other, cell = objective_config(folder)
+    if (other.cell_um, other.feature_um, other.open_squares) != (config.cell_um, config.feature_um,
+                                                                 config.open_squares):
+        raise UdcError(f"--designs {folder}: its cell ({other.cell_um:g} µm of {other.feature_um:g} µm squares, "
+                       f"{other.open_squares} open) differs from the first design's ({config.cell_um:g} µm of "
+                       f"{config.feature_um:g} µm, {config.open_squares} open); expected the same cell")
+    return cell
+
+
+def _pm(row: dict, key: str) -> str:
+    return f"{row[key]:+.3f} ± {row[key + '_se']:.3f} ({row[key + '_leads']})"
+
+
+def _markdown(doc: dict) -> str:
+    n = doc["tilings"]
+    rows = [{**r, **{k: _pm(r, k) for k in ("d4_toled_preset", "d4_toled_squares", "quarter_turns_toled_preset")}}
+            for r in doc["rows"]]
+    lines = [f"# Designs on {n} held-out tilings, paired with the T-OLEDs", "",
+             "Every design scored by the first design's objective: its PSNR (dB, mean over the D4 draws) and the "
+             f"paired difference to each T-OLED, mean ± se (the draws of {n} where the design leads). The preset "
+             "T-OLED is the one `study layout-trained` takes.",
+             ""]
+    lines += md_table(rows, [("design", "design"), ("psnr_db", "objective (dB)"),
+                             ("d4_toled_preset", "− preset T-OLED"), ("d4_toled_squares", "− T-OLED on squares"),
+                             ("quarter_turns_toled_preset", "− preset T-OLED, quarter-turns")],
+                      {"psnr_db": lambda v: f"{v:.3f}"})
+    t = doc["toleds"]
+    lines += ["", f"The T-OLEDs (mean over the D4 draws): the preset {t['d4_toled_preset']:.3f} dB, on the squares "
+              f"{t['d4_toled_squares']:.3f} dB; on the quarter-turns {t['quarter_turns_toled_preset']:.3f} and "
+              f"{t['quarter_turns_toled_squares']:.3f} dB. The objective (the first design's): "
+              + ", ".join(f"{k} {v}" for k, v in t["objective"].items()) + "."]
+    return "\n".join(lines) + "\n"
+
+
+def _figure(doc: dict, out: Path) -> None:
+    plt = pyplot()
+    rows = doc["rows"]
+    fig, ax = plt.subplots(figsize=(7, 0.45 * len(rows) + 1.5))
+    y = np.arange(len(rows))
+    for k, (key, label) in enumerate((("d4_toled_preset", "− the preset T-OLED (the simulator's)"),
+                                      ("d4_toled_squares", "− the T-OLED on the squares (the search's start)"))):
+        ax.errorbar([r[key] for r in rows], y + 0.15 * (2 * k - 1), xerr=[2 * r[key + "_se"] for r in rows],
+                    fmt="o", label=label + ", ± 2 se")
+    ax.axvline(0, color="0.5", lw=0.8)
+    ax.set_yticks(y, [Path(r["design"]).name for r in rows])
+    ax.set_xlabel(f"objective, design − T-OLED (dB), paired over {doc['tilings']} held-out D4 tilings")
+    ax.legend(fontsize=8)
+    save_plot(fig, out / f"{NAME}.png")
+
+
+def run_study(out: Path, designs: list[Path], quick: bool = False) -> dict:
+    """Every folder read (a bad one refused) before any scoring; then the module doc's files."""
+    from udc_render.design.held_out import HELD_OUT_TILINGS
+    check(designs)
+    n = QUICK_TILINGS if quick else HELD_OUT_TILINGS
+    start = time.perf_counter()
+    with tqdm(total=2 * (len(designs) + 2), desc="study held-out") as bar:
+        rows, toleds = _rows(designs, n, bar.update)
+    doc = {"tilings": n, "rows": rows, "toleds": toleds, "seconds": time.perf_counter() - start}
+    save_json(out / f"{NAME}.json", doc)
+    write_tables(out, NAME, rows, [k for k in rows[0] if k != "draws"], _markdown(doc))
+    _figure(doc, out)
+    return doc
