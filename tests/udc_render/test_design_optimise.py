@@ -263,6 +263,9 @@ def test_the_designed_display_files_are_displays(tmp_path):
     (["--kicks", "-1"], "--kicks must be ≥ 0, got -1"),
     (["--kick-swaps", "0"], "--kick-swaps must be > 0, got 0"),
     (["--kicks", "1", "--kick-swaps", "89"], "--kick-swaps 89: the cell has 88 squares to swap; expected 1 … 88"),
+    (["--search-tilings", "0"], "--search-tilings must be > 0, got 0"),
+    (["--search-tilings", "2", "--tiling", "repeated"], "--search-tilings 2: takes --tiling turned"),
+    (["--held-out-tilings", "-1"], "--held-out-tilings must be ≥ 0, got -1"),
 ])
 def test_design_refuses_in_one_line(tmp_path, capsys, argv, says):
     assert cli.main(["design", *argv, "--out", str(tmp_path / "never")]) == 2

@@ -1,0 +1,117 @@
+"""The design's objective on many held-out tilings, paired with the simulator's T-OLED (udc_render.design.held_out),
+the search over several tilings (--search-tilings) and `study held-out` (udc_render.studies.design_held_out)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from psf import Lens, compute_kernels, layouts
+from psf.micrograph import MicrographLayout
+from udc_render import cli
+from udc_render.design import held_out, metrics, torch_psf as tp
+from udc_render.design.cells import layout_cell
+from udc_render.design.config import DesignConfig
+from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
+from udc_render.design.starts import scatter
+
+TINY = dict(cell_um=40.0, feature_um=8.0, open_fraction=0.24, steps=2, pupil_samples=64, kernel_px=31, scatters=2,
+            seed=3)
+
+
+def test_a_grey_cell_scored_at_its_own_transmission_is_the_engines_restorability():
+    """The preset T-OLED's area-weighted raster (the held-out reference's kind of cell: grey edges), tiled plainly and
+    scored at its transmission Σ|a|² / c², equals metrics.restorability of psf.compute_kernels' kernels of the same
+    amplitude micrograph at that transmission × the share inside the window (kernels_and_window's, as the binary
+    cell's test in test_design_optimise), to its 1e-10."""
+    cell, pixel_um = layout_cell(layouts.toled(pitch_um=40.0, open_fraction=0.24), pixel_um=8.0)
+    d = Designer(DesignConfig(**{**TINY, "feature_um": pixel_um, "tiling": "repeated"}))
+    t = float(np.mean(cell ** 2))
+    assert abs(float(np.mean(cell)) - 0.24) < 1e-12 and t < 0.24  # area-weighted: grey edges pass less power
+    score = float(d.objective(torch.tensor(cell), None, t))
+    engine = compute_kernels(MicrographLayout("cell", pixel_um, image=cell), Lens(), RIG_WAVELENGTHS_NM, size_px=31,
+                             pupil_samples=64, precision="float64")
+    _, inside = tp.kernels_and_window(torch.tensor(cell), d.grid, None)  # the engine's within 1 %
+    ref = np.mean(metrics.restorability(engine.kernels, t * inside.numpy())["wiener_mse"])
+    assert abs(score / ref - 1) < 1e-10
+
+
+def test_held_out_draws_are_the_same_for_every_cell_and_apart_from_the_searchs():
+    """One cell under two names scores alike on every draw (paired difference exactly 0, led on no draw); the draws
+    are neither the search's nor the final one; the quarter-turns draw only rotations."""
+    d = Designer(DesignConfig(**TINY))
+    cell = scatter(d.config, "scatter", 0)
+    doc = held_out.held_out_comparison(d, {"a": cell, "b": cell.copy()}, 3)
+    for group in ("d4", "quarter_turns"):
+        assert doc[group]["psnr_db"]["a"] == doc[group]["psnr_db"]["b"]
+        assert len(doc[group]["psnr_db"]["a"]) == 3
+    draws = held_out.held_out_draws(d, 3)
+    assert not any(np.array_equal(t, d.transforms(w)) for t in draws for w in ("search", "final"))
+    assert max(int(t.max()) for t in held_out.held_out_draws(d, 3, flips=False)) <= 3
+    assert max(int(t.max()) for t in draws) >= 4
+
+
+def test_the_paired_difference_is_the_mean_of_the_draws_differences():
+    """vs[name][ref]: the mean, the standard error (sample sd / √n) and the count of positive differences of the
+    per-draw PSNRs, recomputed here from doc['psnr_db']."""
+    d = Designer(DesignConfig(**TINY))
+    doc = held_out.held_out_comparison(d, {"s": scatter(d.config, "scatter", 1)}, 4)["d4"]
+    for ref in ("toled_preset", "toled_squares"):
+        diff = np.subtract(doc["psnr_db"]["s"], doc["psnr_db"][ref])
+        v = doc["vs"]["s"][ref]
+        assert v["mean"] == pytest.approx(diff.mean(), abs=1e-12)
+        assert v["se"] == pytest.approx(diff.std(ddof=1) / 2, abs=1e-12) and v["leads"] == int((diff > 0).sum())
+
+
+def test_the_search_over_m_tilings_lowers_their_mean():
+    """--search-tilings 2: the searched objective is the mean of J on the search's draw and its first further draw
+    (two objective calls here); 1 is the former single draw."""
+    one = Designer(DesignConfig(**TINY))
+    two = Designer(DesignConfig(**TINY, search_tilings=2))
+    x = torch.tensor(scatter(one.config, "scatter", 2))
+    j = [float(one.objective(x, one.transforms("search", m))) for m in (0, 1)]
+    assert float(two.searched(x, "search")) == pytest.approx(np.mean(j), rel=1e-12)
+    assert float(one.searched(x, "search")) == pytest.approx(j[0], rel=1e-12) and j[0] != j[1]
+
+
+def test_design_json_holds_the_held_out_comparison(tmp_path):
+    """A turned wiener run writes design.json's held_out (n draws, both groups, the design against both T-OLEDs)
+    and a study of two folders ranks them on the first's objective; --held-out-tilings 0 writes none."""
+    argv = ["design", "--cell-um", "40", "--feature-um", "8", "--open-area", "0.24", "--steps", "2", "--scatters", "2",
+            "--pupil-samples", "64", "--kernel-px", "31", "--seed", "3", "--quiet"]
+    assert cli.main([*argv, "--held-out-tilings", "2", "--out", str(tmp_path / "a")]) == 0
+    assert cli.main([*argv, "--held-out-tilings", "0", "--init", "toled", "--out", str(tmp_path / "b")]) == 0
+    doc = json.loads((tmp_path / "a" / "design.json").read_text())["held_out"]
+    assert doc["n"] == 2 and set(doc["d4"]["vs"]["design"]) == {"toled_preset", "toled_squares"}
+    assert json.loads((tmp_path / "b" / "design.json").read_text())["held_out"] is None
+    folders = f"{tmp_path / 'a'},{tmp_path / 'b'}"
+    assert cli.main(["study", "held-out", "--designs", folders, "--quick", "--out", str(tmp_path / "s")]) == 0
+    study = json.loads((tmp_path / "s" / "study_held_out.json").read_text())
+    assert [r["design"] for r in study["rows"]] == [str(tmp_path / "a"), str(tmp_path / "b")]
+    assert study["rows"][0]["draws"] != study["rows"][1]["draws"] and (tmp_path / "s" / "study_held_out.png").is_file()
+
+
+@pytest.mark.parametrize("what, says", [
+    ("nofolder", "holds no design.json"),
+    ("other_cell", "differs from the first design's"),
+    ("display", "--designs: `study held-out` takes it, and only it"),
+])
+def test_study_held_out_refuses_in_one_line(tmp_path, capsys, what, says):
+    a = tmp_path / "a"
+    a.mkdir()
+    (a / "design.json").write_text(json.dumps({"config": {**TINY, "tiling": "turned"}}))
+    import imageio.v3 as iio
+    iio.imwrite(a / "cell.png", (scatter(DesignConfig(**TINY), "scatter", 0) * 255).astype(np.uint8))
+    b = tmp_path / "b"
+    b.mkdir()
+    (b / "design.json").write_text(json.dumps({"config": {**TINY, "cell_um": 48.0}}))
+    iio.imwrite(b / "cell.png", (scatter(DesignConfig(**{**TINY, "cell_um": 48.0}), "scatter", 0) * 255
+                                 ).astype(np.uint8))
+    argv = {"nofolder": ["held-out", "--designs", str(tmp_path / "none")],
+            "other_cell": ["held-out", "--designs", f"{a},{b}"],
+            "display": ["layout", "--designs", str(a)]}[what]
+    assert cli.main(["study", *argv, "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err
+    assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()
