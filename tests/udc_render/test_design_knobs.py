@@ -7,6 +7,7 @@ import torch
 
 from udc_render.design import metrics, torch_psf as tp
 from udc_render.design.config import DesignConfig
+from udc_render.design.held_out import held_out_draws
 from udc_render.design.optimise import Designer
 from udc_render.studies import design_knobs as dk
 from udc_render.studies.design_knobs_report import write
@@ -152,3 +153,20 @@ def test_the_kicks_rows_start_at_the_plain_optimum_and_never_fall():
     search = [r["search_psnr_db"] for r in rows]
     assert search == sorted(search) and all(abs(r["open_area"] - 29 / 144) < 1e-12 for r in rows)
     assert rows[0]["cpu_s"] < rows[1]["cpu_s"] <= rows[2]["cpu_s"]
+
+
+def test_the_tilings_rows_pair_each_search_with_the_single_draws():
+    """Part (g) on a tiny setting: the M = 1 row is the plain search's optimum (its held-out mean recomputed here on
+    the held-out draws, its gain exactly 0); each row's gain is the mean of its per-draw PSNRs less M = 1's; the
+    M = 2 search scores its own cell on the mean of its two draws."""
+    cfg = {**TINY, "search_tilings": (1, 2), "held_tilings": 3}
+    rows = dk.tilings_rows(cfg)
+    plain = Designer(DesignConfig(cell_um=96.0, kernel_px=15, pupil_samples=64))
+    while not plain.finished:
+        plain.step()
+    x = torch.tensor(plain.best_cell)
+    j = [float(plain.objective(x, t)) for t in held_out_draws(plain, 3)]
+    assert abs(rows[0]["held_psnr_db"] + 10 * np.log10(np.mean(j))) < 1e-12 and rows[0]["gain_db"] == 0.0
+    diff = np.subtract(rows[1]["held_draws_psnr_db"], rows[0]["held_draws_psnr_db"])
+    assert abs(rows[1]["gain_db"] - diff.mean()) < 1e-12 and rows[1]["search_tilings"] == 2
+    assert abs(rows[0]["search_psnr_db"] + 10 * np.log10(plain.best)) < 1e-12

@@ -41,12 +41,19 @@ defaults) with kicks of 2, 4 and 8 random swaps, its best cell after 0, 1, 2, 4,
 design.json's 'final' (held-out tiling) and on the search's own tiling, with the search's CPU seconds so far and its
 exact scores; 0 kicks is part (b)'s converged cell.
 
+(g) The search's tilings (DesignConfig's search_tilings M: the objective the search lowers is the mean over M fixed
+D4 draws): part (b)'s run to its local optimum with M = 1, 2, 4 and 8, its cell scored on `held_tilings` held-out
+draws (udc_render.design.held_out: neither the search's nor 'final'): the mean PSNR of the mean Wiener MSE over the
+draws, the paired difference to M = 1's cell (mean and se over the draws), the search's own score on its M draws
+(what it overfits: its excess over the held-out mean), the search's CPU seconds and exact scores.
+
 Outputs: study_design.json (every figure), study_design.csv (one row per setting), study_design.md,
 study_design.png (error against CPU time; objective against steps; banding error against CPU time; field phases;
-the ceiling's draws; the kicks).
+the ceiling's draws; the kicks; the search's tilings).
 A part already in OUT's study_design.json with the same settings is kept (the study resumes part by part).
 quick: a 96 µm cell, 31-px kernels, three settings and 2 and 4 steps from 128 pupil samples, raster steps of 8 and
-4 µm, 2 field phases, 1 and 2 of 4 draws, 1 and 2 kicks of 2 swaps (a smoke run).
+4 µm, 2 field phases, 1 and 2 of 4 draws, 1 and 2 kicks of 2 swaps, 1 and 2 search tilings on 2 held-out draws (a
+smoke run).
 """
 from __future__ import annotations
 
@@ -67,6 +74,7 @@ from psf.plan import PAPER_SENSOR_UM, make_plan
 from udc_render.design import metrics, torch_psf as tp
 from udc_render.design.cells import frame_cell
 from udc_render.design.config import DesignConfig
+from udc_render.design.held_out import held_out_draws
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.tiling_power import band_figures, raster_power, sampled_banding, shift_span_um, tiling_power
 from udc_render.optics.field import phase_weights
@@ -74,15 +82,16 @@ from udc_render.streams import stream
 from udc_render.studies.design_knobs_report import write
 
 __all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "banding_rows", "field_profiles", "field_rows",
-           "ceiling_rows", "kicks_rows", "run_study"]
+           "ceiling_rows", "kicks_rows", "tilings_rows", "run_study"]
 
 FULL = {"cell_um": 168.0, "kernel_px": 127, "samples": (128, 256, 384, 512, 768, 1024, 2048),
         "steps": (10, 20, 40, 80, 150), "design_pupil_samples": DesignConfig().pupil_samples,
         "sample_um": (8.0, 4.0, 2.0, 1.0), "phases": (2, 3, 4, 6, 8), "ceiling_draws": (1, 2, 4, 8, 16),
-        "ceiling_truth": 32, "kicks": (1, 2, 4, 8, 16), "kick_swaps": (2, 4, 8)}
+        "ceiling_truth": 32, "kicks": (1, 2, 4, 8, 16), "kick_swaps": (2, 4, 8), "search_tilings": (1, 2, 4, 8),
+        "held_tilings": 16}
 QUICK = {"cell_um": 96.0, "kernel_px": 31, "samples": (64, 128, 256), "steps": (2, 4), "design_pupil_samples": 128,
          "sample_um": (8.0, 4.0), "phases": (2,), "ceiling_draws": (1, 2), "ceiling_truth": 4, "kicks": (1, 2),
-         "kick_swaps": (2,)}
+         "kick_swaps": (2,), "search_tilings": (1, 2), "held_tilings": 2}
 FEATURE_UM = 8.0
 OPEN = 0.20
 SEED = 0
@@ -90,7 +99,8 @@ BANDING_DISTANCE_UM = 2000.0
 FIELD_WAVELENGTH_NM = 520.0
 PART_KEYS = {"sampling": ("samples",), "steps": ("steps", "design_pupil_samples"), "banding": ("sample_um",),
              "field": ("phases",), "ceiling": ("ceiling_draws", "ceiling_truth"),
-             "kicks": ("kicks", "kick_swaps", "design_pupil_samples")}
+             "kicks": ("kicks", "kick_swaps", "design_pupil_samples"),
+             "tilings": ("search_tilings", "held_tilings", "design_pupil_samples")}
 # besides the shared keys: what decides each part (run_study resumes by them)
 SHARED_KEYS = ("cell_um", "kernel_px", "feature_um", "open_fraction", "seed", "wavelengths_nm", "threads",
                "banding_distance_mm")
@@ -185,6 +195,38 @@ def kicks_rows(cfg: dict, progress=None) -> list[dict]:
                          "cpu_s": cpu_s, "evaluations": designer.evaluations})
             if progress:
                 progress(1)
+    return rows
+
+
+def _mean_psnr_db(designer: Designer, cell: np.ndarray, draws: list) -> tuple[float, list[float]]:
+    """(−10 log10 of the mean J over the draws, each draw's PSNR)."""
+    x = torch.tensor(cell, dtype=torch.float64)
+    with torch.no_grad():
+        j = [float(designer.objective(x, t)) for t in draws]
+    return float(-10 * np.log10(np.mean(j))), [float(-10 * np.log10(v)) for v in j]
+
+
+def tilings_rows(cfg: dict, progress=None) -> list[dict]:
+    """Part (g): per M, part (b)'s run with search_tilings M to its local optimum, its cell on the held-out draws
+    (paired with M = 1's cell), the search's own score and CPU seconds."""
+    rows, first = [], None
+    for m in cfg["search_tilings"]:
+        designer = Designer(DesignConfig(cell_um=cfg["cell_um"], kernel_px=cfg["kernel_px"], search_tilings=m,
+                                         pupil_samples=cfg["design_pupil_samples"]))
+        start = time.process_time()
+        while not designer.finished:
+            designer.step()
+        cpu_s = time.process_time() - start
+        psnr, per_draw = _mean_psnr_db(designer, designer.best_cell, held_out_draws(designer, cfg["held_tilings"]))
+        first = first or per_draw
+        diff = np.subtract(per_draw, first)
+        rows.append({"part": "tilings", "search_tilings": m, "steps_done": designer.step_done,
+                     "converged": designer.converged, "held_psnr_db": psnr, "held_draws_psnr_db": per_draw,
+                     "gain_db": float(diff.mean()), "gain_se_db": float(diff.std(ddof=1) / np.sqrt(len(diff))),
+                     "search_psnr_db": float(-10 * np.log10(designer.best)), "cpu_s": cpu_s,
+                     "evaluations": designer.evaluations})
+        if progress:
+            progress(1)
     return rows
 
 
@@ -327,7 +369,7 @@ def _kept_parts(out: Path, config: dict) -> dict:
 
 
 def run_study(out: Path, quick: bool = False) -> dict:
-    """The six parts, written to out (udc_render.studies.design_knobs_report); parts already there with the same
+    """The seven parts, written to out (udc_render.studies.design_knobs_report); parts already there with the same
     settings are kept."""
     cfg = QUICK if quick else FULL
     config = json.loads(json.dumps({**cfg, "feature_um": FEATURE_UM, "open_fraction": OPEN, "seed": SEED,
@@ -338,7 +380,8 @@ def run_study(out: Path, quick: bool = False) -> dict:
     makers = {"sampling": (sampling_rows, 2 * len(cfg["samples"])), "steps": (steps_rows, len(cfg["steps"]) + 1),
               "banding": (banding_rows, 2 * len(cfg["sample_um"])), "field": (field_rows, 2 * len(cfg["phases"])),
               "ceiling": (ceiling_rows, len(cfg["ceiling_draws"])),
-              "kicks": (kicks_rows, len(cfg["kick_swaps"]) * (len(cfg["kicks"]) + 1))}
+              "kicks": (kicks_rows, len(cfg["kick_swaps"]) * (len(cfg["kicks"]) + 1)),
+              "tilings": (tilings_rows, len(cfg["search_tilings"]))}
     total = sum(n for part, (_, n) in makers.items() if part not in kept)
     with tqdm(total=total, desc="study design") as bar:
         doc = {"config": config, **{part: kept[part] if part in kept else make(cfg, bar.update)

@@ -15,7 +15,7 @@ COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "steps_
            "error_profile_rel", "error_peak_to_peak_rel", "turned_peak_to_peak", "turned_rms", "error_turned_rel",
            "phases", "exact_sd", "blend_sd", "blend_error_rms", "one_tile_sd", "one_tile_error_rms", "draws", "blocks",
            "error_toled_rel", "error_scatter_rel", "error_ratio_rel", "kick_swaps", "kicks", "search_psnr_db", "cpu_s",
-           "cpu_gradient_s"]
+           "cpu_gradient_s", "search_tilings", "held_psnr_db", "gain_db", "gain_se_db"]
 
 
 def _cell(v) -> str:
@@ -55,7 +55,7 @@ def markdown(doc: dict) -> str:
                      f"{r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | {r['evaluations']} | "
                      f"{r['cpu_s']:.0f} |")
     return "\n".join(lines + _banding_lines(doc) + _field_lines(doc) + _ceiling_lines(doc)
-                     + _kicks_lines(doc)) + "\n"
+                     + _kicks_lines(doc) + _tilings_lines(doc)) + "\n"
 
 
 def _section(title: str, header: list[str], rows: list[list[str]]) -> list[str]:
@@ -121,6 +121,30 @@ def _kicks_lines(doc: dict) -> list[str]:
                      for r in doc["kicks"]])
 
 
+def _tilings_lines(doc: dict) -> list[str]:
+    """Part (g): the search's tilings (absent from a study run before it)."""
+    if not doc.get("tilings"):
+        return []
+    n = len(doc["tilings"][0]["held_draws_psnr_db"])
+    return _section(f"The search's tilings (part (b)'s run searching the mean over M D4 draws; its cell on {n} "
+                    "held-out draws, paired with M = 1's)",
+                    ["M", "steps done", "held-out PSNR (dB)", "gain over M = 1 (dB, ± se)", "search's PSNR (dB)",
+                     "search's excess (dB)", "exact scores", "CPU s"],
+                    [[str(r["search_tilings"]), str(r["steps_done"]), f"{r['held_psnr_db']:.3f}",
+                      f"{r['gain_db']:+.3f} ± {r['gain_se_db']:.3f}", f"{r['search_psnr_db']:.3f}",
+                      f"{r['search_psnr_db'] - r['held_psnr_db']:+.3f}", str(r["evaluations"]), f"{r['cpu_s']:.0f}"]
+                     for r in doc["tilings"]])
+
+
+def _tilings_axes(ax, rows: list[dict]) -> None:
+    t = [r["cpu_s"] for r in rows]
+    ax.plot(t, [r["held_psnr_db"] for r in rows], "o-", label="held-out draws (mean MSE)")
+    ax.plot(t, [r["search_psnr_db"] for r in rows], "x:", label="the search's own M draws")
+    for r in rows:
+        ax.annotate(f"M = {r['search_tilings']}", (r["cpu_s"], r["held_psnr_db"]), fontsize=7)
+    _label(ax, "CPU s of the search", "designed cell: Wiener PSNR (dB)", "design: search tilings", bool(rows))
+
+
 def _kicks_axes(ax, rows: list[dict]) -> None:
     for i, swaps in enumerate(sorted({r["kick_swaps"] for r in rows})):
         these = [r for r in rows if r["kick_swaps"] == swaps]
@@ -156,7 +180,7 @@ def _figure(doc: dict, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
-    fig, (a, b, c, e, f, g) = plt.subplots(1, 6, figsize=(31, 4))
+    fig, (a, b, c, e, f, g, h) = plt.subplots(1, 7, figsize=(36, 4))
     for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
         rows = [r for r in doc["sampling"] if r["cell"] == name][:-1]  # the reference has no error
         t = [r["cpu_gradient_s"] for r in rows]
@@ -182,6 +206,7 @@ def _figure(doc: dict, out: Path) -> None:
     _field_axes(e, doc.get("field", []))
     _ceiling_axes(f, doc.get("ceiling", []))
     _kicks_axes(g, doc.get("kicks", []))
+    _tilings_axes(h, doc.get("tilings", []))
     for axis in (a.xaxis, b.xaxis):
         axis.set_minor_formatter(NullFormatter())
     b.set_xlabel("search steps, accepted swaps (CPU s beside each)")
@@ -221,7 +246,8 @@ def _field_axes(ax, rows: list[dict]) -> None:
 def write(doc: dict, out: Path) -> list[str]:
     save_json(out / "study_design.json", doc)
     save_text(out / "study_design.csv", _csv(doc["sampling"] + doc["steps"] + doc.get("banding", [])
-                                             + doc.get("field", []) + doc.get("ceiling", []) + doc.get("kicks", [])))
+                                             + doc.get("field", []) + doc.get("ceiling", []) + doc.get("kicks", [])
+                                             + doc.get("tilings", [])))
     save_text(out / "study_design.md", markdown(doc))
     _figure(doc, out)
     return ["study_design.json", "study_design.csv", "study_design.md", "study_design.png"]
