@@ -94,7 +94,7 @@ def test_design_json_holds_the_held_out_comparison(tmp_path):
 
 
 @pytest.mark.parametrize("what, says", [
-    ("nofolder", "holds no design.json"),
+    ("nofolder", "no design.json there; expected a `udc-render design` output folder"),
     ("other_cell", "differs from the first design's"),
     ("display", "--designs: `study held-out` takes it, and only it"),
 ])

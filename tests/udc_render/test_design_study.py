@@ -533,3 +533,86 @@ def test_the_design_guide_prints_the_kicked_design_through_the_simulator():
     assert f"(mean {np.mean([u['mean_db'] for u in unet]):+.2f} dB)".replace("-", "−") in flat
     assert (f"the UNet is level ({unet[0]['mean_db']:+.2f} and {unet[1]['mean_db']:+.2f} dB, two seeds)".replace(
         "-", "−") in flat)
+
+
+HELD_OUT_DEP = {"design_veil": "layout_trained_veil", "floor/veil130": "layout_trained_floor",
+                "kicks/k16": "layout_trained_kicks", "ceiling/veil130_b90": "layout_trained_ceiling",
+                "ceiling/veil_b55": "layout_trained_b55", "design_crop": "layout_trained_e240"}
+
+
+def _held_out_doc(root: Path) -> dict:
+    return json.loads((root / "docs" / "figures" / "design" / "held_out" / "study_held_out.json").read_text())
+
+
+def test_the_design_guide_prints_the_held_out_designs():
+    """The guide's held-out table is the committed `study held-out` JSON (16 draws, the veil objective) beside each
+    design's plain-DeP margin over the turned T-OLED from its committed `study layout-trained` (seed 0; the spec the
+    design's design_turned.toml); the designs through the simulator rank alike by both, with the same signs."""
+    root = Path(__file__).resolve().parents[2]
+    figures = root / "docs" / "figures" / "design"
+    doc = _held_out_doc(root)
+    assert doc["tilings"] == 16 and doc["toleds"]["objective"]["far_veil"] and doc["toleds"]["objective"][
+        "objective"] == "crop"
+    lines = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").splitlines()
+    both = []
+    for r in doc["rows"]:
+        name = r["design"].removeprefix("docs/figures/design/")
+        dep = "—"
+        if name in HELD_OUT_DEP:
+            t = json.loads((figures / HELD_OUT_DEP[name] / "study_layout_trained.json").read_text())
+            spec = [s for s in t["specs"] if s.endswith("design_turned.toml")]
+            assert t["seeds"]["train"] == 0 and len(spec) == 1
+            assert t["specs"][0].endswith("toled168_20.toml@edge@turned")
+            p = t["paired"]["design_turned"]["dep"]
+            dep = f"{p['mean_db']:+.2f} ± {p['se_db']:.2f}".replace("-", "−")
+            both.append((r["d4_toled_preset"], p["mean_db"]))
+
+        def pm(key: str) -> str:
+            return f"{r[key]:+.3f} ± {r[key + '_se']:.3f} ({r[key + '_leads']})".replace("-", "−")
+        row = (f"| `{name.split('/')[-1]}` | {r['psnr_db']:.3f} | {pm('d4_toled_preset')} | {pm('d4_toled_squares')} "
+               f"| {dep} |")
+        assert row in lines, row
+    assert len(both) == 6
+    objective, dep = np.array(both).T
+    assert list(np.argsort(objective)) == list(np.argsort(dep)) and all(np.sign(objective) == np.sign(dep))
+
+
+def test_the_design_guide_prints_the_search_tilings():
+    """Part (g) of the committed `study design`: the guide's table is its JSON's rows (M = 1, 2, 4, 8 on 16 held-out
+    draws), and the claims are their gains, excess and CPU ratios."""
+    root = Path(__file__).resolve().parents[2]
+    text = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8")
+    lines, flat = text.splitlines(), " ".join(text.split())
+    rows = json.loads((root / "docs" / "figures" / "design" / "study_knobs" / "study_design.json").read_text())[
+        "tilings"]
+    assert [r["search_tilings"] for r in rows] == [1, 2, 4, 8] and len(rows[0]["held_draws_psnr_db"]) == 16
+    for r in rows:
+        row = (f"| {r['search_tilings']}{', the default' if r['search_tilings'] == 1 else ''} | {r['steps_done']} | "
+               f"{r['held_psnr_db']:.3f} | {r['gain_db']:+.3f} ± {r['gain_se_db']:.3f} | "
+               f"{r['search_psnr_db'] - r['held_psnr_db']:+.3f} | {r['cpu_s']:.0f} |").replace("-", "−")
+        assert row in lines, row
+    gains = " / ".join(f"{r['gain_db']:+.3f}" for r in rows[1:])
+    cpu = " / ".join(f"{r['cpu_s'] / rows[0]['cpu_s']:.1f}" for r in rows[1:])
+    excess = rows[0]["search_psnr_db"] - rows[0]["held_psnr_db"]
+    assert f"fits its one draw by only {excess:.3f} dB, and M = 2 / 4 / 8 gain {gains} dB held out at {cpu} ×" in flat
+    defaults = " ".join((root / "docs" / "concepts" / "defaults.md").read_text(encoding="utf-8").split())
+    assert f"M = 2 / 4 / 8 gain {gains} dB held out at {cpu} × the CPU time" in defaults
+
+
+def test_the_design_guide_states_the_held_out_claims():
+    """The held-out section's sentences are the committed JSON's: the T-OLEDs' means and their gap, the veil design's
+    and veil130's margins, the largest move on the quarter-turns (veil and crop designs; the wiener design apart)."""
+    root = Path(__file__).resolve().parents[2]
+    flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    doc = _held_out_doc(root)
+    t, rows = doc["toleds"], {r["design"].split("/")[-1]: r for r in doc["rows"]}
+    assert (f"scores {t['d4_toled_preset'] - t['d4_toled_squares']:.3f} dB above the one on the squares "
+            f"({t['d4_toled_preset']:.3f} against {t['d4_toled_squares']:.3f} dB") in flat
+    veil, v130 = rows["design_veil"], rows["veil130"]
+    assert f"by {veil['d4_toled_preset']:.3f} ± {veil['d4_toled_preset_se']:.3f} dB in the objective" in flat
+    assert (f"level in the objective ({v130['d4_toled_preset']:+.3f} ± {v130['d4_toled_preset_se']:.3f} dB)"
+            .replace("-", "−")) in flat
+    assert (f"seemed to lead ({rows['k16']['d4_toled_squares']:+.3f} and {v130['d4_toled_squares']:+.3f} dB)") in flat
+    moves = {n: abs(r["quarter_turns_toled_preset"] - r["d4_toled_preset"]) for n, r in rows.items()}
+    wiener = moves.pop("design")
+    assert f"move by at most {max(moves.values()):.3f} dB ({wiener:.3f} dB for the `wiener` design" in flat
