@@ -12,7 +12,8 @@ CHECKPOINT_STEPS steps and at the end), a progress bar, and what it writes:
                       the margin of the design over it), and UPC's mean ring minima of the designed cell and of the
                       T-OLED at the same open area in the same cell (slit at the tile's edge), turned and repeated;
                       with --banding-ceiling, the banding of both on `study layout`'s raster and draws
-                      (banding_comparison)
+                      (banding_comparison); with wiener or crop, turned, the design on more held-out draws
+                      paired with the simulator's T-OLED and the T-OLED on the squares (held_out)
     design_loss.png   the objective's PSNR against the step, the scatters' spread beside it
 """
 from __future__ import annotations

@@ -119,8 +119,10 @@ def _figure(doc: dict, out: Path) -> None:
         ax.errorbar([r[key] for r in rows], y + 0.15 * (2 * k - 1), xerr=[2 * r[key + "_se"] for r in rows],
                     fmt="o", label=label + ", ± 2 se")
     ax.axvline(0, color="0.5", lw=0.8)
+    ax.set_xscale("symlog", linthresh=0.1)  # linear within ± 0.1 dB, where the margins that matter lie
+    ax.margins(x=0.08)
     ax.set_yticks(y, [Path(r["design"]).name for r in rows])
-    ax.set_xlabel(f"objective, design − T-OLED (dB), paired over {doc['tilings']} held-out D4 tilings")
+    ax.set_xlabel(f"objective, design − T-OLED (dB, symlog), paired over {doc['tilings']} held-out D4 tilings")
     ax.legend(fontsize=8)
     save_plot(fig, out / f"{NAME}.png")
 
