@@ -569,8 +569,10 @@ def test_the_design_guide_prints_the_held_out_designs():
 
         def pm(key: str) -> str:
             return f"{r[key]:+.3f} ± {r[key + '_se']:.3f} ({r[key + '_leads']})".replace("-", "−")
-        row = (f"| `{name.split('/')[-1]}` | {r['psnr_db']:.3f} | {pm('d4_toled_preset')} | {pm('d4_toled_squares')} "
-               f"| {dep} |")
+        u = json.loads((figures / name / "design.json").read_text())["upc"]["turned"]
+        g = f"{u['draws']['mean'][1]:.3f}" if "draws" in u else f"{u['ratio'][1]:.3f} (one tiling)"
+        row = (f"| `{name.split('/')[-1]}` | {g} | {r['psnr_db']:.3f} | {pm('d4_toled_preset')} | "
+               f"{pm('d4_toled_squares')} | {dep} |")
         assert row in lines, row
     assert len(both) == 6
     objective, dep = np.array(both).T
@@ -613,6 +615,17 @@ def test_the_design_guide_states_the_held_out_claims():
     assert (f"level in the objective ({v130['d4_toled_preset']:+.3f} ± {v130['d4_toled_preset_se']:.3f} dB)"
             .replace("-", "−")) in flat
     assert (f"seemed to lead ({rows['k16']['d4_toled_squares']:+.3f} and {v130['d4_toled_squares']:+.3f} dB)") in flat
+    names = ("design_veil", "floor/veil127", "floor/veil130", "floor/veil134")
+    m = [rows[n.split("/")[-1]]["d4_toled_preset"] for n in names]
+    u = [json.loads((root / "docs" / "figures" / "design" / n / "design.json").read_text())["upc"]["turned"]
+         for n in names]
+    g = [u[0]["ratio"][1]] + [x["draws"]["mean"][1] for x in u[1:]]
+    assert m == sorted(m, reverse=True) and g == sorted(g)
+    assert (f"falls from {m[0]:+.3f} dB at UPC's G {g[0]:.3f} (one tiling) to {m[1]:+.3f} ({g[1]:.3f}), {m[2]:+.3f} "
+            f"({g[2]:.3f}) and {m[3]:+.3f} dB ({g[3]:.3f} over 8 draws)").replace("-", "−") in flat
+    b90 = json.loads((root / "docs" / "figures" / "design" / "ceiling" / "veil_b90" / "design.json").read_text())
+    assert (f"(`veil_b90`: {rows['veil_b90']['d4_toled_preset']:+.3f} dB at G "
+            f"{b90['upc']['turned']['draws']['mean'][1]:.3f})").replace("-", "−") in flat
     moves = {n: abs(r["quarter_turns_toled_preset"] - r["d4_toled_preset"]) for n, r in rows.items()}
     wiener = moves.pop("design")
     assert f"move by at most {max(moves.values()):.3f} dB ({wiener:.3f} dB for the `wiener` design" in flat
