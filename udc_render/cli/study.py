@@ -9,7 +9,7 @@ from functools import partial
 from pathlib import Path
 
 from udc_render.cli.args import UserError, add_display_argument, out_dir, positive
-from udc_render.studies import gap
+from udc_render.studies import design_held_out, gap
 
 STUDIES = {
     "psf": "the PSF engine's knobs (pupil samples, precision, wavelength step, field phases, kernel size)",
@@ -170,11 +170,11 @@ def run(args) -> int:
 
 def _held_out(args) -> int:
     """`study held-out`: every folder read before the output folder is made."""
-    from udc_render.studies.design_held_out import NAME, check, run_study
-    check(list(args.designs))
+    design_held_out.check(list(args.designs))
     out = out_dir(args.out)
-    run_study(out, list(args.designs), quick=args.quick)
-    print(f"wrote {out}/{NAME}.json, {NAME}.csv, {NAME}.md, {NAME}.png")
+    design_held_out.run_study(out, list(args.designs), quick=args.quick)
+    name = design_held_out.NAME
+    print(f"wrote {out}/{name}.json, {name}.csv, {name}.md, {name}.png")
     return 0
 
 
