@@ -629,3 +629,28 @@ def test_the_design_guide_states_the_held_out_claims():
     moves = {n: abs(r["quarter_turns_toled_preset"] - r["d4_toled_preset"]) for n, r in rows.items()}
     wiener = moves.pop("design")
     assert f"move by at most {max(moves.values()):.3f} dB ({wiener:.3f} dB for the `wiener` design" in flat
+
+
+def test_the_design_guide_prints_veil128_b100():
+    """The guide's numbers for `veil128_b100` are its committed design.json's: the held-out margin over the
+    simulator's T-OLED, UPC's G over 8 draws, the bands over draws 0–4 and on the ceiling's draws; its settings are
+    the command the guide prints."""
+    root = Path(__file__).resolve().parents[2]
+    flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    d = json.loads((root / "docs" / "figures" / "design" / "ceiling" / "veil128_b100" / "design.json").read_text())
+    c = d["config"]
+    assert (c["upc_floor"], c["banding_ceiling"], c["kicks"], c["kick_swaps"], c["candidates"], c["far_veil"]) == (
+        1.28, 1.0, 8, 4, 100, True) and c["init"].endswith("design_veil/cell.png") and d["kicks_done"] == 8
+    h, u = d["held_out"]["d4"]["vs"]["design"]["toled_preset"], d["upc"]["turned"]["draws"]
+    q = np.mean(d["banding"]["ratio"], axis=1)
+    assert f"{d['steps_done']} steps and {d['evaluations']} exact scores" in flat
+    below = []
+    for name in ("veil127", "veil130", "veil134"):
+        f = json.loads((root / "docs" / "figures" / "design" / "floor" / name / "design.json").read_text())
+        below.append(f["config"]["upc_floor"] - f["upc"]["turned"]["draws"]["mean"][1])
+    assert f"sits {min(below):.3f}–{max(below):.3f} below it" in flat
+    assert (f"puts it {h['mean']:+.3f} ± {h['se']:.3f} dB over the simulator's T-OLED on 16 draws (led on "
+            f"{h['leads']} of 16), with UPC's G {u['mean'][1]:.3f} ± {u['sd'][1]:.3f} over 8 draws (min "
+            f"{u['min'][1]:.3f}) and bands {q.mean():.2f} × the turned T-OLED over draws 0–4 (below it on "
+            f"{(q < 1).sum()} of 5; on the held-out tiling's 8 draws of the ceiling's 8 µm raster, "
+            f"{np.mean(d['final']['banding_ratios']):.2f} ×") in flat

@@ -2,14 +2,15 @@
 
 A turned tiling's kernels are one random draw of quarter-turns and flips, so one draw's objective J is a sample:
 over 16 draws the committed designs' J spreads by 0.02–0.04 dB (sd; `study held-out`), and the search fits the one
-draw it lowers (by 0.016 dB on the default objective: `study design` part g). `design.json`'s "final" is one held-out
-draw; this module scores n more
-(stream keys 'design', 'held_out', k), the same draws for every cell, and pairs each cell with two T-OLEDs:
+draw it lowers (by 0.016 dB on the default objective: `study design` part g). `design.json`'s "final" is one
+held-out draw; this module scores n more (stream keys 'design', 'held_out', k), the same draws for every cell, and
+pairs each cell with two T-OLEDs:
 - 'toled_squares': the preset T-OLED on the design's feature squares (`--init toled`, starts.toled_cell), the
   search's start and its former reference;
 - 'toled_preset': the preset T-OLED on its own ≈ 2 µm area-weighted raster (cells.layout_cell), slit at the tile's
-  edge, at its own transmission Σ|a|² / c² (0.194 at 20 %: its grey edges): the T-OLED that `study layout-trained`
-  and `study layout` take (toled168_20.toml@edge@turned), scored by the same objective on a Designer of its pixel.
+  edge, at its own transmission Σ|a|² / c² (0.194 at 20 %: its grey edges), scored by the same objective on a
+  Designer of its pixel: the T-OLED `study layout-trained` compares with (toled168_20.toml@edge@turned, which rasters
+  the same preset at 1 µm as intensities: restore.studies.layout_trained.CELL_PIXEL_UM).
 The paired difference per draw (cell − T-OLED, dB) has a far smaller spread than either (the draws are shared), so
 its mean and standard error say whether a design leads in expectation.
 """
@@ -20,8 +21,12 @@ from dataclasses import replace
 import numpy as np
 import torch
 
+from psf import layouts
+from udc_render.design import torch_psf as tp
+from udc_render.design.cells import frame_cell, layout_cell
 from udc_render.design.config import DesignConfig
 from udc_render.design.optimise import Designer
+from udc_render.design.starts import toled_cell
 
 __all__ = ["HELD_OUT_TILINGS", "held_out_draws", "preset_toled", "held_out_comparison"]
 
@@ -31,7 +36,6 @@ HELD_OUT_TILINGS = 16  # the paired difference's se ≈ 0.025 dB / √n: 0.006 d
 def held_out_draws(designer: Designer, n: int, flips: bool = True) -> list[np.ndarray]:
     """n tilings of the designer's tiles (stream keys 'design', 'held_out', k): neither the search's nor 'final';
     flips: the 8 D4 elements (the search's), else the 4 quarter-turns (the engine's tile_rotation)."""
-    from udc_render.design import torch_psf as tp
     return [tp.tile_transforms(designer.tiles, designer.config.seed, flips, keys=("design", "held_out", k))
             for k in range(n)]
 
@@ -39,8 +43,6 @@ def held_out_draws(designer: Designer, n: int, flips: bool = True) -> list[np.nd
 def preset_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
     """(the preset T-OLED's amplitude cell on its ≈ 2 µm raster, slit at the tile's edge; the config that scores it:
     the design's objective settings at that pixel, no search options)."""
-    from psf import layouts
-    from udc_render.design.cells import frame_cell, layout_cell
     raster, pixel_um = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
     scoring = replace(config, feature_um=pixel_um, init="scatter", upc_floor=None, banding_ceiling=None, kicks=0,
                       search_tilings=1, scatters=1)
@@ -60,7 +62,6 @@ def _paired(a: list[float], b: list[float]) -> dict:
 
 
 def _compare(designer: Designer, cells: dict, preset: tuple, draws: list, progress) -> dict:
-    from udc_render.design.starts import toled_cell
     psnr = {}
     for name, c in {**cells, "toled_squares": toled_cell(designer.config)}.items():
         psnr[name] = _psnr_db(designer, c, draws)
