@@ -30,7 +30,7 @@ STUDIES = {
     "design": "the layout designer's knobs (the torch PSF's pupil samples, the optimiser's steps): error against "
               "CPU time",
     "held-out": "committed designs (--designs) re-scored on 16 held-out tilings, paired with the T-OLED the simulator "
-                "takes and the T-OLED on the design's squares (about a minute a design at the veil objective)",
+                "takes and the T-OLED on the design's squares (about 30 s a design at the veil objective, one thread)",
     "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
                   "held-out and out-of-family panels (trains both: minutes with --quick, hours without)",
 }
