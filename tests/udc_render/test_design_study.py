@@ -654,3 +654,22 @@ def test_the_design_guide_prints_veil128_b100():
             f"{u['min'][1]:.3f}) and bands {q.mean():.2f} × the turned T-OLED over draws 0–4 (below it on "
             f"{(q < 1).sum()} of 5; on the held-out tiling's 8 draws of the ceiling's 8 µm raster, "
             f"{np.mean(d['final']['banding_ratios']):.2f} ×") in flat
+
+
+def test_the_design_guide_prints_veil128_b100_through_the_simulator():
+    """The guide's veil128_b100 margins through `study layout-trained` are the committed JSON's (seed 0, 80 epochs,
+    its design_turned.toml against the turned T-OLED)."""
+    root = Path(__file__).resolve().parents[2]
+    flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    t = json.loads((root / "docs" / "figures" / "design" / "layout_trained_f128" / "study_layout_trained.json")
+                   .read_text())
+    assert t["seeds"]["train"] == 0 and t["budget"]["epochs"] == 80
+    assert t["specs"] == ["docs/figures/design/toled168_20.toml@edge@turned",
+                          "docs/figures/design/ceiling/veil128_b100/design_turned.toml"]
+    p = t["paired"]["design_turned"]
+
+    def cell(q: dict) -> str:
+        return f"{q['mean_db']:+.2f} ± {q['se_db']:.2f} dB ({q['wins']} of 8)".replace("-", "−")
+    assert (f"plain DeP {cell(p['dep'])}, level; DeP given the far field {cell(p['dep_far'])}; the UNet "
+            f"{cell(p['unet'])}.") in flat
+    assert abs(p["dep"]["mean_db"]) < 2 * p["dep"]["se_db"] and p["unet"]["wins"] == 8 and p["dep_far"]["wins"] == 8
