@@ -628,6 +628,9 @@ def test_the_design_guide_states_the_held_out_claims():
             f"{b90['upc']['turned']['draws']['mean'][1]:.3f})").replace("-", "−") in flat
     moves = {n: abs(r["quarter_turns_toled_preset"] - r["d4_toled_preset"]) for n, r in rows.items()}
     wiener = moves.pop("design")
+    se = [r["d4_toled_preset_se"] for r in rows.values()]
+    defaults = " ".join((root / "docs" / "concepts" / "defaults.md").read_text(encoding="utf-8").split())
+    assert f"the difference's se is {min(se):.3f}–{max(se):.3f} dB at 16" in defaults
     assert f"move by at most {max(moves.values()):.3f} dB ({wiener:.3f} dB for the `wiener` design" in flat
 
 
