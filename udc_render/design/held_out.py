@@ -28,7 +28,8 @@ from udc_render.design.config import DesignConfig
 from udc_render.design.optimise import Designer
 from udc_render.design.starts import toled_cell
 
-__all__ = ["HELD_OUT_TILINGS", "held_out_draws", "preset_toled", "held_out_comparison"]
+__all__ = ["HELD_OUT_TILINGS", "applies", "held_out_draws", "objective_on_draws", "preset_toled",
+           "held_out_comparison"]
 
 HELD_OUT_TILINGS = 16  # the paired difference's se ≈ 0.025 dB / √n: 0.006 dB at 16 (committed veil designs)
 
@@ -49,10 +50,21 @@ def preset_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
     return frame_cell(raster, "edge"), scoring
 
 
-def _psnr_db(designer: Designer, cell: np.ndarray, draws: list, transmission: float | None = None) -> list[float]:
+def applies(config: DesignConfig) -> bool:
+    """Whether the comparison takes the config: the rig's objectives 'wiener' and 'crop' on a turned tiling."""
+    return config.optics == "rig" and config.objective in ("wiener", "crop") and config.tiling == "turned"
+
+
+def objective_on_draws(designer: Designer, cell: np.ndarray, draws: list, transmission: float | None = None
+                       ) -> list[float]:
+    """The float64 objective J of a cell on each draw (Designer.objective; transmission: a grey cell's own)."""
     x = torch.tensor(cell, dtype=torch.float64, device=designer.device)
     with torch.no_grad():
-        return [float(-10 * np.log10(float(designer.objective(x, t, transmission)))) for t in draws]
+        return [float(designer.objective(x, t, transmission)) for t in draws]
+
+
+def _psnr_db(designer: Designer, cell: np.ndarray, draws: list, transmission: float | None = None) -> list[float]:
+    return [float(-10 * np.log10(j)) for j in objective_on_draws(designer, cell, draws, transmission)]
 
 
 def _paired(a: list[float], b: list[float]) -> dict:
@@ -84,7 +96,7 @@ def held_out_comparison(designer: Designer, cells: dict[str, np.ndarray], n: int
     it leads). Takes the rig's objectives 'wiener' and 'crop' on a turned tiling; progress(1) after each cell's
     draws."""
     config = designer.config
-    if config.optics != "rig" or config.objective not in ("wiener", "crop") or config.tiling != "turned":
+    if not applies(config):
         raise ValueError("held_out_comparison: takes --objective wiener or crop, --optics rig, --tiling turned")
     cell, scoring = preset_toled(config)
     preset = (cell, Designer(scoring, designer.sensor, designer.device))

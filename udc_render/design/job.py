@@ -28,7 +28,7 @@ from tqdm import tqdm
 
 from psf.lens import Lens
 from udc_render.design.config import DesignConfig
-from udc_render.design.held_out import HELD_OUT_TILINGS, held_out_comparison
+from udc_render.design.held_out import HELD_OUT_TILINGS, applies, held_out_comparison
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.starts import initial_cell, scatter
 from udc_render.design.tiling_power import sampled_banding
@@ -170,8 +170,7 @@ def _loss_figure(doc: dict, out: Path) -> None:
 
 def _held_out(designer: Designer, cell: np.ndarray, n: int) -> dict | None:
     """held_out.held_out_comparison of the design (n draws) where it applies (the rig's wiener or crop, turned)."""
-    cfg = designer.config
-    if n < 1 or cfg.optics != "rig" or cfg.objective not in WIENER_OBJECTIVES or cfg.tiling != "turned":
+    if n < 1 or not applies(designer.config):
         return None
     return held_out_comparison(designer, {"design": cell}, n)
 

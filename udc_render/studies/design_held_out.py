@@ -35,6 +35,7 @@ def objective_config(folder: Path):
     """The DesignConfig of a design folder's objective (design.json's settings, SEARCH_ONLY's reset), and its cell."""
     from udc_render.design.cells import read_cell
     from udc_render.design.config import DesignConfig
+    from udc_render.design.held_out import applies
     path = folder / "design.json"
     if not path.is_file():
         raise UdcError(f"--designs {folder}: no design.json there; expected a `udc-render design` output folder")
@@ -42,25 +43,23 @@ def objective_config(folder: Path):
     known = {f.name for f in fields(DesignConfig)}
     config = replace(DesignConfig(**{k: v for k, v in saved.items() if k in known and k not in SEARCH_ONLY}),
                      **SEARCH_ONLY)
-    if config.optics != "rig" or config.objective not in ("wiener", "crop") or config.tiling != "turned":
+    if not applies(config):
         raise UdcError(f"--designs {folder}: its design is {config.objective} in --optics {config.optics}, "
                        f"--tiling {config.tiling}; expected --objective wiener or crop, --optics rig, --tiling turned")
     return config, read_cell(str(folder / "cell.png"), config.cell_px, config.open_squares)
 
 
-def check(folders: list[Path]) -> None:
-    """Every folder read and its cell matched to the first's (one line on the first that fails)."""
+def check(folders: list[Path]):
+    """(the first folder's objective config, {folder: cell}): every folder read and its cell matched to the first's
+    (one line on the first that fails)."""
     config = objective_config(folders[0])[0]
-    for folder in folders:
-        _cell(folder, config)
+    return config, {str(f): _cell(f, config) for f in folders}
 
 
-def _rows(folders: list[Path], n: int, progress) -> tuple[list[dict], dict]:
+def _rows(config, cells: dict, n: int, progress) -> tuple[list[dict], dict]:
     """(one row per design, the T-OLEDs' means), every cell scored by the first folder's objective."""
     from udc_render.design.held_out import held_out_comparison
     from udc_render.design.optimise import Designer
-    config = objective_config(folders[0])[0]
-    cells = {str(f): _cell(f, config) for f in folders}
     doc = held_out_comparison(Designer(config), cells, n, progress)
     rows = []
     for name in cells:
@@ -130,11 +129,11 @@ def _figure(doc: dict, out: Path) -> None:
 def run_study(out: Path, designs: list[Path], quick: bool = False) -> dict:
     """Every folder read (a bad one refused) before any scoring; then the module doc's files."""
     from udc_render.design.held_out import HELD_OUT_TILINGS
-    check(designs)
+    config, cells = check(designs)
     n = QUICK_TILINGS if quick else HELD_OUT_TILINGS
     start = time.perf_counter()
     with tqdm(total=2 * (len(designs) + 2), desc="study held-out") as bar:
-        rows, toleds = _rows(designs, n, bar.update)
+        rows, toleds = _rows(config, cells, n, bar.update)
     doc = {"tilings": n, "rows": rows, "toleds": toleds, "seconds": time.perf_counter() - start}
     save_json(out / f"{NAME}.json", doc)
     write_tables(out, NAME, rows, [k for k in rows[0] if k != "draws"], _markdown(doc))

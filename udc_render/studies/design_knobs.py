@@ -74,7 +74,7 @@ from psf.plan import PAPER_SENSOR_UM, make_plan
 from udc_render.design import metrics, torch_psf as tp
 from udc_render.design.cells import frame_cell
 from udc_render.design.config import DesignConfig
-from udc_render.design.held_out import held_out_draws
+from udc_render.design.held_out import held_out_draws, objective_on_draws
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.tiling_power import band_figures, raster_power, sampled_banding, shift_span_um, tiling_power
 from udc_render.optics.field import phase_weights
@@ -198,14 +198,6 @@ def kicks_rows(cfg: dict, progress=None) -> list[dict]:
     return rows
 
 
-def _mean_psnr_db(designer: Designer, cell: np.ndarray, draws: list) -> tuple[float, list[float]]:
-    """(−10 log10 of the mean J over the draws, each draw's PSNR)."""
-    x = torch.tensor(cell, dtype=torch.float64)
-    with torch.no_grad():
-        j = [float(designer.objective(x, t)) for t in draws]
-    return float(-10 * np.log10(np.mean(j))), [float(-10 * np.log10(v)) for v in j]
-
-
 def tilings_rows(cfg: dict, progress=None) -> list[dict]:
     """Part (g): per M, part (b)'s run with search_tilings M to its local optimum, its cell on the held-out draws
     (paired with M = 1's cell), the search's own score and CPU seconds."""
@@ -217,7 +209,8 @@ def tilings_rows(cfg: dict, progress=None) -> list[dict]:
         while not designer.finished:
             designer.step()
         cpu_s = time.process_time() - start
-        psnr, per_draw = _mean_psnr_db(designer, designer.best_cell, held_out_draws(designer, cfg["held_tilings"]))
+        j = objective_on_draws(designer, designer.best_cell, held_out_draws(designer, cfg["held_tilings"]))
+        psnr, per_draw = float(-10 * np.log10(np.mean(j))), [float(-10 * np.log10(v)) for v in j]
         first = first or per_draw
         diff = np.subtract(per_draw, first)
         rows.append({"part": "tilings", "search_tilings": m, "steps_done": designer.step_done,
