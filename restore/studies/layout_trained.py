@@ -38,7 +38,6 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from psf.micrograph import MicrographLayout
 from restore.dep_far import subtract_far
 from restore.online import clean_images, images_fingerprint
 from restore.studies.robustness import (
@@ -59,7 +58,7 @@ from restore.studies.stage_times import StageTimes
 from restore.train import load_model, train
 from udc_render.dataset.bank import read_bank
 from udc_render.dataset.bank_make import bank_settings, make_bank, preset_specs
-from udc_render.design.cells import frame_cell, layout_cell
+from udc_render.design.cells import SIMULATOR_TILE_SEED, frame_cell, intensity_cell
 from udc_render.errors import UdcError
 from udc_render.io.exr import save_exr
 from udc_render.io.files import save_figure, save_json, save_text
@@ -74,7 +73,6 @@ __all__ = ["DISTANCE_MM", "MODIFIERS", "NAME", "entry_display", "paired", "run_s
 
 DISTANCE_MM = 2.0  # the physical profile's d for the presets, and the issue's banding distance
 MODIFIERS = ("edge", "turned")
-CELL_PIXEL_UM = 1.0  # a preset's cell raster for @edge / @turned (the T-OLED's 168 µm cell: 168² squares)
 NAME = "study_layout_trained"
 ROW_KEYS = ("input", "dep", "dep_noiseless", "dep_nofar", "dep_far", "unet")
 VERSION = 3  # 2: the dep_nofar row; 3: dep_far
@@ -85,22 +83,16 @@ BUDGETS = {"quick": ROBUSTNESS_BUDGETS["quick"], "full": replace(ROBUSTNESS_BUDG
 
 
 def _cell_display(display: Display, frame: str, turned: bool, folder: Path) -> Display:
-    """The display's cell as intensities on CELL_PIXEL_UM squares (a preset's exact area-weighted raster,
-    PeriodicLayout.cell_raster, so its open area is kept exactly; a micrograph's own pixels), framed, written as an
-    EXR in `folder` and tiled as a micrograph of intensity values, turned or not; its T(λ) kept."""
-    layout = display.layout
-    if isinstance(layout, MicrographLayout):
-        cell, pixel_um = layout_cell(layout)
-        cell = cell ** 2
-    else:
-        c = max(3, round(layout.pitch_x_um / CELL_PIXEL_UM))
-        cell, pixel_um = layout.cell_raster(c, c)[1], layout.pitch_x_um / c
+    """The display's cell as intensities (cells.intensity_cell: a preset's on CELL_PIXEL_UM squares, its open area
+    kept exactly; a micrograph's own pixels), framed, written as an EXR in `folder` and tiled as a micrograph of
+    intensity values, turned or not (tile seed SIMULATOR_TILE_SEED); its T(λ) kept."""
+    cell, pixel_um = intensity_cell(display.layout)
     cell = frame_cell(cell, frame)
     name = display.name + ("_edge" if frame == "edge" else "") + ("_turned" if turned else "")
     path = folder / f"{name}.exr"
     folder.mkdir(parents=True, exist_ok=True)
     save_exr(path, {c: cell.astype(np.float32) for c in "RGB"})
-    tiled = micrograph_display(path, pixel_um, "intensity", turned, 0)
+    tiled = micrograph_display(path, pixel_um, "intensity", turned, SIMULATOR_TILE_SEED)
     return replace(tiled, name=name, transmission=display.transmission,
                    source=f"{display.source}, cell {'framed at the edge, ' if frame == 'edge' else ''}"
                           f"{'turned per tile' if turned else 'repeated'}")

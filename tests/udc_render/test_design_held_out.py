@@ -12,7 +12,7 @@ from psf import Lens, compute_kernels, layouts
 from psf.micrograph import MicrographLayout
 from udc_render import cli
 from udc_render.design import held_out, metrics, torch_psf as tp
-from udc_render.design.cells import layout_cell
+from udc_render.design.cells import SIMULATOR_TILE_SEED, layout_cell
 from udc_render.design.config import DesignConfig
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.starts import scatter
@@ -36,6 +36,40 @@ def test_a_grey_cell_scored_at_its_own_transmission_is_the_engines_restorability
     _, inside = tp.kernels_and_window(torch.tensor(cell), d.grid, None)  # the engine's within 1 %
     ref = np.mean(metrics.restorability(engine.kernels, t * inside.numpy())["wiener_mse"])
     assert abs(score / ref - 1) < 1e-10
+
+
+def test_the_simulators_tiling_and_raster_score_as_the_engines_kernels():
+    """The 'engine' group's draw and the simulator's T-OLED raster (held_out.simulator_toled: √ of the 1 µm intensities,
+    scored with the LTPS limit lifted), turned: the objective equals metrics.restorability of psf.compute_kernels'
+    kernels of that micrograph turned by the engine for SIMULATOR_TILE_SEED, to 1e-10 (the grey cell's test above)."""
+    config = DesignConfig(**TINY)
+    cell, scoring = held_out.simulator_toled(config)
+    d, design = Designer(scoring), Designer(config)
+    t = float(np.mean(cell ** 2))
+    assert scoring.feature_um == 1.0 and cell.shape == (40, 40) and abs(t - 0.24) < 1e-12 and d.tiles == design.tiles
+    draw = held_out.engine_draw(design)
+    score = float(d.objective(torch.tensor(cell), draw, t))
+    engine = compute_kernels(MicrographLayout("cell", 1.0, random_rotation=True, seed=SIMULATOR_TILE_SEED, image=cell),
+                             Lens(), RIG_WAVELENGTHS_NM, size_px=31, pupil_samples=64, precision="float64")
+    _, inside = tp.kernels_and_window(torch.tensor(cell), d.grid, draw)
+    ref = np.mean(metrics.restorability(engine.kernels, t * inside.numpy())["wiener_mse"])
+    assert abs(score / ref - 1) < 1e-10
+
+
+def test_the_simulators_toled_is_the_cell_layout_trained_tiles(tmp_path):
+    """simulator_toled's cell is the one `study layout-trained` writes for toled168_20.toml@edge@turned (to the EXR's
+    float32), turned with the same tile seed; a study with simulator=True pairs every cell with it, on one more
+    group of one draw."""
+    from restore.studies.layout_trained import entry_display
+    lay = entry_display("docs/figures/design/toled168_20.toml@edge@turned", tmp_path).layout
+    cell, scoring = held_out.simulator_toled(DesignConfig(feature_um=8.0))
+    assert lay.pixel_um == scoring.feature_um == 1.0 and lay.random_rotation and lay.seed == SIMULATOR_TILE_SEED
+    assert np.abs(lay.image - cell).max() < 1e-6
+    d = Designer(DesignConfig(**TINY))
+    doc = held_out.held_out_comparison(d, {"s": scatter(d.config, "scatter", 1)}, 2, simulator=True)
+    assert len(doc["engine"]["psnr_db"]["s"]) == 1 and set(doc["d4"]["vs"]["s"]) == {
+        "toled_preset", "toled_squares", "toled_simulator"}
+    assert doc["toled_simulator_transmission"] == pytest.approx(0.24, abs=1e-12)
 
 
 def test_held_out_draws_are_the_same_for_every_cell_and_apart_from_the_searchs():

@@ -9,6 +9,8 @@ from psf.micrograph import MicrographLayout
 from udc_render.design import torch_psf as tp, upc
 
 RINGS = 147  # k = 0 … 146, UPC's
+CELL_PIXEL_UM = 1.0  # the simulator's raster of a preset's cell (study layout-trained's @edge / @turned: 168² squares)
+SIMULATOR_TILE_SEED = 0  # the tile seed of study layout-trained's @turned (the engine's quarter-turns per tile)
 
 
 def _cell_px(period_um: float, pixel_um: float) -> int:
@@ -25,6 +27,17 @@ def layout_cell(layout, pixel_um: float = 2.0) -> tuple[np.ndarray, float]:
         return np.asarray(layout.image, np.float64), layout.pixel_um
     c = _cell_px(layout.pitch_x_um, pixel_um)
     return tp.preset_cell(layout, c), layout.pitch_x_um / c
+
+
+def intensity_cell(layout, pixel_um: float = CELL_PIXEL_UM) -> tuple[np.ndarray, float]:
+    """(intensity cell |a|² [c, c], its pixel in µm) as the simulator tiles a layout's cell: a micrograph's own pixels
+    squared, a preset's exact area-weighted intensity raster on ≈ pixel_um squares (PeriodicLayout.cell_raster: its
+    open area kept exactly)."""
+    if isinstance(layout, MicrographLayout):
+        cell, pixel = layout_cell(layout)
+        return cell ** 2, pixel
+    c = _cell_px(layout.pitch_x_um, pixel_um)
+    return layout.cell_raster(c, c)[1], layout.pitch_x_um / c
 
 
 def frame_cell(cell: np.ndarray, frame: str = "as_given") -> np.ndarray:

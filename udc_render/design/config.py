@@ -53,13 +53,14 @@ class DesignConfig:
     kicks: int = 0
     kick_swaps: int = 4
     search_tilings: int = 1
+    reference: bool = False  # the scorer of a reference cell (design.held_out's T-OLEDs), not a design: no LTPS limit
 
     def __post_init__(self):
         if self.contrast is None:
             object.__setattr__(self, "contrast", CONTRAST_DEFAULTS.get(self.objective, metrics.RMS_CONTRAST))
         if not 0 < self.open_fraction < 1:
             raise tp.DesignError(f"--open-area {self.open_fraction}: expected a fraction in (0, 1)")
-        if not self.feature_um >= LITHOGRAPHY_UM:
+        if not (self.feature_um >= LITHOGRAPHY_UM or self.reference and self.feature_um > 0):
             raise tp.DesignError(f"--feature-um {self.feature_um}: below the {LITHOGRAPHY_UM} µm that backplane "
                                  "lithography patterns (LTPS); expected ≥ 1.5")
         n = self.cell_um / self.feature_um

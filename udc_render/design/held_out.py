@@ -9,8 +9,10 @@ pairs each cell with two T-OLEDs:
   search's start and its former reference;
 - 'toled_preset': the preset T-OLED on its own ≈ 2 µm area-weighted raster (cells.layout_cell), slit at the tile's
   edge, at its own transmission Σ|a|² / c² (0.194 at 20 %: its grey edges), scored by the same objective on a
-  Designer of its pixel: the T-OLED `study layout-trained` compares with (toled168_20.toml@edge@turned, which rasters
-  the same preset at 1 µm as intensities: restore.studies.layout_trained.CELL_PIXEL_UM).
+  Designer of its pixel: the T-OLED `study layout-trained` compares with (toled168_20.toml@edge@turned);
+- with simulator=True (`study held-out`), 'toled_simulator': that T-OLED exactly as the simulator rasters it
+  (cells.intensity_cell: intensities on CELL_PIXEL_UM = 1 µm squares, amplitudes √I, transmission the open area),
+  and one more group, 'engine': the simulator's own tiling (the engine's quarter-turns for SIMULATOR_TILE_SEED).
 The paired difference per draw (cell − T-OLED, dB) has a far smaller spread than either (the draws are shared), so
 its mean and standard error say whether a design leads in expectation.
 """
@@ -22,14 +24,15 @@ import numpy as np
 import torch
 
 from psf import layouts
+from psf.micrograph import MicrographLayout
 from udc_render.design import torch_psf as tp
-from udc_render.design.cells import frame_cell, layout_cell
+from udc_render.design.cells import SIMULATOR_TILE_SEED, frame_cell, intensity_cell, layout_cell
 from udc_render.design.config import DesignConfig
 from udc_render.design.optimise import Designer
 from udc_render.design.starts import toled_cell
 
-__all__ = ["HELD_OUT_TILINGS", "applies", "held_out_draws", "objective_on_draws", "preset_toled",
-           "held_out_comparison"]
+__all__ = ["HELD_OUT_TILINGS", "applies", "held_out_draws", "engine_draw", "objective_on_draws", "preset_toled",
+           "simulator_toled", "held_out_comparison"]
 
 HELD_OUT_TILINGS = 16  # the paired difference's se ≈ 0.025 dB / √n: 0.006 dB at 16 (committed veil designs)
 
@@ -41,13 +44,31 @@ def held_out_draws(designer: Designer, n: int, flips: bool = True) -> list[np.nd
             for k in range(n)]
 
 
+def engine_draw(designer: Designer) -> np.ndarray:
+    """The simulator's own tiling of the designer's tiles: the engine's quarter-turns per tile for
+    SIMULATOR_TILE_SEED (psf.micrograph.MicrographLayout.tile_rotations, which torch_psf's tests match)."""
+    square = MicrographLayout("cell", 1.0, random_rotation=True, seed=SIMULATOR_TILE_SEED,
+                              image=np.ones((designer.config.cell_px,) * 2))
+    return square.tile_rotations(designer.tiles, designer.tiles)
+
+
+def _scoring(config: DesignConfig, pixel_um: float) -> DesignConfig:
+    """The design's objective settings at a reference cell's pixel, no search options."""
+    return replace(config, feature_um=pixel_um, init="scatter", upc_floor=None, banding_ceiling=None, kicks=0,
+                   search_tilings=1, scatters=1, reference=True)
+
+
 def preset_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
-    """(the preset T-OLED's amplitude cell on its ≈ 2 µm raster, slit at the tile's edge; the config that scores it:
-    the design's objective settings at that pixel, no search options)."""
+    """(the preset T-OLED's amplitude cell on its ≈ 2 µm raster, slit at the tile's edge; the config that scores it)."""
     raster, pixel_um = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
-    scoring = replace(config, feature_um=pixel_um, init="scatter", upc_floor=None, banding_ceiling=None, kicks=0,
-                      search_tilings=1, scatters=1)
-    return frame_cell(raster, "edge"), scoring
+    return frame_cell(raster, "edge"), _scoring(config, pixel_um)
+
+
+def simulator_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
+    """(the preset T-OLED's amplitude cell as `study layout-trained` tiles it: √ of its intensities on
+    CELL_PIXEL_UM squares, slit at the tile's edge; the config that scores it)."""
+    raster, pixel_um = intensity_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
+    return np.sqrt(frame_cell(raster, "edge")), _scoring(config, pixel_um)
 
 
 def applies(config: DesignConfig) -> bool:
@@ -73,34 +94,42 @@ def _paired(a: list[float], b: list[float]) -> dict:
     return {"mean": float(d.mean()), "se": se, "leads": int((d > 0).sum()), "n": len(d)}
 
 
-def _compare(designer: Designer, cells: dict, preset: tuple, draws: list, progress) -> dict:
+def _compare(designer: Designer, cells: dict, references: dict, draws: list, progress) -> dict:
+    """Every cell and reference T-OLED ({name: (grey cell, its scorer)}) on the draws, paired."""
     psnr = {}
     for name, c in {**cells, "toled_squares": toled_cell(designer.config)}.items():
         psnr[name] = _psnr_db(designer, c, draws)
         progress(1)
-    cell, scorer = preset
-    psnr["toled_preset"] = _psnr_db(scorer, cell, draws, float(np.mean(cell ** 2)))
-    progress(1)
+    for name, (cell, scorer) in references.items():
+        psnr[name] = _psnr_db(scorer, cell, draws, float(np.mean(cell ** 2)))
+        progress(1)
     n = len(draws)
+    refs = ("toled_squares", *references)
     return {"psnr_db": psnr, "mean": {k: float(np.mean(v)) for k, v in psnr.items()},
             "sd": {k: float(np.std(v, ddof=1)) if n > 1 else 0.0 for k, v in psnr.items()},
-            "vs": {name: {ref: _paired(psnr[name], psnr[ref]) for ref in ("toled_preset", "toled_squares")}
-                   for name in cells}}
+            "vs": {name: {ref: _paired(psnr[name], psnr[ref]) for ref in refs} for name in cells}}
 
 
 def held_out_comparison(designer: Designer, cells: dict[str, np.ndarray], n: int = HELD_OUT_TILINGS,
-                        progress=lambda k: None) -> dict:
+                        progress=lambda k: None, simulator: bool = False) -> dict:
     """The objective as a PSNR (dB) of each named cell of the designer's squares and of the two T-OLEDs (module
     doc) on n held-out draws, of the 8 D4 elements (the search's, 'd4') and of the 4 quarter-turns (the engine's,
     'quarter_turns'): per draw, mean and sd, and each cell's paired difference to each T-OLED (mean, se, the draws
-    it leads). Takes the rig's objectives 'wiener' and 'crop' on a turned tiling; progress(1) after each cell's
-    draws."""
+    it leads); with simulator, also against the simulator's raster of the T-OLED and on the simulator's own tiling
+    ('engine', one draw). Takes the rig's objectives 'wiener' and 'crop' on a turned tiling; progress(1) after each
+    cell's draws."""
     config = designer.config
     if not applies(config):
         raise ValueError("held_out_comparison: takes --objective wiener or crop, --optics rig, --tiling turned")
-    cell, scoring = preset_toled(config)
-    preset = (cell, Designer(scoring, designer.sensor, designer.device))
-    out = {"n": n, "keys": ["design", "held_out", "k"], "toled_preset_transmission": float(np.mean(cell ** 2))}
-    for group, flips in (("d4", True), ("quarter_turns", False)):
-        out[group] = _compare(designer, cells, preset, held_out_draws(designer, n, flips), progress)
+    references = {}
+    for name, make in (("toled_preset", preset_toled), ("toled_simulator", simulator_toled))[:1 + simulator]:
+        cell, scoring = make(config)
+        references[name] = (cell, Designer(scoring, designer.sensor, designer.device))
+    out = {"n": n, "keys": ["design", "held_out", "k"],
+           **{f"{k}_transmission": float(np.mean(c ** 2)) for k, (c, _) in references.items()}}
+    groups = {"d4": held_out_draws(designer, n, True), "quarter_turns": held_out_draws(designer, n, False)}
+    if simulator:
+        groups["engine"] = [engine_draw(designer)]
+    for group, draws in groups.items():
+        out[group] = _compare(designer, cells, references, draws, progress)
     return out

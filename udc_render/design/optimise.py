@@ -83,7 +83,8 @@ RAISABLE = ("steps", "kicks")  # the search's budget: a resumed run may raise it
 RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
 _LATER_DEFAULTS = {  # options added after the first checkpoints, at the settings those runs had
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
-    "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1}
+    "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1,
+    "reference": False}
 
 
 def far_veil_mse(inside: torch.Tensor, mean_level: float = metrics.MEAN_LEVEL) -> torch.Tensor:

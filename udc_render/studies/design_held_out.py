@@ -1,12 +1,13 @@
 """`udc-render study held-out --designs DIR,DIR`: committed designs re-scored on many held-out tilings, paired with
-the T-OLED the simulator takes (udc_render.design.held_out; issue 48).
+the T-OLED the simulator takes (udc_render.design.held_out with simulator=True; issue 48).
 
 The first folder's design.json gives the objective's settings (the search's own options: start, budget, floor,
 ceiling, kicks, are left out: they do not change the objective), and every design's cell (the same squares and open
 area) is scored by it on the same draws beside the two T-OLEDs, so the designs rank on one objective. Writes
 study_held_out.{json,csv,md,png}: per design, its objective's mean over the draws and its paired difference to the
 preset T-OLED and to the T-OLED on the squares (mean ± se, the draws it leads), on the search's D4 draws and on the
-engine's quarter-turns; the figure draws the paired differences per design.
+engine's quarter-turns, and to the simulator's own raster of the T-OLED on those draws and on the simulator's own
+tiling (one draw: what `study layout-trained` sees); the figure draws the paired differences per design.
 """
 from __future__ import annotations
 
@@ -29,6 +30,8 @@ QUICK_TILINGS = 2
 SEARCH_ONLY = {"init": "scatter", "steps": 1, "candidates": 1, "scatters": 1, "upc_floor": None,
                "floor_channels": "G", "floor_uncropped": False, "banding_ceiling": None, "kicks": 0,
                "kick_swaps": 1, "search_tilings": 1}  # the options that do not change the objective
+GROUPS = ("d4", "quarter_turns", "engine")  # the held-out D4 draws, quarter-turns, the simulator's own tiling
+TOLEDS = ("toled_preset", "toled_squares", "toled_simulator")
 
 
 def objective_config(folder: Path):
@@ -60,15 +63,15 @@ def _rows(config, cells: dict, n: int, progress) -> tuple[list[dict], dict]:
     """(one row per design, the T-OLEDs' means), every cell scored by the first folder's objective."""
     from udc_render.design.held_out import held_out_comparison
     from udc_render.design.optimise import Designer
-    doc = held_out_comparison(Designer(config), cells, n, progress)
+    doc = held_out_comparison(Designer(config), cells, n, progress, simulator=True)
     rows = []
     for name in cells:
         row = {"design": name, "psnr_db": doc["d4"]["mean"][name]}
-        for g in ("d4", "quarter_turns"):
+        for g in GROUPS:
             for ref, v in doc[g]["vs"][name].items():
                 row.update({f"{g}_{ref}": v["mean"], f"{g}_{ref}_se": v["se"], f"{g}_{ref}_leads": v["leads"]})
         rows.append({**row, "draws": doc["d4"]["psnr_db"][name]})
-    toleds = {f"{g}_{t}": doc[g]["mean"][t] for g in ("d4", "quarter_turns") for t in ("toled_preset", "toled_squares")}
+    toleds = {f"{g}_{t}": doc[g]["mean"][t] for g in GROUPS for t in TOLEDS}
     return rows, {"objective": {k: v for k, v in asdict(config).items() if k not in SEARCH_ONLY}, **toleds}
 
 
@@ -89,8 +92,8 @@ def _pm(row: dict, key: str) -> str:
 
 def _markdown(doc: dict) -> str:
     n = doc["tilings"]
-    rows = [{**r, **{k: _pm(r, k) for k in ("d4_toled_preset", "d4_toled_squares", "quarter_turns_toled_preset")}}
-            for r in doc["rows"]]
+    shown = ("d4_toled_preset", "d4_toled_squares", "quarter_turns_toled_preset", "d4_toled_simulator")
+    rows = [{**r, **{k: _pm(r, k) for k in shown}} for r in doc["rows"]]
     lines = [f"# Designs on {n} held-out tilings, paired with the T-OLEDs", "",
              "Every design scored by the first design's objective: its PSNR (dB, mean over the D4 draws) and the "
              f"paired difference to each T-OLED, mean ± se (the draws of {n} where the design leads). The preset "
@@ -98,12 +101,17 @@ def _markdown(doc: dict) -> str:
              ""]
     lines += md_table(rows, [("design", "design"), ("psnr_db", "objective (dB)"),
                              ("d4_toled_preset", "− preset T-OLED"), ("d4_toled_squares", "− T-OLED on squares"),
-                             ("quarter_turns_toled_preset", "− preset T-OLED, quarter-turns")],
-                      {"psnr_db": lambda v: f"{v:.3f}"})
+                             ("quarter_turns_toled_preset", "− preset T-OLED, quarter-turns"),
+                             ("d4_toled_simulator", "− the simulator's raster of it"),
+                             ("engine_toled_simulator", "− that, on the simulator's tiling")],
+                      {"psnr_db": lambda v: f"{v:.3f}", "engine_toled_simulator": lambda v: f"{v:+.3f}"})
     t = doc["toleds"]
     lines += ["", f"The T-OLEDs (mean over the D4 draws): the preset {t['d4_toled_preset']:.3f} dB, on the squares "
               f"{t['d4_toled_squares']:.3f} dB; on the quarter-turns {t['quarter_turns_toled_preset']:.3f} and "
-              f"{t['quarter_turns_toled_squares']:.3f} dB. The objective (the first design's): "
+              f"{t['quarter_turns_toled_squares']:.3f} dB. The simulator's raster of the preset (intensities on 1 µm "
+              f"squares): {t['d4_toled_simulator']:.3f} dB on the D4 draws, {t['engine_toled_simulator']:.3f} dB on "
+              f"the simulator's own tiling (the preset {t['engine_toled_preset']:.3f} dB there). "
+              "The objective (the first design's): "
               + ", ".join(f"{k} {v}" for k, v in t["objective"].items()) + "."]
     return "\n".join(lines) + "\n"
 
@@ -132,7 +140,7 @@ def run_study(out: Path, designs: list[Path], quick: bool = False) -> dict:
     config, cells = check(designs)
     n = QUICK_TILINGS if quick else HELD_OUT_TILINGS
     start = time.perf_counter()
-    with tqdm(total=2 * (len(designs) + 2), desc="study held-out") as bar:
+    with tqdm(total=len(GROUPS) * (len(designs) + len(TOLEDS)), desc="study held-out") as bar:
         rows, toleds = _rows(config, cells, n, bar.update)
     doc = {"tilings": n, "rows": rows, "toleds": toleds, "seconds": time.perf_counter() - start}
     save_json(out / f"{NAME}.json", doc)
