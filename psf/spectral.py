@@ -20,7 +20,7 @@ from . import colour_tables
 from .engine import KernelSet, PSFError, compute_kernels
 
 __all__ = ["CAMERAS", "band_samples", "combine", "auto_step_nm", "band_kernels", "load_sensitivities", "load_weight",
-           "channel_kernels"]
+           "channel_kernels", "channel_weights"]
 
 CAMERAS = ("Nikon 5100 (NPL)", "Sigma SDMerill (NPL)")
 
@@ -138,17 +138,25 @@ def channel_kernels(display, lens, camera: str = "Nikon 5100 (NPL)", illuminant:
     Wavelengths where every channel's weight is below relative_cutoff × its maximum are left out
     (and listed in notes). illuminant: a weight spectrum for load_weight ('E', 'D65', a CSV).
     """
-    wl_s, sens, names = load_sensitivities(camera)
-    step_nm = step_nm or auto_step_nm(float(wl_s[0]), kwargs.get("size_px", 255))
-    lam, dl = band_samples(float(wl_s[0]), float(wl_s[-1]), step_nm)
-    S = np.stack([np.interp(lam, wl_s, s, left=0.0, right=0.0) for s in sens])
-    E = load_weight(illuminant)(lam)
-    W = S * E[None, :] * dl[None, :]
-    keep = np.any(W >= relative_cutoff * W.max(axis=1, keepdims=True), axis=0)
-    ks = compute_kernels(display, lens, lam[keep], **kwargs)
-    centres = (W[:, keep] * lam[keep]).sum(axis=1) / W[:, keep].sum(axis=1)
-    out = combine(ks, W[:, keep], centres, {"camera": camera, "illuminant": illuminant, "channel_step_nm": step_nm,
-                                            "channels": names})
-    out.notes.append(f"{int((~keep).sum())} of {lam.size} wavelengths skipped: every channel weight "
+    step_nm = step_nm or auto_step_nm(float(load_sensitivities(camera)[0][0]), kwargs.get("size_px", 255))
+    lam, W, names, skipped = channel_weights(camera, illuminant, step_nm, relative_cutoff)
+    ks = compute_kernels(display, lens, lam, **kwargs)
+    centres = (W * lam).sum(axis=1) / W.sum(axis=1)
+    out = combine(ks, W, centres, {"camera": camera, "illuminant": illuminant, "channel_step_nm": step_nm,
+                                   "channels": names})
+    out.notes.append(f"{skipped} of {lam.size + skipped} wavelengths skipped: every channel weight "
                      f"< {relative_cutoff:g} × its peak")
     return out
+
+
+def channel_weights(camera: str, illuminant: str, step_nm: float, relative_cutoff: float = 1e-3
+                    ) -> tuple[np.ndarray, np.ndarray, list[str], int]:
+    """(wavelengths_nm [K], weights S_c(λ) E(λ) δλ [C, K], channel names, wavelengths skipped): channel_kernels'
+    midpoint samples of the camera's band at step_nm, those where every channel's weight is below relative_cutoff ×
+    its maximum left out."""
+    wl_s, sens, names = load_sensitivities(camera)
+    lam, dl = band_samples(float(wl_s[0]), float(wl_s[-1]), step_nm)
+    S = np.stack([np.interp(lam, wl_s, s, left=0.0, right=0.0) for s in sens])
+    W = S * load_weight(illuminant)(lam)[None, :] * dl[None, :]
+    keep = np.any(W >= relative_cutoff * W.max(axis=1, keepdims=True), axis=0)
+    return lam[keep], W[:, keep], names, int((~keep).sum())

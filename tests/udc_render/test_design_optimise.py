@@ -266,6 +266,9 @@ def test_the_designed_display_files_are_displays(tmp_path):
     (["--search-tilings", "0"], "--search-tilings must be > 0, got 0"),
     (["--search-tilings", "2", "--tiling", "repeated"], "--search-tilings 2: takes --tiling turned"),
     (["--held-out-tilings", "-1"], "--held-out-tilings must be ≥ 0, got -1"),
+    (["--channel-step", "0.5"], "--channel-step 0.5: expected 0 (the rig's 640 / 520 / 450 nm) or a step ≥ 1 nm"),
+    (["--channel-step", "-2"], "--channel-step must be ≥ 0, got -2"),
+    (["--optics", "upc", "--objective", "rings", "--channel-step", "40"], "--channel-step 40.0: expected 0"),
 ])
 def test_design_refuses_in_one_line(tmp_path, capsys, argv, says):
     assert cli.main(["design", *argv, "--out", str(tmp_path / "never")]) == 2

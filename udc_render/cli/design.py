@@ -76,6 +76,10 @@ def register(sub) -> None:
     p.add_argument("--search-tilings", type=positive("--search-tilings", int), default=1,
                    help="--tiling turned: the search's objective is the mean over this many fixed D4 draws (one "
                         "draw's objective is fitted to that draw; study design part g) [1]")
+    p.add_argument("--channel-step", type=number("--channel-step", float, 0, lo_open=False), default=0.0,
+                   help="--optics rig: ≥ 1 sums each channel over the camera's band sampled at this step in nm, "
+                        "weighted by its sensitivity × D65 (the kernels `study layout-trained`'s bank takes); 0: one "
+                        "wavelength per channel, 640 / 520 / 450 nm (the paper's recipe) [0]")
     p.add_argument("--scatters", type=positive("--scatters", int), default=20,
                    help="random scatters at the same open area scored beside the design, the baseline [20]")
     p.add_argument("--held-out-tilings", type=number("--held-out-tilings", int, 0, lo_open=False), default=16,
@@ -99,7 +103,7 @@ def run(args) -> int:
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
-                          args.kicks, args.kick_swaps, args.search_tilings)
+                          args.kicks, args.kick_swaps, args.search_tilings, args.channel_step)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet, held_out_tilings=args.held_out_tilings)
     f, b = doc["final"], doc["scatters"]

@@ -53,6 +53,7 @@ class DesignConfig:
     kicks: int = 0
     kick_swaps: int = 4
     search_tilings: int = 1
+    channel_step_nm: float = 0.0  # > 0: the objective's channels summed over the camera's band (optimise module doc)
     reference: bool = False  # the scorer of a reference cell (design.held_out's T-OLEDs), not a design: no LTPS limit
 
     def __post_init__(self):
@@ -87,6 +88,10 @@ class DesignConfig:
                                  "has one draw)")
         self._check_floor()
         self._check_ceiling()
+        if not (self.channel_step_nm == 0 or self.channel_step_nm >= 1 and self.optics == "rig"):
+            raise tp.DesignError(f"--channel-step {self.channel_step_nm}: expected 0 (the rig's 640 / 520 / 450 nm) "
+                                 f"or a step ≥ 1 nm (the engine's own is λ / S ≈ 1.6 nm), with --optics rig; got "
+                                 f"--optics {self.optics}")
         if self.far_veil and self.objective not in ("wiener", "crop"):
             raise tp.DesignError(f"--far-veil: takes --objective wiener or crop (the light past the kernel's window), "
                                  f"got {self.objective}")

@@ -50,6 +50,11 @@ With upc_floor R, 'wiener' and 'crop' are searched times a hinge that holds UPC'
 T-OLED's in the floor's channels (udc_render.design.floor): the restoration objective under UPC's target. With
 banding_ceiling R, times a hinge that holds the bands at d = 2 mm at most R × the T-OLED's (udc_render.design.bands).
 init takes 'scatter', 'toled' or a former design's cell.png (a search from another start).
+With channel_step_nm > 0 the rig's objectives see the camera's channels instead of one wavelength each: the kernels
+at the camera's band sampled at that step, summed with the weights S_c(λ) D65(λ) δλ (objective_wavelengths;
+torch_psf.channel_sum: psf.spectral.channel_kernels' sum, the kernels `study layout-trained`'s bank takes). A cell
+fitted at 640 / 520 / 450 nm keeps structure that the band washes out: the committed designs' margins over the
+simulator's T-OLED fall by 0.09-0.10 dB (docs/guides/design.md, "One wavelength per channel").
 The search scores in float32 (a swap is taken only if it lowers J by more than IMPROVE_REL of J, well above
 float32's rounding); every reported score is float64.
 
@@ -65,6 +70,7 @@ import numpy as np
 import torch
 
 from psf.lens import Lens
+from psf.spectral import channel_weights
 from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.design.bands import BandingCeiling
 from udc_render.design.config import DesignConfig
@@ -76,7 +82,8 @@ from udc_render.design.starts import initial_cell, kicked
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
 
-__all__ = ["IMPROVE_REL", "RIG_WAVELENGTHS_NM", "Designer", "far_veil_mse"]
+__all__ = ["IMPROVE_REL", "RIG_WAVELENGTHS_NM", "CHANNEL_ILLUMINANT", "Designer", "far_veil_mse",
+           "objective_wavelengths"]
 
 IMPROVE_REL = 1e-5
 RAISABLE = ("steps", "kicks")  # the search's budget: a resumed run may raise it and go on
@@ -84,7 +91,8 @@ RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
 _LATER_DEFAULTS = {  # options added after the first checkpoints, at the settings those runs had
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
     "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1,
-    "reference": False}
+    "channel_step_nm": 0.0, "reference": False}
+CHANNEL_ILLUMINANT = "D65"  # the white of the bank's channel kernels (udc_render.dataset.bank_make)
 
 
 def far_veil_mse(inside: torch.Tensor, mean_level: float = metrics.MEAN_LEVEL) -> torch.Tensor:
@@ -92,6 +100,16 @@ def far_veil_mse(inside: torch.Tensor, mean_level: float = metrics.MEAN_LEVEL) -
     kernel holds only the window (f: the share inside it): that light lands as a veil of about the scene's mean,
     relative to the window's light, and passes the restorer's filter at its DC gain of 1 (restore.dep_far)."""
     return ((1 - inside) / inside) ** 2 * mean_level ** 2
+
+
+def objective_wavelengths(config: DesignConfig, sensor: SensorConfig) -> tuple[tuple, torch.Tensor | None]:
+    """(the objective's wavelengths in nm, the weights [3, K] that sum them into the camera's channels, or None):
+    the rig's three (RIG_WAVELENGTHS_NM, the paper's recipe) or, with channel_step_nm, the camera's band at that
+    step weighted by its sensitivities × CHANNEL_ILLUMINANT (psf.spectral.channel_weights: the bank's channels)."""
+    if not config.channel_step_nm:
+        return RIG_WAVELENGTHS_NM, None
+    lam, weights, _, _ = channel_weights(sensor.camera, CHANNEL_ILLUMINANT, config.channel_step_nm)
+    return tuple(float(v) for v in lam), torch.tensor(weights)
 
 
 class Designer:
@@ -102,7 +120,8 @@ class Designer:
         if config.optics == "upc":
             self.grid, self.tiles, size = None, upc.TILES, upc.PSF_PX
         else:
-            self.grid = tp.cell_grid(config.cell_px, config.feature_um, Lens(), RIG_WAVELENGTHS_NM, 3.1,
+            wavelengths_nm, self.channel_weights = objective_wavelengths(config, self.sensor)
+            self.grid = tp.cell_grid(config.cell_px, config.feature_um, Lens(), wavelengths_nm, 3.1,
                                      config.kernel_px, config.pupil_samples)
             self.tiles, size = self.grid.tiles, config.kernel_px
         self.rings = ring_index(size)
@@ -137,6 +156,8 @@ class Designer:
             k = upc.psf(cell, transforms)[channels]
         else:
             k, inside = tp.kernels_and_window(cell, self.grid, transforms)
+            if self.channel_weights is not None:
+                k, inside = tp.channel_sum(k, inside, self.channel_weights)
             k, inside = k[channels], inside[channels]
         if self.config.objective in ("wiener", "crop"):
             near, far = split_kernel(k, self.window.to(k.dtype)) if self.config.objective == "crop" else (k, None)

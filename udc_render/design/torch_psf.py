@@ -29,7 +29,7 @@ from udc_render.errors import UdcError
 from udc_render.streams import stream
 
 __all__ = ["DesignError", "CellGrid", "cell_grid", "raster_matrix", "tile_transforms", "tiled_mask", "kernels",
-           "kernels_and_window", "preset_cell", "transform_tile", "tile"]
+           "kernels_and_window", "channel_sum", "preset_cell", "transform_tile", "tile"]
 
 
 class DesignError(UdcError):
@@ -166,3 +166,14 @@ def preset_cell(layout, cell_px: int) -> np.ndarray:
         raise DesignError(f"layout {layout.name}: a cell must be square, got {layout.pitch_x_um} × "
                           f"{layout.pitch_y_um} µm")
     return layout.cell_raster(cell_px, cell_px)[0]
+
+
+def channel_sum(kernels: torch.Tensor, inside: torch.Tensor, weights: torch.Tensor
+                ) -> tuple[torch.Tensor, torch.Tensor]:
+    """psf.spectral.combine for a cell (its transmittance the same at every λ): the channel kernels
+    Σ_k w_ck f_k k_k / Σ_k w_ck f_k and shares inside Σ_k w_ck f_k / Σ_k w_ck, from kernels [K, S, S], shares f [K]
+    and weights w [C, K] (S_c(λ) E(λ) δλ: psf.spectral.channel_weights)."""
+    ww = weights.to(kernels.dtype) * inside[None, :]
+    total = ww.sum(dim=1)
+    return torch.einsum("ck,kij->cij", ww, kernels) / total[:, None, None], total / weights.to(total.dtype).sum(dim=1)
+
