@@ -10,12 +10,14 @@ import torch
 
 from psf import Lens, compute_kernels, layouts
 from psf.micrograph import MicrographLayout
+from psf.spectral import channel_weights
 from udc_render import cli
 from udc_render.design import held_out, metrics, torch_psf as tp
 from udc_render.design.cells import SIMULATOR_TILE_SEED, layout_cell
 from udc_render.design.config import DesignConfig
-from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
+from udc_render.design.optimise import CHANNEL_ILLUMINANT, RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.starts import scatter
+from udc_render.sensor.config import SensorConfig
 
 TINY = dict(cell_um=40.0, feature_um=8.0, open_fraction=0.24, steps=2, pupil_samples=64, kernel_px=31, scatters=2,
             seed=3)
@@ -125,12 +127,20 @@ def test_design_json_holds_the_held_out_comparison(tmp_path):
     study = json.loads((tmp_path / "s" / "study_held_out.json").read_text())
     assert [r["design"] for r in study["rows"]] == [str(tmp_path / "a"), str(tmp_path / "b")]
     assert study["rows"][0]["draws"] != study["rows"][1]["draws"] and (tmp_path / "s" / "study_held_out.png").is_file()
+    assert {"engine_toled_simulator", "d4_toled_simulator"} <= set(study["rows"][0])
+    assert cli.main(["study", "channel-step", "--designs", folders, "--quick", "--out", str(tmp_path / "c")]) == 0
+    rows = json.loads((tmp_path / "c" / "study_channel_step.json").read_text())["rows"]
+    lam = channel_weights(SensorConfig().camera, CHANNEL_ILLUMINANT, 40.0)[0]
+    assert [r["channel_step_nm"] for r in rows] == [0.0, 80.0, 40.0] and rows[-1]["error_db"] == 0.0
+    assert rows[0]["wavelengths"] == 3 and rows[-1]["wavelengths"] == len(lam)
+    engine = {r["design"]: r["engine_toled_simulator"] for r in study["rows"]}  # the design's own step, 0
+    assert rows[0]["margins_db"] == pytest.approx(engine, abs=1e-9)
 
 
 @pytest.mark.parametrize("what, says", [
     ("nofolder", "no design.json there; expected a `udc-render design` output folder"),
     ("other_cell", "differs from the first design's"),
-    ("display", "--designs: `study held-out` takes it, and only it"),
+    ("display", "--designs: `study held-out` and `study channel-step` take it, and only they"),
 ])
 def test_study_held_out_refuses_in_one_line(tmp_path, capsys, what, says):
     a = tmp_path / "a"

@@ -9,7 +9,7 @@ from functools import partial
 from pathlib import Path
 
 from udc_render.cli.args import UserError, add_display_argument, out_dir, positive
-from udc_render.studies import design_held_out, gap
+from udc_render.studies import design_channels, design_held_out, gap
 
 STUDIES = {
     "psf": "the PSF engine's knobs (pupil samples, precision, wavelength step, field phases, kernel size)",
@@ -31,12 +31,16 @@ STUDIES = {
               "CPU time",
     "held-out": "committed designs (--designs) re-scored on 16 held-out tilings, paired with the T-OLED the simulator "
                 "takes and the T-OLED on the design's squares (about 30 s a design at the veil objective, one thread)",
+    "channel-step": "committed designs (--designs) scored by their objective at each channel step (one wavelength "
+                    "per channel to the camera's band at 5 nm) against the simulator's T-OLED on its own tiling: "
+                    "error against CPU time (about 3 min for 3 designs, one thread)",
     "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
                   "held-out and out-of-family panels (trains both: minutes with --quick, hours without)",
 }
 
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
+DESIGN_STUDIES = {"held-out": design_held_out, "channel-step": design_channels}  # the studies of --designs
 
 
 def image_files(text: str) -> tuple[str, ...]:
@@ -102,7 +106,8 @@ def register(sub) -> None:
                    help="layout-trained only: the UNets' epochs (the full budget's 80, the robustness recipe's 240 "
                         "take about 3x as long) [the budget's]")
     s.add_argument("--designs", type=design_folders, default=(),
-                   help="held-out only: `udc-render design` output folders, comma-separated [none]")
+                   help="held-out and channel-step only: `udc-render design` output folders, comma-separated "
+                        "[none]")
     s.add_argument("--restore-crops", choices=("astronaut", "photos"), default="astronaut",
                    help="layout only, with --restore: the natural crops restored: astronaut, its face and suit (2 "
                         "crops); photos, 8 crops of astronaut, chelsea, coffee and rocket (4x the time) [astronaut]")
@@ -128,10 +133,11 @@ def run(args) -> int:
         raise UserError(f"--restore-crops {args.restore_crops}: only with --restore dep")
     if args.conditioned and args.what != "robustness":
         raise UserError("--conditioned: only `study robustness` trains a conditioned restorer")
-    if bool(args.designs) != (args.what == "held-out"):
-        raise UserError("--designs: `study held-out` takes it, and only it (design folders, comma-separated)")
-    if args.what == "held-out":
-        return _held_out(args)
+    if bool(args.designs) != (args.what in DESIGN_STUDIES):
+        raise UserError("--designs: `study held-out` and `study channel-step` take it, and only they (design folders, "
+                        "comma-separated)")
+    if args.what in DESIGN_STUDIES:
+        return _designs(args, DESIGN_STUDIES[args.what])
     if args.what == "layout":
         return _layout(args)
     if args.what == "layout-trained":
@@ -168,12 +174,12 @@ def run(args) -> int:
     return 0
 
 
-def _held_out(args) -> int:
-    """`study held-out`: every folder read before the output folder is made."""
+def _designs(args, study) -> int:
+    """`study held-out` and `study channel-step`: every folder read before the output folder is made."""
     design_held_out.check(list(args.designs))
     out = out_dir(args.out)
-    design_held_out.run_study(out, list(args.designs), quick=args.quick)
-    name = design_held_out.NAME
+    study.run_study(out, list(args.designs), quick=args.quick)
+    name = study.NAME
     print(f"wrote {out}/{name}.json, {name}.csv, {name}.md, {name}.png")
     return 0
 
