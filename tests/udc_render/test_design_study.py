@@ -535,7 +535,8 @@ def test_the_design_guide_prints_the_kicked_design_through_the_simulator():
         "-", "−") in flat)
 
 
-HELD_OUT_DEP = {"design_veil": "layout_trained_veil", "floor/veil130": "layout_trained_floor",
+HELD_OUT_DEP = {"design_veil": "layout_trained_veil", "ceiling/veil128_b100": "layout_trained_f128",
+                "floor/veil130": "layout_trained_floor",
                 "kicks/k16": "layout_trained_kicks", "ceiling/veil130_b90": "layout_trained_ceiling",
                 "ceiling/veil_b55": "layout_trained_b55", "design_crop": "layout_trained_e240"}
 
@@ -547,7 +548,8 @@ def _held_out_doc(root: Path) -> dict:
 def test_the_design_guide_prints_the_held_out_designs():
     """The guide's held-out table is the committed `study held-out` JSON (16 draws, the veil objective) beside each
     design's plain-DeP margin over the turned T-OLED from its committed `study layout-trained` (seed 0; the spec the
-    design's design_turned.toml); the designs through the simulator rank alike by both, with the same signs."""
+    design's design_turned.toml); the designs through the simulator rank alike by both, with the same signs but
+    veil128_b100's (one wavelength per channel: test_the_design_guide_prints_the_channel_step)."""
     root = Path(__file__).resolve().parents[2]
     figures = root / "docs" / "figures" / "design"
     doc = _held_out_doc(root)
@@ -565,7 +567,7 @@ def test_the_design_guide_prints_the_held_out_designs():
             assert t["specs"][0].endswith("toled168_20.toml@edge@turned")
             p = t["paired"]["design_turned"]["dep"]
             dep = f"{p['mean_db']:+.2f} ± {p['se_db']:.2f}".replace("-", "−")
-            both.append((r["d4_toled_preset"], p["mean_db"]))
+            both.append((name, r["d4_toled_preset"], p["mean_db"]))
 
         def pm(key: str) -> str:
             return f"{r[key]:+.3f} ± {r[key + '_se']:.3f} ({r[key + '_leads']})".replace("-", "−")
@@ -574,9 +576,10 @@ def test_the_design_guide_prints_the_held_out_designs():
         row = (f"| `{name.split('/')[-1]}` | {g} | {r['psnr_db']:.3f} | {pm('d4_toled_preset')} | "
                f"{pm('d4_toled_squares')} | {dep} |")
         assert row in lines, row
-    assert len(both) == 6
-    objective, dep = np.array(both).T
-    assert list(np.argsort(objective)) == list(np.argsort(dep)) and all(np.sign(objective) == np.sign(dep))
+    assert len(both) == 7
+    objective, dep = (np.array([b[k] for b in both]) for k in (1, 2))
+    assert list(np.argsort(objective)) == list(np.argsort(dep))
+    assert [b[0] for b in both if np.sign(b[1]) != np.sign(b[2])] == ["ceiling/veil128_b100"]
 
 
 def test_the_design_guide_prints_the_search_tilings():
@@ -685,3 +688,55 @@ def test_the_design_guide_prints_veil128_b100_through_the_simulator():
             .replace("(mean -", "(mean −")) in flat
     assert (f"by the UNet ({unet[0]['mean_db']:+.2f} and {unet[1]['mean_db']:+.2f} dB, two seeds)"
             .replace("-", "−")) in flat
+
+
+def test_the_design_guide_prints_the_channel_step():
+    """The channel-step section is the committed `study channel-step` (its rows; 40 nm the default's error and CPU
+    ratio), the held-out study's simulator raster and tiling, and each design's plain DeP from its committed
+    `study layout-trained`: the camera's channels give every design DeP's sign, one wavelength per channel does not,
+    and the mean distance to DeP of the designs within 0.1 dB falls as printed."""
+    root = Path(__file__).resolve().parents[2]
+    figures = root / "docs" / "figures" / "design"
+    text = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8")
+    lines, flat = text.splitlines(), " ".join(text.split())
+    rows = json.loads((figures / "channel_step" / "study_channel_step.json").read_text())["rows"]
+    assert [r["channel_step_nm"] for r in rows] == [0.0, 80.0, 40.0, 20.0, 10.0, 5.0] and rows[-1]["error_db"] == 0
+    for r in rows[:-1]:
+        assert f"| {r['wavelengths']} | {r['cpu_s']:.2f} | {r['error_db']:.4f} |" in text
+    one, forty = rows[0], rows[2]
+    assert (f"40 nm (8 wavelengths) is within {forty['error_db']:.3f} dB of 5 nm at "
+            f"{forty['cpu_s'] / one['cpu_s']:.1f} × one wavelength's CPU time, and one wavelength per channel errs by "
+            f"{one['error_db']:.2f} dB") in flat
+    h = json.loads((figures / "held_out" / "study_held_out.json").read_text())
+    t = h["toleds"]
+    assert f"{t['d4_toled_simulator']:.3f} against {t['d4_toled_preset']:.3f} dB" in flat
+    assert f"moves every margin by {t['d4_toled_simulator'] - t['d4_toled_preset']:.3f} dB" in flat
+    moved = max(abs(r["engine_toled_simulator"] - r["d4_toled_simulator"]) for r in h["rows"]
+                if not r["design"].endswith("/design"))
+    assert f"within {moved:.3f} dB of their held-out means" in flat
+    mono = {Path(k).name: v for k, v in one["margins_db"].items()}
+    spec = {Path(k).name: v for k, v in forty["margins_db"].items()}
+    loss = [mono[n] - spec[n] for n in mono]
+    assert f"each loses {min(loss):.2f}–{max(loss):.2f} dB against the T-OLED" in flat
+    near, signs = [], {"mono": 0, "spec": 0}
+    for name, folder in CHANNEL_DEP.items():
+        p = json.loads((figures / folder / "study_layout_trained.json").read_text())["paired"]["design_turned"]["dep"]
+        row = f"| `{name}` | {mono[name]:+.3f} | {spec[name]:+.3f} | {p['mean_db']:+.2f} ± {p['se_db']:.2f} |"
+        assert row.replace("-", "−") in lines, row
+        signs["mono"] += np.sign(mono[name]) == np.sign(p["mean_db"])
+        signs["spec"] += np.sign(spec[name]) == np.sign(p["mean_db"])
+        if abs(p["mean_db"]) < 0.1:
+            near.append((abs(mono[name] - p["mean_db"]), abs(spec[name] - p["mean_db"])))
+    assert signs == {"mono": 5, "spec": 7} and len(near) == 4
+    a, b = np.mean(near, axis=0)
+    assert f"mean distance to DeP falls from {a:.3f} dB to {b:.3f} dB" in flat
+    defaults = " ".join((root / "docs" / "concepts" / "defaults.md").read_text(encoding="utf-8").split())
+    assert (f"within {forty['error_db']:.3f} dB of 5 nm at {forty['cpu_s'] / one['cpu_s']:.1f} × the CPU time; one "
+            f"wavelength per channel errs by {one['error_db']:.2f} dB") in defaults
+
+
+CHANNEL_DEP = {"design_veil": "layout_trained_veil", "veil128_b100": "layout_trained_f128",
+               "veil130": "layout_trained_floor", "k16": "layout_trained_kicks",
+               "veil130_b90": "layout_trained_ceiling", "veil_b55": "layout_trained_b55",
+               "design_crop": "layout_trained_e240"}
+

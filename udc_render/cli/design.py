@@ -6,6 +6,7 @@ from pathlib import Path
 
 from udc_render.cli.args import number, out_dir, positive
 from udc_render.design.options import (
+    CHANNEL_STEP_NM,
     CHANNELS,
     CROP_PX,
     DEFAULT_FEATURE_UM,
@@ -76,10 +77,11 @@ def register(sub) -> None:
     p.add_argument("--search-tilings", type=positive("--search-tilings", int), default=1,
                    help="--tiling turned: the search's objective is the mean over this many fixed D4 draws (one "
                         "draw's objective is fitted to that draw; study design part g) [1]")
-    p.add_argument("--channel-step", type=number("--channel-step", float, 0, lo_open=False), default=0.0,
+    p.add_argument("--channel-step", type=number("--channel-step", float, 0, lo_open=False), default=None,
                    help="--optics rig: ≥ 1 sums each channel over the camera's band sampled at this step in nm, "
                         "weighted by its sensitivity × D65 (the kernels `study layout-trained`'s bank takes); 0: one "
-                        "wavelength per channel, 640 / 520 / 450 nm (the paper's recipe) [0]")
+                        "wavelength per channel, 640 / 520 / 450 nm (the paper's recipe; the designs committed before "
+                        f"this option) [{CHANNEL_STEP_NM:g} with --optics rig: study channel-step; 0 with upc]")
     p.add_argument("--scatters", type=positive("--scatters", int), default=20,
                    help="random scatters at the same open area scored beside the design, the baseline [20]")
     p.add_argument("--held-out-tilings", type=number("--held-out-tilings", int, 0, lo_open=False), default=16,
@@ -96,6 +98,14 @@ def register(sub) -> None:
                    help="output folder: design.toml, cell.png, design.json, design_loss.png [out/design]")
 
 
+def _channel_step(args) -> float:
+    """--channel-step as given, else CHANNEL_STEP_NM in the rig's optics and 0 in UPC's (their one wavelength per
+    channel)."""
+    if args.channel_step is not None:
+        return args.channel_step
+    return CHANNEL_STEP_NM if args.optics == "rig" else 0.0
+
+
 def run(args) -> int:
     from udc_render.design.config import DesignConfig
     from udc_render.design.job import run_design
@@ -103,7 +113,7 @@ def run(args) -> int:
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
-                          args.kicks, args.kick_swaps, args.search_tilings, args.channel_step)
+                          args.kicks, args.kick_swaps, args.search_tilings, _channel_step(args))
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet, held_out_tilings=args.held_out_tilings)
     f, b = doc["final"], doc["scatters"]
