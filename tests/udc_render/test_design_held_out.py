@@ -133,8 +133,9 @@ def test_design_json_holds_the_held_out_comparison(tmp_path):
     lam = channel_weights(SensorConfig().camera, CHANNEL_ILLUMINANT, 40.0)[0]
     assert [r["channel_step_nm"] for r in rows] == [0.0, 80.0, 40.0] and rows[-1]["error_db"] == 0.0
     assert rows[0]["wavelengths"] == 3 and rows[-1]["wavelengths"] == len(lam)
-    engine = {r["design"]: r["engine_toled_simulator"] for r in study["rows"]}  # the design's own step, 0
-    assert rows[0]["margins_db"] == pytest.approx(engine, abs=1e-9)
+    engine = {r["design"]: r["engine_toled_simulator"] for r in study["rows"]}  # at the designs' own step, 40
+    assert json.loads((tmp_path / "a" / "design.json").read_text())["config"]["channel_step_nm"] == 40.0
+    assert rows[2]["margins_db"] == pytest.approx(engine, abs=1e-9) != rows[0]["margins_db"]
 
 
 @pytest.mark.parametrize("what, says", [
