@@ -740,3 +740,43 @@ CHANNEL_DEP = {"design_veil": "layout_trained_veil", "veil128_b100": "layout_tra
                "veil130_b90": "layout_trained_ceiling", "veil_b55": "layout_trained_b55",
                "design_crop": "layout_trained_e240"}
 
+
+def test_the_design_guide_prints_the_camera_channel_searches():
+    """The four searches at --channel-step 40 (docs/figures/design/channel_step/): the guide's rows are their
+    design.json's (start, floor, ceiling, kicks, squares moved, the held-out margin over the simulator's T-OLED,
+    UPC's G over 8 draws, the bands over draws 0–4); the two at UPC's floor trail that T-OLED, the others lead."""
+    root = Path(__file__).resolve().parents[2]
+    folder = root / "docs" / "figures" / "design" / "channel_step"
+    lines = (root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").splitlines()
+    starts = {"design_veil": "veil design", "veil128_b100": "`veil128_b100`"}
+    margins = {}
+    for name in ("spec_veil", "spec_veil_b100", "spec_veil128", "spec_f128"):
+        d = json.loads((folder / name / "design.json").read_text())
+        c, h, u = d["config"], d["held_out"]["d4"]["vs"]["design"]["toled_preset"], d["upc"]["turned"]["draws"]
+        assert c["channel_step_nm"] == 40.0 and c["far_veil"] and c["objective"] == "crop"
+        floor = "none" if c["upc_floor"] is None else f"{c['upc_floor']:g}"
+        ceiling = "none" if c["banding_ceiling"] is None else f"{c['banding_ceiling']:.1f}"
+        bands = "—" if d["banding"] is None else f"{np.mean(d['banding']['ratio']):.2f}"
+        row = (f"| `{name}` | {starts[c['init'].split('/')[-2]]} | {floor}, {ceiling} | {d['kicks_done']} | "
+               f"{d['initial']['squares_moved']} | {h['mean']:+.3f} ± {h['se']:.3f} ({h['leads']}) | "
+               f"{u['mean'][1]:.3f} (min {u['min'][1]:.3f}) | {bands} |").replace("-", "−")
+        assert row in lines, row
+        margins[name] = h["mean"]
+    assert margins["spec_veil"] > margins["spec_veil_b100"] > 0 > max(margins["spec_veil128"], margins["spec_f128"])
+
+
+def test_the_design_guide_prints_spec_veil_b100_through_the_simulator():
+    """`layout_trained_spec_b100/` is spec_veil_b100's design_turned.toml against the turned T-OLED at training seed 0,
+    and the guide's margins (plain DeP, DeP given the far field, the UNet) are its paired rows."""
+    root = Path(__file__).resolve().parents[2]
+    flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    t = json.loads((root / "docs" / "figures" / "design" / "layout_trained_spec_b100" / "study_layout_trained.json"
+                    ).read_text())
+    assert t["seeds"]["train"] == 0 and t["specs"][0].endswith("toled168_20.toml@edge@turned")
+    assert t["specs"][1].endswith("channel_step/spec_veil_b100/design_turned.toml")
+    p = t["paired"]["design_turned"]
+
+    def pm(k: str) -> str:
+        return f"{p[k]['mean_db']:+.2f} ± {p[k]['se_db']:.2f} dB ({p[k]['wins']} of 8)".replace("-", "−")
+    assert f"plain DeP {pm('dep')}, DeP given the far field {pm('dep_far')}, the UNet {pm('unet')}" in flat
+
