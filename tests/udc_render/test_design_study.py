@@ -767,7 +767,8 @@ def test_the_design_guide_prints_the_camera_channel_searches():
 
 def test_the_design_guide_prints_spec_veil_b100_through_the_simulator():
     """`layout_trained_spec_b100/` is spec_veil_b100's design_turned.toml against the turned T-OLED at training seed 0,
-    and the guide's margins (plain DeP, DeP given the far field, the UNet) are its paired rows."""
+    and the guide's margins (plain DeP, DeP given the far field, the UNet) are its paired rows; seed 1's folder has
+    the same specs and DeP, and the guide prints its UNet and the two seeds' mean."""
     root = Path(__file__).resolve().parents[2]
     flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
     t = json.loads((root / "docs" / "figures" / "design" / "layout_trained_spec_b100" / "study_layout_trained.json"
@@ -779,4 +780,12 @@ def test_the_design_guide_prints_spec_veil_b100_through_the_simulator():
     def pm(k: str) -> str:
         return f"{p[k]['mean_db']:+.2f} ± {p[k]['se_db']:.2f} dB ({p[k]['wins']} of 8)".replace("-", "−")
     assert f"plain DeP {pm('dep')}, DeP given the far field {pm('dep_far')}, the UNet {pm('unet')}" in flat
+    s1 = json.loads((root / "docs" / "figures" / "design" / "layout_trained_spec_b100_seed1" /
+                     "study_layout_trained.json").read_text())
+    assert s1["seeds"]["train"] == 1 and s1["specs"] == t["specs"]
+    q = s1["paired"]["design_turned"]
+    assert q["dep"] == p["dep"]  # the same captures and DeP: only the UNet's training differs
+    unet = f"{q['unet']['mean_db']:+.2f} ± {q['unet']['se_db']:.2f} dB ({q['unet']['wins']} of 8)".replace("-", "−")
+    mean = f"{(q['unet']['mean_db'] + p['unet']['mean_db']) / 2:+.2f}".replace("-", "−")
+    assert f"the UNet is at {unet}: level over the two seeds (mean {mean} dB)" in flat
 
