@@ -31,8 +31,8 @@ from udc_render.design.config import DesignConfig
 from udc_render.design.optimise import Designer
 from udc_render.design.starts import toled_cell
 
-__all__ = ["HELD_OUT_TILINGS", "applies", "held_out_draws", "engine_draw", "objective_on_draws", "preset_toled",
-           "simulator_toled", "held_out_comparison"]
+__all__ = ["HELD_OUT_TILINGS", "applies", "held_out_draws", "engine_draw", "objective_on_draws", "psnr_on_draws",
+           "preset_toled", "simulator_toled", "held_out_comparison"]
 
 HELD_OUT_TILINGS = 16  # the paired difference's se ≈ 0.025 dB / √n: 0.006 dB at 16 (committed veil designs)
 
@@ -84,7 +84,9 @@ def objective_on_draws(designer: Designer, cell: np.ndarray, draws: list, transm
         return [float(designer.objective(x, t, transmission)) for t in draws]
 
 
-def _psnr_db(designer: Designer, cell: np.ndarray, draws: list, transmission: float | None = None) -> list[float]:
+def psnr_on_draws(designer: Designer, cell: np.ndarray, draws: list, transmission: float | None = None
+                  ) -> list[float]:
+    """−10 log10 J of the cell on each draw (objective_on_draws), dB."""
     return [float(-10 * np.log10(j)) for j in objective_on_draws(designer, cell, draws, transmission)]
 
 
@@ -98,10 +100,10 @@ def _compare(designer: Designer, cells: dict, references: dict, draws: list, pro
     """Every cell and reference T-OLED ({name: (grey cell, its scorer)}) on the draws, paired."""
     psnr = {}
     for name, c in {**cells, "toled_squares": toled_cell(designer.config)}.items():
-        psnr[name] = _psnr_db(designer, c, draws)
+        psnr[name] = psnr_on_draws(designer, c, draws)
         progress(1)
     for name, (cell, scorer) in references.items():
-        psnr[name] = _psnr_db(scorer, cell, draws, float(np.mean(cell ** 2)))
+        psnr[name] = psnr_on_draws(scorer, cell, draws, float(np.mean(cell ** 2)))
         progress(1)
     n = len(draws)
     refs = ("toled_squares", *references)
@@ -121,8 +123,9 @@ def held_out_comparison(designer: Designer, cells: dict[str, np.ndarray], n: int
     config = designer.config
     if not applies(config):
         raise ValueError("held_out_comparison: takes --objective wiener or crop, --optics rig, --tiling turned")
+    makers = {"toled_preset": preset_toled, **({"toled_simulator": simulator_toled} if simulator else {})}
     references = {}
-    for name, make in (("toled_preset", preset_toled), ("toled_simulator", simulator_toled))[:1 + simulator]:
+    for name, make in makers.items():
         cell, scoring = make(config)
         references[name] = (cell, Designer(scoring, designer.sensor, designer.device))
     out = {"n": n, "keys": ["design", "held_out", "k"],

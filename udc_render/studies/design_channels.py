@@ -28,22 +28,17 @@ STEPS_NM = (0.0, 80.0, 40.0, 20.0, 10.0, 5.0)  # 0: one wavelength per channel; 
 QUICK_STEPS_NM = (0.0, 80.0, 40.0)
 
 
-def _psnr_db(designer, cell: np.ndarray, draw, transmission: float | None = None) -> float:
-    from udc_render.design.held_out import objective_on_draws
-    return float(-10 * np.log10(objective_on_draws(designer, cell, [draw], transmission)[0]))
-
-
 def _row(config, cells: dict, step_nm: float) -> dict:
     """One step: the T-OLED's PSNR, each design's margin over it, one objective's CPU seconds."""
-    from udc_render.design.held_out import engine_draw, simulator_toled
+    from udc_render.design.held_out import engine_draw, psnr_on_draws, simulator_toled
     from udc_render.design.optimise import Designer
     cfg = replace(config, channel_step_nm=step_nm)
     designer = Designer(cfg)
     draw = engine_draw(designer)
     toled, scoring = simulator_toled(cfg)
-    reference = _psnr_db(Designer(scoring), toled, draw, float(np.mean(toled ** 2)))
+    reference = psnr_on_draws(Designer(scoring), toled, [draw], float(np.mean(toled ** 2)))[0]
     start = time.process_time()
-    margins = {name: _psnr_db(designer, c, draw) - reference for name, c in cells.items()}
+    margins = {name: psnr_on_draws(designer, c, [draw])[0] - reference for name, c in cells.items()}
     return {"channel_step_nm": step_nm, "wavelengths": len(designer.grid.wavelengths_nm),
             "cpu_s": (time.process_time() - start) / len(cells), "toled_psnr_db": reference, "margins_db": margins}
 
