@@ -19,7 +19,7 @@ from imageio import v3 as iio
 
 from .layouts import LayoutError
 
-__all__ = ["SUFFIXES", "MicrographLayout", "read_transmission_image"]
+__all__ = ["SUFFIXES", "MicrographLayout", "quarter_turns", "read_transmission_image"]
 
 SUFFIXES = {".png", ".tif", ".tiff", ".exr"}
 
@@ -66,6 +66,12 @@ def read_transmission_image(path: str | Path) -> np.ndarray:
     if lo < 0 or hi > 1 + 1e-6:
         raise LayoutError(f"micrograph {path}: values must lie in [0, 1] after scaling, got [{lo:.4g}, {hi:.4g}]")
     return np.clip(img, 0.0, 1.0)
+
+
+def quarter_turns(seed: int, tiles_x: int, tiles_y: int, square: bool = True) -> np.ndarray:
+    """[tiles_y, tiles_x] quarter turns per tile drawn from seed: uniform over 0..3 (a square tile) or over 0, 2."""
+    choices = np.array([0, 1, 2, 3]) if square else np.array([0, 2])
+    return np.random.default_rng(seed).choice(choices, size=(tiles_y, tiles_x))
 
 
 def _area_resample_matrix(n_out: int, n_in: int) -> np.ndarray:
@@ -143,10 +149,8 @@ class MicrographLayout:
         """Quarter turns (0..3) for every tile, from the recorded seed (all 0 without rotation)."""
         if not self.random_rotation:
             return np.zeros((tiles_y, tiles_x), dtype=int)
-        rng = np.random.default_rng(self.seed)
         h, w = self.image.shape
-        choices = np.array([0, 1, 2, 3]) if h == w else np.array([0, 2])
-        return rng.choice(choices, size=(tiles_y, tiles_x))
+        return quarter_turns(self.seed, tiles_x, tiles_y, square=h == w)
 
     def describe(self) -> dict:
         digest = hashlib.sha256(np.ascontiguousarray(self.image).tobytes()).hexdigest()[:16]

@@ -1,8 +1,9 @@
 """`udc-render study layout-trained`: pixel layouts compared by restorers through the simulator (issue 48).
 
-For each layout given (a display file, a preset or a micrograph; `@edge` frames its cell with the first open column
-at the tile's edge, `@turned` tiles it with a random quarter-turn per tile: udc_render.design.cells.frame_cell,
-psf.MicrographLayout), at equal footing:
+For each layout given (a display file, a preset or a micrograph; `@edge` frames its cell with the first opening at
+the tile's edge, `@turned` tiles it with a random quarter-turn per tile: a preset exactly, from its Fourier series
+(psf.turned), a micrograph by its own pixels (udc_render.design.cells.frame_cell, psf.MicrographLayout)), at equal
+footing:
     d = 2 mm (the physical profile's), the stack's T(λ) as the display gives it, and a gain of 1 / the layout's
     power transmittance, so that every capture's mean level is glass's;
 1. a kernel bank of the layout (udc_render.dataset.bank_make) under the `physical` profile at the robustness study's
@@ -38,6 +39,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from psf.layouts import PeriodicLayout
+from psf.turned import TurnedLayout, edge_framed
 from restore.dep_far import subtract_far
 from restore.online import clean_images, images_fingerprint
 from restore.studies.robustness import (
@@ -58,7 +61,7 @@ from restore.studies.stage_times import StageTimes
 from restore.train import load_model, train
 from udc_render.dataset.bank import read_bank
 from udc_render.dataset.bank_make import bank_settings, make_bank, preset_specs
-from udc_render.design.cells import SIMULATOR_TILE_SEED, frame_cell, intensity_cell
+from udc_render.design.cells import SIMULATOR_TILE_SEED, frame_cell, layout_cell
 from udc_render.errors import UdcError
 from udc_render.io.exr import save_exr
 from udc_render.io.files import save_figure, save_json, save_text
@@ -83,19 +86,21 @@ BUDGETS = {"quick": ROBUSTNESS_BUDGETS["quick"], "full": replace(ROBUSTNESS_BUDG
 
 
 def _cell_display(display: Display, frame: str, turned: bool, folder: Path) -> Display:
-    """The display's cell as intensities (cells.intensity_cell: a preset's on CELL_PIXEL_UM squares, its open area
-    kept exactly; a micrograph's own pixels), framed, written as an EXR in `folder` and tiled as a micrograph of
-    intensity values, turned or not (tile seed SIMULATOR_TILE_SEED); its T(λ) kept."""
-    cell, pixel_um = intensity_cell(display.layout)
-    cell = frame_cell(cell, frame)
+    """The display framed ('edge': its first opening at the tile's edge) and tiled turned or not (tile seed
+    SIMULATOR_TILE_SEED), its T(λ) kept: a preset exactly (psf.turned: its Fourier series, no raster); a micrograph
+    as its own pixels, framed, written as an EXR in `folder` and tiled as a micrograph."""
     name = display.name + ("_edge" if frame == "edge" else "") + ("_turned" if turned else "")
+    source = (f"{display.source}, cell {'framed at the edge, ' if frame == 'edge' else ''}"
+              f"{'turned per tile' if turned else 'repeated'}")
+    if isinstance(display.layout, PeriodicLayout):
+        layout = edge_framed(display.layout) if frame == "edge" else display.layout
+        return replace(display, name=name, layout=TurnedLayout(layout, SIMULATOR_TILE_SEED, turned), source=source)
+    cell, pixel_um = layout_cell(display.layout)
     path = folder / f"{name}.exr"
     folder.mkdir(parents=True, exist_ok=True)
-    save_exr(path, {c: cell.astype(np.float32) for c in "RGB"})
-    tiled = micrograph_display(path, pixel_um, "intensity", turned, SIMULATOR_TILE_SEED)
-    return replace(tiled, name=name, transmission=display.transmission,
-                   source=f"{display.source}, cell {'framed at the edge, ' if frame == 'edge' else ''}"
-                          f"{'turned per tile' if turned else 'repeated'}")
+    save_exr(path, {c: frame_cell(cell, frame).astype(np.float32) for c in "RGB"})
+    tiled = micrograph_display(path, pixel_um, "amplitude", turned, SIMULATOR_TILE_SEED)
+    return replace(tiled, name=name, transmission=display.transmission, source=source)
 
 
 def entry_display(spec: str, folder: Path) -> Display:

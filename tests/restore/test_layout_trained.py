@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from psf.micrograph import MicrographLayout
+from psf.turned import TurnedLayout
 from restore.studies.layout_trained import NAME, ROW_KEYS, entry_display, paired, run_study
 from udc_render.cli import main
 from udc_render.errors import UdcError
@@ -18,14 +18,15 @@ FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures" / "design"
 
 
 def test_a_preset_cell_framed_and_turned_keeps_its_open_area_and_gets_the_gain_one_over_it(tmp_path):
-    """@edge@turned: the preset's exact area-weighted intensity raster (1 µm squares) as a turned micrograph; its open
-    area is the preset's 20 % exactly, the gain 1 / 0.2, and its first column is open (framed at the edge)."""
+    """@edge@turned: the preset itself (psf.turned: no raster), its slit moved to the tile's edge and turned per tile;
+    its open area is the preset's 20 % exactly, the gain 1 / 0.2, and no EXR is written."""
     d = entry_display(f"{FIGURES / 'toled168_20.toml'}@edge@turned", tmp_path)
-    assert isinstance(d.layout, MicrographLayout) and d.layout.random_rotation and d.name == "toled168_20_edge_turned"
-    assert d.layout.period_um == (168.0, 168.0)
-    assert d.layout.power_transmittance == pytest.approx(0.20, rel=1e-6)
-    assert d.gain == pytest.approx(5.0, rel=1e-6)
-    assert d.layout.image[:, 0].max() > 0 and (tmp_path / "toled168_20_edge_turned.exr").is_file()
+    assert isinstance(d.layout, TurnedLayout) and d.layout.random_rotation and d.name == "toled168_20_edge_turned"
+    assert d.layout.period_um == (168.0, 168.0) and not d.layout.periodic
+    assert d.layout.power_transmittance == pytest.approx(0.20, rel=1e-12)
+    assert d.gain == pytest.approx(5.0, rel=1e-12)
+    slit = d.layout.base.openings[0]
+    assert slit.cx_um - slit.width_um / 2 == pytest.approx(0.0, abs=1e-12) and not list(tmp_path.glob("*.exr"))
     plain = entry_display(str(FIGURES / "poled_20.toml"), tmp_path)
     assert plain.layout.describe()["kind"] == "periodic" and plain.gain == pytest.approx(1 / 0.2)
 

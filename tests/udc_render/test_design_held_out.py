@@ -1,5 +1,6 @@
-"""The design's objective on many held-out tilings, paired with the simulator's T-OLED (udc_render.design.held_out),
-the search over several tilings (--search-tilings) and `study held-out` (udc_render.studies.design_held_out)."""
+"""The design's objective on many held-out tilings, paired with the exact T-OLED the simulator takes
+(udc_render.design.held_out), the search over several tilings (--search-tilings) and `study held-out`
+(udc_render.studies.design_held_out)."""
 from __future__ import annotations
 
 import json
@@ -11,6 +12,7 @@ import torch
 from psf import Lens, compute_kernels, layouts
 from psf.micrograph import MicrographLayout
 from psf.spectral import channel_weights
+from psf.turned import TurnedLayout, edge_framed
 from udc_render import cli
 from udc_render.design import held_out, metrics, torch_psf as tp
 from udc_render.design.cells import SIMULATOR_TILE_SEED, layout_cell
@@ -40,38 +42,41 @@ def test_a_grey_cell_scored_at_its_own_transmission_is_the_engines_restorability
     assert abs(score / ref - 1) < 1e-10
 
 
-def test_the_simulators_tiling_and_raster_score_as_the_engines_kernels():
-    """The 'engine' group's draw and the simulator's T-OLED raster (held_out.simulator_toled: √ of the 1 µm intensities,
-    scored with the LTPS limit lifted), turned: the objective equals metrics.restorability of psf.compute_kernels'
-    kernels of that micrograph turned by the engine for SIMULATOR_TILE_SEED, to 1e-10 (the grey cell's test above)."""
+def test_the_simulators_tiling_and_the_exact_toled_score_as_the_engines_kernels():
+    """The 'engine' group's draw and the exact T-OLED (held_out.preset_toled: a binary raster with its edges on the
+    grid, scored with the LTPS limit lifted), turned: the objective equals metrics.restorability of
+    psf.compute_kernels' kernels of the preset itself, from its Fourier series (psf.turned), framed and turned by
+    the engine for SIMULATOR_TILE_SEED, to 1e-10 (the grey cell's test above)."""
     config = DesignConfig(**TINY)
-    cell, scoring = held_out.simulator_toled(config)
+    cell, scoring = held_out.preset_toled(config)
     d, design = Designer(scoring), Designer(config)
     t = float(np.mean(cell ** 2))
-    assert scoring.feature_um == 1.0 and cell.shape == (40, 40) and abs(t - 0.24) < 1e-12 and d.tiles == design.tiles
+    assert np.all((cell == 0) | (cell == 1)) and abs(t - 0.24) < 1e-12 and d.tiles == design.tiles
+    assert scoring.feature_um == pytest.approx(1 / 3) and cell.shape == (120, 120)
     draw = held_out.engine_draw(design)
     score = float(d.objective(torch.tensor(cell), draw, t))
-    engine = compute_kernels(MicrographLayout("cell", 1.0, random_rotation=True, seed=SIMULATOR_TILE_SEED, image=cell),
-                             Lens(), RIG_WAVELENGTHS_NM, size_px=31, pupil_samples=64, precision="float64")
+    toled = layouts.toled(pitch_um=40.0, open_fraction=0.24)
+    engine = compute_kernels(TurnedLayout(edge_framed(toled), SIMULATOR_TILE_SEED), Lens(), RIG_WAVELENGTHS_NM,
+                             size_px=31, pupil_samples=64, precision="float64")
     _, inside = tp.kernels_and_window(torch.tensor(cell), d.grid, draw)
     ref = np.mean(metrics.restorability(engine.kernels, t * inside.numpy())["wiener_mse"])
     assert abs(score / ref - 1) < 1e-10
 
 
-def test_the_simulators_toled_is_the_cell_layout_trained_tiles(tmp_path):
-    """simulator_toled's cell is the one `study layout-trained` writes for toled168_20.toml@edge@turned (to the EXR's
-    float32), turned with the same tile seed; a study with simulator=True pairs every cell with it, on one more
-    group of one draw."""
+def test_the_exact_toled_is_the_preset_layout_trained_tiles(tmp_path):
+    """`study layout-trained`'s toled168_20.toml@edge@turned is the preset framed at the edge and turned with the
+    simulator's tile seed (no raster); preset_toled's cell is that preset exactly; a study with simulator=True
+    pairs every cell with it on one more group of one draw."""
     from restore.studies.layout_trained import entry_display
     lay = entry_display("docs/figures/design/toled168_20.toml@edge@turned", tmp_path).layout
-    cell, scoring = held_out.simulator_toled(DesignConfig(feature_um=8.0))
-    assert lay.pixel_um == scoring.feature_um == 1.0 and lay.random_rotation and lay.seed == SIMULATOR_TILE_SEED
-    assert np.abs(lay.image - cell).max() < 1e-6
+    assert isinstance(lay, TurnedLayout) and lay.random_rotation and lay.seed == SIMULATOR_TILE_SEED
+    cell, scoring = held_out.preset_toled(DesignConfig(feature_um=8.0))
+    c = cell.shape[0]
+    assert c == 2520 and np.array_equal(cell, np.round(lay.base.cell_raster(c, c)[0]))
     d = Designer(DesignConfig(**TINY))
     doc = held_out.held_out_comparison(d, {"s": scatter(d.config, "scatter", 1)}, 2, simulator=True)
-    assert len(doc["engine"]["psnr_db"]["s"]) == 1 and set(doc["d4"]["vs"]["s"]) == {
-        "toled_preset", "toled_squares", "toled_simulator"}
-    assert doc["toled_simulator_transmission"] == pytest.approx(0.24, abs=1e-12)
+    assert len(doc["engine"]["psnr_db"]["s"]) == 1 and set(doc["d4"]["vs"]["s"]) == {"toled_preset", "toled_squares"}
+    assert doc["toled_preset_transmission"] == pytest.approx(0.24, abs=1e-12)
 
 
 def test_held_out_draws_are_the_same_for_every_cell_and_apart_from_the_searchs():
@@ -127,13 +132,13 @@ def test_design_json_holds_the_held_out_comparison(tmp_path):
     study = json.loads((tmp_path / "s" / "study_held_out.json").read_text())
     assert [r["design"] for r in study["rows"]] == [str(tmp_path / "a"), str(tmp_path / "b")]
     assert study["rows"][0]["draws"] != study["rows"][1]["draws"] and (tmp_path / "s" / "study_held_out.png").is_file()
-    assert {"engine_toled_simulator", "d4_toled_simulator"} <= set(study["rows"][0])
+    assert "engine_toled_preset" in study["rows"][0] and "d4_toled_simulator" not in study["rows"][0]
     assert cli.main(["study", "channel-step", "--designs", folders, "--quick", "--out", str(tmp_path / "c")]) == 0
     rows = json.loads((tmp_path / "c" / "study_channel_step.json").read_text())["rows"]
     lam = channel_weights(SensorConfig().camera, CHANNEL_ILLUMINANT, 40.0)[0]
     assert [r["channel_step_nm"] for r in rows] == [0.0, 80.0, 40.0] and rows[-1]["error_db"] == 0.0
     assert rows[0]["wavelengths"] == 3 and rows[-1]["wavelengths"] == len(lam)
-    engine = {r["design"]: r["engine_toled_simulator"] for r in study["rows"]}  # at the designs' own step, 40
+    engine = {r["design"]: r["engine_toled_preset"] for r in study["rows"]}  # at the designs' own step, 40
     assert json.loads((tmp_path / "a" / "design.json").read_text())["config"]["channel_step_nm"] == 40.0
     assert rows[2]["margins_db"] == pytest.approx(engine, abs=1e-9) != rows[0]["margins_db"]
 
@@ -160,3 +165,14 @@ def test_study_held_out_refuses_in_one_line(tmp_path, capsys, what, says):
     assert cli.main(["study", *argv, "--out", str(tmp_path / "never")]) == 2
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()
+
+
+def test_the_exact_cell_puts_every_edge_on_the_grid_or_is_refused():
+    """cells.exact_cell: the T-OLED at 168 µm and 20 % on 2520² squares of 1/15 µm (its slit's edges at 196/3 and
+    42/5 µm), binary, its open area exact; the P-OLED's ellipses have no such grid: refused in one line."""
+    from udc_render.design.cells import exact_cell
+    cell, pixel = exact_cell(layouts.toled(pitch_um=168.0, open_fraction=0.2))
+    assert cell.shape == (2520, 2520) and pixel == pytest.approx(1 / 15)
+    assert cell.mean() == pytest.approx(0.2, abs=1e-12)
+    with pytest.raises(tp.DesignError, match="poled: no raster of at most 4096²"):
+        exact_cell(layouts.poled(open_fraction=0.2))

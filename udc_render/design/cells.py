@@ -9,7 +9,7 @@ from psf.micrograph import MicrographLayout
 from udc_render.design import torch_psf as tp, upc
 
 RINGS = 147  # k = 0 … 146, UPC's
-CELL_PIXEL_UM = 1.0  # the simulator's raster of a preset's cell (study layout-trained's @edge / @turned: 168² squares)
+EXACT_MAX_PX = 4096  # exact_cell's largest raster side (the T-OLED at 168 µm and 20 %: 2520, edges on 1/15 µm)
 SIMULATOR_TILE_SEED = 0  # the tile seed of study layout-trained's @turned (the engine's quarter-turns per tile)
 
 
@@ -29,15 +29,17 @@ def layout_cell(layout, pixel_um: float = 2.0) -> tuple[np.ndarray, float]:
     return tp.preset_cell(layout, c), layout.pitch_x_um / c
 
 
-def intensity_cell(layout, pixel_um: float = CELL_PIXEL_UM) -> tuple[np.ndarray, float]:
-    """(intensity cell |a|² [c, c], its pixel in µm) as the simulator tiles a layout's cell: a micrograph's own pixels
-    squared, a preset's exact area-weighted intensity raster on ≈ pixel_um squares (PeriodicLayout.cell_raster: its
-    open area kept exactly)."""
-    if isinstance(layout, MicrographLayout):
-        cell, pixel = layout_cell(layout)
-        return cell ** 2, pixel
-    c = _cell_px(layout.pitch_x_um, pixel_um)
-    return layout.cell_raster(c, c)[1], layout.pitch_x_um / c
+def exact_cell(layout) -> tuple[np.ndarray, float]:
+    """(binary amplitude cell [c, c], its pixel in µm): a preset on the coarsest raster that puts every edge of its
+    openings on the grid, so that the raster is the preset exactly (its Fourier series as psf.turned tiles it for
+    the simulator); c a multiple of the pitch in µm, at most EXACT_MAX_PX, else refused in one line."""
+    pitch = layout.pitch_x_um
+    for c in range(round(pitch), EXACT_MAX_PX + 1, max(1, round(pitch))):
+        amp = tp.preset_cell(layout, c)
+        if np.all((amp < 1e-9) | (amp > 1 - 1e-9)):
+            return np.round(amp), pitch / c
+    raise tp.DesignError(f"layout {layout.name}: no raster of at most {EXACT_MAX_PX}² squares puts its edges on the "
+                         "grid; the exact T-OLED needs a preset with rational edges")
 
 
 def frame_cell(cell: np.ndarray, frame: str = "as_given") -> np.ndarray:

@@ -7,12 +7,14 @@ held-out draw; this module scores n more (stream keys 'design', 'held_out', k), 
 pairs each cell with two T-OLEDs:
 - 'toled_squares': the preset T-OLED on the design's feature squares (`--init toled`, starts.toled_cell), the
   search's start and its former reference;
-- 'toled_preset': the preset T-OLED on its own ≈ 2 µm area-weighted raster (cells.layout_cell), slit at the tile's
-  edge, at its own transmission Σ|a|² / c² (0.194 at 20 %: its grey edges), scored by the same objective on a
-  Designer of its pixel: the T-OLED `study layout-trained` compares with (toled168_20.toml@edge@turned);
-- with simulator=True (`study held-out`), 'toled_simulator': that T-OLED exactly as the simulator rasters it
-  (cells.intensity_cell: intensities on CELL_PIXEL_UM = 1 µm squares, amplitudes √I, transmission the open area),
-  and one more group, 'engine': the simulator's own tiling (the engine's quarter-turns for SIMULATOR_TILE_SEED).
+- 'toled_preset': the preset T-OLED exactly (cells.exact_cell: a binary raster with its edges on the grid, 2520²
+  squares at 168 µm and 20 %), slit at the tile's edge, at its own transmission: the T-OLED `study layout-trained`
+  compares with (toled168_20.toml@edge@turned, which the simulator tiles from the preset's Fourier series:
+  psf.turned). Before, the simulator took a raster of the preset's intensities on 1 µm squares (amplitudes √I) and
+  this reference an amplitude raster on ≈ 2 µm squares: both score about 0.2 dB above the exact T-OLED (their grey
+  edges keep light inside the kernel window; docs/guides/design.md);
+- with simulator=True (`study held-out`), one more group, 'engine': the simulator's own tiling (the engine's
+  quarter-turns for SIMULATOR_TILE_SEED).
 The paired difference per draw (cell − T-OLED, dB) has a far smaller spread than either (the draws are shared), so
 its mean and standard error say whether a design leads in expectation.
 """
@@ -24,15 +26,15 @@ import numpy as np
 import torch
 
 from psf import layouts
-from psf.micrograph import MicrographLayout
+from psf.micrograph import quarter_turns
 from udc_render.design import torch_psf as tp
-from udc_render.design.cells import SIMULATOR_TILE_SEED, frame_cell, intensity_cell, layout_cell
+from udc_render.design.cells import SIMULATOR_TILE_SEED, exact_cell, frame_cell
 from udc_render.design.config import DesignConfig
 from udc_render.design.optimise import Designer
 from udc_render.design.starts import toled_cell
 
 __all__ = ["HELD_OUT_TILINGS", "applies", "held_out_draws", "engine_draw", "objective_on_draws", "psnr_on_draws",
-           "preset_toled", "simulator_toled", "held_out_comparison"]
+           "preset_toled", "held_out_comparison"]
 
 HELD_OUT_TILINGS = 16  # the paired difference's se ≈ 0.025 dB / √n: 0.006 dB at 16 (committed veil designs)
 
@@ -46,10 +48,9 @@ def held_out_draws(designer: Designer, n: int, flips: bool = True) -> list[np.nd
 
 def engine_draw(designer: Designer) -> np.ndarray:
     """The simulator's own tiling of the designer's tiles: the engine's quarter-turns per tile for
-    SIMULATOR_TILE_SEED (psf.micrograph.MicrographLayout.tile_rotations, which torch_psf's tests match)."""
-    square = MicrographLayout("cell", 1.0, random_rotation=True, seed=SIMULATOR_TILE_SEED,
-                              image=np.ones((designer.config.cell_px,) * 2))
-    return square.tile_rotations(designer.tiles, designer.tiles)
+    SIMULATOR_TILE_SEED (psf.micrograph.quarter_turns: a micrograph's and a turned preset's, which torch_psf's
+    tests match)."""
+    return quarter_turns(SIMULATOR_TILE_SEED, designer.tiles, designer.tiles)
 
 
 def _scoring(config: DesignConfig, pixel_um: float) -> DesignConfig:
@@ -59,16 +60,9 @@ def _scoring(config: DesignConfig, pixel_um: float) -> DesignConfig:
 
 
 def preset_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
-    """(the preset T-OLED's amplitude cell on its ≈ 2 µm raster, slit at the tile's edge; the config that scores it)."""
-    raster, pixel_um = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
+    """(the preset T-OLED's exact binary cell, slit at the tile's edge; the config that scores it)."""
+    raster, pixel_um = exact_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
     return frame_cell(raster, "edge"), _scoring(config, pixel_um)
-
-
-def simulator_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
-    """(the preset T-OLED's amplitude cell as `study layout-trained` tiles it: √ of its intensities on
-    CELL_PIXEL_UM squares, slit at the tile's edge; the config that scores it)."""
-    raster, pixel_um = intensity_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
-    return np.sqrt(frame_cell(raster, "edge")), _scoring(config, pixel_um)
 
 
 def applies(config: DesignConfig) -> bool:
@@ -117,19 +111,14 @@ def held_out_comparison(designer: Designer, cells: dict[str, np.ndarray], n: int
     """The objective as a PSNR (dB) of each named cell of the designer's squares and of the two T-OLEDs (module
     doc) on n held-out draws, of the 8 D4 elements (the search's, 'd4') and of the 4 quarter-turns (the engine's,
     'quarter_turns'): per draw, mean and sd, and each cell's paired difference to each T-OLED (mean, se, the draws
-    it leads); with simulator, also against the simulator's raster of the T-OLED and on the simulator's own tiling
-    ('engine', one draw). Takes the rig's objectives 'wiener' and 'crop' on a turned tiling; progress(1) after each
-    cell's draws."""
+    it leads); with simulator, also on the simulator's own tiling ('engine', one draw). Takes the rig's objectives
+    'wiener' and 'crop' on a turned tiling; progress(1) after each cell's draws."""
     config = designer.config
     if not applies(config):
         raise ValueError("held_out_comparison: takes --objective wiener or crop, --optics rig, --tiling turned")
-    makers = {"toled_preset": preset_toled, **({"toled_simulator": simulator_toled} if simulator else {})}
-    references = {}
-    for name, make in makers.items():
-        cell, scoring = make(config)
-        references[name] = (cell, Designer(scoring, designer.sensor, designer.device))
-    out = {"n": n, "keys": ["design", "held_out", "k"],
-           **{f"{k}_transmission": float(np.mean(c ** 2)) for k, (c, _) in references.items()}}
+    cell, scoring = preset_toled(config)
+    references = {"toled_preset": (cell, Designer(scoring, designer.sensor, designer.device))}
+    out = {"n": n, "keys": ["design", "held_out", "k"], "toled_preset_transmission": float(np.mean(cell ** 2))}
     groups = {"d4": held_out_draws(designer, n, True), "quarter_turns": held_out_draws(designer, n, False)}
     if simulator:
         groups["engine"] = [engine_draw(designer)]

@@ -3,7 +3,7 @@
 The rig's objectives see one wavelength per channel (640 / 520 / 450 nm, `design --channel-step 0`) or the camera's
 channels: its band sampled at a step, summed with the weights S_c(λ) D65(λ) δλ (`--channel-step NM`, the kernels
 `study layout-trained`'s bank takes; udc_render.design.optimise.objective_wavelengths). Each design's cell (the
-first folder's objective, its channel step set per row) and the simulator's T-OLED (held_out.simulator_toled) are
+first folder's objective, its channel step set per row) and the simulator's T-OLED (held_out.preset_toled, exact) are
 scored on the simulator's own tiling (held_out.engine_draw), and each design's margin over that T-OLED (dB) is taken
 against the finest step's: the error of the approximation. CPU seconds are one objective's, the mean over the
 designs. Writes study_channel_step.{json,csv,md,png}.
@@ -30,12 +30,12 @@ QUICK_STEPS_NM = (0.0, 80.0, 40.0)
 
 def _row(config, cells: dict, step_nm: float) -> dict:
     """One step: the T-OLED's PSNR, each design's margin over it, one objective's CPU seconds."""
-    from udc_render.design.held_out import engine_draw, psnr_on_draws, simulator_toled
+    from udc_render.design.held_out import engine_draw, preset_toled, psnr_on_draws
     from udc_render.design.optimise import Designer
     cfg = replace(config, channel_step_nm=step_nm)
     designer = Designer(cfg)
     draw = engine_draw(designer)
-    toled, scoring = simulator_toled(cfg)
+    toled, scoring = preset_toled(cfg)
     reference = psnr_on_draws(Designer(scoring), toled, [draw], float(np.mean(toled ** 2)))[0]
     start = time.process_time()
     margins = {name: psnr_on_draws(designer, c, [draw])[0] - reference for name, c in cells.items()}
