@@ -30,7 +30,7 @@ STUDIES = {
     "design": "the layout designer's knobs (the torch PSF's pupil samples, the optimiser's steps): error against "
               "CPU time",
     "held-out": "committed designs (--designs) re-scored on 16 held-out tilings, paired with the T-OLED the simulator "
-                "takes (also its own raster and tiling) and the T-OLED on the design's squares (about 1 min a design "
+                "takes (exact; also on its own tiling) and the T-OLED on the design's squares (about 1 min a design "
                 "at the veil objective, one thread)",
     "channel-step": "committed designs (--designs) scored by their objective at each channel step (one wavelength "
                     "per channel to the camera's band at 5 nm) against the simulator's T-OLED on its own tiling: "
