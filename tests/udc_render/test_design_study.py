@@ -857,6 +857,16 @@ def test_the_design_guide_prints_the_exact_toled():
     shift = {k: np.mean(np.subtract(raster[k], ref[k])) for k in ("dep", "dep_far", "unet")}
     assert (f"the exact one loses {shift['dep']:.2f} dB by plain DeP, {shift['dep_far']:.2f} dB by DeP given the far "
             f"field and {shift['unet']:.2f} dB by the UNet") in flat
+    presets = {r["layout"]: r["per_image_db"] for r in
+               json.loads((figures / "layout_trained" / "study_layout_trained.json").read_text())["rows"]}
+    f128_row = {r["layout"]: r["per_image_db"] for r in json.loads(
+        (figures / "layout_trained_f128" / "study_layout_trained.json").read_text())["rows"]}["design_turned"]
+    for name, r in (("veil128_b100", f128_row), ("spec_veil_b95", rows["spec_veil_b95_turned"])):
+        m = [np.mean(np.subtract(r[k], presets[p][k])) for p in ("toled168_20", "poled_20") for k in ("dep", "unet")]
+        assert f"`{name}` {m[0]:+.2f} / {m[1]:+.2f} dB over the repeated T-OLED and {m[2]:+.2f} / {m[3]:+.2f}" in flat \
+            or f"`{name}` {m[0]:+.2f} / {m[1]:+.2f} and {m[2]:+.2f} / {m[3]:+.2f} dB" in flat, (name, m)
+        assert all(np.all(np.subtract(r[k], presets[p][k]) > 0) for p in ("toled168_20", "poled_20")
+                   for k in ("dep", "unet"))
     f128 = {r["layout"]: r["per_image_db"] for r in json.loads(
         (figures / "layout_trained_f128" / "study_layout_trained.json").read_text())["rows"]}["design_turned"]
     b95 = rows["spec_veil_b95_turned"]
