@@ -167,12 +167,15 @@ def test_study_held_out_refuses_in_one_line(tmp_path, capsys, what, says):
     assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()
 
 
-def test_the_exact_cell_puts_every_edge_on_the_grid_or_is_refused():
-    """cells.exact_cell: the T-OLED at 168 µm and 20 % on 2520² squares of 1/15 µm (its slit's edges at 196/3 and
-    42/5 µm), binary, its open area exact; the P-OLED's ellipses have no such grid: refused in one line."""
-    from udc_render.design.cells import exact_cell
-    cell, pixel = exact_cell(layouts.toled(pitch_um=168.0, open_fraction=0.2))
+def test_the_reference_cell_puts_every_edge_on_the_grid_or_takes_the_finest_raster():
+    """cells.reference_cell: the T-OLED at 168 µm and 20 % on 2520² squares of 1/15 µm (its slit's edges at 196/3 and
+    42/5 µm), binary, its open area exact; at 21.3 % its edges need squares of 1/25 µm (4200², past EXACT_MAX_PX): the
+    finest raster, 4032², area-weighted, its mean amplitude the open area and only the edges grey."""
+    from udc_render.design.cells import EXACT_MAX_PX, reference_cell
+    cell, pixel = reference_cell(layouts.toled(pitch_um=168.0, open_fraction=0.2))
     assert cell.shape == (2520, 2520) and pixel == pytest.approx(1 / 15)
-    assert cell.mean() == pytest.approx(0.2, abs=1e-12)
-    with pytest.raises(tp.DesignError, match="poled: no raster of at most 4096²"):
-        exact_cell(layouts.poled(open_fraction=0.2))
+    assert cell.mean() == pytest.approx(0.2, abs=1e-12) and np.all((cell == 0) | (cell == 1))
+    fine, pixel = reference_cell(layouts.toled(pitch_um=168.0, open_fraction=0.213))
+    grey = (fine > 1e-9) & (fine < 1 - 1e-9)
+    assert fine.shape == (4032, 4032) and 4032 <= EXACT_MAX_PX and pixel == pytest.approx(168 / 4032)
+    assert fine.mean() == pytest.approx(0.213, rel=1e-9) and 0 < grey.sum() < 4 * 4032

@@ -9,7 +9,7 @@ from psf.micrograph import MicrographLayout
 from udc_render.design import torch_psf as tp, upc
 
 RINGS = 147  # k = 0 … 146, UPC's
-EXACT_MAX_PX = 4096  # exact_cell's largest raster side (the T-OLED at 168 µm and 20 %: 2520, edges on 1/15 µm)
+EXACT_MAX_PX = 4096  # reference_cell's largest raster side (the T-OLED at 168 µm and 20 %: 2520, edges on 1/15 µm)
 SIMULATOR_TILE_SEED = 0  # the tile seed of study layout-trained's @turned (the engine's quarter-turns per tile)
 
 
@@ -29,17 +29,19 @@ def layout_cell(layout, pixel_um: float = 2.0) -> tuple[np.ndarray, float]:
     return tp.preset_cell(layout, c), layout.pitch_x_um / c
 
 
-def exact_cell(layout) -> tuple[np.ndarray, float]:
-    """(binary amplitude cell [c, c], its pixel in µm): a preset on the coarsest raster that puts every edge of its
-    openings on the grid, so that the raster is the preset exactly (its Fourier series as psf.turned tiles it for
-    the simulator); c a multiple of the pitch in µm, at most EXACT_MAX_PX, else refused in one line."""
+def reference_cell(layout) -> tuple[np.ndarray, float]:
+    """(amplitude cell [c, c], its pixel in µm): a preset on the coarsest raster that puts every edge of its openings on
+    the grid, binary, so that the raster is the preset exactly (its Fourier series, as psf.turned tiles it for the
+    simulator); c a multiple of the pitch in µm up to EXACT_MAX_PX. A preset with no such raster (curved or irrational
+    edges) gets the finest of them, area-weighted: grey edges of ≤ 1/24 µm (the T-OLED's rasters converge to it as the
+    square: 0.02 dB above the exact one at 1/8 µm in the veil objective, docs/guides/design.md)."""
     pitch = layout.pitch_x_um
-    for c in range(round(pitch), EXACT_MAX_PX + 1, max(1, round(pitch))):
+    sizes = range(round(pitch), EXACT_MAX_PX + 1, max(1, round(pitch)))
+    for c in sizes:
         amp = tp.preset_cell(layout, c)
         if np.all((amp < 1e-9) | (amp > 1 - 1e-9)):
             return np.round(amp), pitch / c
-    raise tp.DesignError(f"layout {layout.name}: no raster of at most {EXACT_MAX_PX}² squares puts its edges on the "
-                         "grid; the exact T-OLED needs a preset with rational edges")
+    return amp, pitch / sizes[-1]
 
 
 def frame_cell(cell: np.ndarray, frame: str = "as_given") -> np.ndarray:

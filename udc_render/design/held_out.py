@@ -7,7 +7,7 @@ held-out draw; this module scores n more (stream keys 'design', 'held_out', k), 
 pairs each cell with two T-OLEDs:
 - 'toled_squares': the preset T-OLED on the design's feature squares (`--init toled`, starts.toled_cell), the
   search's start and its former reference;
-- 'toled_preset': the preset T-OLED exactly (cells.exact_cell: a binary raster with its edges on the grid, 2520²
+- 'toled_preset': the preset T-OLED exactly (cells.reference_cell: a binary raster with its edges on the grid, 2520²
   squares at 168 µm and 20 %), slit at the tile's edge, at its own transmission: the T-OLED `study layout-trained`
   compares with (toled168_20.toml@edge@turned, which the simulator tiles from the preset's Fourier series:
   psf.turned). Before, the simulator took a raster of the preset's intensities on 1 µm squares (amplitudes √I) and
@@ -28,7 +28,7 @@ import torch
 from psf import layouts
 from psf.micrograph import quarter_turns
 from udc_render.design import torch_psf as tp
-from udc_render.design.cells import SIMULATOR_TILE_SEED, exact_cell, frame_cell
+from udc_render.design.cells import SIMULATOR_TILE_SEED, frame_cell, reference_cell
 from udc_render.design.config import DesignConfig
 from udc_render.design.optimise import Designer
 from udc_render.design.starts import toled_cell
@@ -61,7 +61,7 @@ def _scoring(config: DesignConfig, pixel_um: float) -> DesignConfig:
 
 def preset_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
     """(the preset T-OLED's exact binary cell, slit at the tile's edge; the config that scores it)."""
-    raster, pixel_um = exact_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
+    raster, pixel_um = reference_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
     return frame_cell(raster, "edge"), _scoring(config, pixel_um)
 
 
