@@ -872,3 +872,27 @@ def test_the_design_guide_prints_the_exact_toled():
     b95 = rows["spec_veil_b95_turned"]
     for k in ("dep", "dep_far", "unet"):
         assert np.all(np.subtract(f128[k], ref[k]) > 0) and np.all(np.subtract(b95[k], ref[k]) > 0)
+
+
+def test_the_design_guide_prints_the_exact_toled_with_seed_1():
+    """`layout_trained_exact_seed1/`: the exact T-OLED trained with seed 1, paired with its own rows and with the
+    committed seed-1 runs' design rows (their raster T-OLED rows are one); spec_veil_b95 leads on every image."""
+    root = Path(__file__).resolve().parents[2]
+    figures = root / "docs" / "figures" / "design"
+    flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    rows = {r["layout"]: r["per_image_db"] for r in
+            json.loads((figures / "layout_trained_exact_seed1" / "study_layout_trained.json").read_text())["rows"]}
+    ref = rows["toled168_20_edge_turned"]
+    got, raster = {}, None
+    for name in ("spec_veil_b95", "spec_veil128"):
+        got[name] = rows[f"{name}_turned"]["unet"]
+    seed1 = (("veil128_b100", "f128"), ("veil130", "floor"), ("k16", "kicks"), ("spec_veil_b100", "spec_b100"))
+    for name, run in seed1:
+        d = {r["layout"]: r["per_image_db"] for r in json.loads(
+            (figures / f"layout_trained_{run}_seed1" / "study_layout_trained.json").read_text())["rows"]}
+        raster = raster or d["toled168_20_edge_turned"]["unet"]
+        assert d["toled168_20_edge_turned"]["unet"] == raster
+        got[name] = d["design_turned"]["unet"]
+    for name, unet in got.items():
+        assert f"`{name}` {_pm(unet, ref['unet'])}".replace("-", "−") in flat, name
+    assert np.all(np.subtract(got["spec_veil_b95"], ref["unet"]) > 0)
