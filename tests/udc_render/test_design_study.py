@@ -896,3 +896,17 @@ def test_the_design_guide_prints_the_exact_toled_with_seed_1():
     for name, unet in got.items():
         assert f"`{name}` {_pm(unet, ref['unet'])}".replace("-", "−") in flat, name
     assert np.all(np.subtract(got["spec_veil_b95"], ref["unet"]) > 0)
+
+
+def test_the_design_guide_prints_spec_f95():
+    """spec_f95's paragraph: its design.json (a search against the exact T-OLED: held-out margin, UPC's G, bands)."""
+    root = Path(__file__).resolve().parents[2]
+    d = json.loads((root / "docs" / "figures" / "design" / "channel_step" / "spec_f95" / "design.json").read_text())
+    flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    c, h, u = d["config"], d["held_out"]["d4"]["vs"]["design"]["toled_preset"], d["upc"]["turned"]["draws"]
+    assert (c["upc_floor"], c["banding_ceiling"], c["channel_step_nm"], d["kicks_done"]) == (1.28, 0.95, 40.0, 4)
+    assert f"{d['kicks_done']} kicks moved {d['initial']['squares_moved']} squares" in flat
+    assert (f"leads the exact T-OLED by {h['mean']:+.3f} ± {h['se']:.3f} dB ({h['leads']} of 16 held-out draws"
+            in flat)
+    assert f"at UPC's G {u['mean'][1]:.3f} (min {u['min'][1]:.3f}) over 8 tilings" in flat
+    assert f"bands {np.mean(d['banding']['ratio']):.3f} × the turned T-OLED over draws 0–4" in flat
