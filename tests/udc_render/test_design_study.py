@@ -910,3 +910,28 @@ def test_the_design_guide_prints_spec_f95():
             in flat)
     assert f"at UPC's G {u['mean'][1]:.3f} (min {u['min'][1]:.3f}) over 8 tilings" in flat
     assert f"bands {np.mean(d['banding']['ratio']):.3f} × the turned T-OLED over draws 0–4" in flat
+
+
+def test_the_design_guide_prints_spec_f95_through_the_simulator():
+    """spec_f95's rows in both exact runs (seeds 0 and 1) and against the presets of `layout_trained/`."""
+    root = Path(__file__).resolve().parents[2]
+    figures = root / "docs" / "figures" / "design"
+    flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    runs = [{r["layout"]: r["per_image_db"] for r in json.loads(
+        (figures / name / "study_layout_trained.json").read_text())["rows"]}
+        for name in ("layout_trained_exact", "layout_trained_exact_seed1")]
+    r0, r1 = (run["spec_f95_turned"] for run in runs)
+    ref0, ref1 = (run["toled168_20_edge_turned"] for run in runs)
+    assert r0["dep"] == r1["dep"]  # DeP has no training seed
+    def short(a, b):
+        d = np.subtract(a, b)
+        return f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f}", f"{(d > 0).sum()} of {len(d)}"
+    (dm, dw), (fm, fw) = short(r0["dep"], ref0["dep"]), short(r0["dep_far"], ref0["dep_far"])
+    (u0, w0), (u1, w1) = short(r0["unet"], ref0["unet"]), short(r1["unet"], ref1["unet"])
+    text = (f"level by plain DeP ({dm} dB, {dw}), leads given the far field ({fm}, {fw}) and by the UNet with both "
+            f"seeds ({u0}, {w0}; {u1}, {w1})")
+    assert text.replace("-", "−") in flat, text
+    presets = {r["layout"]: r["per_image_db"] for r in
+               json.loads((figures / "layout_trained" / "study_layout_trained.json").read_text())["rows"]}
+    m = [np.mean(np.subtract(r0[k], presets[p][k])) for p in ("toled168_20", "poled_20") for k in ("dep", "unet")]
+    assert f"repeated T-OLED by {m[0]:+.2f} / {m[1]:+.2f} dB and the P-OLED by {m[2]:+.2f} / {m[3]:+.2f} dB" in flat
