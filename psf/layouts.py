@@ -43,6 +43,10 @@ class Rect:
     def area_um2(self) -> float:
         return self.width_um * self.height_um
 
+    @property
+    def left_um(self) -> float:
+        return self.cx_um - self.width_um / 2
+
     def areas(self, x_edges, y_edges, dx_um=0.0, dy_um=0.0):
         return rect_areas(x_edges, y_edges, self.cx_um + dx_um, self.cy_um + dy_um,
                           self.width_um, self.height_um)
@@ -64,6 +68,10 @@ class Ellipse:
     @property
     def area_um2(self) -> float:
         return math.pi * self.rx_um * self.ry_um
+
+    @property
+    def left_um(self) -> float:
+        return self.cx_um - self.rx_um
 
     def areas(self, x_edges, y_edges, dx_um=0.0, dy_um=0.0):
         return ellipse_areas(x_edges, y_edges, self.cx_um + dx_um, self.cy_um + dy_um,

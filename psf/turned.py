@@ -14,24 +14,16 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .layouts import Ellipse, LayoutError, PeriodicLayout, Rect
+from .layouts import LayoutError, PeriodicLayout
 from .micrograph import quarter_turns
 
 __all__ = ["TurnedLayout", "edge_framed"]
 
 
-def _left_um(opening) -> float:
-    if isinstance(opening, Rect):
-        return opening.cx_um - opening.width_um / 2
-    if isinstance(opening, Ellipse):
-        return opening.cx_um - opening.rx_um
-    raise LayoutError(f"opening {type(opening).__name__}: no left edge known (Rect or Ellipse)")
-
-
 def edge_framed(layout: PeriodicLayout) -> PeriodicLayout:
     """The layout shifted along x so that its leftmost opening starts at the cell's edge x = 0 (the framing
     udc_render.design.cells.frame_cell gives a raster: its first open column at column 0)."""
-    shift = -min(_left_um(o) for o in layout.openings)
+    shift = -min(o.left_um for o in layout.openings)
     return replace(layout, openings=tuple(replace(o, cx_um=o.cx_um + shift) for o in layout.openings))
 
 

@@ -94,7 +94,8 @@ def _cell_display(display: Display, frame: str, turned: bool, folder: Path) -> D
               f"{'turned per tile' if turned else 'repeated'}")
     if isinstance(display.layout, PeriodicLayout):
         layout = edge_framed(display.layout) if frame == "edge" else display.layout
-        return replace(display, name=name, layout=TurnedLayout(layout, SIMULATOR_TILE_SEED, turned), source=source)
+        layout = TurnedLayout(layout, SIMULATOR_TILE_SEED) if turned else layout
+        return replace(display, name=name, layout=layout, source=source)
     cell, pixel_um = layout_cell(display.layout)
     path = folder / f"{name}.exr"
     folder.mkdir(parents=True, exist_ok=True)

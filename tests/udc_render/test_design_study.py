@@ -801,9 +801,21 @@ EXACT_REPAIRED = {"design_crop": ("layout_trained", "design_crop"),
                   "spec_veil_b100": ("layout_trained_spec_b100", "channel_step/spec_veil_b100")}
 
 
-def _pm(a, b) -> str:
+def _paired(a, b) -> tuple[str, str]:
+    """("mean ± se", "wins of n") of the per-image differences a − b, as the guide prints them."""
     d = np.subtract(a, b)
-    return f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f} ({(d > 0).sum()} of {len(d)})"
+    return f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f}", f"{(d > 0).sum()} of {len(d)}"
+
+
+def _pm(a, b) -> str:
+    return "{} ({})".format(*_paired(a, b))
+
+
+def _per_image(folder: str) -> dict:
+    """{layout: its per-image PSNRs} of a committed `study layout-trained` folder under docs/figures/design."""
+    doc = json.loads((Path(__file__).resolve().parents[2] / "docs" / "figures" / "design" / folder
+                      / "study_layout_trained.json").read_text())
+    return {r["layout"]: r["per_image_db"] for r in doc["rows"]}
 
 
 def test_the_design_guide_prints_the_exact_toled():
@@ -827,16 +839,13 @@ def test_the_design_guide_prints_the_exact_toled():
     assert f"Against the exact T-OLED ({t['d4_toled_preset']:.3f} dB over the D4 draws)" in flat
     assert f"({t['d4_toled_squares']:.3f} dB, the search's start) now scores above the preset" in flat
     assert f"the exact T-OLED scores **{t['engine_toled_preset']:.3f} dB**" in flat
-    exact = json.loads((figures / "layout_trained_exact" / "study_layout_trained.json").read_text())
-    rows = {r["layout"]: r["per_image_db"] for r in exact["rows"]}
+    rows = _per_image("layout_trained_exact")
     ref = rows["toled168_20_edge_turned"]
-    kicks = json.loads((figures / "layout_trained_kicks" / "study_layout_trained.json").read_text())["rows"]
-    k16 = {r["layout"]: r["per_image_db"] for r in kicks}["design_turned"]
+    k16 = _per_image("layout_trained_kicks")["design_turned"]
     assert all(k16[k] == rows["k16_turned"][k] for k in ("dep", "dep_far", "unet"))
     raster = None
     for name, (run, folder) in EXACT_REPAIRED.items():
-        d = {r["layout"]: r["per_image_db"] for r in
-             json.loads((figures / run / "study_layout_trained.json").read_text())["rows"]}
+        d = _per_image(run)
         r, old = d["design_turned"], d["toled168_20_edge_turned"]
         raster = raster or old
         assert all(old[k] == raster[k] for k in ("dep", "dep_far", "unet"))
@@ -857,18 +866,14 @@ def test_the_design_guide_prints_the_exact_toled():
     shift = {k: np.mean(np.subtract(raster[k], ref[k])) for k in ("dep", "dep_far", "unet")}
     assert (f"the exact one loses {shift['dep']:.2f} dB by plain DeP, {shift['dep_far']:.2f} dB by DeP given the far "
             f"field and {shift['unet']:.2f} dB by the UNet") in flat
-    presets = {r["layout"]: r["per_image_db"] for r in
-               json.loads((figures / "layout_trained" / "study_layout_trained.json").read_text())["rows"]}
-    f128_row = {r["layout"]: r["per_image_db"] for r in json.loads(
-        (figures / "layout_trained_f128" / "study_layout_trained.json").read_text())["rows"]}["design_turned"]
-    for name, r in (("veil128_b100", f128_row), ("spec_veil_b95", rows["spec_veil_b95_turned"])):
+    presets = _per_image("layout_trained")
+    f128 = _per_image("layout_trained_f128")["design_turned"]
+    for name, r in (("veil128_b100", f128), ("spec_veil_b95", rows["spec_veil_b95_turned"])):
         m = [np.mean(np.subtract(r[k], presets[p][k])) for p in ("toled168_20", "poled_20") for k in ("dep", "unet")]
         assert f"`{name}` {m[0]:+.2f} / {m[1]:+.2f} dB over the repeated T-OLED and {m[2]:+.2f} / {m[3]:+.2f}" in flat \
             or f"`{name}` {m[0]:+.2f} / {m[1]:+.2f} and {m[2]:+.2f} / {m[3]:+.2f} dB" in flat, (name, m)
         assert all(np.all(np.subtract(r[k], presets[p][k]) > 0) for p in ("toled168_20", "poled_20")
                    for k in ("dep", "unet"))
-    f128 = {r["layout"]: r["per_image_db"] for r in json.loads(
-        (figures / "layout_trained_f128" / "study_layout_trained.json").read_text())["rows"]}["design_turned"]
     b95 = rows["spec_veil_b95_turned"]
     for k in ("dep", "dep_far", "unet"):
         assert np.all(np.subtract(f128[k], ref[k]) > 0) and np.all(np.subtract(b95[k], ref[k]) > 0)
@@ -878,18 +883,15 @@ def test_the_design_guide_prints_the_exact_toled_with_seed_1():
     """`layout_trained_exact_seed1/`: the exact T-OLED trained with seed 1, paired with its own rows and with the
     committed seed-1 runs' design rows (their raster T-OLED rows are one); spec_veil_b95 leads on every image."""
     root = Path(__file__).resolve().parents[2]
-    figures = root / "docs" / "figures" / "design"
     flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
-    rows = {r["layout"]: r["per_image_db"] for r in
-            json.loads((figures / "layout_trained_exact_seed1" / "study_layout_trained.json").read_text())["rows"]}
+    rows = _per_image("layout_trained_exact_seed1")
     ref = rows["toled168_20_edge_turned"]
     got, raster = {}, None
     for name in ("spec_veil_b95", "spec_veil128"):
         got[name] = rows[f"{name}_turned"]["unet"]
     seed1 = (("veil128_b100", "f128"), ("veil130", "floor"), ("k16", "kicks"), ("spec_veil_b100", "spec_b100"))
     for name, run in seed1:
-        d = {r["layout"]: r["per_image_db"] for r in json.loads(
-            (figures / f"layout_trained_{run}_seed1" / "study_layout_trained.json").read_text())["rows"]}
+        d = _per_image(f"layout_trained_{run}_seed1")
         raster = raster or d["toled168_20_edge_turned"]["unet"]
         assert d["toled168_20_edge_turned"]["unet"] == raster
         got[name] = d["design_turned"]["unet"]
@@ -915,23 +917,16 @@ def test_the_design_guide_prints_spec_f95():
 def test_the_design_guide_prints_spec_f95_through_the_simulator():
     """spec_f95's rows in both exact runs (seeds 0 and 1) and against the presets of `layout_trained/`."""
     root = Path(__file__).resolve().parents[2]
-    figures = root / "docs" / "figures" / "design"
     flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
-    runs = [{r["layout"]: r["per_image_db"] for r in json.loads(
-        (figures / name / "study_layout_trained.json").read_text())["rows"]}
-        for name in ("layout_trained_exact", "layout_trained_exact_seed1")]
+    runs = [_per_image(name) for name in ("layout_trained_exact", "layout_trained_exact_seed1")]
     r0, r1 = (run["spec_f95_turned"] for run in runs)
     ref0, ref1 = (run["toled168_20_edge_turned"] for run in runs)
     assert r0["dep"] == r1["dep"]  # DeP has no training seed
-    def short(a, b):
-        d = np.subtract(a, b)
-        return f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f}", f"{(d > 0).sum()} of {len(d)}"
-    (dm, dw), (fm, fw) = short(r0["dep"], ref0["dep"]), short(r0["dep_far"], ref0["dep_far"])
-    (u0, w0), (u1, w1) = short(r0["unet"], ref0["unet"]), short(r1["unet"], ref1["unet"])
+    (dm, dw), (fm, fw) = _paired(r0["dep"], ref0["dep"]), _paired(r0["dep_far"], ref0["dep_far"])
+    (u0, w0), (u1, w1) = _paired(r0["unet"], ref0["unet"]), _paired(r1["unet"], ref1["unet"])
     text = (f"level by plain DeP ({dm} dB, {dw}), leads given the far field ({fm}, {fw}) and by the UNet with both "
             f"seeds ({u0}, {w0}; {u1}, {w1})")
     assert text.replace("-", "−") in flat, text
-    presets = {r["layout"]: r["per_image_db"] for r in
-               json.loads((figures / "layout_trained" / "study_layout_trained.json").read_text())["rows"]}
+    presets = _per_image("layout_trained")
     m = [np.mean(np.subtract(r0[k], presets[p][k])) for p in ("toled168_20", "poled_20") for k in ("dep", "unet")]
     assert f"repeated T-OLED by {m[0]:+.2f} / {m[1]:+.2f} dB and the P-OLED by {m[2]:+.2f} / {m[3]:+.2f} dB" in flat
