@@ -60,6 +60,9 @@ def register(sub) -> None:
     p.add_argument("--contrast", type=positive("--contrast"), default=None,
                    help="the scene's RMS contrast in the wiener and crop objectives [0.3 with wiener; 1.0 with crop: "
                         "its designs restore best by DeP at 1.0 of 0.3, 0.5, 1.0 (docs/guides/design.md)]")
+    p.add_argument("--mean-level", type=positive("--mean-level"), default=None,
+                   help="the scene's mean in the wiener and crop objectives, a fraction of the glass capture's full "
+                        "well [0.5; study layout-trained's scenes: 0.41 with --contrast 0.51 (docs/guides/design.md)]")
     p.add_argument("--init", default="scatter",
                    help=f"the search's start, one of {', '.join(INITS)} or a cell PNG: scatter: a random scatter; "
                         "toled: the preset T-OLED on the squares, its slit at the tile's edge; PATH: a former design's "
@@ -113,7 +116,8 @@ def run(args) -> int:
                           args.candidates, args.seed, args.pupil_samples, args.kernel_px, args.scatters, args.crop_px,
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
-                          args.kicks, args.kick_swaps, args.search_tilings, _channel_step(args))
+                          args.kicks, args.kick_swaps, args.search_tilings, _channel_step(args),
+                          **({} if args.mean_level is None else {"mean_level": args.mean_level}))
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet, held_out_tilings=args.held_out_tilings)
     f, b = doc["final"], doc["scatters"]

@@ -55,6 +55,7 @@ class DesignConfig:
     search_tilings: int = 1
     channel_step_nm: float = 0.0  # > 0: the objective's channels summed over the camera's band (optimise module doc)
     reference: bool = False  # the scorer of a reference cell (design.held_out's T-OLEDs), not a design: no LTPS limit
+    mean_level: float = metrics.MEAN_LEVEL  # μ: the scene's mean, a fraction of the glass capture's full well
 
     def __post_init__(self):
         if self.contrast is None:
@@ -75,6 +76,8 @@ class DesignConfig:
             raise tp.DesignError(f"--crop-px {self.crop_px}: expected an integer ≥ 2")
         if not self.contrast > 0:
             raise tp.DesignError(f"--contrast {self.contrast}: expected an RMS contrast > 0")
+        if not 0 < self.mean_level <= 1:
+            raise tp.DesignError(f"--mean-level {self.mean_level}: expected a fraction of the full well in (0, 1]")
         for key, allowed in (("tiling", TILINGS), ("objective", OBJECTIVES), ("optics", OPTICS)):
             if getattr(self, key) not in allowed:
                 raise tp.DesignError(f"--{key} {getattr(self, key)}: expected one of {', '.join(allowed)}")

@@ -91,7 +91,8 @@ RIG_WAVELENGTHS_NM = (640.0, 520.0, 450.0)
 _LATER_DEFAULTS = {  # options added after the first checkpoints, at the settings those runs had
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
     "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1,
-    "channel_step_nm": 0.0, "reference": False}
+    "channel_step_nm": 0.0, "reference": False,
+    "mean_level": metrics.MEAN_LEVEL}
 CHANNEL_ILLUMINANT = "D65"  # the white of the bank's channel kernels (udc_render.dataset.bank_make)
 
 
@@ -125,7 +126,7 @@ class Designer:
                                      config.kernel_px, config.pupil_samples)
             self.tiles, size = self.grid.tiles, config.kernel_px
         self.rings = ring_index(size)
-        variance = (config.contrast * metrics.MEAN_LEVEL) ** 2
+        variance = (config.contrast * config.mean_level) ** 2
         self.signal = torch.tensor(metrics.natural_spectrum(config.kernel_px, variance), device=device)
         self.window = torch.tensor(near_window(config.kernel_px, config.crop_px), device=device)
         self.transmission = config.open_squares / config.cell_px ** 2
@@ -164,11 +165,10 @@ class Designer:
             h, h_far = spectrum(near), (None if far is None else spectrum(far))
             signal = self.signal.to(cell.dtype)
             kept = (self.transmission if transmission is None else transmission) * inside
-            mse = torch.stack([metrics.wiener_mse(h[c], signal, metrics.noise_variance(self.sensor, metrics.MEAN_LEVEL,
-                                                                                      t), t,
-                                                  None if h_far is None else h_far[c])
+            noise = [metrics.noise_variance(self.sensor, self.config.mean_level, t) for t in kept]
+            mse = torch.stack([metrics.wiener_mse(h[c], signal, noise[c], t, None if h_far is None else h_far[c])
                                for c, t in enumerate(kept)])
-            return (mse + far_veil_mse(inside) if self.config.far_veil else mse).mean()
+            return (mse + far_veil_mse(inside, self.config.mean_level) if self.config.far_veil else mse).mean()
         if self.config.objective == "rings":
             return -torch.log(mean_ring_minima(k, self.rings)).mean()
         h = spectrum(k)
