@@ -156,19 +156,23 @@ def check_clean_images(folder: Path, b: Budget) -> None:
                        "--out or delete the folder")
 
 
+def clean_image(b: Budget, i: int) -> np.ndarray:
+    """[3, h, w] float32: item i of the budget's clean set (module doc)."""
+    # [IMAGES_SEED, 0] is default_rng(IMAGES_SEED) (zero padding), which nothing else draws from
+    palette = np.random.default_rng([IMAGES_SEED, i]).uniform(0.0, WHITE_FILL, (16, 3))
+    return dead_leaves_colour(*b.sensor_px, IMAGES_SEED * 1000 + i, palette).astype(np.float32)
+
+
 def write_clean_images(folder: Path, b: Budget) -> Path:
     """The clean set (module doc) in `folder`, a dataset layout; kept when its manifest is there and is this
     budget's (check_clean_images)."""
     if (folder / "manifest.jsonl").is_file():
         check_clean_images(folder, b)
         return folder
-    w, h = b.sensor_px
     lines = []
     for i, line in enumerate(clean_manifest(b)):
         split = line["split"]
-        # [IMAGES_SEED, 0] is default_rng(IMAGES_SEED) (zero padding), which nothing else draws from
-        palette = np.random.default_rng([IMAGES_SEED, i]).uniform(0.0, WHITE_FILL, (16, 3))
-        rgb = dead_leaves_colour(w, h, IMAGES_SEED * 1000 + i, palette).astype(np.float32)
+        rgb = clean_image(b, i)
         item = Path(split) / f"item_{i:04d}"
         (folder / item).mkdir(parents=True, exist_ok=True)
         save_exr(folder / item / "gt.exr", {c: rgb[k] for k, c in enumerate("RGB")})

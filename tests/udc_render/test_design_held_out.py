@@ -133,6 +133,8 @@ def test_design_json_holds_the_held_out_comparison(tmp_path):
     assert [r["design"] for r in study["rows"]] == [str(tmp_path / "a"), str(tmp_path / "b")]
     assert study["rows"][0]["draws"] != study["rows"][1]["draws"] and (tmp_path / "s" / "study_held_out.png").is_file()
     assert "engine_toled_preset" in study["rows"][0] and "d4_toled_simulator" not in study["rows"][0]
+    for light in [r for r in study["rows"]] + [study["toleds"]["toled_preset_light"]]:  # far_light's shares, R, G, B
+        assert all(0 < b < w < 1 for w, b in zip(light["past_window"], light["beyond_acceptance"], strict=True))
     assert cli.main(["study", "channel-step", "--designs", folders, "--quick", "--out", str(tmp_path / "c")]) == 0
     rows = json.loads((tmp_path / "c" / "study_channel_step.json").read_text())["rows"]
     lam = channel_weights(SensorConfig().camera, CHANNEL_ILLUMINANT, 40.0)[0]

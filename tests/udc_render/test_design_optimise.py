@@ -29,18 +29,21 @@ def _binary(c: int, k: int, seed: int) -> np.ndarray:
     return flat.reshape(c, c)
 
 
-def test_the_wiener_objective_is_the_restorability_of_the_engines_kernels():
+@pytest.mark.parametrize("scene", [{}, {"mean_level": 0.41, "contrast": 0.51}])
+def test_the_wiener_objective_is_the_restorability_of_the_engines_kernels(scene):
     """A binary cell's score (torch) equals metrics.restorability on psf.compute_kernels' kernels (numpy) at the open
     area × the fraction of the light inside the window (kernels_and_window; the plain tiling's differs from the
-    engine's power series by under 1 %, test_design_torch_psf)."""
-    d = Designer(DesignConfig(**{**TINY, "tiling": "repeated", "cell_um": 40.0, "feature_um": 8.0}))
+    engine's power series by under 1 %, test_design_torch_psf), at the default scene and at --mean-level and
+    --contrast given."""
+    d = Designer(DesignConfig(**{**TINY, "tiling": "repeated", "cell_um": 40.0, "feature_um": 8.0, **scene}))
     cell = _binary(5, 6, 0)
     parts = d.score(cell)
     engine = compute_kernels(MicrographLayout("cell", 8.0, image=cell), Lens(), RIG_WAVELENGTHS_NM, size_px=31,
                              pupil_samples=64, precision="float64")
     _, inside = tp.kernels_and_window(torch.tensor(cell), d.grid, None)  # the engine's: test_design_torch_psf
     kept = float(cell.mean()) * inside.numpy()
-    ref = np.mean(metrics.restorability(engine.kernels, kept)["wiener_mse"])
+    ref = np.mean(metrics.restorability(engine.kernels, kept, mean_level=d.config.mean_level,
+                                        contrast=d.config.contrast)["wiener_mse"])
     assert abs(parts["objective"] / ref - 1) < 1e-10 and abs(parts["open_area"] - 6 / 25) < 1e-15
     assert abs(parts["psnr_db"] + 10 * np.log10(ref)) < 1e-9
 
@@ -62,6 +65,10 @@ def test_the_far_veil_adds_the_bias_of_the_light_past_the_window():
                               pupil_samples=64, precision="float64").energy_outside
     engine = np.mean((np.asarray(outside) / (1 - np.asarray(outside))) ** 2) * metrics.MEAN_LEVEL ** 2
     assert abs((veiled - plain) / engine - 1) < 0.05
+    dim = {**config, "mean_level": 0.41}  # the veil is the scene's mean: --mean-level's
+    gap = (Designer(DesignConfig(**dim, far_veil=True)).score(cell)["objective"]
+           - Designer(DesignConfig(**dim)).score(cell)["objective"])
+    assert abs(gap / (np.mean(((1 - f) / f) ** 2) * 0.41 ** 2) - 1) < 1e-10
 
 
 def test_the_rings_objective_is_upcs_statistic_in_their_sampling():
@@ -253,6 +260,8 @@ def test_the_designed_display_files_are_displays(tmp_path):
     (["--open-area", "0.001"], "less than one 8.0 µm square"),
     (["--objective", "crop", "--crop-px", "1"], "--crop-px 1: expected an integer ≥ 2"),
     (["--contrast", "0"], "--contrast"),
+    (["--mean-level", "0"], "--mean-level must be > 0, got 0"),
+    (["--mean-level", "1.5"], "--mean-level 1.5: expected a fraction of the full well in (0, 1]"),
     (["--init", "poled"], "--init"),
     (["--optics", "upc"], "--optics upc takes --objective upc or rings, got wiener"),
     (["--optics", "upc", "--objective", "rings", "--cell-um", "160"],

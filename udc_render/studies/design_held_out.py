@@ -59,20 +59,37 @@ def check(folders: list[Path]):
     return config, {str(f): _cell(f, config) for f in folders}
 
 
+def _light(cell: np.ndarray, pixel_um: float, designer) -> dict:
+    """The shares of the cell's light past the objective's kernel window and beyond the lens's acceptance (the
+    simulator's far field keeps the light between them) at the rig's wavelengths (design.far_light, closed form)."""
+    from udc_render.design.far_light import light_shares
+    from udc_render.design.optimise import RIG_WAVELENGTHS_NM
+    from udc_render.optics.far_field import PAPER_FRAME_UM, acceptance_um
+    g = designer.grid
+    shares = [light_shares(cell, pixel_um, lam / 1000, g.image_distance_um, g.size_px * g.pixel_um / 2,
+                           acceptance_um(PAPER_FRAME_UM)) for lam in RIG_WAVELENGTHS_NM]
+    return {"past_window": [1 - s["window"] for s in shares],
+            "beyond_acceptance": [1 - s["acceptance"] for s in shares]}
+
+
 def _rows(config, cells: dict, n: int, progress) -> tuple[list[dict], dict]:
-    """(one row per design, the T-OLEDs' means), every cell scored by the first folder's objective."""
-    from udc_render.design.held_out import held_out_comparison
+    """(one row per design, the T-OLEDs' means and the preset T-OLED's light shares), every cell scored by the first
+    folder's objective."""
+    from udc_render.design.held_out import held_out_comparison, preset_toled
     from udc_render.design.optimise import Designer
-    doc = held_out_comparison(Designer(config), cells, n, progress, simulator=True)
+    designer = Designer(config)
+    doc = held_out_comparison(designer, cells, n, progress, simulator=True)
+    toled, scoring = preset_toled(config)
     rows = []
     for name in cells:
-        row = {"design": name, "psnr_db": doc["d4"]["mean"][name]}
+        row = {"design": name, "psnr_db": doc["d4"]["mean"][name], **_light(cells[name], config.feature_um, designer)}
         for g in GROUPS:
             for ref, v in doc[g]["vs"][name].items():
                 row.update({f"{g}_{ref}": v["mean"], f"{g}_{ref}_se": v["se"], f"{g}_{ref}_leads": v["leads"]})
         rows.append({**row, "draws": doc["d4"]["psnr_db"][name]})
     toleds = {f"{g}_{t}": doc[g]["mean"][t] for g in GROUPS for t in TOLEDS}
-    return rows, {"objective": {k: v for k, v in asdict(config).items() if k not in SEARCH_ONLY}, **toleds}
+    return rows, {"objective": {k: v for k, v in asdict(config).items() if k not in SEARCH_ONLY}, **toleds,
+                  "toled_preset_light": _light(toled, scoring.feature_um, designer)}
 
 
 def _cell(folder: Path, config) -> np.ndarray:
@@ -90,10 +107,14 @@ def _pm(row: dict, key: str) -> str:
     return f"{row[key]:+.3f} ± {row[key + '_se']:.3f} ({row[key + '_leads']})"
 
 
+def _shares(light: dict) -> str:
+    return "; ".join(" / ".join(f"{100 * v:.2f}" for v in light[k]) for k in ("past_window", "beyond_acceptance"))
+
+
 def _markdown(doc: dict) -> str:
     n = doc["tilings"]
     shown = ("d4_toled_preset", "d4_toled_squares", "quarter_turns_toled_preset")
-    rows = [{**r, **{k: _pm(r, k) for k in shown}} for r in doc["rows"]]
+    rows = [{**r, **{k: _pm(r, k) for k in shown}, "light": _shares(r)} for r in doc["rows"]]
     lines = [f"# Designs on {n} held-out tilings, paired with the T-OLEDs", "",
              "Every design scored by the first design's objective: its PSNR (dB, mean over the D4 draws) and the "
              f"paired difference to each T-OLED, mean ± se (the draws of {n} where the design leads). The preset "
@@ -102,13 +123,15 @@ def _markdown(doc: dict) -> str:
     lines += md_table(rows, [("design", "design"), ("psnr_db", "objective (dB)"),
                              ("d4_toled_preset", "− preset T-OLED"), ("d4_toled_squares", "− T-OLED on squares"),
                              ("quarter_turns_toled_preset", "− preset T-OLED, quarter-turns"),
-                             ("engine_toled_preset", "− preset T-OLED, the simulator's tiling")],
+                             ("engine_toled_preset", "− preset T-OLED, the simulator's tiling"),
+                             ("light", "past the window; beyond the acceptance (%, 640 / 520 / 450 nm)")],
                       {"psnr_db": lambda v: f"{v:.3f}", "engine_toled_preset": lambda v: f"{v:+.3f}"})
     t = doc["toleds"]
     lines += ["", f"The T-OLEDs (mean over the D4 draws): the preset {t['d4_toled_preset']:.3f} dB, on the squares "
               f"{t['d4_toled_squares']:.3f} dB; on the quarter-turns {t['quarter_turns_toled_preset']:.3f} and "
               f"{t['quarter_turns_toled_squares']:.3f} dB; on the simulator's own tiling "
-              f"{t['engine_toled_preset']:.3f} dB. "
+              f"{t['engine_toled_preset']:.3f} dB; its light past the window, beyond the acceptance "
+              f"{_shares(t['toled_preset_light'])} %. "
               "The objective (the first design's): "
               + ", ".join(f"{k} {v}" for k, v in t["objective"].items()) + "."]
     return "\n".join(lines) + "\n"
