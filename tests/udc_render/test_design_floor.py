@@ -81,10 +81,22 @@ def test_a_search_starts_from_a_former_designs_cell(tmp_path):
     assert np.array_equal(d.cell, cell)
 
 
+def test_a_search_starts_from_a_coarser_designs_cell(tmp_path):
+    """--init PATH of a coarser design (a 21² cell of 8 µm squares on a 42² cell of 4 µm): each square split into
+    2 × 2, the open area kept exactly (88 × 4 = 352 of 1764 squares: --open-area 88 / 441)."""
+    cell = _binary21(88, 6)
+    iio.imwrite(tmp_path / "cell.png", (cell * 255).astype(np.uint8))
+    fine = DesignConfig(**{**FLOORED, "feature_um": 4.0, "open_fraction": 88 / 441}, init=str(tmp_path / "cell.png"))
+    start = Designer(fine).cell
+    assert start.shape == (42, 42) and np.array_equal(start[::2, ::2], cell) and start.sum() == 352
+    assert np.array_equal(start[1::2, 1::2], cell)
+
+
 @pytest.mark.parametrize("image, says", [
-    (np.zeros((20, 21), np.uint8), "expected a 21 × 21 grey PNG of 0 and 255"),
-    (np.full((21, 21), 128, np.uint8), "expected a 21 × 21 grey PNG of 0 and 255"),
-    ((_binary21(87, 1) * 255).astype(np.uint8), "87 open squares; the open area needs 88"),
+    (np.zeros((20, 21), np.uint8), "expected a square grey PNG of 0 and 255 (a design's cell.png) of 21 px or a side"),
+    (np.zeros((20, 20), np.uint8), "of 21 px or a side that divides it, got shape (20, 20)"),
+    (np.full((21, 21), 128, np.uint8), "expected a square grey PNG of 0 and 255"),
+    ((_binary21(87, 1) * 255).astype(np.uint8), "87 open squares on the 21² cell; the open area needs 88"),
 ])
 def test_a_bad_start_cell_is_refused_in_one_line(tmp_path, capsys, image, says):
     iio.imwrite(tmp_path / "start.png", image)

@@ -76,16 +76,19 @@ def resample_matrix(c: int, px: int = upc.CELL_PX) -> np.ndarray:
 
 
 def read_cell(path: str, cell_px: int, open_squares: int) -> np.ndarray:
-    """A binary cell from a PNG of cell_px² pixels, 0 (opaque) or 255 (open), with open_squares open: a former
-    design's cell.png as the search's start (design --init PATH)."""
+    """A binary cell from a PNG, 0 (opaque) or 255 (open): a former design's cell.png as the search's start (design
+    --init PATH), of cell_px² pixels, or of a coarser design's squares (a side that divides cell_px: each square
+    split into k × k), with open_squares open."""
     try:
         image = np.asarray(iio.imread(path))
     except (OSError, ValueError) as err:
         raise tp.DesignError(f"--init {path}: not scatter or toled, and not a readable cell PNG ({err})") from None
-    if image.shape != (cell_px, cell_px) or not np.isin(image, (0, 255)).all():
-        raise tp.DesignError(f"--init {path}: expected a {cell_px} × {cell_px} grey PNG of 0 and 255 (a design's "
-                             f"cell.png), got shape {image.shape}")
-    if int((image == 255).sum()) != open_squares:
-        raise tp.DesignError(f"--init {path}: {int((image == 255).sum())} open squares; the open area needs "
-                             f"{open_squares}")
-    return (image == 255).astype(np.float64)
+    side = image.shape[0] if image.ndim == 2 and image.shape[0] == image.shape[1] else 0
+    if not (side and cell_px % side == 0 and np.isin(image, (0, 255)).all()):
+        raise tp.DesignError(f"--init {path}: expected a square grey PNG of 0 and 255 (a design's cell.png) of "
+                             f"{cell_px} px or a side that divides it, got shape {image.shape}")
+    cell = np.kron((image == 255).astype(np.float64), np.ones((cell_px // side,) * 2))
+    if int(cell.sum()) != open_squares:
+        raise tp.DesignError(f"--init {path}: {int(cell.sum())} open squares on the {cell_px}² cell; the open area "
+                             f"needs {open_squares}")
+    return cell

@@ -35,6 +35,10 @@ the final scores take another: held out):
   (natural crops reach 0.6–1.7; the restorability's 0.3 is low for them). A stationary stand-in, checked against
   the exact posterior mean on finite crops (crop.crop_mse): the designed cell of 'wiener' restores 9 dB below the
   T-OLED in DeP on 192-px crops because its light reaches ±96 px and more (docs/guides/design.md);
+  The scene's mean μ (noise, signal variance (c μ)², veil) is mean_level, 0.5 of the full well by default;
+  `study layout-trained`'s validation images (dead leaves) hold μ 0.41, c 0.51 (restore.studies.scene_statistics),
+  with which the objective's margins over the exact T-OLED come nearer that study's plain DeP for the designs near
+  the T-OLED, and further from it for those far below (docs/guides/design.md);
 - 'upc': UPC's first term, −0.01 × the mean of the lowest 30 % of |H|² / (|H|² + 0.015) (their image L2 term,
   which needs an image set, is left out; their open-area term is met exactly by the swaps);
 - 'rings': UPC's figure of merit itself, −mean over the channels of log(the mean over rings k = 1 … S/2 − 1 of the
