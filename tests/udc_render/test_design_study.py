@@ -1028,3 +1028,24 @@ def test_the_design_guide_prints_the_study_scene_searches():
     fine = iio.imread(figures / "scene" / "f95_4um" / "cell.png") == 255
     coarse = np.kron(iio.imread(figures / "channel_step" / "spec_f95" / "cell.png") == 255, np.ones((2, 2), bool))
     assert fine.sum() == coarse.sum() == 352 and (fine != coarse).sum() == 12
+
+
+def test_the_design_guide_prints_f95_4um_through_the_simulator():
+    """f95_4um's rows (scene/layout_trained, seeds 0 and 1) paired with the exact T-OLED's rows of the exact runs, and
+    with spec_f95's and the presets'; DeP has no training seed."""
+    root = Path(__file__).resolve().parents[2]
+    flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
+    r0, r1 = (_per_image(f"scene/{run}")["f95_4um_turned"] for run in ("layout_trained", "layout_trained_seed1"))
+    ref0, ref1 = (_per_image(run)["toled168_20_edge_turned"] for run in ("layout_trained_exact",
+                                                                          "layout_trained_exact_seed1"))
+    assert r0["dep"] == r1["dep"]
+    (dm, dw), (fm, fw) = _paired(r0["dep"], ref0["dep"]), _paired(r0["dep_far"], ref0["dep_far"])
+    (u0, w0), (u1, w1) = _paired(r0["unet"], ref0["unet"]), _paired(r1["unet"], ref1["unet"])
+    text = (f"plain DeP **{dm} dB ({dw})**, DeP given the far field {fm} ({fw}), the UNet {u0} ({w0}, seed 0) and "
+            f"{u1} ({w1}, seed 1)")
+    assert text.replace("-", "−") in flat, text
+    presets = _per_image("layout_trained")
+    m = [np.mean(np.subtract(r0[k], presets[p][k])) for p in ("toled168_20", "poled_20") for k in ("dep", "unet")]
+    assert f"repeated T-OLED {m[0]:+.2f} / {m[1]:+.2f} dB and over the P-OLED {m[2]:+.2f} / {m[3]:+.2f} dB" in flat
+    f95 = _per_image("layout_trained_exact")["spec_f95_turned"]["dep"]
+    assert f"(plain DeP {np.mean(np.subtract(r0['dep'], f95)):+.2f} over `spec_f95`'s row)" in flat
