@@ -1014,7 +1014,8 @@ def test_the_design_guide_prints_the_study_scene_searches():
     u = {n: d["upc"]["turned"]["draws"] for n, d in docs.items()}
     bands = {n: float(np.mean(d["banding"]["ratio"])) for n, d in docs.items()}
     assert docs["f95"]["initial"]["squares_moved"] == 0
-    assert f"leads the exact T-OLED by {h['f95']['mean']:+.3f} ± {h['f95']['se']:.3f} dB ({h['f95']['leads']} of 16" in flat
+    f95 = h["f95"]
+    assert f"leads the exact T-OLED by {f95['mean']:+.3f} ± {f95['se']:.3f} dB ({f95['leads']} of 16" in flat
     b = docs["b95_floor"]
     assert (f"lifts G from 1.204 to {u['b95_floor']['mean'][1]:.3f} (mean over 8 tilings; min "
             f"{u['b95_floor']['min'][1]:.3f}), {b['initial']['squares_moved']} squares moved, bands "
