@@ -1026,6 +1026,9 @@ def test_the_design_guide_prints_the_study_scene_searches():
     assert f"**{f['mean']:+.3f} ± {f['se']:.3f} dB ({f['leads']} of 16)**" in flat
     assert (f"UPC's G {u['f95_4um']['mean'][1]:.3f} (min {u['f95_4um']['min'][1]:.3f}; B "
             f"{u['f95_4um']['mean'][2]:.3f})") in flat and f"**{bands['f95_4um']:.3f} ×**" in flat
+    light = json.loads((figures / "scene" / "held_out_4um" / "study_held_out.json").read_text())["rows"][0]
+    assert light["design"].endswith("scene/f95_4um")
+    assert f"Its light past the window is {' / '.join(f'{100 * v:.2f}' for v in light['past_window'])} %" in flat
     fine = iio.imread(figures / "scene" / "f95_4um" / "cell.png") == 255
     coarse = np.kron(iio.imread(figures / "channel_step" / "spec_f95" / "cell.png") == 255, np.ones((2, 2), bool))
     assert fine.sum() == coarse.sum() == 352 and (fine != coarse).sum() == 12
@@ -1049,4 +1052,5 @@ def test_the_design_guide_prints_f95_4um_through_the_simulator():
     m = [np.mean(np.subtract(r0[k], presets[p][k])) for p in ("toled168_20", "poled_20") for k in ("dep", "unet")]
     assert f"repeated T-OLED {m[0]:+.2f} / {m[1]:+.2f} dB and over the P-OLED {m[2]:+.2f} / {m[3]:+.2f} dB" in flat
     f95 = _per_image("layout_trained_exact")["spec_f95_turned"]["dep"]
-    assert f"(plain DeP {np.mean(np.subtract(r0['dep'], f95)):+.2f} over `spec_f95`'s row)" in flat
+    assert f"(plain DeP {np.mean(np.subtract(r0['dep'], f95)):+.2f} over `spec_f95`'s row;" in flat
+    assert f"against plain DeP's {np.mean(np.subtract(r0['dep'], ref0['dep'])):+.3f})" in flat
