@@ -304,12 +304,13 @@ def test_physics_page_states_the_poled_orders_spacing():
 def test_defaults_of_the_layout_design(defaults):
     """concepts/defaults.md's design rows against udc_render.design's constants."""
     from udc_render.design import bands, floor, job, metrics, options
+    from udc_render.design.config import DesignConfig
     _says(defaults["minimum feature size (`--feature-um`)"], "8 µm; at least 1.5 µm")
     assert options.DEFAULT_FEATURE_UM == 8.0 and options.LITHOGRAPHY_UM == 1.5
     _says(defaults["the `crop` objective's scene contrast (`--contrast`)"], "| 1.0 (RMS) |")
     assert options.CONTRAST_DEFAULTS["crop"] == 1.0
-    _says(defaults["the far veil's level (`--far-veil`)"], "μ = 0.5 of the full well")
-    assert metrics.MEAN_LEVEL == 0.5
+    _says(defaults["the objective's scene mean (`--mean-level`; the far veil's level)"], "μ = 0.5 of the full well")
+    assert metrics.MEAN_LEVEL == 0.5 and DesignConfig().mean_level == 0.5
     _says(defaults["the UPC floor's weight (`design.floor.FLOOR_WEIGHT`)"], "| 10 |")
     assert floor.FLOOR_WEIGHT == 10.0
     _says(defaults["UPC's ratio over more tilings (`design.job.UPC_DRAWS`)"], "| 8 D4 draws |")

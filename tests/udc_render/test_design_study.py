@@ -818,6 +818,20 @@ def _per_image(folder: str) -> dict:
     return {r["layout"]: r["per_image_db"] for r in doc["rows"]}
 
 
+def _against_exact(r0: dict, r1: dict) -> tuple[list, list]:
+    """(plain DeP, DeP given the far field, the UNet seed 0, seed 1) as _paired of a design's rows in a seed-0 and a
+    seed-1 run against the exact T-OLED's rows of layout_trained_exact(_seed1), and its seed-0 margins over the
+    repeated T-OLED and the P-OLED of layout_trained/ (DeP, UNet; DeP, UNet); DeP has no training seed."""
+    ref0, ref1 = (_per_image(run)["toled168_20_edge_turned"] for run in ("layout_trained_exact",
+                                                                          "layout_trained_exact_seed1"))
+    assert r0["dep"] == r1["dep"]
+    pairs = [_paired(r0["dep"], ref0["dep"]), _paired(r0["dep_far"], ref0["dep_far"]),
+             _paired(r0["unet"], ref0["unet"]), _paired(r1["unet"], ref1["unet"])]
+    presets = _per_image("layout_trained")
+    return pairs, [np.mean(np.subtract(r0[k], presets[p][k])) for p in ("toled168_20", "poled_20")
+                   for k in ("dep", "unet")]
+
+
 def test_the_design_guide_prints_the_exact_toled():
     """The section on the exact T-OLED: `held_out_exact/`'s rows and T-OLEDs, and `layout_trained_exact/`'s T-OLED
     row paired with the committed seed-0 runs' design rows (their captures and seed-0 training are the same: k16's
@@ -919,16 +933,10 @@ def test_the_design_guide_prints_spec_f95_through_the_simulator():
     root = Path(__file__).resolve().parents[2]
     flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
     runs = [_per_image(name) for name in ("layout_trained_exact", "layout_trained_exact_seed1")]
-    r0, r1 = (run["spec_f95_turned"] for run in runs)
-    ref0, ref1 = (run["toled168_20_edge_turned"] for run in runs)
-    assert r0["dep"] == r1["dep"]  # DeP has no training seed
-    (dm, dw), (fm, fw) = _paired(r0["dep"], ref0["dep"]), _paired(r0["dep_far"], ref0["dep_far"])
-    (u0, w0), (u1, w1) = _paired(r0["unet"], ref0["unet"]), _paired(r1["unet"], ref1["unet"])
+    ((dm, dw), (fm, fw), (u0, w0), (u1, w1)), m = _against_exact(*(run["spec_f95_turned"] for run in runs))
     text = (f"level by plain DeP ({dm} dB, {dw}), leads given the far field ({fm}, {fw}) and by the UNet with both "
             f"seeds ({u0}, {w0}; {u1}, {w1})")
     assert text.replace("-", "−") in flat, text
-    presets = _per_image("layout_trained")
-    m = [np.mean(np.subtract(r0[k], presets[p][k])) for p in ("toled168_20", "poled_20") for k in ("dep", "unet")]
     assert f"repeated T-OLED by {m[0]:+.2f} / {m[1]:+.2f} dB and the P-OLED by {m[2]:+.2f} / {m[3]:+.2f} dB" in flat
 
 
@@ -1040,17 +1048,12 @@ def test_the_design_guide_prints_f95_4um_through_the_simulator():
     root = Path(__file__).resolve().parents[2]
     flat = " ".join((root / "docs" / "guides" / "design.md").read_text(encoding="utf-8").split())
     r0, r1 = (_per_image(f"scene/{run}")["f95_4um_turned"] for run in ("layout_trained", "layout_trained_seed1"))
-    ref0, ref1 = (_per_image(run)["toled168_20_edge_turned"] for run in ("layout_trained_exact",
-                                                                          "layout_trained_exact_seed1"))
-    assert r0["dep"] == r1["dep"]
-    (dm, dw), (fm, fw) = _paired(r0["dep"], ref0["dep"]), _paired(r0["dep_far"], ref0["dep_far"])
-    (u0, w0), (u1, w1) = _paired(r0["unet"], ref0["unet"]), _paired(r1["unet"], ref1["unet"])
+    ((dm, dw), (fm, fw), (u0, w0), (u1, w1)), m = _against_exact(r0, r1)
     text = (f"plain DeP **{dm} dB ({dw})**, DeP given the far field {fm} ({fw}), the UNet {u0} ({w0}, seed 0) and "
             f"{u1} ({w1}, seed 1)")
     assert text.replace("-", "−") in flat, text
-    presets = _per_image("layout_trained")
-    m = [np.mean(np.subtract(r0[k], presets[p][k])) for p in ("toled168_20", "poled_20") for k in ("dep", "unet")]
     assert f"repeated T-OLED {m[0]:+.2f} / {m[1]:+.2f} dB and over the P-OLED {m[2]:+.2f} / {m[3]:+.2f} dB" in flat
     f95 = _per_image("layout_trained_exact")["spec_f95_turned"]["dep"]
     assert f"(plain DeP {np.mean(np.subtract(r0['dep'], f95)):+.2f} over `spec_f95`'s row;" in flat
+    ref0 = _per_image("layout_trained_exact")["toled168_20_edge_turned"]
     assert f"against plain DeP's {np.mean(np.subtract(r0['dep'], ref0['dep'])):+.3f})" in flat

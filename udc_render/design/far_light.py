@@ -10,9 +10,8 @@ to the sensor region R = λ z ν (z: the image distance), C the cell's c × c sq
 over its D4 turns, which leave a square window and a disc unchanged. Parseval's sum is taken on a grid of step
 1 / (pad P) up to the region's largest frequency (one 8 µm square's window share: 1.9e-5 / 3.4e-5 / 1.4e-5 off Si's
 closed form at pad 4 / 8 / 16, the Riemann sum's edge; 2 s for the 2520² T-OLED cell): a check of the engine's
-energy_outside that shares no code with it
-(psf.engine: the tiled pupil's FFT and exact pixel integration), and the light past the window that the simulator's
-far field keeps (within the acceptance) or loses (beyond it).
+energy_outside that shares no code with it (psf.engine: the tiled pupil's FFT and exact pixel integration), and the
+light past the window that the simulator's far field keeps (within the acceptance) or loses (beyond it).
 """
 from __future__ import annotations
 

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from udc_render.design.far_light import light_shares
 from udc_render.errors import UdcError
 from udc_render.io.files import save_json
 from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
@@ -62,7 +63,6 @@ def check(folders: list[Path]):
 def _light(cell: np.ndarray, pixel_um: float, designer) -> dict:
     """The shares of the cell's light past the objective's kernel window and beyond the lens's acceptance (the
     simulator's far field keeps the light between them) at the rig's wavelengths (design.far_light, closed form)."""
-    from udc_render.design.far_light import light_shares
     from udc_render.design.optimise import RIG_WAVELENGTHS_NM
     from udc_render.optics.far_field import PAPER_FRAME_UM, acceptance_um
     g = designer.grid
