@@ -1034,6 +1034,12 @@ def test_the_design_guide_prints_the_study_scene_searches():
     assert f"**{f['mean']:+.3f} ± {f['se']:.3f} dB ({f['leads']} of 16)**" in flat
     assert (f"UPC's G {u['f95_4um']['mean'][1]:.3f} (min {u['f95_4um']['min'][1]:.3f}; B "
             f"{u['f95_4um']['mean'][2]:.3f})") in flat and f"**{bands['f95_4um']:.3f} ×**" in flat
+    for name, start in (("b95_4um", "channel_step/spec_veil_b95"), ("v128_4um", "ceiling/veil128_b100")):
+        d = json.loads((figures / "scene" / name / "design.json").read_text())
+        v, g = d["held_out"]["d4"]["vs"]["design"]["toled_preset"], d["upc"]["turned"]["draws"]["mean"][1]
+        assert d["config"]["init"] == f"docs/figures/design/{start}/cell.png" and d["config"]["feature_um"] == 4.0
+        assert (f"{v['mean']:+.3f} ± {v['se']:.3f} dB ({v['leads']} of 16; G {g:.3f}, bands "
+                f"{np.mean(d['banding']['ratio']):.3f} ×)").replace("-", "−") in flat
     light = json.loads((figures / "scene" / "held_out_4um" / "study_held_out.json").read_text())["rows"][0]
     assert light["design"].endswith("scene/f95_4um")
     assert f"Its light past the window is {' / '.join(f'{100 * v:.2f}' for v in light['past_window'])} %" in flat
