@@ -117,7 +117,7 @@ def run(args) -> int:
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
                           args.kicks, args.kick_swaps, args.search_tilings, _channel_step(args),
-                          **({} if args.mean_level is None else {"mean_level": args.mean_level}))
+                          mean_level=args.mean_level)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet, held_out_tilings=args.held_out_tilings)
     f, b = doc["final"], doc["scatters"]

@@ -55,11 +55,13 @@ class DesignConfig:
     search_tilings: int = 1
     channel_step_nm: float = 0.0  # > 0: the objective's channels summed over the camera's band (optimise module doc)
     reference: bool = False  # the scorer of a reference cell (design.held_out's T-OLEDs), not a design: no LTPS limit
-    mean_level: float = metrics.MEAN_LEVEL  # μ: the scene's mean, a fraction of the glass capture's full well
+    mean_level: float | None = None  # μ, a fraction of the glass capture's full well; None: metrics.MEAN_LEVEL
 
     def __post_init__(self):
         if self.contrast is None:
             object.__setattr__(self, "contrast", CONTRAST_DEFAULTS.get(self.objective, metrics.RMS_CONTRAST))
+        if self.mean_level is None:
+            object.__setattr__(self, "mean_level", metrics.MEAN_LEVEL)
         if not 0 < self.open_fraction < 1:
             raise tp.DesignError(f"--open-area {self.open_fraction}: expected a fraction in (0, 1)")
         if not (self.feature_um >= LITHOGRAPHY_UM or self.reference and self.feature_um > 0):

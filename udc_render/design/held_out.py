@@ -21,6 +21,7 @@ its mean and standard error say whether a design leads in expectation.
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import lru_cache
 
 import numpy as np
 import torch
@@ -59,10 +60,20 @@ def _scoring(config: DesignConfig, pixel_um: float) -> DesignConfig:
                    search_tilings=1, scatters=1, reference=True)
 
 
+@lru_cache(maxsize=4)
+def _framed_toled(cell_um: float, open_fraction: float) -> tuple[np.ndarray, float]:
+    """(the preset T-OLED's reference cell, slit at the tile's edge, read-only; its pixel in µm), made once per cell
+    and open area (reference_cell rasters up to 2520² squares: a second a call; the studies ask for it per row)."""
+    raster, pixel_um = reference_cell(layouts.toled(pitch_um=cell_um, open_fraction=open_fraction))
+    framed = frame_cell(raster, "edge")
+    framed.flags.writeable = False
+    return framed, pixel_um
+
+
 def preset_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
     """(the preset T-OLED's exact binary cell, slit at the tile's edge; the config that scores it)."""
-    raster, pixel_um = reference_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
-    return frame_cell(raster, "edge"), _scoring(config, pixel_um)
+    cell, pixel_um = _framed_toled(config.cell_um, config.open_fraction)
+    return cell, _scoring(config, pixel_um)
 
 
 def applies(config: DesignConfig) -> bool:
