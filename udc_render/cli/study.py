@@ -1,5 +1,5 @@
 """`udc-render study {psf,render,capture,far_field,realism,defocus,banding,gap,robustness,layout,layout-trained,
-layout-dipole,design} --out DIR [--quick]`:
+layout-dipole,design,held-out,channel-step,design-bands} --out DIR [--quick]`:
 error-versus-run-time studies of the approximation knobs, the defocus and banding studies users run, and the
 robustness of a restorer trained on one panel or on randomized panels (restore.studies.robustness)."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ from functools import partial
 from pathlib import Path
 
 from udc_render.cli.args import UserError, add_display_argument, out_dir, positive
-from udc_render.studies import design_channels, design_held_out, gap
+from udc_render.studies import design_bands, design_channels, design_held_out, gap
 
 STUDIES = {
     "psf": "the PSF engine's knobs (pupil samples, precision, wavelength step, field phases, kernel size)",
@@ -35,13 +35,17 @@ STUDIES = {
     "channel-step": "committed designs (--designs) scored by their objective at each channel step (one wavelength "
                     "per channel to the camera's band at 5 nm) against the simulator's T-OLED on its own tiling: "
                     "error against CPU time (about 3 min for 3 designs, one thread)",
+    "design-bands": "committed designs (--designs) on 32 held-out D4 draws: their bands at d = 2 mm against the "
+                    "turned T-OLED's at each design's open area, mean ± se per channel, and the ratio's change on a "
+                    "1 µm raster (about 3 min a design, one thread)",
     "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
                   "held-out and out-of-family panels (trains both: minutes with --quick, hours without)",
 }
 
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr")
-DESIGN_STUDIES = {"held-out": design_held_out, "channel-step": design_channels}  # the studies of --designs
+DESIGN_STUDIES = {"held-out": design_held_out, "channel-step": design_channels,
+                  "design-bands": design_bands}  # the studies of --designs
 
 
 def image_files(text: str) -> tuple[str, ...]:
@@ -107,8 +111,8 @@ def register(sub) -> None:
                    help="layout-trained only: the UNets' epochs (the full budget's 80, the robustness recipe's 240 "
                         "take about 3x as long) [the budget's]")
     s.add_argument("--designs", type=design_folders, default=(),
-                   help="held-out and channel-step only: `udc-render design` output folders, comma-separated "
-                        "[none]")
+                   help="held-out, channel-step and design-bands only: `udc-render design` output folders, "
+                        "comma-separated [none]")
     s.add_argument("--restore-crops", choices=("astronaut", "photos"), default="astronaut",
                    help="layout only, with --restore: the natural crops restored: astronaut, its face and suit (2 "
                         "crops); photos, 8 crops of astronaut, chelsea, coffee and rocket (4x the time) [astronaut]")
@@ -135,8 +139,8 @@ def run(args) -> int:
     if args.conditioned and args.what != "robustness":
         raise UserError("--conditioned: only `study robustness` trains a conditioned restorer")
     if bool(args.designs) != (args.what in DESIGN_STUDIES):
-        raise UserError("--designs: `study held-out` and `study channel-step` take it, and only they (design folders, "
-                        "comma-separated)")
+        raise UserError("--designs: `study held-out`, `study channel-step` and `study design-bands` take it, and "
+                        "only they (design folders, comma-separated)")
     if args.what in DESIGN_STUDIES:
         return _designs(args, DESIGN_STUDIES[args.what])
     if args.what == "layout":
@@ -176,8 +180,8 @@ def run(args) -> int:
 
 
 def _designs(args, study) -> int:
-    """`study held-out` and `study channel-step`: every folder read before the output folder is made."""
-    design_held_out.check(list(args.designs))
+    """`study held-out`, `channel-step` and `design-bands`: every folder read before the output folder is made."""
+    study.check(list(args.designs))
     out = out_dir(args.out)
     study.run_study(out, list(args.designs), quick=args.quick)
     name = study.NAME

@@ -31,11 +31,11 @@ from udc_render.design.config import DesignConfig
 from udc_render.design.held_out import HELD_OUT_TILINGS, applies, held_out_comparison
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.starts import initial_cell, scatter
-from udc_render.design.tiling_power import sampled_banding
+from udc_render.design.tiling_power import SAMPLE_UM, sampled_banding
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 
 __all__ = ["CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "scatter_baseline", "upc_comparison",
-           "ratio_over_draws", "banding_comparison"]
+           "ratio_over_draws", "toled_banding_cell", "banding_sd", "ratio_summary", "banding_comparison"]
 
 CHECKPOINT_STEPS = 10
 UPC_DRAWS = 8  # more D4 tilings for UPC's ratio (ratio_over_draws): the mean's sd to about a third of one draw's
@@ -115,25 +115,42 @@ def ratio_over_draws(cells: dict, seed: int, n: int = UPC_DRAWS) -> dict:
     return {"n": n, "mean": r.mean(0).tolist(), "sd": r.std(0, ddof=1).tolist(), "min": r.min(0).tolist()}
 
 
-def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=None) -> dict:
-    """The relative sd of the power at d = 2 mm over the paper sensor's shifts (layout_banding.sampled_banding on its
-    2 µm raster, R / G / B) of the designed cell and of the preset T-OLED at the open area (84 × 84 at 2 µm, slit at
-    the tile's edge), tiled as the design is, on `study layout --tile-seed N`'s draws: per draw, and their ratio's
-    mean, sample sd, largest, and the draws below 1 per channel (seeds: BANDING_SEEDS by default)."""
+def toled_banding_cell(cell_um: float, open_fraction: float, pixel_um: float = SAMPLE_UM) -> tuple[np.ndarray, float]:
+    """(amplitude cell, its pixel in µm): the bands' reference, the preset T-OLED at the open area in the cell, its
+    slit at the tile's edge, area-weighted on ≈ pixel_um squares (84 × 84 at 2 µm for 168 µm: grey where an edge
+    falls inside a square)."""
     from psf import layouts
     from udc_render.design.cells import frame_cell, layout_cell
-    seeds = BANDING_SEEDS if seeds is None else seeds
-    toled, toled_um = layout_cell(layouts.toled(pitch_um=config.cell_um, open_fraction=config.open_fraction))
-    cells = {"design": (cell, config.feature_um), "toled_edge": (frame_cell(toled, "edge"), toled_um)}
-    sd = {name: [] for name in cells}
-    for seed in seeds:
-        for name, (c, pixel_um) in cells.items():
-            doc = sampled_banding(c, pixel_um, Lens(), RIG_WAVELENGTHS_NM, seed=seed, tilings=(config.tiling,))
-            sd[name].append(doc[config.tiling]["rms"])
-    r = np.divide(sd["design"], sd["toled_edge"])
-    return {"tiling": config.tiling, "seeds": list(seeds), "sd": sd, "ratio": r.tolist(), "mean": r.mean(0).tolist(),
-            "sd_of_ratio": (r.std(0, ddof=1) if len(seeds) > 1 else np.zeros(r.shape[1])).tolist(),
+    toled, toled_um = layout_cell(layouts.toled(pitch_um=cell_um, open_fraction=open_fraction), pixel_um)
+    return frame_cell(toled, "edge"), toled_um
+
+
+def banding_sd(cell: np.ndarray, pixel_um: float, tiling: str, seeds, sample_um: float = SAMPLE_UM) -> list:
+    """[draw][R, G, B]: the relative sd of the power at d = 2 mm over the paper sensor's shifts
+    (tiling_power.sampled_banding on its raster of sample_um) of the cell tiled so, on `study layout --tile-seed N`'s
+    draws N in seeds."""
+    return [sampled_banding(cell, pixel_um, Lens(), RIG_WAVELENGTHS_NM, seed=seed, sample_um=sample_um,
+                            tilings=(tiling,))[tiling]["rms"] for seed in seeds]
+
+
+def ratio_summary(design_sd: list, toled_sd: list) -> dict:
+    """The per-draw ratio design / T-OLED [draw][R, G, B] and per channel its mean, sample sd, largest and the draws
+    below 1."""
+    r = np.divide(design_sd, toled_sd)
+    return {"ratio": r.tolist(), "mean": r.mean(0).tolist(),
+            "sd_of_ratio": (r.std(0, ddof=1) if len(r) > 1 else np.zeros(r.shape[1])).tolist(),
             "max": r.max(0).tolist(), "below": (r < 1).sum(0).tolist()}
+
+
+def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=None) -> dict:
+    """The bands (banding_sd, R / G / B) of the designed cell and of the preset T-OLED at the open area
+    (toled_banding_cell), tiled as the design is, on `study layout --tile-seed N`'s draws: per draw, and
+    ratio_summary's figures (seeds: BANDING_SEEDS by default)."""
+    seeds = BANDING_SEEDS if seeds is None else seeds
+    toled, toled_um = toled_banding_cell(config.cell_um, config.open_fraction)
+    sd = {"design": banding_sd(cell, config.feature_um, config.tiling, seeds),
+          "toled_edge": banding_sd(toled, toled_um, config.tiling, seeds)}
+    return {"tiling": config.tiling, "seeds": list(seeds), "sd": sd, **ratio_summary(sd["design"], sd["toled_edge"])}
 
 
 def _loss_figure(doc: dict, out: Path) -> None:

@@ -1,0 +1,129 @@
+"""`udc-render study design-bands --designs DIR,DIR`: the designs' bands at d = 2 mm on many D4 draws, paired with the
+T-OLED at each design's open area (issue 48).
+
+design.json's `banding` scores a design on 5 draws, and one draw's ratio to the T-OLED varies by about 8 % (sd), so a
+ratio of 1.05 over 5 draws is one standard error from level. Here every design is scored as there
+(udc_render.design.job: banding_sd on the 2 µm raster, R / G / B, against toled_banding_cell tiled the same way on the
+same `study layout --tile-seed N` draws), on DRAWS draws: per channel the ratio's mean ± se, its sd over the draws and
+the draws below 1. The reference is the preset on 2 µm squares with grey edges, the designs are exact on the raster;
+on the first CHECK_DRAWS draws both are also scored on a 1 µm raster (the T-OLED on 1 µm squares), and the ratio's
+change is the raster's error stated beside the result. Designs may differ in squares and open area: each is paired
+with the T-OLED at its own (computed once per open area). Writes study_design_bands.{json,csv,md,png}.
+"""
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import fields
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from udc_render.errors import UdcError
+from udc_render.io.files import save_json
+from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
+
+__all__ = ["NAME", "DRAWS", "QUICK_DRAWS", "CHECK_DRAWS", "CHECK_SAMPLE_UM", "check", "run_study"]
+
+NAME = "study_design_bands"
+DRAWS = 32  # the ratio's se to about 0.014 (sd 0.08 over draws)
+QUICK_DRAWS = 2
+CHECK_DRAWS = 2  # draws also scored on the finer raster (6 × the time of a draw)
+CHECK_SAMPLE_UM = 1.0
+CHANNELS = ("R", "G", "B")
+
+
+def _design(folder: Path):
+    """(the design's DesignConfig, its cell) from a `udc-render design` folder, refused in one line otherwise."""
+    from udc_render.design.cells import read_cell
+    from udc_render.design.config import DesignConfig
+    path = folder / "design.json"
+    if not path.is_file():
+        raise UdcError(f"--designs {folder}: no design.json there; expected a `udc-render design` output folder")
+    saved = json.loads(path.read_text())["config"]
+    known = {f.name for f in fields(DesignConfig)}
+    config = DesignConfig(**{k: v for k, v in saved.items() if k in known})
+    return config, read_cell(str(folder / "cell.png"), config.cell_px, config.open_squares)
+
+
+def check(folders: list[Path]) -> dict:
+    """{folder: (config, cell)}: every folder read before any scoring (one line on the first that fails)."""
+    return {str(f): _design(f) for f in folders}
+
+
+def _toled_sd(config, seeds, sample_um: float, cache: dict) -> list:
+    """The T-OLED's bands at the design's cell, open area and tiling on the draws, computed once per key."""
+    from udc_render.design.job import banding_sd, toled_banding_cell
+    key = (config.cell_um, config.open_fraction, config.tiling, tuple(seeds), sample_um)
+    if key not in cache:
+        toled, toled_um = toled_banding_cell(config.cell_um, config.open_fraction, sample_um)
+        cache[key] = banding_sd(toled, toled_um, config.tiling, seeds, sample_um)
+    return cache[key]
+
+
+def _row(name: str, config, cell: np.ndarray, draws: int, checks: int, cache: dict) -> dict:
+    """One design: its ratio over the draws (job.ratio_summary, with the se) and the finer raster's change."""
+    from udc_render.design.job import banding_sd, ratio_summary
+    from udc_render.design.tiling_power import SAMPLE_UM
+    seeds = list(range(draws))
+    sd = banding_sd(cell, config.feature_um, config.tiling, seeds)
+    summary = ratio_summary(sd, _toled_sd(config, seeds, SAMPLE_UM, cache))
+    fine_seeds = seeds[:checks]
+    fine = ratio_summary(banding_sd(cell, config.feature_um, config.tiling, fine_seeds, CHECK_SAMPLE_UM),
+                         _toled_sd(config, fine_seeds, CHECK_SAMPLE_UM, cache))
+    coarse = np.mean(summary["ratio"][:checks], axis=0)
+    se = np.asarray(summary["sd_of_ratio"]) / np.sqrt(draws)
+    return {"design": name, "feature_um": config.feature_um, "open_fraction": config.open_fraction,
+            "tiling": config.tiling, "draws": draws, **summary, "se": se.tolist(), "sd": sd,
+            "raster_change": (np.asarray(fine["mean"]) / coarse - 1).tolist()}
+
+
+def _markdown(doc: dict) -> str:
+    def pm(r, c):
+        return f"{r['mean'][c]:.3f} ± {r['se'][c]:.3f} ({r['below'][c]})"
+
+    rows = [{"design": Path(r["design"]).name, **{ch: pm(r, c) for c, ch in enumerate(CHANNELS)},
+             "sd": f"{r['sd_of_ratio'][1]:.3f}", "fine": " / ".join(f"{100 * v:+.1f}" for v in r["raster_change"])}
+            for r in doc["rows"]]
+    n = doc["draws"]
+    lines = ["# The designs' bands at d = 2 mm over held-out D4 draws, paired with the T-OLED", "",
+             f"The ratio of each design's bands (the relative sd of the power over the paper sensor's shifts, 2 µm "
+             f"raster) to the turned T-OLED's at the design's open area on the same draw: mean ± se over {n} draws "
+             f"(the draws below 1), its sd over the draws in G, and the mean ratio's change on a {CHECK_SAMPLE_UM:g} "
+             f"µm raster over the first {doc['check_draws']} draws (%, R / G / B).", ""]
+    lines += md_table(rows, [("design", "design"), ("R", "R"), ("G", "G"), ("B", "B"), ("sd", "sd over draws, G"),
+                             ("fine", f"change on {CHECK_SAMPLE_UM:g} µm (%)")], {})
+    return "\n".join(lines) + "\n"
+
+
+def _figure(doc: dict, out: Path) -> None:
+    plt = pyplot()
+    rows = doc["rows"]
+    fig, ax = plt.subplots(figsize=(7, 0.45 * len(rows) + 1.5))
+    for y, r in enumerate(rows):
+        g = np.asarray(r["ratio"])[:, 1]
+        ax.plot(g, np.full(len(g), y) + np.linspace(-0.2, 0.2, len(g)), ".", color="0.6", ms=3)
+        ax.errorbar(r["mean"][1], y, xerr=2 * r["se"][1], fmt="o", color="C0")
+    ax.axvline(1, color="0.3", lw=0.8)
+    ax.set_yticks(range(len(rows)), [Path(r["design"]).name for r in rows])
+    ax.set_xlabel(f"bands at d = 2 mm, design / turned T-OLED, G (each draw; mean ± 2 se over {doc['draws']})")
+    save_plot(fig, out / f"{NAME}.png")
+
+
+def run_study(out: Path, designs: list[Path], quick: bool = False) -> dict:
+    """Every folder read (a bad one refused) before any scoring; then the module doc's files."""
+    found = check(designs)
+    draws, checks = (QUICK_DRAWS, 1) if quick else (DRAWS, CHECK_DRAWS)
+    start, cache, rows = time.perf_counter(), {}, []
+    for name, (config, cell) in tqdm(found.items(), desc="study design-bands"):
+        rows.append(_row(name, config, cell, draws, checks, cache))
+    doc = {"draws": draws, "check_draws": checks, "check_sample_um": CHECK_SAMPLE_UM, "rows": rows,
+           "toled_sd": {f"{k[0]:g} µm, {k[1]:.6g}, {k[2]}, {k[4]:g} µm raster": v for k, v in cache.items()},
+           "seconds": time.perf_counter() - start}
+    save_json(out / f"{NAME}.json", doc)
+    flat = [{"design": r["design"], **{f"{k}_{ch}": r[k][c] for k in ("mean", "se", "below", "raster_change")
+                                       for c, ch in enumerate(CHANNELS)}} for r in rows]
+    write_tables(out, NAME, flat, list(flat[0]), _markdown(doc))
+    _figure(doc, out)
+    return doc
