@@ -148,7 +148,7 @@ def test_design_json_holds_the_held_out_comparison(tmp_path):
 @pytest.mark.parametrize("what, says", [
     ("nofolder", "no design.json there; expected a `udc-render design` output folder"),
     ("other_cell", "differs from the first design's"),
-    ("display", "--designs: `study held-out` and `study channel-step` take it, and only they"),
+    ("display", "--designs: `study held-out`, `study channel-step` and `study design-bands` take it, and only they"),
 ])
 def test_study_held_out_refuses_in_one_line(tmp_path, capsys, what, says):
     a = tmp_path / "a"

@@ -63,20 +63,22 @@ def _toled_sd(config, seeds, sample_um: float, cache: dict) -> list:
 
 
 def _row(name: str, config, cell: np.ndarray, draws: int, checks: int, cache: dict) -> dict:
-    """One design: its ratio over the draws (job.ratio_summary, with the se) and the finer raster's change."""
+    """One design: its ratio over the draws (job.ratio_summary, with the se) and its change on the finer raster over
+    the first `checks` draws (None for 0)."""
     from udc_render.design.job import banding_sd, ratio_summary
     from udc_render.design.tiling_power import SAMPLE_UM
     seeds = list(range(draws))
     sd = banding_sd(cell, config.feature_um, config.tiling, seeds)
     summary = ratio_summary(sd, _toled_sd(config, seeds, SAMPLE_UM, cache))
-    fine_seeds = seeds[:checks]
-    fine = ratio_summary(banding_sd(cell, config.feature_um, config.tiling, fine_seeds, CHECK_SAMPLE_UM),
-                         _toled_sd(config, fine_seeds, CHECK_SAMPLE_UM, cache))
-    coarse = np.mean(summary["ratio"][:checks], axis=0)
     se = np.asarray(summary["sd_of_ratio"]) / np.sqrt(draws)
-    return {"design": name, "feature_um": config.feature_um, "open_fraction": config.open_fraction,
-            "tiling": config.tiling, "draws": draws, **summary, "se": se.tolist(), "sd": sd,
-            "raster_change": (np.asarray(fine["mean"]) / coarse - 1).tolist()}
+    row = {"design": name, "feature_um": config.feature_um, "open_fraction": config.open_fraction,
+           "tiling": config.tiling, "draws": draws, **summary, "se": se.tolist(), "sd": sd, "raster_change": None}
+    if checks:
+        fine_seeds = seeds[:checks]
+        fine = ratio_summary(banding_sd(cell, config.feature_um, config.tiling, fine_seeds, CHECK_SAMPLE_UM),
+                             _toled_sd(config, fine_seeds, CHECK_SAMPLE_UM, cache))
+        row["raster_change"] = (np.asarray(fine["mean"]) / np.mean(summary["ratio"][:checks], axis=0) - 1).tolist()
+    return row
 
 
 def _markdown(doc: dict) -> str:
