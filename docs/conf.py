@@ -42,7 +42,8 @@ exclude_patterns = ["_build", "Thumbs.db", ".DS_Store",
                     "figures/design/**/study_layout.md", "figures/design/**/study_design.md",
                     "figures/design/**/layout_crop.md", "figures/design/**/study_layout_compare.md",
                     "figures/design/**/study_layout_trained.md", "figures/design/**/study_layout_dipole.md",
-                    "figures/design/**/study_held_out.md", "figures/design/**/study_channel_step.md"]
+                    "figures/design/**/study_held_out.md", "figures/design/**/study_channel_step.md",
+                    "figures/design/**/study_design_bands.md"]
 templates_path = ["_templates"]
 
 # MyST: the project's Markdown is included as is (docs/*.md, RESULTS.md, scenes/README.md,
