@@ -70,3 +70,10 @@ def test_study_design_bands_refuses_a_folder_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "no design.json there" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "never").exists()
+
+
+def test_a_design_whose_start_is_gone_is_read():
+    """design.json's search-only settings are not read back: k8_then_swaps3 started from a cell PNG under /tmp that
+    no longer exists, and its folder still reads (its 88 open squares of 21 × 21)."""
+    config, cell = design_bands.check([DESIGNS / "kicks/k8_then_swaps3"])[str(DESIGNS / "kicks/k8_then_swaps3")]
+    assert cell.shape == (21, 21) and int(cell.sum()) == 88 and config.init == "scatter"

@@ -12,16 +12,14 @@ with the T-OLED at its own (computed once per open area). Writes study_design_ba
 """
 from __future__ import annotations
 
-import json
 import time
-from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from udc_render.errors import UdcError
 from udc_render.io.files import save_json
+from udc_render.studies.design_held_out import saved_design
 from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
 
 __all__ = ["NAME", "DRAWS", "QUICK_DRAWS", "CHECK_DRAWS", "CHECK_SAMPLE_UM", "check", "run_study"]
@@ -34,22 +32,9 @@ CHECK_SAMPLE_UM = 1.0
 CHANNELS = ("R", "G", "B")
 
 
-def _design(folder: Path):
-    """(the design's DesignConfig, its cell) from a `udc-render design` folder, refused in one line otherwise."""
-    from udc_render.design.cells import read_cell
-    from udc_render.design.config import DesignConfig
-    path = folder / "design.json"
-    if not path.is_file():
-        raise UdcError(f"--designs {folder}: no design.json there; expected a `udc-render design` output folder")
-    saved = json.loads(path.read_text())["config"]
-    known = {f.name for f in fields(DesignConfig)}
-    config = DesignConfig(**{k: v for k, v in saved.items() if k in known})
-    return config, read_cell(str(folder / "cell.png"), config.cell_px, config.open_squares)
-
-
 def check(folders: list[Path]) -> dict:
     """{folder: (config, cell)}: every folder read before any scoring (one line on the first that fails)."""
-    return {str(f): _design(f) for f in folders}
+    return {str(f): saved_design(f) for f in folders}
 
 
 def _toled_sd(config, seeds, sample_um: float, cache: dict) -> list:

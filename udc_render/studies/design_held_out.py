@@ -24,7 +24,7 @@ from udc_render.errors import UdcError
 from udc_render.io.files import save_json
 from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
 
-__all__ = ["NAME", "QUICK_TILINGS", "objective_config", "check", "run_study"]
+__all__ = ["NAME", "QUICK_TILINGS", "saved_design", "objective_config", "check", "run_study"]
 
 NAME = "study_held_out"
 QUICK_TILINGS = 2
@@ -35,22 +35,29 @@ GROUPS = ("d4", "quarter_turns", "engine")  # the held-out D4 draws, quarter-tur
 TOLEDS = ("toled_preset", "toled_squares")
 
 
-def objective_config(folder: Path):
-    """The DesignConfig of a design folder's objective (design.json's settings, SEARCH_ONLY's reset), and its cell."""
+def saved_design(folder: Path):
+    """(the DesignConfig of design.json's settings in a `udc-render design` folder less the search's own, SEARCH_ONLY
+    (its start may name a file gone since), and its cell), refused in one line when the folder holds no design.json."""
     from udc_render.design.cells import read_cell
     from udc_render.design.config import DesignConfig
-    from udc_render.design.held_out import applies
     path = folder / "design.json"
     if not path.is_file():
         raise UdcError(f"--designs {folder}: no design.json there; expected a `udc-render design` output folder")
     saved = json.loads(path.read_text())["config"]
     known = {f.name for f in fields(DesignConfig)}
-    config = replace(DesignConfig(**{k: v for k, v in saved.items() if k in known and k not in SEARCH_ONLY}),
-                     **SEARCH_ONLY)
+    config = DesignConfig(**{k: v for k, v in saved.items() if k in known and k not in SEARCH_ONLY})
+    return config, read_cell(str(folder / "cell.png"), config.cell_px, config.open_squares)
+
+
+def objective_config(folder: Path):
+    """The DesignConfig of a design folder's objective (design.json's settings, SEARCH_ONLY's reset), and its cell."""
+    from udc_render.design.held_out import applies
+    saved, cell = saved_design(folder)
+    config = replace(saved, **SEARCH_ONLY)
     if not applies(config):
         raise UdcError(f"--designs {folder}: its design is {config.objective} in --optics {config.optics}, "
                        f"--tiling {config.tiling}; expected --objective wiener or crop, --optics rig, --tiling turned")
-    return config, read_cell(str(folder / "cell.png"), config.cell_px, config.open_squares)
+    return config, cell
 
 
 def check(folders: list[Path]):
