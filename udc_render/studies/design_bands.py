@@ -7,8 +7,9 @@ ratio of 1.05 over 5 draws is one standard error from level. Here every design i
 same `study layout --tile-seed N` draws), on DRAWS draws: per channel the ratio's mean ± se, its sd over the draws and
 the draws below 1. The reference is the preset on 2 µm squares with grey edges, the designs are exact on the raster;
 on the first CHECK_DRAWS draws both are also scored on a 1 µm raster (the T-OLED on 1 µm squares), and the ratio's
-change is the raster's error stated beside the result. Designs may differ in squares and open area: each is paired
-with the T-OLED at its own (computed once per open area). Writes study_design_bands.{json,csv,md,png}.
+change is stated beside the result: an estimate of the raster's error, not a bound (the T-OLED's grey edges do not
+converge monotonically with the square: docs/guides/design.md). Designs may differ in squares and open area: each
+is paired with the T-OLED at its own (computed once per open area). Writes study_design_bands.{json,csv,md,png}.
 """
 from __future__ import annotations
 
