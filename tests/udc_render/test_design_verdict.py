@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from tests.udc_render.test_design_study import _per_image, _pm
+
 FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures" / "design"
 GUIDE = Path(__file__).resolve().parents[2] / "docs" / "guides" / "design.md"
 # design: (its folder, its rows at training seeds 0 and 1 as (run, layout)); seeds 2 and 3: four_seeds/seed2, seed3.
@@ -35,9 +37,7 @@ def _guide() -> str:
     return " ".join(GUIDE.read_text().split())
 
 
-def _rows(run: str) -> dict:
-    doc = json.loads((FIGURES / run / "study_layout_trained.json").read_text())
-    return {r["layout"]: r["per_image_db"] for r in doc["rows"]}
+_rows = _per_image  # {layout: its per-image PSNRs} of a committed `study layout-trained` folder
 
 
 def _fmt(text: str) -> str:
@@ -45,8 +45,8 @@ def _fmt(text: str) -> str:
 
 
 def _paired(a, b) -> str:
-    d = np.subtract(a, b)
-    return _fmt(f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f} ({(d > 0).sum()} of {len(d)})")
+    """"mean ± se (wins of n)" of the per-image differences a − b, with the guide's minus sign."""
+    return _fmt(_pm(a, b))
 
 
 def _seeds(name: str) -> list[dict]:
