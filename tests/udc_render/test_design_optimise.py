@@ -16,7 +16,8 @@ from udc_render.design import job, metrics, torch_psf as tp, upc
 from udc_render.design.cells import RINGS
 from udc_render.design.config import DesignConfig
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
-from udc_render.design.starts import kicked, scatter
+from udc_render.design.starts import scatter
+from udc_render.design.symmetry import kicked_orbits, orbits
 from udc_render.optics.displays import DisplayError, load_display
 
 TINY = dict(cell_um=200.0, feature_um=40.0, open_fraction=0.24, steps=4, pupil_samples=64, kernel_px=31, scatters=3,
@@ -136,7 +137,7 @@ def test_the_search_ends_in_a_local_optimum_of_all_swaps(tiling):
 def test_a_kick_moves_the_given_swaps_and_keeps_the_open_area():
     cell = _binary(21, 88, 4)
     for swaps in (1, 4, 88):
-        out = kicked(cell, swaps, np.random.default_rng(swaps))
+        out = kicked_orbits(cell, orbits(21, "none"), swaps, np.random.default_rng(swaps))
         assert out.sum() == 88 and np.sum((cell > 0.5) & (out < 0.5)) == swaps and cell.sum() == 88
 
 

@@ -14,6 +14,7 @@ from udc_render.design.options import (
     LITHOGRAPHY_UM,
     OBJECTIVES,
     OPTICS,
+    SYMMETRIES,
     TILINGS,
 )
 
@@ -67,6 +68,10 @@ def register(sub) -> None:
                    help=f"the search's start, one of {', '.join(INITS)} or a cell PNG: scatter: a random scatter; "
                         "toled: the preset T-OLED on the squares, its slit at the tile's edge; PATH: a former design's "
                         "cell.png (0 / 255, the same squares and open area) [scatter]")
+    p.add_argument("--symmetry", choices=SYMMETRIES, default="none",
+                   help="none: a free cell; c2: a point-symmetric cell (equal to itself turned by 180°), whose "
+                        "centroid sits at the tile's centre, so a turned tiling has no dipole bands "
+                        "(udc_render.design.symmetry); the swaps and kicks move its square pairs [none]")
     p.add_argument("--steps", type=positive("--steps", int), default=150,
                    help="at most this many swaps of an open and an opaque square; the search stops earlier at a "
                         "local optimum [150]")
@@ -117,7 +122,7 @@ def run(args) -> int:
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
                           args.kicks, args.kick_swaps, args.search_tilings, _channel_step(args),
-                          mean_level=args.mean_level)
+                          mean_level=args.mean_level, symmetry=args.symmetry)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet, held_out_tilings=args.held_out_tilings)
     f, b = doc["final"], doc["scatters"]

@@ -15,8 +15,10 @@ from udc_render.design.options import (
     LITHOGRAPHY_UM,
     OBJECTIVES,
     OPTICS,
+    SYMMETRIES,
     TILINGS,
 )
+from udc_render.design.symmetry import check_symmetric
 
 __all__ = ["DesignConfig"]
 
@@ -56,6 +58,7 @@ class DesignConfig:
     channel_step_nm: float = 0.0  # > 0: the objective's channels summed over the camera's band (optimise module doc)
     reference: bool = False  # the scorer of a reference cell (design.held_out's T-OLEDs), not a design: no LTPS limit
     mean_level: float | None = None  # μ, a fraction of the glass capture's full well; None: metrics.MEAN_LEVEL
+    symmetry: str = "none"  # 'c2': a point-symmetric cell, no dipole (udc_render.design.symmetry)
 
     def __post_init__(self):
         if self.contrast is None:
@@ -86,6 +89,7 @@ class DesignConfig:
         _check_channels("--channels", self.channels)
         if self.init not in INITS:
             read_cell(self.init, self.cell_px, self.open_squares)
+        self._check_symmetry()
         if self.optics == "upc":
             self._check_upc()
         if self.search_tilings > 1 and self.tiling != "turned":
@@ -105,10 +109,27 @@ class DesignConfig:
                 raise tp.DesignError(f"--{key.replace('_', '-')} {getattr(self, key)}: expected an integer ≥ 1")
         if not (isinstance(self.kicks, int) and self.kicks >= 0):
             raise tp.DesignError(f"--kicks {self.kicks}: expected an integer ≥ 0")
-        most = min(self.open_squares, self.cell_px ** 2 - self.open_squares)
+        most = min(self.open_squares, self.cell_px ** 2 - self.open_squares) // (2 if self.symmetry == "c2" else 1)
         if self.kicks and self.kick_swaps > most:
-            raise tp.DesignError(f"--kick-swaps {self.kick_swaps}: the cell has {most} squares to swap; expected "
+            unit = "square pairs" if self.symmetry == "c2" else "squares"
+            raise tp.DesignError(f"--kick-swaps {self.kick_swaps}: the cell has {most} {unit} to swap; expected "
                                  f"1 … {most}")
+
+    def _check_symmetry(self) -> None:
+        if self.symmetry not in SYMMETRIES:
+            raise tp.DesignError(f"--symmetry {self.symmetry}: expected one of {', '.join(SYMMETRIES)}")
+        if self.symmetry == "none":
+            return
+        if self.init == "toled":
+            raise tp.DesignError("--symmetry c2: --init toled is not point-symmetric (its slit at the tile's edge); "
+                                 "start from scatter or a point-symmetric cell.png")
+        if self.cell_px % 2 == 0 and self.open_squares % 2:
+            raise tp.DesignError(f"--symmetry c2: {self.open_squares} open squares (--open-area "
+                                 f"{self.open_fraction}) are odd, and the even {self.cell_px}² cell has no centre "
+                                 "square; expected an even number")
+        if self.init != "scatter":
+            check_symmetric(read_cell(self.init, self.cell_px, self.open_squares), self.symmetry,
+                            f"--init {self.init}")
 
     def _check_upc(self) -> None:
         if self.objective not in ("upc", "rings"):

@@ -82,7 +82,8 @@ from udc_render.design.crop import near_window, split_kernel
 from udc_render.design.floor import UpcFloor
 from udc_render.design.mtf import mean_ring_minima, ring_index, spectrum
 from udc_render.design.options import CHANNELS
-from udc_render.design.starts import initial_cell, kicked
+from udc_render.design.starts import initial_cell
+from udc_render.design.symmetry import kicked_orbits, orbit_swaps, orbits
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
 
@@ -96,7 +97,7 @@ _LATER_DEFAULTS = {  # options added after the first checkpoints, at the setting
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
     "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1,
     "channel_step_nm": 0.0, "reference": False,
-    "mean_level": metrics.MEAN_LEVEL}
+    "mean_level": metrics.MEAN_LEVEL, "symmetry": "none"}
 CHANNEL_ILLUMINANT = "D65"  # the white of the bank's channel kernels (udc_render.dataset.bank_make)
 
 
@@ -140,6 +141,7 @@ class Designer:
         self.ceiling = None if config.banding_ceiling is None else BandingCeiling(
             config.banding_ceiling, config.cell_px, config.cell_um, config.open_fraction, RIG_WAVELENGTHS_NM,
             config.seed, config.tiling == "turned", device=device)
+        self.groups = orbits(config.cell_px, config.symmetry)
         self.cell = initial_cell(config)
         self.current = self.search_score(self.cell)
         self.best_cell, self.best = self.cell, self.current
@@ -208,14 +210,11 @@ class Designer:
         with torch.no_grad():
             return float(self.searched(torch.tensor(cell, dtype=torch.float32, device=self.device), "search"))
 
-    def _predicted(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(open squares, opaque squares, predicted change [open, opaque] of each swap: g_j − g_i)."""
+    def _predicted(self) -> tuple[list, list, np.ndarray]:
+        """(open orbits, opaque orbits, predicted change [open, opaque] of each swap: symmetry.orbit_swaps)."""
         x = torch.tensor(self.cell, dtype=torch.float32, device=self.device, requires_grad=True)
         self.searched(x, "search").backward()
-        g = x.grad.double().cpu().numpy().ravel()
-        flat = self.cell.ravel()
-        opened, closed = np.flatnonzero(flat > 0.5), np.flatnonzero(flat < 0.5)
-        return opened, closed, g[closed][None, :] - g[opened][:, None]
+        return orbit_swaps(self.cell, self.groups, x.grad.double().cpu().numpy().ravel())
 
     def step(self) -> dict:
         """One step (module doc): the first improving swap among the candidates, or converged."""
@@ -225,12 +224,14 @@ class Designer:
         for idx in order:
             i, j = np.unravel_index(idx, predicted.shape)
             trial = self.cell.ravel().copy()
+            if not np.isfinite(predicted[i, j]):
+                break
             trial[opened[i]], trial[closed[j]] = 0.0, 1.0
             value = self.search_score(trial.reshape(self.cell.shape))
             rec["tried"] += 1
             if value < self.current - IMPROVE_REL * abs(self.current):
                 self.cell, self.current = trial.reshape(self.cell.shape), value
-                rec["swap"] = [int(opened[i]), int(closed[j])]
+                rec["swap"] = [int(opened[i][0]), int(closed[j][0])]
                 break
         self.evaluations += rec["tried"] + 1
         if self.current < self.best:
@@ -249,8 +250,8 @@ class Designer:
             self.cell, self.current, self.converged = self.best_cell, self.best, True
             return
         self.kicks_done += 1
-        self.cell = kicked(self.best_cell, self.config.kick_swaps, stream(self.config.seed, "design", "kick",
-                                                                          self.kicks_done))
+        self.cell = kicked_orbits(self.best_cell, self.groups, self.config.kick_swaps,
+                                  stream(self.config.seed, "design", "kick", self.kicks_done))
         self.current = self.search_score(self.cell)
         self.evaluations += 1
         rec["kick"] = self.kicks_done

@@ -1,5 +1,6 @@
 """The design search's cells besides its swaps (udc_render.design.optimise): where it starts (a random scatter, the
-T-OLED on the squares, a former design's cell) and the kicks of its iterated local search."""
+T-OLED on the squares, a former design's cell); the kicks of its iterated local search are
+udc_render.design.symmetry.kicked_orbits."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,9 +8,10 @@ import numpy as np
 from udc_render.design import torch_psf as tp
 from udc_render.design.cells import frame_cell, read_cell
 from udc_render.design.config import DesignConfig
+from udc_render.design.symmetry import symmetric_scatter
 from udc_render.streams import stream
 
-__all__ = ["scatter", "kicked", "toled_cell", "initial_cell"]
+__all__ = ["scatter", "toled_cell", "initial_cell"]
 
 
 def scatter(config: DesignConfig, *keys) -> np.ndarray:
@@ -18,15 +20,6 @@ def scatter(config: DesignConfig, *keys) -> np.ndarray:
     flat = np.zeros(c * c)
     flat[stream(config.seed, "design", *keys).permutation(c * c)[: config.open_squares]] = 1.0
     return flat.reshape(c, c)
-
-
-def kicked(cell: np.ndarray, swaps: int, rng: np.random.Generator) -> np.ndarray:
-    """The cell with `swaps` random open squares closed and as many opaque ones opened (the open area kept)."""
-    flat = cell.ravel().copy()
-    opened, closed = np.flatnonzero(flat > 0.5), np.flatnonzero(flat < 0.5)
-    flat[rng.choice(opened, swaps, replace=False)] = 0.0
-    flat[rng.choice(closed, swaps, replace=False)] = 1.0
-    return flat.reshape(cell.shape)
 
 
 def toled_cell(config: DesignConfig) -> np.ndarray:
@@ -42,9 +35,11 @@ def toled_cell(config: DesignConfig) -> np.ndarray:
 
 
 def initial_cell(config: DesignConfig) -> np.ndarray:
-    """The search's start by config.init: a random scatter (stream 'design', 'init'), the T-OLED (toled_cell), or a
-    cell PNG (cells.read_cell: a former design's cell.png)."""
+    """The search's start by config.init: a random scatter (stream 'design', 'init'; with symmetry c2 a random
+    point-symmetric one), the T-OLED (toled_cell), or a cell PNG (cells.read_cell: a former design's cell.png)."""
     if config.init == "toled":
         return toled_cell(config)
+    if config.init == "scatter" and config.symmetry == "c2":
+        return symmetric_scatter(config.cell_px, config.open_squares, stream(config.seed, "design", "init", "c2"))
     return scatter(config, "init") if config.init == "scatter" else read_cell(config.init, config.cell_px,
                                                                                config.open_squares)
