@@ -42,23 +42,26 @@ def _design(folder: Path, **config) -> Path:
 
 
 def test_the_toled_is_scored_once_per_open_area_and_raster(tmp_path, monkeypatch):
-    """Three designs at two open areas: the T-OLED's bands are computed once per open area and raster (2 µm and the
-    check's 1 µm), and every ratio is the design's over the T-OLED's at its own open area, draw by draw."""
+    """Three designs at two open areas: the T-OLED's bands are computed once per open area, raster (2 µm and the
+    check's 1 µm) and tiling (the design's, and repeated on one draw), and every ratio is the design's over the
+    T-OLED's at its own open area, draw by draw; over the repeated T-OLED, each draw over its one figure."""
     calls = []
 
     def fake_sd(cell, pixel_um, tiling, seeds, sample_um=2.0):
-        calls.append((cell.shape, sample_um))
+        calls.append((cell.shape, sample_um, tiling))
         return [[float(cell.mean()) * (1 + s) * c for c in (1.0, 2.0, 3.0)] for s in seeds]
 
     monkeypatch.setattr(job, "banding_sd", fake_sd)
     folders = [_design(tmp_path / "a"), _design(tmp_path / "b"), _design(tmp_path / "c", open_fraction=0.32)]
     doc = design_bands.run_study(tmp_path / "out", folders, quick=True)
     toleds = [c for c in calls if c[0] != (5, 5)]
-    assert len(toleds) == 4 and len(calls) == 4 + 2 * 3
+    assert len(toleds) == 6 and len(calls) == 6 + 2 * 3
+    assert sorted(c[2] for c in toleds) == ["repeated"] * 2 + ["turned"] * 4
     for r, folder in zip(doc["rows"], folders):
         config, cell = design_bands.check([folder])[str(folder)]
         toled, _ = job.toled_banding_cell(config.cell_um, config.open_fraction)
         assert np.allclose(r["ratio"], cell.mean() / toled.mean())
+        assert np.allclose(r["over_repeated"]["mean"], 1.5 * cell.mean() / toled.mean())  # draws 0, 1: × 1, × 2
         assert r["raster_change"] == pytest.approx([0.0, 0.0, 0.0], abs=1e-9)  # area-weighted: the same open area
     for name in ("json", "csv", "md", "png"):
         assert (tmp_path / "out" / f"study_design_bands.{name}").is_file()

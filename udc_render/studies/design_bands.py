@@ -9,7 +9,9 @@ the draws below 1. The reference is the preset on 2 µm squares with grey edges,
 on the first CHECK_DRAWS draws both are also scored on a 1 µm raster (the T-OLED on 1 µm squares), and the ratio's
 change is stated beside the result: an estimate of the raster's error, not a bound (the T-OLED's grey edges do not
 converge monotonically with the square: docs/guides/design.md). Designs may differ in squares and open area: each
-is paired with the T-OLED at its own (computed once per open area). Writes study_design_bands.{json,csv,md,png}.
+is paired with the T-OLED at its own (computed once per open area). Beside, each design's bands over the repeated
+T-OLED's (the same cell tiled plainly: one figure, no draw), mean ± se over the draws: the reading of "no stronger
+than the T-OLED's" where that T-OLED is the repeated one. Writes study_design_bands.{json,csv,md,png}.
 """
 from __future__ import annotations
 
@@ -38,13 +40,15 @@ def check(folders: list[Path]) -> dict:
     return {str(f): saved_design(f) for f in folders}
 
 
-def _toled_sd(config, seeds, sample_um: float, cache: dict) -> list:
-    """The T-OLED's bands at the design's cell, open area and tiling on the draws, computed once per key."""
+def _toled_sd(config, seeds, sample_um: float, cache: dict, tiling: str | None = None) -> list:
+    """The T-OLED's bands at the design's cell and open area, tiled as the design is (or as `tiling`), on the draws,
+    computed once per key."""
     from udc_render.design.job import banding_sd, toled_banding_cell
-    key = (config.cell_um, config.open_fraction, config.tiling, tuple(seeds), sample_um)
+    tiling = tiling or config.tiling
+    key = (config.cell_um, config.open_fraction, tiling, tuple(seeds), sample_um)
     if key not in cache:
         toled, toled_um = toled_banding_cell(config.cell_um, config.open_fraction, sample_um)
-        cache[key] = banding_sd(toled, toled_um, config.tiling, seeds, sample_um)
+        cache[key] = banding_sd(toled, toled_um, tiling, seeds, sample_um)
     return cache[key]
 
 
@@ -57,8 +61,12 @@ def _row(name: str, config, cell: np.ndarray, draws: int, checks: int, cache: di
     sd = banding_sd(cell, config.feature_um, config.tiling, seeds)
     summary = ratio_summary(sd, _toled_sd(config, seeds, SAMPLE_UM, cache))
     se = np.asarray(summary["sd_of_ratio"]) / np.sqrt(draws)
+    repeated = np.divide(sd, _toled_sd(config, [0], SAMPLE_UM, cache, "repeated")[0])
     row = {"design": name, "feature_um": config.feature_um, "open_fraction": config.open_fraction,
-           "tiling": config.tiling, "draws": draws, **summary, "se": se.tolist(), "sd": sd, "raster_change": None}
+           "tiling": config.tiling, "draws": draws, **summary, "se": se.tolist(), "sd": sd, "raster_change": None,
+           "over_repeated": {"mean": repeated.mean(0).tolist(),
+                             "se": (repeated.std(0, ddof=1) / np.sqrt(draws) if draws > 1 else 0 * repeated[0]
+                                    ).tolist(), "below": (repeated < 1).sum(0).tolist()}}
     if checks:
         fine_seeds = seeds[:checks]
         fine = ratio_summary(banding_sd(cell, config.feature_um, config.tiling, fine_seeds, CHECK_SAMPLE_UM),
@@ -72,16 +80,19 @@ def _markdown(doc: dict) -> str:
         return f"{r['mean'][c]:.3f} ± {r['se'][c]:.3f} ({r['below'][c]})"
 
     rows = [{"design": Path(r["design"]).name, **{ch: pm(r, c) for c, ch in enumerate(CHANNELS)},
-             "sd": f"{r['sd_of_ratio'][1]:.3f}", "fine": " / ".join(f"{100 * v:+.1f}" for v in r["raster_change"])}
+             "sd": f"{r['sd_of_ratio'][1]:.3f}", "fine": " / ".join(f"{100 * v:+.1f}" for v in r["raster_change"]),
+             "repeated": pm(r["over_repeated"], 1)}
             for r in doc["rows"]]
     n = doc["draws"]
     lines = ["# The designs' bands at d = 2 mm over held-out D4 draws, paired with the T-OLED", "",
              f"The ratio of each design's bands (the relative sd of the power over the paper sensor's shifts, 2 µm "
              f"raster) to the turned T-OLED's at the design's open area on the same draw: mean ± se over {n} draws "
              f"(the draws below 1), its sd over the draws in G, and the mean ratio's change on a {CHECK_SAMPLE_UM:g} "
-             f"µm raster over the first {doc['check_draws']} draws (%, R / G / B).", ""]
+             f"µm raster over the first {doc['check_draws']} draws (%, R / G / B); last, the design's bands over "
+             f"the repeated T-OLED's (one figure: a periodic display has no draw), G.", ""]
     lines += md_table(rows, [("design", "design"), ("R", "R"), ("G", "G"), ("B", "B"), ("sd", "sd over draws, G"),
-                             ("fine", f"change on {CHECK_SAMPLE_UM:g} µm (%)")], {})
+                             ("fine", f"change on {CHECK_SAMPLE_UM:g} µm (%)"),
+                             ("repeated", "over the repeated T-OLED, G")], {})
     return "\n".join(lines) + "\n"
 
 
@@ -111,7 +122,8 @@ def run_study(out: Path, designs: list[Path], quick: bool = False) -> dict:
            "seconds": time.perf_counter() - start}
     save_json(out / f"{NAME}.json", doc)
     flat = [{"design": r["design"], **{f"{k}_{ch}": r[k][c] for k in ("mean", "se", "below", "raster_change")
-                                       for c, ch in enumerate(CHANNELS)}} for r in rows]
+                                       for c, ch in enumerate(CHANNELS)},
+             **{f"over_repeated_{ch}": r["over_repeated"]["mean"][c] for c, ch in enumerate(CHANNELS)}} for r in rows]
     write_tables(out, NAME, flat, list(flat[0]), _markdown(doc))
     _figure(doc, out)
     return doc
