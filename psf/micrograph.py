@@ -68,9 +68,13 @@ def read_transmission_image(path: str | Path) -> np.ndarray:
     return np.clip(img, 0.0, 1.0)
 
 
-def quarter_turns(seed: int, tiles_x: int, tiles_y: int, square: bool = True) -> np.ndarray:
-    """[tiles_y, tiles_x] quarter turns per tile drawn from seed: uniform over 0..3 (a square tile) or over 0, 2."""
+def quarter_turns(seed: int, tiles_x: int, tiles_y: int, square: bool = True, flips: bool = False) -> np.ndarray:
+    """[tiles_y, tiles_x] D4 elements per tile drawn from seed (k: k mod 4 quarter turns, the tile mirrored left-right
+    first when k ≥ 4; psf.pupil.tile_mask): uniform over the quarter turns 0..3 (a square tile) or 0, 2, and with
+    flips over those and their mirror images as well."""
     choices = np.array([0, 1, 2, 3]) if square else np.array([0, 2])
+    if flips:
+        choices = np.concatenate([choices, choices + 4])
     return np.random.default_rng(seed).choice(choices, size=(tiles_y, tiles_x))
 
 
@@ -85,17 +89,19 @@ def _area_resample_matrix(n_out: int, n_in: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class MicrographLayout:
-    """A measured display tile; period = image size × pixel_um."""
+    """A measured display tile; period = image size × pixel_um. random_rotation: each tile turned by a random quarter
+    turn; with flip, by a random element of D4 (a quarter turn or its mirror image)."""
     path: str
     pixel_um: float
     values: str = "amplitude"
     random_rotation: bool = False
     seed: int = 0
     image: np.ndarray = field(repr=False, compare=False, default=None)
+    flip: bool = False
 
     @classmethod
     def load(cls, path, pixel_um: float, values: str = "amplitude", random_rotation: bool = False,
-             seed: int = 0) -> "MicrographLayout":
+             seed: int = 0, flip: bool = False) -> "MicrographLayout":
         if not pixel_um > 0:
             raise LayoutError(f"micrograph {path}: pixel_um must be > 0, got {pixel_um}")
         if values not in ("amplitude", "intensity"):
@@ -104,7 +110,9 @@ class MicrographLayout:
         amp = np.sqrt(img) if values == "intensity" else img
         if not amp.any():
             raise LayoutError(f"micrograph {path}: fully opaque (every value is 0); nothing is transmitted")
-        return cls(str(path), float(pixel_um), values, bool(random_rotation), int(seed), amp)
+        if flip and not random_rotation:
+            raise LayoutError(f"micrograph {path}: flip mirrors randomly turned tiles; it needs random_rotation")
+        return cls(str(path), float(pixel_um), values, bool(random_rotation), int(seed), amp, bool(flip))
 
     @property
     def name(self) -> str:
@@ -146,14 +154,15 @@ class MicrographLayout:
         return dft * np.outer(np.sinc(ky / h), np.sinc(kx / w)) * shift
 
     def tile_rotations(self, tiles_x: int, tiles_y: int) -> np.ndarray:
-        """Quarter turns (0..3) for every tile, from the recorded seed (all 0 without rotation)."""
+        """The D4 element (quarter_turns' numbering: 0..3 turns, 4..7 with flip) of every tile, from the recorded seed
+        (all 0 without rotation)."""
         if not self.random_rotation:
             return np.zeros((tiles_y, tiles_x), dtype=int)
         h, w = self.image.shape
-        return quarter_turns(self.seed, tiles_x, tiles_y, square=h == w)
+        return quarter_turns(self.seed, tiles_x, tiles_y, square=h == w, flips=self.flip)
 
     def describe(self) -> dict:
         digest = hashlib.sha256(np.ascontiguousarray(self.image).tobytes()).hexdigest()[:16]
         return {"kind": "micrograph", "path": self.path, "pixel_um": self.pixel_um, "values": self.values,
                 "random_rotation": self.random_rotation, "seed": self.seed,
-                "shape": list(self.image.shape), "sha256_16": digest}
+                "shape": list(self.image.shape), "sha256_16": digest, **({"flip": True} if self.flip else {})}

@@ -127,5 +127,6 @@ def tile_mask(layout, cell_n: tuple[int, int], tiles: tuple[int, int], mask_rast
     rot = layout.tile_rotations(tx, ty) if hasattr(layout, "tile_rotations") else None
     if rot is None or not rot.any():
         return np.tile(amp, (ty, tx)), kappa
-    rows = [np.concatenate([np.rot90(amp, k) for k in rot[j]], axis=1) for j in range(ty)]
+    variants = [np.rot90(np.fliplr(amp) if k >= 4 else amp, k % 4) for k in range(8)]  # quarter_turns' D4 numbering
+    rows = [np.concatenate([variants[k] for k in rot[j]], axis=1) for j in range(ty)]
     return np.concatenate(rows, axis=0), kappa

@@ -132,3 +132,23 @@ def test_psf_takes_a_display_files_layout_and_distance_and_distance_mm_wins(cell
     at_zero = _psf(tmp_path, "zero", "--display", str(toml), "--distance-mm", "0")
     assert "field_kernels" not in at_zero and "field_kernels" in from_file
     assert np.max(np.abs(at_zero["kernels"] - _psf(tmp_path, "img0", "--display", str(png))["kernels"])) < 1e-12 * peak
+
+
+@pytest.mark.parametrize("flip, says", [(True, None), ('"yes"', "display.layout.tile_flip = 'yes': expected true "
+                                                                 "or false"),
+                                        ("true\ntile_rotation = false", "needs tile_rotation = true")])
+def test_a_display_files_tile_flip_mirrors_the_turned_tiles(cell, tmp_path, capsys, flip, says):
+    """tile_flip = true: the micrograph's tiles turned and mirrored (psf.micrograph.quarter_turns' D4 draws); any other
+    value, or a flip without turns, is refused in one line by every command (here psf)."""
+    png, _ = cell
+    path = tmp_path / "f.toml"
+    rotation = "" if "tile_rotation" in str(flip) else "tile_rotation = true\n"
+    path.write_text(f'[display]\nname = "f"\n[display.layout]\ntype = "micrograph"\nfile = "{png.name}"\n'
+                    f'{rotation}tile_flip = {str(flip).lower()}\n')
+    if says is None:
+        layout = D.load_display(str(path)).layout
+        assert layout.flip and set(np.unique(layout.tile_rotations(30, 30))) == set(range(8))
+        return
+    assert main(["psf", "--display", str(path), "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err
+    assert says in err and str(path) in err and len(err.strip().splitlines()) == 1

@@ -239,11 +239,16 @@ def test_the_baseline_scatters_are_scored_as_the_design_is(tmp_path):
     assert draws["n"] == job.UPC_DRAWS and np.all(np.array(draws["min"]) <= draws["mean"])
 
 
-def test_the_designed_display_files_are_displays(tmp_path):
-    doc = job.run_design(DesignConfig(**{**TINY, "steps": 2}), tmp_path, quiet=True, compare=False)
+@pytest.mark.parametrize("symmetry", ["none", "c2"])
+def test_the_designed_display_files_are_displays(tmp_path, symmetry):
+    """design.toml repeats the cell, design_turned.toml turns it (and, for a point-symmetric cell, whose quarter
+    turns give two distinct tiles, mirrors it too: the search's D4)."""
+    doc = job.run_design(DesignConfig(**{**TINY, "steps": 2, "symmetry": symmetry}), tmp_path, quiet=True,
+                         compare=False)
     plain, turned = load_display(str(tmp_path / "design.toml")), load_display(str(tmp_path / "design_turned.toml"))
     assert plain.layout.image.shape == (5, 5) and plain.layout.pixel_um == 40.0 and not plain.layout.random_rotation
-    assert turned.layout.random_rotation and abs(plain.layout.open_fraction - doc["open_squares"] / 25) < 1e-15
+    assert turned.layout.random_rotation and turned.layout.flip == (symmetry == "c2")
+    assert abs(plain.layout.open_fraction - doc["open_squares"] / 25) < 1e-15
     assert abs(plain.gain - round(25 / doc["open_squares"], 3)) < 1e-12
     assert json.loads((tmp_path / "design.json").read_text())["cell_px"] == 5
     assert (tmp_path / "design_loss.png").stat().st_size > 0

@@ -86,7 +86,8 @@ def test_design_refuses_a_cell_the_symmetry_cannot_take(tmp_path, capsys):
                        (["--init", str(png)], f"--init {png}: the cell is not point-symmetric"),
                        (["--cell-um", "32", "--open-area", "0.19"],
                         "--symmetry c2: 3 open squares (--open-area 0.19) are odd, and the even 4² cell has no centre"),
-                       (["--kicks", "1", "--kick-swaps", "45"], "--kick-swaps 45: the cell has 44 square pairs to swap"),
+                       (["--kicks", "1", "--kick-swaps", "45"],
+                        "--kick-swaps 45: the cell has 44 square pairs to swap"),
                        (["--symmetry", "c4"], "--symmetry: invalid choice: 'c4'")):
         assert cli.main(["design", "--symmetry", "c2", *argv, "--out", str(tmp_path / "never")]) == 2
         err = capsys.readouterr().err

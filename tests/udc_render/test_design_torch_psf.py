@@ -19,8 +19,8 @@ LENS = Lens()
 WL = (450.0, 640.0)
 
 
-def _engine(cell, pixel_um, rotate, size_px, pupil, precision="float64"):
-    lay = MicrographLayout("cell", pixel_um, random_rotation=rotate, seed=3, image=cell)
+def _engine(cell, pixel_um, rotate, size_px, pupil, precision="float64", flip=False):
+    lay = MicrographLayout("cell", pixel_um, random_rotation=rotate, seed=3, image=cell, flip=flip)
     ks = compute_kernels(lay, LENS, WL, size_px=size_px, pupil_samples=pupil, precision=precision)
     return lay, ks.kernels
 
@@ -38,11 +38,14 @@ def test_raster_matrix_is_the_engines_band_limited_raster():
     assert np.abs(b @ cell @ b.T - ref).max() < 1e-12
 
 
-@pytest.mark.parametrize("rotate", [False, True])
-def test_kernels_equal_the_engines_float64(rotate):
-    """A grey 168 µm T-OLED cell (21 × 8 µm), plain and with the engine's random quarter-turns."""
+@pytest.mark.parametrize("rotate, flip", [(False, False), (True, False), (True, True)])
+def test_kernels_equal_the_engines_float64(rotate, flip):
+    """A grey 168 µm T-OLED cell (21 × 8 µm), plain and with the engine's random quarter-turns; with their mirror
+    images too (D4: tile_flip), its slit cut at the cell's centre line (the whole T-OLED is its own mirror image)."""
     cell = tp.preset_cell(layouts.toled(pitch_um=168.0), 21)
-    lay, ref = _engine(cell, 8.0, rotate, 31, 256)
+    if flip:
+        cell[:, 11:] = 0.0
+    lay, ref = _engine(cell, 8.0, rotate, 31, 256, flip=flip)
     got = _torch(cell, 8.0, lay, 31, 256)
     assert np.abs(got - ref).max() < 1e-8 * ref.max()
 

@@ -48,9 +48,12 @@ def _save_state(designer: Designer, path: Path) -> None:
         torch.save(designer.state(), tmp)
 
 
-def _display_toml(name: str, image: str, pixel_um: float, open_area: float, turned: bool, seed: int) -> str:
-    """A display file of the cell; its gain 1 / open area brings the capture's mean level back to glass's."""
-    turns = f"tile_rotation = true\ntile_seed = {seed}\n" if turned else ""
+def _display_toml(name: str, image: str, pixel_um: float, open_area: float, turned: bool, seed: int,
+                  flip: bool = False) -> str:
+    """A display file of the cell; its gain 1 / open area brings the capture's mean level back to glass's; turned:
+    the engine's random quarter-turns, and with flip their mirror images too (D4, the search's tilings)."""
+    flips = "tile_flip = true\n" if flip else ""
+    turns = f"tile_rotation = true\n{flips}tile_seed = {seed}\n" if turned else ""
     return (f'[display]\nname = "{name}"\ngain = {round(1.0 / open_area, 3)!r}\n\n[display.layout]\n'
             f'type = "micrograph"\nfile = "{image}"\npixel_um = {pixel_um!r}\nvalues = "amplitude"\n{turns}')
 
@@ -201,7 +204,7 @@ def _write(designer: Designer, out: Path, compare: bool, held_out_tilings: int) 
     save_text(out / "design.toml", _display_toml("design", "cell.png", cfg.feature_um, open_area, False, cfg.seed))
     if cfg.tiling == "turned":
         save_text(out / "design_turned.toml", _display_toml("design_turned", "cell.png", cfg.feature_um, open_area,
-                                                            True, cfg.seed))
+                                                            True, cfg.seed, flip=cfg.symmetry == "c2"))
     initial = initial_cell(cfg)
     final = designer.score(cell)
     doc = {"config": asdict(cfg), "final": final, "search_objective": designer.best,
