@@ -111,7 +111,8 @@ class MicrographLayout:
         if not amp.any():
             raise LayoutError(f"micrograph {path}: fully opaque (every value is 0); nothing is transmitted")
         if flip and not random_rotation:
-            raise LayoutError(f"micrograph {path}: flip mirrors randomly turned tiles; it needs random_rotation")
+            raise LayoutError(f"micrograph {path}: flip (--tile-flip) mirrors randomly turned tiles; it needs "
+                              "random_rotation (--tile-rotation)")
         return cls(str(path), float(pixel_um), values, bool(random_rotation), int(seed), amp, bool(flip))
 
     @property

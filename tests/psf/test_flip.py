@@ -56,5 +56,6 @@ def test_a_flip_without_turns_is_refused(tmp_path):
     import imageio.v3 as iio
     path = tmp_path / "c.png"
     iio.imwrite(path, np.full((4, 4), 255, np.uint8))
-    with pytest.raises(LayoutError, match="flip mirrors randomly turned tiles; it needs random_rotation"):
+    says = r"flip \(--tile-flip\) mirrors randomly turned tiles; it needs random_rotation \(--tile-rotation\)"
+    with pytest.raises(LayoutError, match=says):
         MicrographLayout.load(path, 8.0, flip=True)

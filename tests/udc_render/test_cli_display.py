@@ -152,3 +152,14 @@ def test_a_display_files_tile_flip_mirrors_the_turned_tiles(cell, tmp_path, caps
     assert main(["psf", "--display", str(path), "--out", str(tmp_path / "never")]) == 2
     err = capsys.readouterr().err
     assert says in err and str(path) in err and len(err.strip().splitlines()) == 1
+
+
+def test_psf_mirrors_a_micrographs_turned_tiles_or_refuses_in_one_line(cell, tmp_path, capsys):
+    png, _ = cell
+    assert main(["psf", "--display", str(png), "--tile-flip", "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err
+    assert "needs random_rotation (--tile-rotation)" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "never").exists()
+    args = build_parser().parse_args(["psf", "--display", str(png), "--tile-rotation", "--tile-flip"])
+    from udc_render.cli.psf import layout_and_distance
+    assert layout_and_distance(args)[0].flip

@@ -114,6 +114,8 @@ def register(sub) -> None:
                    help="what a micrograph image's pixels are: amplitude: the amplitude transmission (default); "
                         "intensity: the power transmission (its square root is taken) [amplitude]")
     p.add_argument("--tile-rotation", action="store_true", help="rotate each micrograph tile randomly")
+    p.add_argument("--tile-flip", action="store_true",
+                   help="with --tile-rotation, also mirror each micrograph tile at random (the 8 elements of D4)")
     p.add_argument("--tile-seed", "--seed", dest="tile_seed", type=int, default=0,
                    help="seed of the tile rotations (old spelling --seed) [0]")
     p.add_argument("--no-cache", action="store_true", help="neither read nor write the kernel cache")
@@ -126,7 +128,7 @@ def layout_and_distance(args):
     else the display's own (a display file's distance_mm; 0 for the presets and micrographs)."""
     from udc_render.optics.displays import load_display
     display = load_display(args.display, pixel_um=args.micrograph_pixel_um, values=args.micrograph_values,
-                           random_rotation=args.tile_rotation, seed=args.tile_seed)
+                           random_rotation=args.tile_rotation, seed=args.tile_seed, flip=args.tile_flip)
     return display.layout, display.distance_mm if args.distance_mm is None else args.distance_mm
 
 
@@ -156,8 +158,8 @@ def compute(args, display, lens, bar):
 
 def run(args) -> int:
     from psf import Lens
+    display, args.distance_mm = layout_and_distance(args)  # a bad display refused before the folder is made
     out = out_dir(args.out)
-    display, args.distance_mm = layout_and_distance(args)
     lens = Lens(args.focal_length_um, args.aperture_um, args.focus_distance_mm, args.object_distance_mm,
                 tuple(args.zernike or ()))
     with warnings.catch_warnings(record=True) as caught, tqdm(desc="psf kernels", unit="kernel", disable=None) as bar:

@@ -202,12 +202,12 @@ def micrograph_name(path: Path) -> str:
 
 
 def micrograph_display(path: Path, pixel_um: float = 1.0, values: str = "amplitude", random_rotation: bool = False,
-                       seed: int = 0) -> Display:
+                       seed: int = 0, flip: bool = False) -> Display:
     """A transmission micrograph as a display, named by the file's stem: what a display file with only
     ``[display.layout] type = "micrograph"`` gives (T = 1, gain 1, d = 0), with the tile's pixel size,
-    values and random tile rotation of ``psf.MicrographLayout.load``."""
+    values, random tile rotation and mirror (flip) of ``psf.MicrographLayout.load``."""
     name = micrograph_name(path)
-    layout = MicrographLayout.load(path, pixel_um, values, random_rotation, seed)
+    layout = MicrographLayout.load(path, pixel_um, values, random_rotation, seed, flip)
     return Display(name, layout, Transmission("flat", 1.0), 1.0, 0.0, source=str(path))
 
 
