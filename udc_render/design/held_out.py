@@ -50,8 +50,9 @@ def held_out_draws(designer: Designer, n: int, flips: bool = True) -> list[np.nd
 def engine_draw(designer: Designer) -> np.ndarray:
     """The simulator's own tiling of the designer's tiles: the engine's quarter-turns per tile for
     SIMULATOR_TILE_SEED (psf.micrograph.quarter_turns: a micrograph's and a turned preset's, which torch_psf's
-    tests match)."""
-    return quarter_turns(SIMULATOR_TILE_SEED, designer.tiles, designer.tiles)
+    tests match), mirrored too for a point-symmetric design (its design_turned.toml's tile_flip)."""
+    return quarter_turns(SIMULATOR_TILE_SEED, designer.tiles, designer.tiles,
+                         flips=designer.config.symmetry == "c2")
 
 
 def _scoring(config: DesignConfig, pixel_um: float) -> DesignConfig:
