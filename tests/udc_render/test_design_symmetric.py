@@ -66,3 +66,9 @@ def test_the_guides_row_is_the_committed_runs(name):
              json.loads((FIGURES / "symmetric" / "design_bands" / "study_design_bands.json").read_text())["rows"]}
     assert f"| {bands[name]['mean'][1]:.2f} | {bands[name]['over_repeated']['mean'][1]:.2f} |" in row
     assert bands[name]["over_repeated"]["below"][1] == 32  # "below the repeated T-OLED on every one of the 32 draws"
+
+
+def test_the_guides_second_seed_of_c2_veil_is_the_committed_run():
+    paired = json.loads((FIGURES / "symmetric" / "layout_trained_seed1" / "study_layout_trained.json").read_text())
+    unet = paired["paired"]["c2_veil_turned"]["unet"]
+    assert f"(seed 1: {_pm(unet['mean_db'], unet['se_db'], 2)})" in _row("c2_veil") and unet["wins"] == 0
