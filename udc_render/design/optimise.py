@@ -11,6 +11,10 @@ an open and an opaque square, which keep K:
     predicted change are scored exactly, in that order, and the first that lowers J is taken;
     none lowers J: a local optimum of this neighbourhood, and the run stops early (converged).
 
+With symmetry 'c2' the cell stays point-symmetric (udc_render.design.symmetry): a swap closes a square and its 180°
+image and opens another such pair (predicted change: the pairs' summed gradients), and the start and the kicks keep
+the symmetry; 'none' moves single squares, as above.
+
 With kicks N (iterated local search, Lourenço, Martin & Stützle, "Iterated Local Search", Handbook of
 Metaheuristics 2003): at each local optimum the best cell so far takes kick_swaps random swaps (stream 'design',
 'kick', n) and the swaps above descend again, N times; the design is the best local optimum. The swaps alone stop
@@ -223,9 +227,9 @@ class Designer:
         rec = {"step": self.step_done, "swap": None, "tried": 0}
         for idx in order:
             i, j = np.unravel_index(idx, predicted.shape)
-            trial = self.cell.ravel().copy()
-            if not np.isfinite(predicted[i, j]):
+            if not np.isfinite(predicted[i, j]):  # the rest change the open area (symmetry.orbit_swaps)
                 break
+            trial = self.cell.ravel().copy()
             trial[opened[i]], trial[closed[j]] = 0.0, 1.0
             value = self.search_score(trial.reshape(self.cell.shape))
             rec["tried"] += 1
