@@ -8,6 +8,7 @@ import skimage.io as skio
 
 from udc_render.cli import build_parser, main
 from udc_render.cli.args import capture_setup
+from udc_render.cli.psf import layout_and_distance
 from udc_render.optics import displays as D
 
 # the smallest arguments of each command that takes --display, less --display and --out
@@ -161,5 +162,4 @@ def test_psf_mirrors_a_micrographs_turned_tiles_or_refuses_in_one_line(cell, tmp
     assert "needs random_rotation (--tile-rotation)" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "never").exists()
     args = build_parser().parse_args(["psf", "--display", str(png), "--tile-rotation", "--tile-flip"])
-    from udc_render.cli.psf import layout_and_distance
     assert layout_and_distance(args)[0].flip

@@ -87,9 +87,7 @@ class DesignConfig:
             if getattr(self, key) not in allowed:
                 raise tp.DesignError(f"--{key} {getattr(self, key)}: expected one of {', '.join(allowed)}")
         _check_channels("--channels", self.channels)
-        if self.init not in INITS:
-            read_cell(self.init, self.cell_px, self.open_squares)
-        self._check_symmetry()
+        self._check_symmetry(None if self.init in INITS else read_cell(self.init, self.cell_px, self.open_squares))
         if self.optics == "upc":
             self._check_upc()
         if self.search_tilings > 1 and self.tiling != "turned":
@@ -115,7 +113,8 @@ class DesignConfig:
             raise tp.DesignError(f"--kick-swaps {self.kick_swaps}: the cell has {most} {unit} to swap; expected "
                                  f"1 … {most}")
 
-    def _check_symmetry(self) -> None:
+    def _check_symmetry(self, start) -> None:
+        """The symmetry known and the start able to keep it (start: the --init cell PNG's cell, or None)."""
         if self.symmetry not in SYMMETRIES:
             raise tp.DesignError(f"--symmetry {self.symmetry}: expected one of {', '.join(SYMMETRIES)}")
         if self.symmetry == "none":
@@ -127,9 +126,8 @@ class DesignConfig:
             raise tp.DesignError(f"--symmetry c2: {self.open_squares} open squares (--open-area "
                                  f"{self.open_fraction}) are odd, and the even {self.cell_px}² cell has no centre "
                                  "square; expected an even number")
-        if self.init != "scatter":
-            check_symmetric(read_cell(self.init, self.cell_px, self.open_squares), self.symmetry,
-                            f"--init {self.init}")
+        if start is not None:
+            check_symmetric(start, self.symmetry, f"--init {self.init}")
 
     def _check_upc(self) -> None:
         if self.objective not in ("upc", "rings"):
@@ -164,6 +162,12 @@ class DesignConfig:
     def channel_index(self) -> list[int]:
         """The objective's channels as indices into the kernels' R, G, B."""
         return [CHANNELS.index(c) for c in self.channels]
+
+    @property
+    def tile_flips(self) -> bool:
+        """Whether the simulator's turned tiling mirrors the tiles too (tile_flip): for a point-symmetric cell,
+        whose quarter turns alone give two distinct tiles."""
+        return self.symmetry == "c2"
 
     @property
     def cell_px(self) -> int:

@@ -51,8 +51,7 @@ def engine_draw(designer: Designer) -> np.ndarray:
     """The simulator's own tiling of the designer's tiles: the engine's quarter-turns per tile for
     SIMULATOR_TILE_SEED (psf.micrograph.quarter_turns: a micrograph's and a turned preset's, which torch_psf's
     tests match), mirrored too for a point-symmetric design (its design_turned.toml's tile_flip)."""
-    return quarter_turns(SIMULATOR_TILE_SEED, designer.tiles, designer.tiles,
-                         flips=designer.config.symmetry == "c2")
+    return quarter_turns(SIMULATOR_TILE_SEED, designer.tiles, designer.tiles, flips=designer.config.tile_flips)
 
 
 def _scoring(config: DesignConfig, pixel_um: float) -> DesignConfig:

@@ -204,7 +204,7 @@ def _write(designer: Designer, out: Path, compare: bool, held_out_tilings: int) 
     save_text(out / "design.toml", _display_toml("design", "cell.png", cfg.feature_um, open_area, False, cfg.seed))
     if cfg.tiling == "turned":
         save_text(out / "design_turned.toml", _display_toml("design_turned", "cell.png", cfg.feature_um, open_area,
-                                                            True, cfg.seed, flip=cfg.symmetry == "c2"))
+                                                            True, cfg.seed, flip=cfg.tile_flips))
     initial = initial_cell(cfg)
     final = designer.score(cell)
     doc = {"config": asdict(cfg), "final": final, "search_objective": designer.best,

@@ -52,6 +52,11 @@ def _toled_sd(config, seeds, sample_um: float, cache: dict, tiling: str | None =
     return cache[key]
 
 
+def _se(summary: dict, draws: int) -> list:
+    """The standard error of ratio_summary's mean over the draws."""
+    return (np.asarray(summary["sd_of_ratio"]) / np.sqrt(draws)).tolist()
+
+
 def _row(name: str, config, cell: np.ndarray, draws: int, checks: int, cache: dict) -> dict:
     """One design: its ratio over the draws (job.ratio_summary, with the se) and its change on the finer raster over
     the first `checks` draws (None for 0)."""
@@ -60,13 +65,11 @@ def _row(name: str, config, cell: np.ndarray, draws: int, checks: int, cache: di
     seeds = list(range(draws))
     sd = banding_sd(cell, config.feature_um, config.tiling, seeds)
     summary = ratio_summary(sd, _toled_sd(config, seeds, SAMPLE_UM, cache))
-    se = np.asarray(summary["sd_of_ratio"]) / np.sqrt(draws)
-    repeated = np.divide(sd, _toled_sd(config, [0], SAMPLE_UM, cache, "repeated")[0])
+    repeated = ratio_summary(sd, _toled_sd(config, [0], SAMPLE_UM, cache, "repeated") * draws)  # no draw: one figure
     row = {"design": name, "feature_um": config.feature_um, "open_fraction": config.open_fraction,
-           "tiling": config.tiling, "draws": draws, **summary, "se": se.tolist(), "sd": sd, "raster_change": None,
-           "over_repeated": {"mean": repeated.mean(0).tolist(),
-                             "se": (repeated.std(0, ddof=1) / np.sqrt(draws) if draws > 1 else 0 * repeated[0]
-                                    ).tolist(), "below": (repeated < 1).sum(0).tolist()}}
+           "tiling": config.tiling, "draws": draws, **summary, "se": _se(summary, draws), "sd": sd,
+           "raster_change": None,
+           "over_repeated": {"mean": repeated["mean"], "se": _se(repeated, draws), "below": repeated["below"]}}
     if checks:
         fine_seeds = seeds[:checks]
         fine = ratio_summary(banding_sd(cell, config.feature_um, config.tiling, fine_seeds, CHECK_SAMPLE_UM),
