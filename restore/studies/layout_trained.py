@@ -72,7 +72,7 @@ from udc_render.profiles import describe, resolve_profile
 from udc_render.scene.geometry import sensor_kernel_px
 from udc_render.studies.fingerprint import FIELD, digest, file_digest, stale_note
 
-__all__ = ["DISTANCE_MM", "MODIFIERS", "NAME", "entry_display", "paired", "run_study"]
+__all__ = ["DISTANCE_MM", "MODIFIERS", "NAME", "entry_display", "paired", "study_budget", "run_study"]
 
 DISTANCE_MM = 2.0  # the physical profile's d for the presets, and the issue's banding distance
 MODIFIERS = ("edge", "turned")
@@ -218,7 +218,10 @@ def _plot(out: Path, rows: list[dict]) -> None:
 
 def _markdown(result: dict) -> str:
     rows, ref = result["rows"], result["rows"][0]
-    lines = [f"# `study layout-trained` ({result['budget']['name']} budget)", "",
+    b = result["budget"]
+    lines = [f"# `study layout-trained` ({b['name']} budget)", "",
+             f"Rig: {b['sensor_px'][0]} × {b['sensor_px'][1]} px of {b['pitch_um']:g} µm (DeP on packed planes of "
+             f"{2 * b['pitch_um']:g} µm).", "",
              f"Reference for the paired differences: {ref['layout']} ({ref['images']} validation images, "
              "the same noise draws for every layout). PSNR: the paper protocol's; level: level-matched.", "",
              "| layout | T | input | DeP | DeP, no sensor noise | DeP, no far field | DeP given the far field | UNet | "
@@ -237,19 +240,29 @@ def _markdown(result: dict) -> str:
     return "\n".join(lines)
 
 
+def study_budget(quick: bool = False, epochs: int | None = None, pitch_um: float | None = None):
+    """The robustness budget ('quick' or 'full') with the UNets' epochs and the rig's sensor pitch given (None: the
+    budget's): the frame keeps its pixels, so a finer pitch sees a smaller field, and the bank's kernels take the
+    render margin at that pitch (sensor_kernel_px: 129 px at 6.2 µm, 257 at 3.1)."""
+    b = BUDGETS["quick" if quick else "full"]
+    b = b if epochs is None else replace(b, epochs=int(epochs))
+    return b if pitch_um is None else replace(b, pitch_um=float(pitch_um))
+
+
 def run_study(out: Path, specs: list[str], quick: bool = False, cache_dir: str | None = None,
-              progress: bool = True, train_seed: int = TRAIN_SEED, epochs: int | None = None) -> dict:
+              progress: bool = True, train_seed: int = TRAIN_SEED, epochs: int | None = None,
+              pitch_um: float | None = None) -> dict:
     """The study (module doc) of the layouts `specs` (DISPLAY[@edge][@turned]; the first is the reference) in `out`,
     or the rest of an interrupted one; writes the report and returns its JSON document. train_seed: the UNets'
-    (the score's images and noise draws do not change with it); epochs: the UNets' (None: the budget's)."""
+    (the score's images and noise draws do not change with it); epochs: the UNets' (None: the budget's); pitch_um:
+    the rig's sensor pitch (None: the budget's; the frame's pixels stay, the kernels take the render margin)."""
     out = Path(out).resolve()
     displays = [entry_display(s, out / "panels") for s in specs]
     names = [d.name for d in displays]
     if len(set(names)) != len(names):
         raise UdcError(f"--display {','.join(specs)}: expected distinct layouts, got the names {', '.join(names)}")
     out.mkdir(parents=True, exist_ok=True)
-    b = BUDGETS["quick" if quick else "full"]
-    b = b if epochs is None else replace(b, epochs=int(epochs))
+    b = study_budget(quick, epochs, pitch_um)
     times = StageTimes(out / "times.json")
     data = write_clean_images(out / "clean", b)
     banks = _banks(out, displays, b, times, cache_dir, progress)

@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 
 from psf.turned import TurnedLayout
-from restore.studies.layout_trained import NAME, ROW_KEYS, entry_display, paired, run_study
+from restore.studies.layout_trained import NAME, ROW_KEYS, entry_display, paired, run_study, study_budget
+from restore.studies.robustness import study_scene
 from udc_render.cli import main
 from udc_render.errors import UdcError
+from udc_render.scene.geometry import sensor_kernel_px
 
 FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures" / "design"
 
@@ -59,6 +61,24 @@ def test_the_cli_refuses_no_epochs_before_any_work(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "--train-epochs 0: expected a count ≥ 1" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_the_cli_refuses_no_pitch_before_any_work(tmp_path, capsys):
+    assert main(["study", "layout-trained", "--display", "toled", "--pitch-um", "0", "--out",
+                 str(tmp_path / "o")]) != 0
+    err = capsys.readouterr().err
+    assert "--pitch-um must be > 0, got 0" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_finer_pitch_keeps_the_frame_and_the_kernels_reach():
+    """--pitch-um 3.1: the full budget's 512 × 256 px at half its pitch, its kernels twice the pixels (the same
+    reach in µm: 129 px of 6.2 µm, 257 of 3.1), the rest of the recipe unchanged."""
+    full, fine = study_budget(), study_budget(pitch_um=3.1)
+    assert (full.pitch_um, fine.pitch_um) == (6.2, 3.1) and fine.sensor_px == full.sensor_px
+    assert fine == study_budget(pitch_um=3.1) and {**vars(fine), "pitch_um": 6.2} == vars(full)
+    assert (sensor_kernel_px(study_scene(full)), sensor_kernel_px(study_scene(fine))) == (129, 257)
+    assert study_budget(epochs=240).epochs == 240 and study_budget(quick=True).pitch_um == 12.4
 
 
 def test_paired_differences():

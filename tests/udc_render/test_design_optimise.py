@@ -30,17 +30,17 @@ def _binary(c: int, k: int, seed: int) -> np.ndarray:
     return flat.reshape(c, c)
 
 
-@pytest.mark.parametrize("scene", [{}, {"mean_level": 0.41, "contrast": 0.51}])
+@pytest.mark.parametrize("scene", [{}, {"mean_level": 0.41, "contrast": 0.51}, {"pixel_um": 6.2}])
 def test_the_wiener_objective_is_the_restorability_of_the_engines_kernels(scene):
     """A binary cell's score (torch) equals metrics.restorability on psf.compute_kernels' kernels (numpy) at the open
     area × the fraction of the light inside the window (kernels_and_window; the plain tiling's differs from the
     engine's power series by under 1 %, test_design_torch_psf), at the default scene and at --mean-level and
-    --contrast given."""
+    --contrast given, and at another sensor pitch (--pixel-um: the engine's pixel_um)."""
     d = Designer(DesignConfig(**{**TINY, "tiling": "repeated", "cell_um": 40.0, "feature_um": 8.0, **scene}))
     cell = _binary(5, 6, 0)
     parts = d.score(cell)
-    engine = compute_kernels(MicrographLayout("cell", 8.0, image=cell), Lens(), RIG_WAVELENGTHS_NM, size_px=31,
-                             pupil_samples=64, precision="float64")
+    engine = compute_kernels(MicrographLayout("cell", 8.0, image=cell), Lens(), RIG_WAVELENGTHS_NM,
+                             pixel_um=d.config.pixel_um, size_px=31, pupil_samples=64, precision="float64")
     _, inside = tp.kernels_and_window(torch.tensor(cell), d.grid, None)  # the engine's: test_design_torch_psf
     kept = float(cell.mean()) * inside.numpy()
     ref = np.mean(metrics.restorability(engine.kernels, kept, mean_level=d.config.mean_level,
@@ -96,6 +96,7 @@ def test_the_rings_objective_is_upcs_statistic_in_their_sampling():
     (("upc_floor", "floor_channels", "floor_uncropped"), {"upc_floor": 1.3}),
     (("banding_ceiling",), {"banding_ceiling": 0.95}),
     (("kicks", "kick_swaps"), {"kick_swaps": 2}),
+    (("pixel_um",), {"pixel_um": 6.2}),
 ])
 def test_a_checkpoint_from_before_a_later_option_resumes(dropped, changed):
     """A state saved without a later option's settings (their defaults then) loads into the default run only."""
@@ -284,6 +285,9 @@ def test_the_designed_display_files_are_displays(tmp_path, symmetry):
     (["--channel-step", "0.5"], "--channel-step 0.5: expected 0 (the rig's 640 / 520 / 450 nm) or a step ≥ 1 nm"),
     (["--channel-step", "-2"], "--channel-step must be ≥ 0, got -2"),
     (["--optics", "upc", "--objective", "rings", "--channel-step", "40"], "--channel-step 40.0: expected 0"),
+    (["--pixel-um", "0"], "--pixel-um must be > 0, got 0"),
+    (["--optics", "upc", "--objective", "rings", "--channel-step", "0", "--pixel-um", "12.4"],
+     "--pixel-um 12.4: takes --optics rig"),
 ])
 def test_design_refuses_in_one_line(tmp_path, capsys, argv, says):
     assert cli.main(["design", *argv, "--out", str(tmp_path / "never")]) == 2

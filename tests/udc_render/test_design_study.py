@@ -57,6 +57,7 @@ def test_study_layout_writes_its_tables_and_figures(tmp_path, capsys):
     (["--distance-mm", "0"], "--distance-mm"),
     (["--train-seed", "1"], "only `study layout-trained` trains"),
     (["--train-epochs", "240"], "only `study layout-trained` trains"),
+    (["--pitch-um", "3.1"], "--pitch-um 3.1: only `study layout-trained` takes a sensor pitch"),
 ])
 def test_study_layout_refuses_in_one_line(tmp_path, capsys, argv, says):
     out = tmp_path / "never"

@@ -14,6 +14,7 @@ from udc_render.design.options import (
     LITHOGRAPHY_UM,
     OBJECTIVES,
     OPTICS,
+    RIG_PIXEL_UM,
     SYMMETRIES,
     TILINGS,
 )
@@ -99,7 +100,11 @@ def register(sub) -> None:
     p.add_argument("--pupil-samples", type=positive("--pupil-samples", int), default=512,
                    help="pupil samples across the aperture of the objective's kernels [512]")
     p.add_argument("--kernel-px", type=positive("--kernel-px", int), default=127,
-                   help="the objective's kernel size in 3.1 µm pixels, odd [127]")
+                   help="the objective's kernel size in --pixel-um pixels, odd [127]")
+    p.add_argument("--pixel-um", type=positive("--pixel-um"), default=RIG_PIXEL_UM,
+                   help="--optics rig: the objective's sensor pitch in µm, the pitch the restorer works at (a Bayer "
+                        "camera's packed planes: twice its pixel) [3.1: the paper's rig, its 1.55 µm sensor's packed "
+                        "planes; study layout-trained's DeP: 12.4]")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cuda [cpu]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--out", type=Path, default=Path("out/design"),
@@ -122,7 +127,7 @@ def run(args) -> int:
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
                           args.kicks, args.kick_swaps, args.search_tilings, _channel_step(args),
-                          mean_level=args.mean_level, symmetry=args.symmetry)
+                          mean_level=args.mean_level, symmetry=args.symmetry, pixel_um=args.pixel_um)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet, held_out_tilings=args.held_out_tilings)
     f, b = doc["final"], doc["scatters"]

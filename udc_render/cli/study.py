@@ -110,6 +110,10 @@ def register(sub) -> None:
     s.add_argument("--train-epochs", type=int, default=None,
                    help="layout-trained only: the UNets' epochs (the full budget's 80, the robustness recipe's 240 "
                         "take about 3x as long) [the budget's]")
+    s.add_argument("--pitch-um", type=positive("--pitch-um"), default=None,
+                   help="layout-trained only: the rig's sensor pitch in µm; the frame stays 512 × 256 px, so a finer "
+                        "pitch sees a smaller field and takes larger kernels (the render margin), and DeP restores "
+                        "packed planes of twice the pitch [the budget's: 6.2, --quick 12.4; the paper's sensor: 1.55]")
     s.add_argument("--designs", type=design_folders, default=(),
                    help="held-out, channel-step and design-bands only: `udc-render design` output folders, "
                         "comma-separated [none]")
@@ -132,6 +136,8 @@ def run(args) -> int:
     if args.train_epochs is not None and (args.what != "layout-trained" or args.train_epochs < 1):
         raise UserError(f"--train-epochs {args.train_epochs}: expected a count ≥ 1, and only `study layout-trained` "
                         "trains")
+    if args.pitch_um is not None and args.what != "layout-trained":
+        raise UserError(f"--pitch-um {args.pitch_um:g}: only `study layout-trained` takes a sensor pitch")
     if args.restore and args.what != "layout":
         raise UserError(f"--restore {args.restore}: only `study layout` restores")
     if args.restore_crops != "astronaut" and not args.restore:
@@ -213,6 +219,6 @@ def _layout_trained(args) -> int:
     from restore.studies.layout_trained import NAME, run_study
     out = out_dir(args.out)
     run_study(out, [p for p in args.display.split(",") if p], quick=args.quick, train_seed=args.train_seed,
-              epochs=args.train_epochs)
+              epochs=args.train_epochs, pitch_um=args.pitch_um)
     print(f"wrote {out}/{NAME}.md, {NAME}.json, {NAME}.png, {NAME}_restored.png")
     return 0

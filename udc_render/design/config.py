@@ -15,6 +15,7 @@ from udc_render.design.options import (
     LITHOGRAPHY_UM,
     OBJECTIVES,
     OPTICS,
+    RIG_PIXEL_UM,
     SYMMETRIES,
     TILINGS,
 )
@@ -59,6 +60,7 @@ class DesignConfig:
     reference: bool = False  # the scorer of a reference cell (design.held_out's T-OLEDs), not a design: no LTPS limit
     mean_level: float | None = None  # μ, a fraction of the glass capture's full well; None: metrics.MEAN_LEVEL
     symmetry: str = "none"  # 'c2': a point-symmetric cell, no dipole (udc_render.design.symmetry)
+    pixel_um: float = RIG_PIXEL_UM  # the objective's sensor pitch (its kernels' pixels), µm
 
     def __post_init__(self):
         if self.contrast is None:
@@ -77,6 +79,8 @@ class DesignConfig:
         if round(self.open_fraction * self.cell_px ** 2) < 1:
             raise tp.DesignError(f"--open-area {self.open_fraction}: less than one {self.feature_um} µm square of "
                                  f"the {self.cell_px} × {self.cell_px} cell")
+        if not self.pixel_um > 0:
+            raise tp.DesignError(f"--pixel-um {self.pixel_um}: expected a sensor pitch > 0 µm")
         if not (isinstance(self.crop_px, int) and self.crop_px >= 2):
             raise tp.DesignError(f"--crop-px {self.crop_px}: expected an integer ≥ 2")
         if not self.contrast > 0:
@@ -130,6 +134,9 @@ class DesignConfig:
             check_symmetric(start, self.symmetry, f"--init {self.init}")
 
     def _check_upc(self) -> None:
+        if self.pixel_um != RIG_PIXEL_UM:
+            raise tp.DesignError(f"--pixel-um {self.pixel_um:g}: takes --optics rig (UPC's optics sample their own "
+                                 "2 µm pixels)")
         if self.objective not in ("upc", "rings"):
             raise tp.DesignError(f"--optics upc takes --objective upc or rings, got {self.objective} (the Wiener "
                                  "objectives need the rig's sensor sampling: --optics rig)")

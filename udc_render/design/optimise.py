@@ -85,7 +85,7 @@ from udc_render.design.config import DesignConfig
 from udc_render.design.crop import near_window, split_kernel
 from udc_render.design.floor import UpcFloor
 from udc_render.design.mtf import mean_ring_minima, ring_index, spectrum
-from udc_render.design.options import CHANNELS
+from udc_render.design.options import CHANNELS, RIG_PIXEL_UM
 from udc_render.design.starts import initial_cell
 from udc_render.design.symmetry import kicked_orbits, orbit_swaps, orbits
 from udc_render.sensor.config import SensorConfig
@@ -101,7 +101,7 @@ _LATER_DEFAULTS = {  # options added after the first checkpoints, at the setting
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
     "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1,
     "channel_step_nm": 0.0, "reference": False,
-    "mean_level": metrics.MEAN_LEVEL, "symmetry": "none"}
+    "mean_level": metrics.MEAN_LEVEL, "symmetry": "none", "pixel_um": RIG_PIXEL_UM}
 CHANNEL_ILLUMINANT = "D65"  # the white of the bank's channel kernels (udc_render.dataset.bank_make)
 
 
@@ -131,7 +131,7 @@ class Designer:
             self.grid, self.tiles, size = None, upc.TILES, upc.PSF_PX
         else:
             wavelengths_nm, self.channel_weights = objective_wavelengths(config, self.sensor)
-            self.grid = tp.cell_grid(config.cell_px, config.feature_um, Lens(), wavelengths_nm, 3.1,
+            self.grid = tp.cell_grid(config.cell_px, config.feature_um, Lens(), wavelengths_nm, config.pixel_um,
                                      config.kernel_px, config.pupil_samples)
             self.tiles, size = self.grid.tiles, config.kernel_px
         self.rings = ring_index(size)

@@ -7,6 +7,9 @@ OBJECTIVES = ("wiener", "upc", "crop", "rings")
 OPTICS = ("rig", "upc")  # rig: the paper's rig, exact kernels; upc: UPC's sampling (udc_render.design.upc)
 CHANNELS = "RGB"
 INITS = ("scatter", "toled")
+# The objective's sensor pitch: the paper's rig (3.1 µm, psf.Lens()); `study layout-trained`'s DeP restores packed
+# planes of 12.4 µm (its 6.2 µm sensor's 2 × 2 Bayer blocks), where the designs rank otherwise (docs/guides/design.md)
+RIG_PIXEL_UM = 3.1
 CROP_PX = 192  # the objective 'crop's crop: `study layout --restore dep`'s
 # The scene's RMS contrast per objective when --contrast is not given. wiener: 0.3 (not studied). crop: 1.0, the
 # photographs' (astronaut's crops 0.6-1.6): from the T-OLED at 192 px its designs restore by DeP, paired against the
