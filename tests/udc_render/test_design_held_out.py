@@ -20,6 +20,7 @@ from udc_render.design.config import DesignConfig
 from udc_render.design.optimise import CHANNEL_ILLUMINANT, RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.starts import scatter
 from udc_render.sensor.config import SensorConfig
+from udc_render.studies.design_held_out import at_pitch
 
 TINY = dict(cell_um=40.0, feature_um=8.0, open_fraction=0.24, steps=2, pupil_samples=64, kernel_px=31, scatters=2,
             seed=3)
@@ -143,12 +144,26 @@ def test_design_json_holds_the_held_out_comparison(tmp_path):
     engine = {r["design"]: r["engine_toled_preset"] for r in study["rows"]}  # at the designs' own step, 40
     assert json.loads((tmp_path / "a" / "design.json").read_text())["config"]["channel_step_nm"] == 40.0
     assert rows[2]["margins_db"] == pytest.approx(engine, abs=1e-9) != rows[0]["margins_db"]
+    assert cli.main(["study", "held-out", "--designs", folders, "--quick", "--pixel-um", "9.3", "--out",
+                     str(tmp_path / "p")]) == 0
+    coarse = json.loads((tmp_path / "p" / "study_held_out.json").read_text())["toleds"]["objective"]
+    assert (coarse["pixel_um"], coarse["kernel_px"]) == (9.3, 11) and study["toleds"]["objective"]["pixel_um"] == 3.1
+
+
+@pytest.mark.parametrize("pixel_um, kernel_px", [(3.1, 255), (6.2, 129), (12.4, 65), (1.55, 511), (4.0, 199)])
+def test_at_pitch_keeps_the_kernels_window_in_um(pixel_um, kernel_px):
+    """255 px of 3.1 µm (790.5 µm) at 6.2 µm: 129 px (799.8 µm, the layout-trained banks'), at 12.4 µm: 65 px, at
+    1.55 µm 511 px (792.05 µm: 510 px would cover it, but a kernel is odd), at 4 µm 199 px (796 µm; 197.6 needed)."""
+    config = at_pitch(DesignConfig(**{**TINY, "kernel_px": 255}), pixel_um)
+    assert (config.pixel_um, config.kernel_px) == (pixel_um, kernel_px) and config.kernel_px % 2 == 1
+    assert at_pitch(config, None) is config
 
 
 @pytest.mark.parametrize("what, says", [
     ("nofolder", "no design.json there; expected a `udc-render design` output folder"),
     ("other_cell", "differs from the first design's"),
     ("display", "--designs: `study held-out`, `study channel-step` and `study design-bands` take it, and only they"),
+    ("pixel", "--pixel-um 6.2: only `study held-out` takes the objective's pitch"),
 ])
 def test_study_held_out_refuses_in_one_line(tmp_path, capsys, what, says):
     a = tmp_path / "a"
@@ -163,7 +178,8 @@ def test_study_held_out_refuses_in_one_line(tmp_path, capsys, what, says):
                                  ).astype(np.uint8))
     argv = {"nofolder": ["held-out", "--designs", str(tmp_path / "none")],
             "other_cell": ["held-out", "--designs", f"{a},{b}"],
-            "display": ["layout", "--designs", str(a)]}[what]
+            "display": ["layout", "--designs", str(a)],
+            "pixel": ["channel-step", "--designs", str(a), "--pixel-um", "6.2"]}[what]
     assert cli.main(["study", *argv, "--out", str(tmp_path / "never")]) == 2
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()

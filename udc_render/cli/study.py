@@ -114,6 +114,10 @@ def register(sub) -> None:
                    help="layout-trained only: the rig's sensor pitch in µm; the frame stays 512 × 256 px, so a finer "
                         "pitch sees a smaller field and takes larger kernels (the render margin), and DeP restores "
                         "packed planes of twice the pitch [the budget's: 6.2, --quick 12.4; the paper's sensor: 1.55]")
+    s.add_argument("--pixel-um", type=positive("--pixel-um"), default=None,
+                   help="held-out only: score the designs' objective at this sensor pitch in µm, its kernel window "
+                        "kept in µm (12.4: the packed planes DeP restores in study layout-trained) [the first "
+                        "design's: 3.1]")
     s.add_argument("--designs", type=design_folders, default=(),
                    help="held-out, channel-step and design-bands only: `udc-render design` output folders, "
                         "comma-separated [none]")
@@ -138,6 +142,8 @@ def run(args) -> int:
                         "trains")
     if args.pitch_um is not None and args.what != "layout-trained":
         raise UserError(f"--pitch-um {args.pitch_um:g}: only `study layout-trained` takes a sensor pitch")
+    if args.pixel_um is not None and args.what != "held-out":
+        raise UserError(f"--pixel-um {args.pixel_um:g}: only `study held-out` takes the objective's pitch")
     if args.restore and args.what != "layout":
         raise UserError(f"--restore {args.restore}: only `study layout` restores")
     if args.restore_crops != "astronaut" and not args.restore:
@@ -189,7 +195,8 @@ def _designs(args, study) -> int:
     """`study held-out`, `channel-step` and `design-bands`: every folder read before the output folder is made."""
     study.check(list(args.designs))
     out = out_dir(args.out)
-    study.run_study(out, list(args.designs), quick=args.quick)
+    extra = {} if args.pixel_um is None else {"pixel_um": args.pixel_um}
+    study.run_study(out, list(args.designs), quick=args.quick, **extra)
     name = study.NAME
     print(f"wrote {out}/{name}.json, {name}.csv, {name}.md, {name}.png")
     return 0

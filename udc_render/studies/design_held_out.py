@@ -2,7 +2,8 @@
 the T-OLED the simulator takes (udc_render.design.held_out with simulator=True; issue 48).
 
 The first folder's design.json gives the objective's settings (the search's own options: start, budget, floor,
-ceiling, kicks, are left out: they do not change the objective), and every design's cell (the same squares and open
+ceiling, kicks, are left out: they do not change the objective; --pixel-um scores it at another sensor pitch, the
+kernel's window kept in µm: at_pitch), and every design's cell (the same squares and open
 area) is scored by it on the same draws beside the two T-OLEDs, so the designs rank on one objective. Writes
 study_held_out.{json,csv,md,png}: per design, its objective's mean over the draws and its paired difference to the
 preset T-OLED (exact, as the simulator takes it) and to the T-OLED on the squares (mean ± se, the draws it leads), on
@@ -12,6 +13,7 @@ layout-trained` sees); the figure draws the paired differences per design.
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import asdict, fields, replace
 from pathlib import Path
@@ -24,7 +26,7 @@ from udc_render.errors import UdcError
 from udc_render.io.files import save_json
 from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
 
-__all__ = ["NAME", "QUICK_TILINGS", "saved_design", "objective_config", "check", "run_study"]
+__all__ = ["NAME", "QUICK_TILINGS", "saved_design", "objective_config", "at_pitch", "check", "run_study"]
 
 NAME = "study_held_out"
 QUICK_TILINGS = 2
@@ -58,6 +60,16 @@ def objective_config(folder: Path):
         raise UdcError(f"--designs {folder}: its design is {config.objective} in --optics {config.optics}, "
                        f"--tiling {config.tiling}; expected --objective wiener or crop, --optics rig, --tiling turned")
     return config, cell
+
+
+def at_pitch(config, pixel_um: float | None):
+    """The objective at another sensor pitch (None: as saved), its kernel window kept in µm: the smallest odd
+    kernel_px whose window covers the saved one (255 px of 3.1 µm: 129 of 6.2 and 65 of 12.4, the bank kernels of
+    `study layout-trained` at 6.2 µm and their packed planes)."""
+    if pixel_um is None:
+        return config
+    size = 2 * math.ceil((config.kernel_px * config.pixel_um / pixel_um - 1) / 2) + 1
+    return replace(config, pixel_um=float(pixel_um), kernel_px=int(size))
 
 
 def check(folders: list[Path]):
@@ -162,10 +174,12 @@ def _figure(doc: dict, out: Path) -> None:
     save_plot(fig, out / f"{NAME}.png")
 
 
-def run_study(out: Path, designs: list[Path], quick: bool = False) -> dict:
-    """Every folder read (a bad one refused) before any scoring; then the module doc's files."""
+def run_study(out: Path, designs: list[Path], quick: bool = False, pixel_um: float | None = None) -> dict:
+    """Every folder read (a bad one refused) before any scoring; then the module doc's files; pixel_um: the
+    objective's sensor pitch (at_pitch; None: the first design's)."""
     from udc_render.design.held_out import HELD_OUT_TILINGS
     config, cells = check(designs)
+    config = at_pitch(config, pixel_um)
     n = QUICK_TILINGS if quick else HELD_OUT_TILINGS
     start = time.perf_counter()
     with tqdm(total=len(GROUPS) * (len(designs) + len(TOLEDS)), desc="study held-out") as bar:
