@@ -25,9 +25,9 @@ diffract: 37.0 dB against 27.8 dB for a binary scatter at 20 %), so the gradient
 transmissions instead of reordering them, and projecting back to binary returns the initial scatter (the former
 Adam optimiser: 8 of 441 squares moved in 150 steps, 0.001 dB; docs/guides/design.md).
 
-Objective J, on the exact kernels of the paper's rig (psf.Lens(), 3.1 µm pixels, 640 / 520 / 450 nm), the cell
-tiled plainly or by one fixed random D4 tiling (the search's; search_tilings M > 1: the mean of J over M fixed draws;
-the final scores take another: held out):
+Objective J, on the exact kernels of the paper's rig (psf.Lens(), pixels of pixel_um: 3.1 µm, the paper rig's packed
+planes, unless given; 640 / 520 / 450 nm), the cell tiled plainly or by one fixed random D4 tiling (the search's;
+search_tilings M > 1: the mean of J over M fixed draws; the final scores take another: held out):
 - 'wiener' (default): the mean over channels of the Wiener estimate's expected error under a 1/f² scene and the
   sensor's shot and read noise (udc_render.design.metrics) at the transmission K / c² times the fraction of the
   transmitted light inside the kernel's window (torch_psf.kernels_and_window): the light diffracted past the
