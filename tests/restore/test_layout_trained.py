@@ -55,19 +55,12 @@ def test_the_cli_refuses_a_bad_entry_before_any_work(tmp_path, capsys):
     assert not (tmp_path / "o" / "banks").exists()
 
 
-def test_the_cli_refuses_no_epochs_before_any_work(tmp_path, capsys):
-    assert main(["study", "layout-trained", "--display", "toled", "--train-epochs", "0", "--out",
-                 str(tmp_path / "o")]) != 0
+@pytest.mark.parametrize("option, says", [("--train-epochs", "--train-epochs 0: expected a count ≥ 1"),
+                                          ("--pitch-um", "--pitch-um must be > 0, got 0")])
+def test_the_cli_refuses_a_zero_count_or_pitch_before_any_work(tmp_path, capsys, option, says):
+    assert main(["study", "layout-trained", "--display", "toled", option, "0", "--out", str(tmp_path / "o")]) != 0
     err = capsys.readouterr().err
-    assert "--train-epochs 0: expected a count ≥ 1" in err and len(err.strip().splitlines()) == 1
-    assert not (tmp_path / "o").exists()
-
-
-def test_the_cli_refuses_no_pitch_before_any_work(tmp_path, capsys):
-    assert main(["study", "layout-trained", "--display", "toled", "--pitch-um", "0", "--out",
-                 str(tmp_path / "o")]) != 0
-    err = capsys.readouterr().err
-    assert "--pitch-um must be > 0, got 0" in err and len(err.strip().splitlines()) == 1
+    assert says in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
 
 
