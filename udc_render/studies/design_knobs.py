@@ -76,6 +76,7 @@ from udc_render.design.cells import frame_cell
 from udc_render.design.config import DesignConfig
 from udc_render.design.held_out import held_out_draws, objective_on_draws
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
+from udc_render.design.options import RIG_PIXEL_UM
 from udc_render.design.tiling_power import band_figures, raster_power, sampled_banding, shift_span_um, tiling_power
 from udc_render.optics.field import phase_weights
 from udc_render.streams import stream
@@ -140,7 +141,8 @@ def sampling_rows(cfg: dict, progress=None) -> list[dict]:
     for name, cell in cells(cfg["cell_um"]).items():
         found = []
         for i, samples in enumerate(cfg["samples"]):
-            grid = tp.cell_grid(cell.shape[0], FEATURE_UM, Lens(), RIG_WAVELENGTHS_NM, 3.1, cfg["kernel_px"], samples)
+            grid = tp.cell_grid(cell.shape[0], FEATURE_UM, Lens(), RIG_WAVELENGTHS_NM, RIG_PIXEL_UM, cfg["kernel_px"],
+                                samples)
             if i == 0:
                 _scores(cell, grid)  # untimed: torch's first calls at a size pay set-up costs
             s, forward_s, grad_s = _scores(cell, grid)
@@ -291,10 +293,10 @@ def field_rows(cfg: dict, progress=None) -> list[dict]:
     for name, cell in cells(cfg["cell_um"]).items():
         display = _turned(cell)
         for P in cfg["phases"]:
-            ks, cpu_s = _timed(lambda: compute_kernels(display, lens, wl, 3.1, cfg["kernel_px"],
+            ks, cpu_s = _timed(lambda: compute_kernels(display, lens, wl, RIG_PIXEL_UM, cfg["kernel_px"],
                                                        BANDING_DISTANCE_UM / 1000, P))
-            plan = make_plan(display, lens, wl, 3.1, cfg["kernel_px"], BANDING_DISTANCE_UM / 1000, P, "mft", None,
-                             "float64", True, "band_limited", PAPER_SENSOR_UM, [])
+            plan = make_plan(display, lens, wl, RIG_PIXEL_UM, cfg["kernel_px"], BANDING_DISTANCE_UM / 1000, P, "mft",
+                             None, "float64", True, "band_limited", PAPER_SENSOR_UM, [])
             prof = field_profiles(display, ks, plan, raster_power(plan, FIELD_WAVELENGTH_NM))
             exact = prof["exact"]
             row = {"part": "field", "cell": name, "phases": P, "cpu_s": cpu_s,

@@ -31,6 +31,7 @@ import torch
 from psf.lens import Lens
 from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.design.cells import RINGS, frame_cell, layout_cell, upc_cell
+from udc_render.design.options import RIG_PIXEL_UM
 from udc_render.design.tiling_power import DEFAULT_DISTANCE_MM, SAMPLE_UM, sampled_banding
 from udc_render.sensor.config import SensorConfig
 from udc_render.studies.layout_banding import layout_banding
@@ -94,8 +95,8 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
     pupil = 256 if quick else None
     upc_grid = tp.cell_grid(cell.shape[0], cell_um, UPC_LENS, upc.WAVELENGTHS_NM, UPC_PIXEL_UM,
                             63 if quick else UPC_KERNEL_PX, pupil)
-    rig_grid = tp.cell_grid(cell.shape[0], cell_um, Lens(), RIG_WAVELENGTHS_NM, 3.1, 63 if quick else RIG_KERNEL_PX,
-                            pupil)
+    rig_grid = tp.cell_grid(cell.shape[0], cell_um, Lens(), RIG_WAVELENGTHS_NM, RIG_PIXEL_UM,
+                            63 if quick else RIG_KERNEL_PX, pupil)
     trans = float(layout.power_transmittance)
     out = {"upc": {}, "exact": {}, "restorability": {}, "mtf_maps": {}, "restored": {}}
     crop_px, crop_set = (QUICK_CROP_PX, CROP_SETS[crops][:1]) if quick else (CROP_PX, CROP_SETS[crops])

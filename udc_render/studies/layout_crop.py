@@ -29,6 +29,7 @@ from psf.lens import Lens
 from restore.dep import centred_psf, denoise_plane, wiener_plane
 from udc_render.design import crop, metrics, torch_psf as tp
 from udc_render.design.cells import frame_cell, layout_cell
+from udc_render.design.options import RIG_PIXEL_UM
 from udc_render.io.files import save_json, save_text
 from udc_render.sensor.config import SensorConfig
 from udc_render.streams import stream
@@ -52,7 +53,7 @@ def layout_kernels(spec: str, seed: int = 0) -> tuple[str, np.ndarray, np.ndarra
     display = load_display(path)
     cell, cell_um = layout_cell(display.layout)
     cell = frame_cell(cell, frame or "as_given")
-    grid = tp.cell_grid(cell.shape[0], cell_um, Lens(), (640.0, 520.0, 450.0), 3.1, KERNEL_PX)
+    grid = tp.cell_grid(cell.shape[0], cell_um, Lens(), (640.0, 520.0, 450.0), RIG_PIXEL_UM, KERNEL_PX)
     with torch.no_grad():
         k, inside = tp.kernels_and_window(torch.tensor(cell), grid, tp.tile_transforms(grid.tiles, seed))
     trans = float(display.layout.power_transmittance) * inside.numpy()
