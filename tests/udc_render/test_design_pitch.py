@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from restore.studies.layout_trained import paired
+from tests.udc_render.test_design_symmetric import _pm
 
 FIGURES = Path(__file__).resolve().parents[2] / "docs" / "figures" / "design"
 PITCH = FIGURES / "symmetric" / "pitch"
@@ -32,10 +33,6 @@ def _section() -> list[str]:
 
 def _rows(name: str) -> list[str]:
     return [line for line in _section() if line.startswith(f"| `{name}` |")]
-
-
-def _pm(mean: float, se: float, digits: int) -> str:
-    return f"{mean:+.{digits}f} ± {se:.{digits}f}".replace("+", "" if mean < 0 else "+").replace("-", "−")
 
 
 def _json(folder: Path, name: str) -> dict:
