@@ -157,6 +157,8 @@ def test_at_pitch_keeps_the_kernels_window_in_um(pixel_um, kernel_px):
     config = at_pitch(DesignConfig(**{**TINY, "kernel_px": 255}), pixel_um)
     assert (config.pixel_um, config.kernel_px) == (pixel_um, kernel_px) and config.kernel_px % 2 == 1
     assert at_pitch(config, None) is config
+    packed = at_pitch(DesignConfig(**{**TINY, "kernel_px": 255}), pixel_um, packed=True)
+    assert packed.packed and packed.objective_px == 2 * (kernel_px // 4) + 1 and not config.packed
 
 
 @pytest.mark.parametrize("what, says", [
@@ -164,6 +166,7 @@ def test_at_pitch_keeps_the_kernels_window_in_um(pixel_um, kernel_px):
     ("other_cell", "differs from the first design's"),
     ("display", "--designs: `study held-out`, `study channel-step` and `study design-bands` take it, and only they"),
     ("pixel", "--pixel-um 6.2: only `study held-out` takes the objective's pitch"),
+    ("packed", "--packed: only `study held-out` scores the objective on packed planes"),
 ])
 def test_study_held_out_refuses_in_one_line(tmp_path, capsys, what, says):
     a = tmp_path / "a"
@@ -179,7 +182,8 @@ def test_study_held_out_refuses_in_one_line(tmp_path, capsys, what, says):
     argv = {"nofolder": ["held-out", "--designs", str(tmp_path / "none")],
             "other_cell": ["held-out", "--designs", f"{a},{b}"],
             "display": ["layout", "--designs", str(a)],
-            "pixel": ["channel-step", "--designs", str(a), "--pixel-um", "6.2"]}[what]
+            "pixel": ["channel-step", "--designs", str(a), "--pixel-um", "6.2"],
+            "packed": ["design-bands", "--designs", str(a), "--packed"]}[what]
     assert cli.main(["study", *argv, "--out", str(tmp_path / "never")]) == 2
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()

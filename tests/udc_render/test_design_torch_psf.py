@@ -13,6 +13,7 @@ import torch
 from psf import Lens, compute_kernels, layouts
 from psf.micrograph import MicrographLayout
 from psf.pupil import cell_raster
+from restore.known import packed_from_sensor
 from udc_render.design import torch_psf as tp
 
 LENS = Lens()
@@ -133,3 +134,21 @@ def test_a_coarser_pitch_is_the_finer_kernels_summed_in_blocks():
     blocks = k_fine.numpy().reshape(len(WL), 21, 3, 21, 3).sum(axis=(2, 4))
     assert np.abs(blocks - k_coarse.numpy()).max() < 1e-12 * k_coarse.numpy().max()
     assert np.allclose(in_fine.numpy(), in_coarse.numpy(), rtol=1e-12, atol=0)
+
+
+@pytest.mark.parametrize("size_px", [31, 33])
+def test_the_packed_kernel_is_the_one_dep_deconvolves_with(size_px):
+    """design --packed: torch_psf.packed equals restore.known.packed_from_sensor (the restorer's numpy form; its R, Gr
+    and B planes, unit sum) for a kernel centre of either parity, bound 1e-6 (packed_from_sensor's float32); a
+    sensor-pitch delta at the centre is a packed delta and one shifted by 2 px is shifted by 1 packed px."""
+    k = np.random.default_rng(5).random((3, size_px, size_px))
+    ref = packed_from_sensor(k)[[0, 1, 3]].astype(np.float64)
+    ref /= ref.sum(axis=(1, 2), keepdims=True)
+    got = tp.packed(torch.tensor(k)).numpy()
+    assert got.shape == ref.shape == (3, 2 * (size_px // 4) + 1, 2 * (size_px // 4) + 1)
+    assert np.abs(got - ref).max() < 1e-6 * ref.max()
+    c, m = size_px // 2, size_px // 4
+    delta = torch.zeros(size_px, size_px, dtype=torch.float64)
+    delta[c, c + 2] = 1.0
+    shifted = tp.packed(delta).numpy()
+    assert shifted[m, m + 1] == 1.0 and shifted.sum() == 1.0

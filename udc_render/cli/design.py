@@ -105,6 +105,10 @@ def register(sub) -> None:
                    help="--optics rig: the objective's sensor pitch in µm, the pitch the restorer works at (a Bayer "
                         "camera's packed planes: twice its pixel) [3.1: the paper's rig, its 1.55 µm sensor's packed "
                         "planes; study layout-trained's DeP: 12.4]")
+    p.add_argument("--packed", action="store_true",
+                   help="--objective wiener or crop: score the kernels on the packed planes DeP restores (2 × 2 "
+                        "pixels of --pixel-um weighted ½, 1, ½: restore.known.packed_from_sensor; --crop-px in "
+                        "packed pixels) [off: the kernels at --pixel-um]")
     p.add_argument("--device", default="cpu", help="torch device, e.g. cuda [cpu]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--out", type=Path, default=Path("out/design"),
@@ -127,7 +131,8 @@ def run(args) -> int:
                           args.contrast, args.init, args.optics, args.channels, args.far_veil,
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
                           args.kicks, args.kick_swaps, args.search_tilings, _channel_step(args),
-                          mean_level=args.mean_level, symmetry=args.symmetry, pixel_um=args.pixel_um)
+                          mean_level=args.mean_level, symmetry=args.symmetry, pixel_um=args.pixel_um,
+                          packed=args.packed)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet, held_out_tilings=args.held_out_tilings)
     f, b = doc["final"], doc["scatters"]

@@ -118,6 +118,9 @@ def register(sub) -> None:
                    help="held-out only: score the designs' objective at this sensor pitch in µm, its kernel window "
                         "kept in µm (12.4: the packed planes DeP restores in study layout-trained) [the first "
                         "design's: 3.1]")
+    s.add_argument("--packed", action="store_true",
+                   help="held-out only: score the objective on the packed planes of --pixel-um's pixels, the kernel "
+                        "DeP deconvolves with (--pixel-um 6.2 --packed: study layout-trained's DeP) [as saved]")
     s.add_argument("--designs", type=design_folders, default=(),
                    help="held-out, channel-step and design-bands only: `udc-render design` output folders, "
                         "comma-separated [none]")
@@ -144,6 +147,8 @@ def run(args) -> int:
         raise UserError(f"--pitch-um {args.pitch_um:g}: only `study layout-trained` takes a sensor pitch")
     if args.pixel_um is not None and args.what != "held-out":
         raise UserError(f"--pixel-um {args.pixel_um:g}: only `study held-out` takes the objective's pitch")
+    if args.packed and args.what != "held-out":
+        raise UserError("--packed: only `study held-out` scores the objective on packed planes")
     if args.restore and args.what != "layout":
         raise UserError(f"--restore {args.restore}: only `study layout` restores")
     if args.restore_crops != "astronaut" and not args.restore:
@@ -196,6 +201,7 @@ def _designs(args, study) -> int:
     study.check(list(args.designs))
     out = out_dir(args.out)
     extra = {} if args.pixel_um is None else {"pixel_um": args.pixel_um}
+    extra.update({"packed": True} if args.packed else {})
     study.run_study(out, list(args.designs), quick=args.quick, **extra)
     name = study.NAME
     print(f"wrote {out}/{name}.json, {name}.csv, {name}.md, {name}.png")

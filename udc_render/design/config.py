@@ -61,6 +61,7 @@ class DesignConfig:
     mean_level: float | None = None  # μ, a fraction of the glass capture's full well; None: metrics.MEAN_LEVEL
     symmetry: str = "none"  # 'c2': a point-symmetric cell, no dipole (udc_render.design.symmetry)
     pixel_um: float = RIG_PIXEL_UM  # the objective's sensor pitch (its kernels' pixels), µm
+    packed: bool = False  # the objective on the packed planes (2 × pixel_um) that DeP restores (torch_psf.packed)
 
     def __post_init__(self):
         if self.contrast is None:
@@ -81,6 +82,9 @@ class DesignConfig:
                                  f"the {self.cell_px} × {self.cell_px} cell")
         if not self.pixel_um > 0:
             raise tp.DesignError(f"--pixel-um {self.pixel_um}: expected a sensor pitch > 0 µm")
+        if self.packed and (self.optics != "rig" or self.objective not in ("wiener", "crop")):
+            raise tp.DesignError(f"--packed: takes --optics rig with --objective wiener or crop (DeP's kernel), got "
+                                 f"--optics {self.optics} --objective {self.objective}")
         if not (isinstance(self.crop_px, int) and self.crop_px >= 2):
             raise tp.DesignError(f"--crop-px {self.crop_px}: expected an integer ≥ 2")
         if not self.contrast > 0:
@@ -175,6 +179,11 @@ class DesignConfig:
         """Whether the simulator's turned tiling mirrors the tiles too (tile_flip): for a point-symmetric cell,
         whose quarter turns alone give two distinct tiles."""
         return self.symmetry == "c2"
+
+    @property
+    def objective_px(self) -> int:
+        """The size of the kernels the objective scores: kernel_px, or its packed planes' (torch_psf.packed)."""
+        return 2 * (self.kernel_px // 4) + 1 if self.packed else self.kernel_px
 
     @property
     def cell_px(self) -> int:

@@ -27,7 +27,9 @@ Adam optimiser: 8 of 441 squares moved in 150 steps, 0.001 dB; docs/guides/desig
 
 Objective J, on the exact kernels of the paper's rig (psf.Lens(), pixels of pixel_um: 3.1 µm, the paper rig's packed
 planes, unless given; 640 / 520 / 450 nm), the cell tiled plainly or by one fixed random D4 tiling (the search's;
-search_tilings M > 1: the mean of J over M fixed draws; the final scores take another: held out):
+search_tilings M > 1: the mean of J over M fixed draws; the final scores take another: held out; with packed, the
+kernels of pixel_um's pixels on the packed planes of a Bayer camera, 2 × 2 pixels weighted ½, 1, ½, the kernel DeP
+deconvolves with: torch_psf.packed, and crop_px and the scene's spectrum in packed pixels):
 - 'wiener' (default): the mean over channels of the Wiener estimate's expected error under a 1/f² scene and the
   sensor's shot and read noise (udc_render.design.metrics) at the transmission K / c² times the fraction of the
   transmitted light inside the kernel's window (torch_psf.kernels_and_window): the light diffracted past the
@@ -101,7 +103,8 @@ _LATER_DEFAULTS = {  # options added after the first checkpoints, at the setting
     "optics": "rig", "channels": CHANNELS, "far_veil": False, "upc_floor": None, "floor_channels": "G",
     "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1,
     "channel_step_nm": 0.0, "reference": False,
-    "mean_level": metrics.MEAN_LEVEL, "symmetry": "none", "pixel_um": RIG_PIXEL_UM}
+    "mean_level": metrics.MEAN_LEVEL, "symmetry": "none", "pixel_um": RIG_PIXEL_UM,
+    "packed": False}
 CHANNEL_ILLUMINANT = "D65"  # the white of the bank's channel kernels (udc_render.dataset.bank_make)
 
 
@@ -133,11 +136,11 @@ class Designer:
             wavelengths_nm, self.channel_weights = objective_wavelengths(config, self.sensor)
             self.grid = tp.cell_grid(config.cell_px, config.feature_um, Lens(), wavelengths_nm, config.pixel_um,
                                      config.kernel_px, config.pupil_samples)
-            self.tiles, size = self.grid.tiles, config.kernel_px
+            self.tiles, size = self.grid.tiles, config.objective_px
         self.rings = ring_index(size)
         variance = (config.contrast * config.mean_level) ** 2
-        self.signal = torch.tensor(metrics.natural_spectrum(config.kernel_px, variance), device=device)
-        self.window = torch.tensor(near_window(config.kernel_px, config.crop_px), device=device)
+        self.signal = torch.tensor(metrics.natural_spectrum(config.objective_px, variance), device=device)
+        self.window = torch.tensor(near_window(config.objective_px, config.crop_px), device=device)
         self.transmission = config.open_squares / config.cell_px ** 2
         self.floor = None if config.upc_floor is None else UpcFloor(
             config.upc_floor, config.floor_channels, config.cell_px, config.cell_um, config.open_fraction,
@@ -170,6 +173,7 @@ class Designer:
             if self.channel_weights is not None:
                 k, inside = tp.channel_sum(k, inside, self.channel_weights)
             k, inside = k[channels], inside[channels]
+            k = tp.packed(k) if self.config.packed else k
         if self.config.objective in ("wiener", "crop"):
             near, far = split_kernel(k, self.window.to(k.dtype)) if self.config.objective == "crop" else (k, None)
             h, h_far = spectrum(near), (None if far is None else spectrum(far))

@@ -29,7 +29,7 @@ from udc_render.errors import UdcError
 from udc_render.streams import stream
 
 __all__ = ["DesignError", "CellGrid", "cell_grid", "raster_matrix", "tile_transforms", "tiled_mask", "kernels",
-           "kernels_and_window", "channel_sum", "preset_cell", "transform_tile", "tile"]
+           "kernels_and_window", "channel_sum", "packed", "preset_cell", "transform_tile", "tile"]
 
 
 class DesignError(UdcError):
@@ -177,3 +177,16 @@ def channel_sum(kernels: torch.Tensor, inside: torch.Tensor, weights: torch.Tens
     total = ww.sum(dim=1)
     return torch.einsum("ck,kij->cij", ww, kernels) / total[:, None, None], total / weights.to(total.dtype).sum(dim=1)
 
+
+
+def packed(kernels: torch.Tensor) -> torch.Tensor:
+    """[..., k, k] unit-sum kernels at a Bayer camera's packed planes of [..., S, S] at the sensor pitch (S odd,
+    centre c = S // 2, k = 2 (c // 2) + 1): the kernel DeP deconvolves with (udc_render.description.packed_window,
+    restore.known.packed_from_sensor),
+        k[i, j] ∝ Σ_{a, b ∈ {−1, 0, 1}} h(a) h(b) K[c + 2i + a, c + 2j + b],  h = (½, 1, ½)."""
+    p = torch.nn.functional.pad(kernels, (1, 1, 1, 1))
+    box = 0.5 * p[..., :-2, :] + p[..., 1:-1, :] + 0.5 * p[..., 2:, :]
+    box = 0.5 * box[..., :-2] + box[..., 1:-1] + 0.5 * box[..., 2:]
+    c = kernels.shape[-1] // 2
+    k = box[..., c % 2::2, c % 2::2]
+    return k / k.sum(dim=(-2, -1), keepdim=True)

@@ -62,14 +62,15 @@ def objective_config(folder: Path):
     return config, cell
 
 
-def at_pitch(config, pixel_um: float | None):
+def at_pitch(config, pixel_um: float | None, packed: bool = False):
     """The objective at another sensor pitch (None: as saved), its kernel window kept in µm: the smallest odd
     kernel_px whose window covers the saved one (255 px of 3.1 µm: 129 of 6.2 and 65 of 12.4, the bank kernels of
-    `study layout-trained` at 6.2 µm and their packed planes)."""
+    `study layout-trained` at 6.2 µm and their packed planes); packed: scored on the packed planes of that pitch
+    (DesignConfig.packed)."""
     if pixel_um is None:
-        return config
+        return replace(config, packed=True) if packed else config
     size = 2 * math.ceil((config.kernel_px * config.pixel_um / pixel_um - 1) / 2) + 1
-    return replace(config, pixel_um=float(pixel_um), kernel_px=int(size))
+    return replace(config, pixel_um=float(pixel_um), kernel_px=int(size), packed=packed or config.packed)
 
 
 def check(folders: list[Path]):
@@ -174,12 +175,13 @@ def _figure(doc: dict, out: Path) -> None:
     save_plot(fig, out / f"{NAME}.png")
 
 
-def run_study(out: Path, designs: list[Path], quick: bool = False, pixel_um: float | None = None) -> dict:
+def run_study(out: Path, designs: list[Path], quick: bool = False, pixel_um: float | None = None,
+              packed: bool = False) -> dict:
     """Every folder read (a bad one refused) before any scoring; then the module doc's files; pixel_um: the
-    objective's sensor pitch (at_pitch; None: the first design's)."""
+    objective's sensor pitch (at_pitch; None: the first design's); packed: on its packed planes."""
     from udc_render.design.held_out import HELD_OUT_TILINGS
     config, cells = check(designs)
-    config = at_pitch(config, pixel_um)
+    config = at_pitch(config, pixel_um, packed)
     n = QUICK_TILINGS if quick else HELD_OUT_TILINGS
     start = time.perf_counter()
     with tqdm(total=len(GROUPS) * (len(designs) + len(TOLEDS)), desc="study held-out") as bar:
