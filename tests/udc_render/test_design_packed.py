@@ -7,6 +7,7 @@ restorer's packed_from_sensor) and test_design_optimise.py's (the objective on t
 from __future__ import annotations
 
 import json
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -49,6 +50,7 @@ def _row(label: str) -> str:
     return next(line for line in _section() if line.startswith(f"| {label} |"))
 
 
+@lru_cache(maxsize=None)
 def _dep(name: str) -> np.ndarray:
     run, layout, ref = DEP[name]
     rows = _per_image(run)
@@ -56,6 +58,7 @@ def _dep(name: str) -> np.ndarray:
     return np.subtract(rows[layout]["dep"], reference)
 
 
+@lru_cache(maxsize=None)
 def _objective() -> dict:
     """{run: {design: (mean, se) of design − the preset T-OLED}}."""
     out = {}
@@ -106,16 +109,15 @@ def test_the_packed_searchs_row_is_the_committed_runs(name):
     if name == "c2_veil":
         rows, folder = _per_image("symmetric/layout_trained"), FIGURES / "symmetric" / name
         design, toled = rows["c2_veil_turned"], rows[TOLED88]
-        bands = _bands(FIGURES / "symmetric" / BANDS[name][0], name)
         mean, se = objective["held_out_packed_6.2um"][name]
     else:
         run = PITCH / "layout_trained_packed"
         design, toled = (json.loads((run / f / "study_layout_trained.json").read_text())["rows"][0]["per_image_db"]
                          for f in (name, "toled88"))
         folder = PITCH / name
-        bands = _bands(FIGURES / "symmetric" / BANDS[name][0], name)
         v = json.loads((folder / "design.json").read_text())["held_out"]["d4"]["vs"]["design"]["toled_preset"]
         mean, se = v["mean"], v["se"]
+    bands = _bands(FIGURES / "symmetric" / BANDS[name][0], name)
     upc = json.loads((folder / "design.json").read_text())["upc"]["turned"]["ratio"][1]
     cells = [_pm(mean, se, 3), f"{mean + offset:+.2f}".replace("-", "−")]
     for key in ("input", "dep", "dep_noiseless", "dep_far", "unet"):

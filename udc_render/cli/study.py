@@ -201,7 +201,8 @@ def _designs(args, study) -> int:
     study.check(list(args.designs))
     out = out_dir(args.out)
     extra = {} if args.pixel_um is None else {"pixel_um": args.pixel_um}
-    extra.update({"packed": True} if args.packed else {})
+    if args.packed:
+        extra["packed"] = True
     study.run_study(out, list(args.designs), quick=args.quick, **extra)
     name = study.NAME
     print(f"wrote {out}/{name}.json, {name}.csv, {name}.md, {name}.png")

@@ -67,10 +67,10 @@ def at_pitch(config, pixel_um: float | None, packed: bool = False):
     kernel_px whose window covers the saved one (255 px of 3.1 µm: 129 of 6.2 and 65 of 12.4, the bank kernels of
     `study layout-trained` at 6.2 µm and their packed planes); packed: scored on the packed planes of that pitch
     (DesignConfig.packed)."""
-    if pixel_um is None:
-        return replace(config, packed=True) if packed else config
-    size = 2 * math.ceil((config.kernel_px * config.pixel_um / pixel_um - 1) / 2) + 1
-    return replace(config, pixel_um=float(pixel_um), kernel_px=int(size), packed=packed or config.packed)
+    if pixel_um is not None:
+        size = 2 * math.ceil((config.kernel_px * config.pixel_um / pixel_um - 1) / 2) + 1
+        config = replace(config, pixel_um=float(pixel_um), kernel_px=int(size))
+    return replace(config, packed=True) if packed else config
 
 
 def check(folders: list[Path]):
