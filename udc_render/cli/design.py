@@ -6,6 +6,7 @@ from pathlib import Path
 
 from udc_render.cli.args import number, out_dir, positive
 from udc_render.design.options import (
+    ARRANGEMENT_TILES,
     CHANNEL_STEP_NM,
     CHANNELS,
     CROP_PX,
@@ -31,7 +32,12 @@ def register(sub) -> None:
     p.add_argument("--open-area", type=float, default=0.20, help="the open area, a fraction in (0, 1) [0.20]")
     p.add_argument("--tiling", choices=TILINGS, default="turned",
                    help="repeated: the cell tiled as it is; turned: each tile turned and mirrored at random "
-                        "(one fixed D4 draw for the search, another held out for the scores) [turned]")
+                        "(one fixed D4 draw for the search, another held out for the scores); arranged: a K × K "
+                        "pattern of the tile's D4 elements (--arrangement), repeated, searched with the cell: a "
+                        "periodic display (supercell.png) [turned]")
+    p.add_argument("--arrangement", type=positive("--arrangement", int), default=ARRANGEMENT_TILES,
+                   help=f"--tiling arranged: K, the arrangement's tiles a side (period K × --cell-um) "
+                        f"[{ARRANGEMENT_TILES}]")
     p.add_argument("--objective", choices=OBJECTIVES, default="wiener",
                    help="wiener: the Wiener estimate's expected error under the sensor's noise; upc: UPC's "
                         "Wiener-response term (lowest 30 %% of |H|²/(|H|² + 0.015)); crop: wiener on a --crop-px crop, "
@@ -132,7 +138,7 @@ def run(args) -> int:
                           args.upc_floor, args.floor_channels, args.floor_uncropped, args.banding_ceiling,
                           args.kicks, args.kick_swaps, args.search_tilings, _channel_step(args),
                           mean_level=args.mean_level, symmetry=args.symmetry, pixel_um=args.pixel_um,
-                          packed=args.packed)
+                          packed=args.packed, arrangement=args.arrangement)
     out = out_dir(args.out)
     doc = run_design(config, out, args.device, args.quiet, held_out_tilings=args.held_out_tilings)
     f, b = doc["final"], doc["scatters"]

@@ -7,8 +7,9 @@ The rig's objectives J ('wiener', 'crop', with or without the far veil, with or 
 b_c the relative standard deviation of the transmitted power P(s) over the mask shifts the paper's sensor sees
 (udc_render.design.tiling_power, the figure `study layout`'s sampled banding reports), per channel at the rig's
 wavelengths (640 / 520 / 450 nm), the cell tiled as the design is (turned: BANDING_DRAWS fixed D4 draws of the
-window's tiles, the variances averaged); b^ref the same of the preset T-OLED at the open area with its slit at the
-tile's edge (cells.toled_reference, on the cell's squares: UPC's 21 × 21 at 8 µm) on the same draws. P is computed
+window's tiles, the variances averaged; arranged: its one periodic tiling); b^ref the same of the preset T-OLED at
+the open area with its slit at the tile's edge (cells.toled_reference, on the cell's squares: UPC's 21 × 21 at 8 µm)
+on the same draws (arranged: the T-OLED repeated, the other periodic display). P is computed
 here in torch, differentiable in the cell: the cell on its own squares (one raster sample per feature square: the
 cell is exact on them; orders beyond 1/2δ are lost), tiled over tiling_power's window, propagated over d by the
 angular spectrum and correlated with the area-weighted aperture by FFTs. On 8 µm squares the turned ratios of the
@@ -83,8 +84,11 @@ class BandingCeiling:
         self._ref: dict[str, torch.Tensor] = {}
         self._draws: dict[str, list] = {}
 
-    def transforms(self, which: str) -> list:
-        """The tiling's draws (keys 'design', 'banding', which, k), drawn once; one plain tiling when repeated."""
+    def transforms(self, which: str, arrangement: np.ndarray | None = None) -> list:
+        """The tiling's draws (keys 'design', 'banding', which, k), drawn once; one plain tiling when repeated; the
+        arrangement repeated (torch_psf.arranged) when given."""
+        if arrangement is not None:
+            return [tp.arranged(arrangement, self.tiles)]
         if not self.turned:
             return [None]
         if which not in self._draws:
@@ -105,19 +109,20 @@ class BandingCeiling:
             out.append(power[ch.rows][:, ch.cols])
         return out
 
-    def bands(self, cell: torch.Tensor, which: str) -> torch.Tensor:
+    def bands(self, cell: torch.Tensor, which: str, arrangement: np.ndarray | None = None) -> torch.Tensor:
         """[channels] the relative sd of P, root of the mean variance over the tiling's draws."""
         per_draw = torch.stack([torch.stack([relative_sd(p) for p in self.power(cell, t)])
-                                for t in self.transforms(which)])
+                                for t in self.transforms(which, arrangement)])
         return (per_draw ** 2).mean(0).sqrt()
 
-    def ratios(self, cell: torch.Tensor, which: str) -> torch.Tensor:
-        """[channels] the cell's bands over the T-OLED's, on the tiling."""
+    def ratios(self, cell: torch.Tensor, which: str, arrangement: np.ndarray | None = None) -> torch.Tensor:
+        """[channels] the cell's bands over the T-OLED's, on the tiling (an arranged tiling's, given its
+        arrangement, over the T-OLED repeated: both periodic displays)."""
         if which not in self._ref:
             with torch.no_grad():
                 self._ref[which] = self.bands(self.reference, which)
-        return self.bands(cell, which) / self._ref[which].to(cell.dtype)
+        return self.bands(cell, which, arrangement) / self._ref[which].to(cell.dtype)
 
-    def factor(self, cell: torch.Tensor, which: str) -> torch.Tensor:
+    def factor(self, cell: torch.Tensor, which: str, arrangement: np.ndarray | None = None) -> torch.Tensor:
         """1 + BANDING_WEIGHT Σ_c max(0, log ratio_c − log R) (floor.hinge_factor)."""
-        return hinge_factor(self.ratios(cell, which), self.ratio, BANDING_WEIGHT, ceiling=True)
+        return hinge_factor(self.ratios(cell, which, arrangement), self.ratio, BANDING_WEIGHT, ceiling=True)

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from udc_render.design import metrics, torch_psf as tp, upc
 from udc_render.design.cells import read_cell
 from udc_render.design.options import (
+    ARRANGEMENT_TILES,
     CHANNELS,
     CONTRAST_DEFAULTS,
     CROP_PX,
@@ -62,6 +63,7 @@ class DesignConfig:
     symmetry: str = "none"  # 'c2': a point-symmetric cell, no dipole (udc_render.design.symmetry)
     pixel_um: float = RIG_PIXEL_UM  # the objective's sensor pitch (its kernels' pixels), µm
     packed: bool = False  # the objective on the packed planes (2 × pixel_um) that DeP restores (torch_psf.packed)
+    arrangement: int = ARRANGEMENT_TILES  # with tiling 'arranged': the K of its K × K pattern of D4 tiles
 
     def __post_init__(self):
         if self.contrast is None:
@@ -103,6 +105,7 @@ class DesignConfig:
                                  "has one draw)")
         self._check_floor()
         self._check_ceiling()
+        self._check_arranged()
         if not (self.channel_step_nm == 0 or self.channel_step_nm >= 1 and self.optics == "rig"):
             raise tp.DesignError(f"--channel-step {self.channel_step_nm}: expected 0 (the rig's 640 / 520 / 450 nm) "
                                  f"or a step ≥ 1 nm (the engine's own is λ / S ≈ 1.6 nm), with --optics rig; got "
@@ -160,6 +163,14 @@ class DesignConfig:
     def _check_ceiling(self) -> None:
         if self.banding_ceiling is not None:
             self._check_bound("--banding-ceiling", self.banding_ceiling)
+
+    def _check_arranged(self) -> None:
+        if not (isinstance(self.arrangement, int) and 1 <= self.arrangement <= 16):
+            raise tp.DesignError(f"--arrangement {self.arrangement}: expected an integer in 1 … 16 (tiles a side)")
+        if self.tiling == "arranged" and (self.optics != "rig" or self.upc_floor is not None):
+            raise tp.DesignError(f"--tiling arranged: takes --optics rig without --upc-floor (UPC's statistic is "
+                                 f"taken on their random tilings), got --optics {self.optics}"
+                                 + (f" --upc-floor {self.upc_floor:g}" if self.upc_floor is not None else ""))
 
     def _check_bound(self, option: str, ratio: float, why: str = "") -> None:
         """A ratio to the T-OLED's that bounds the rig's objectives: > 0, with wiener or crop in the rig's optics."""

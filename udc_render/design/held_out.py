@@ -77,8 +77,10 @@ def preset_toled(config: DesignConfig) -> tuple[np.ndarray, DesignConfig]:
 
 
 def applies(config: DesignConfig) -> bool:
-    """Whether the comparison takes the config: the rig's objectives 'wiener' and 'crop' on a turned tiling."""
-    return config.optics == "rig" and config.objective in ("wiener", "crop") and config.tiling == "turned"
+    """Whether the comparison takes the config: the rig's objectives 'wiener' and 'crop' on a turned or an arranged
+    tiling (an arranged design scored on its one tiling against the T-OLEDs' draws)."""
+    return config.optics == "rig" and config.objective in ("wiener", "crop") and config.tiling in ("turned",
+                                                                                                  "arranged")
 
 
 def objective_on_draws(designer: Designer, cell: np.ndarray, draws: list, transmission: float | None = None
@@ -103,14 +105,16 @@ def _paired(a: list[float], b: list[float]) -> dict:
 
 def _compare(designer: Designer, cells: dict, references: dict, draws: list, progress) -> dict:
     """Every cell and reference T-OLED ({name: (grey cell, its scorer)}) on the draws, paired."""
-    psnr = {}
-    for name, c in {**cells, "toled_squares": toled_cell(designer.config)}.items():
-        psnr[name] = psnr_on_draws(designer, c, draws)
+    psnr, n = {}, len(draws)
+    own = designer.transforms("final") if designer.config.tiling == "arranged" else None
+    for name, c in cells.items():
+        psnr[name] = psnr_on_draws(designer, c, draws) if own is None else psnr_on_draws(designer, c, [own]) * n
         progress(1)
+    psnr["toled_squares"] = psnr_on_draws(designer, toled_cell(designer.config), draws)
+    progress(1)
     for name, (cell, scorer) in references.items():
         psnr[name] = psnr_on_draws(scorer, cell, draws, float(np.mean(cell ** 2)))
         progress(1)
-    n = len(draws)
     refs = ("toled_squares", *references)
     return {"psnr_db": psnr, "mean": {k: float(np.mean(v)) for k, v in psnr.items()},
             "sd": {k: float(np.std(v, ddof=1)) if n > 1 else 0.0 for k, v in psnr.items()},
@@ -123,10 +127,12 @@ def held_out_comparison(designer: Designer, cells: dict[str, np.ndarray], n: int
     doc) on n held-out draws, of the 8 D4 elements (the search's, 'd4') and of the 4 quarter-turns (the engine's,
     'quarter_turns'): per draw, mean and sd, and each cell's paired difference to each T-OLED (mean, se, the draws
     it leads); with simulator, also on the simulator's own tiling ('engine', one draw). Takes the rig's objectives
-    'wiener' and 'crop' on a turned tiling; progress(1) after each cell's draws."""
+    'wiener' and 'crop' on a turned tiling, or an arranged one (its cells on their one tiling, the same figure
+    beside every draw: the difference's spread is the T-OLEDs'); progress(1) after each cell's draws."""
     config = designer.config
     if not applies(config):
-        raise ValueError("held_out_comparison: takes --objective wiener or crop, --optics rig, --tiling turned")
+        raise ValueError("held_out_comparison: takes --objective wiener or crop, --optics rig, --tiling turned or "
+                         "arranged")
     cell, scoring = preset_toled(config)
     references = {"toled_preset": (cell, Designer(scoring, designer.sensor, designer.device))}
     out = {"n": n, "keys": ["design", "held_out", "k"], "toled_preset_transmission": float(np.mean(cell ** 2))}

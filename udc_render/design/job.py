@@ -4,16 +4,18 @@ CHECKPOINT_STEPS steps and at the end), a progress bar, and what it writes:
     design_state.pt   the checkpoint (settings, the cell, its objective, the record): the same command resumes it
     cell.png          the designed cell, 0 / 255 (one pixel per feature square)
     design.toml       a display file of the cell repeated ([display.layout] type = "micrograph", gain 1 / open
-                      area): every command takes it (psf, synth, dataset, bank, train, study layout)
+                      area): every command takes it (psf, synth, dataset, bank, train, study layout); with --tiling
+                      arranged, of supercell.png repeated: the cell in its arrangement's D4 elements, K c × K c
     design_turned.toml  with --tiling turned: the cell with the engine's random quarter-turns per tile
                       (tile_rotation; the engine turns without mirroring, the search's tilings draw the 8 D4 elements)
     design.json       the settings, the record, and in the same run on the held-out tiling: the designed cell's and
                       the initial scatter's scores, N random scatters at the same open area (their spread, the best,
                       the margin of the design over it), and UPC's mean ring minima of the designed cell and of the
                       T-OLED at the same open area in the same cell (slit at the tile's edge), turned and repeated;
-                      with --banding-ceiling, the banding of both on `study layout`'s raster and draws
-                      (banding_comparison); with wiener or crop, turned, the design on more held-out draws
-                      paired with the simulator's T-OLED and the T-OLED on the squares (held_out)
+                      with --banding-ceiling or arranged, the banding of both on `study layout`'s raster and draws
+                      (banding_comparison); with wiener or crop, turned or arranged, the design on more held-out
+                      draws (arranged: on its one tiling) paired with the simulator's turned T-OLED and the T-OLED on
+                      the squares (held_out); arranged, its arrangement (K × K D4 elements, torch_psf.transform_tile)
     design_loss.png   the objective's PSNR against the step, the scatters' spread beside it
 """
 from __future__ import annotations
@@ -82,19 +84,23 @@ def _upc_scores(cells: dict, turns: np.ndarray) -> tuple[dict, dict]:
             {name: k.tolist() for name, (_, k) in both.items()})
 
 
-def upc_comparison(cell: np.ndarray, config: DesignConfig) -> dict:
+def upc_comparison(cell: np.ndarray, config: DesignConfig, arrangement: np.ndarray | None = None) -> dict:
     """UPC's mean ring minima (R / G / B, their sampling) of the designed cell and of the preset T-OLED at the same
     open area in the same cell, its slit at the tile's edge (the framing that reproduces their turned baseline),
     turned (D4 tiles, seed config.seed) and repeated, each cell taken to 21 × 21 as `study layout` takes it; the
     designed / T-OLED ratios; beside them the mean ring means and the share of the power inside UPC's crop
     (upc.kept_fraction) and the ratio of the PSFs normalised before the crop (ratio × the shares' ratio: what UPC's
-    crop does not inflate); turned, the ratio over UPC_DRAWS more tilings (ratio_over_draws)."""
+    crop does not inflate); turned, the ratio over UPC_DRAWS more tilings (ratio_over_draws); with an arrangement,
+    also the cell arranged so (torch_psf.arranged) beside the T-OLED arranged alike."""
     from udc_render.design import torch_psf as tp, upc
     from udc_render.design.cells import toled_reference, upc_cell
     cells = {"design": upc_cell(cell), "toled_edge": toled_reference(config.cell_um, config.open_fraction)}
     out = {}
-    for tiling, seed in (("turned", config.seed), ("repeated", None)):
-        rings, kept = _upc_scores(cells, tp.tile_transforms(upc.TILES, seed))
+    tilings = {"turned": tp.tile_transforms(upc.TILES, config.seed), "repeated": tp.tile_transforms(upc.TILES, None)}
+    if arrangement is not None:
+        tilings["arranged"] = tp.arranged(arrangement, upc.TILES)
+    for tiling, turns in tilings.items():
+        rings, kept = _upc_scores(cells, turns)
         minima = {name: r["mean_of_ring_minima"] for name, r in rings.items()}
         ratio = np.divide(minima["design"], minima["toled_edge"])
         uncropped = ratio * np.divide(kept["design"], kept["toled_edge"])
@@ -145,15 +151,26 @@ def ratio_summary(design_sd: list, toled_sd: list) -> dict:
             "max": r.max(0).tolist(), "below": (r < 1).sum(0).tolist()}
 
 
-def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=None) -> dict:
+def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=None, arrangement: np.ndarray | None = None
+                       ) -> dict:
     """The bands (banding_sd, R / G / B) of the designed cell and of the preset T-OLED at the open area
     (toled_banding_cell), tiled as the design is, on `study layout --tile-seed N`'s draws: per draw, and
-    ratio_summary's figures (seeds: BANDING_SEEDS by default)."""
+    ratio_summary's figures (seeds: BANDING_SEEDS by default); arranged (its arrangement given), its super-cell
+    (supercell) repeated against the T-OLED repeated: one figure each, both periodic."""
     seeds = BANDING_SEEDS if seeds is None else seeds
+    tiling = "repeated" if arrangement is not None else config.tiling
+    seeds = [0] if arrangement is not None else seeds
+    design = cell if arrangement is None else supercell(cell, arrangement)
     toled, toled_um = toled_banding_cell(config.cell_um, config.open_fraction)
-    sd = {"design": banding_sd(cell, config.feature_um, config.tiling, seeds),
-          "toled_edge": banding_sd(toled, toled_um, config.tiling, seeds)}
+    sd = {"design": banding_sd(design, config.feature_um, tiling, seeds),
+          "toled_edge": banding_sd(toled, toled_um, tiling, seeds)}
     return {"tiling": config.tiling, "seeds": list(seeds), "sd": sd, **ratio_summary(sd["design"], sd["toled_edge"])}
+
+
+def supercell(cell: np.ndarray, arrangement: np.ndarray) -> np.ndarray:
+    """The K c × K c period of an arranged tiling: the cell in each tile's D4 element (torch_psf.tile)."""
+    from udc_render.design.torch_psf import tile
+    return tile(torch.from_numpy(np.asarray(cell, np.float64)), np.asarray(arrangement)).numpy()
 
 
 def _loss_figure(doc: dict, out: Path) -> None:
@@ -195,13 +212,22 @@ def _held_out(designer: Designer, cell: np.ndarray, n: int) -> dict | None:
     return held_out_comparison(designer, {"design": cell}, n)
 
 
+def _write_png(path: Path, cell: np.ndarray) -> None:
+    with atomic_path(path) as tmp:
+        iio.imwrite(tmp, (cell * 255).astype(np.uint8), extension=".png")
+
+
 def _write(designer: Designer, out: Path, compare: bool, held_out_tilings: int) -> dict:
     cfg = designer.config
-    cell = designer.best_cell
-    with atomic_path(out / "cell.png") as tmp:
-        iio.imwrite(tmp, (cell * 255).astype(np.uint8), extension=".png")
+    cell, arrangement = designer.best_cell, designer.best_arrangement
+    designer.arrangement = arrangement  # a run stopped by --steps scores its best cell on the best arrangement
+    _write_png(out / "cell.png", cell)
     open_area = float(cell.mean())
-    save_text(out / "design.toml", _display_toml("design", "cell.png", cfg.feature_um, open_area, False, cfg.seed))
+    image = "cell.png"
+    if arrangement is not None:
+        image = "supercell.png"
+        _write_png(out / image, supercell(cell, arrangement))
+    save_text(out / "design.toml", _display_toml("design", image, cfg.feature_um, open_area, False, cfg.seed))
     if cfg.tiling == "turned":
         save_text(out / "design_turned.toml", _display_toml("design_turned", "cell.png", cfg.feature_um, open_area,
                                                             True, cfg.seed, flip=cfg.tile_flips))
@@ -210,8 +236,11 @@ def _write(designer: Designer, out: Path, compare: bool, held_out_tilings: int) 
     doc = {"config": asdict(cfg), "final": final, "search_objective": designer.best,
            "initial": {**designer.score(initial), "search_objective": designer.search_score(initial),
                        "squares_moved": int(np.sum(initial != cell) // 2)},
-           "scatters": scatter_baseline(designer, final), "upc": upc_comparison(cell, cfg) if compare else None,
-           "banding": banding_comparison(cell, cfg) if compare and cfg.banding_ceiling else None,
+           "arrangement": None if arrangement is None else arrangement.tolist(),
+           "scatters": scatter_baseline(designer, final),
+           "upc": upc_comparison(cell, cfg, arrangement) if compare else None,
+           "banding": banding_comparison(cell, cfg, arrangement=arrangement)
+           if compare and (cfg.banding_ceiling or arrangement is not None) else None,
            "held_out": _held_out(designer, cell, held_out_tilings) if compare else None,
            "open_squares": int(cell.sum()), "cell_px": cfg.cell_px, "steps_done": designer.step_done,
            "converged": designer.converged, "evaluations": designer.evaluations, "kicks_done": designer.kicks_done,

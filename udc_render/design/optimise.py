@@ -15,6 +15,12 @@ With symmetry 'c2' the cell stays point-symmetric (udc_render.design.symmetry): 
 image and opens another such pair (predicted change: the pairs' summed gradients), and the start and the kicks keep
 the symmetry; 'none' moves single squares, as above.
 
+With tiling 'arranged' the tiles follow a K × K arrangement of D4 elements repeated over the window
+(torch_psf.arranged): one periodic display, the same for the search and the final scores. At each local optimum of
+the swaps a sweep turns the arrangement's tiles in raster order, each to whichever of its eight elements scores
+lowest exactly (coordinate descent, 7 K² evaluations); when a tile turned the swaps go on, and the search stops
+where neither a swap nor a sweep lowers J (then kicks, if any, perturb the best cell on the best arrangement).
+
 With kicks N (iterated local search, Lourenço, Martin & Stützle, "Iterated Local Search", Handbook of
 Metaheuristics 2003): at each local optimum the best cell so far takes kick_swaps random swaps (stream 'design',
 'kick', n) and the swaps above descend again, N times; the design is the best local optimum. The swaps alone stop
@@ -104,7 +110,7 @@ _LATER_DEFAULTS = {  # options added after the first checkpoints, at the setting
     "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1,
     "channel_step_nm": 0.0, "reference": False,
     "mean_level": metrics.MEAN_LEVEL, "symmetry": "none", "pixel_um": RIG_PIXEL_UM,
-    "packed": False}
+    "packed": False, "arrangement": 4}
 CHANNEL_ILLUMINANT = "D65"  # the white of the bank's channel kernels (udc_render.dataset.bank_make)
 
 
@@ -113,6 +119,10 @@ def far_veil_mse(inside: torch.Tensor, mean_level: float = metrics.MEAN_LEVEL) -
     kernel holds only the window (f: the share inside it): that light lands as a veil of about the scene's mean,
     relative to the window's light, and passes the restorer's filter at its DC gain of 1 (restore.dep_far)."""
     return ((1 - inside) / inside) ** 2 * mean_level ** 2
+
+
+def _listed(arrangement: np.ndarray | None) -> list | None:
+    return None if arrangement is None else arrangement.tolist()
 
 
 def objective_wavelengths(config: DesignConfig, sensor: SensorConfig) -> tuple[tuple, torch.Tensor | None]:
@@ -149,6 +159,9 @@ class Designer:
             config.banding_ceiling, config.cell_px, config.cell_um, config.open_fraction, RIG_WAVELENGTHS_NM,
             config.seed, config.tiling == "turned", device=device)
         self.groups = orbits(config.cell_px, config.symmetry)
+        self.arrangement = (tp.tile_transforms(config.arrangement, config.seed, keys=("design", "arrangement"))
+                            if config.tiling == "arranged" else None)
+        self.best_arrangement = None if self.arrangement is None else self.arrangement.copy()
         self.cell = initial_cell(config)
         self.current = self.search_score(self.cell)
         self.best_cell, self.best = self.cell, self.current
@@ -159,6 +172,8 @@ class Designer:
         scores ('final')."""
         if self.config.tiling == "repeated":
             return None
+        if self.config.tiling == "arranged":
+            return tp.arranged(self.arrangement, self.tiles)
         return tp.tile_transforms(self.tiles, self.config.seed, keys=("design", which) + ((m,) if m else ()))
 
     def objective(self, cell: torch.Tensor, transforms, transmission: float | None = None) -> torch.Tensor:
@@ -197,7 +212,7 @@ class Designer:
         j = sum(self.objective(cell, self.transforms(which, m)) for m in range(n)) / n
         if self.floor is not None:
             j = j * self.floor.factor(cell, which)
-        return j if self.ceiling is None else j * self.ceiling.factor(cell, which)
+        return j if self.ceiling is None else j * self.ceiling.factor(cell, which, self.arrangement)
 
     def score(self, cell: np.ndarray, which: str = "final") -> dict:
         """The float64 objective J of a binary cell on the held-out ('final') or the search's tiling, with its PSNR
@@ -211,7 +226,7 @@ class Designer:
             if self.floor is not None:
                 out["upc_floor_ratios"] = self.floor.ratios(x, which).tolist()
             if self.ceiling is not None:
-                out["banding_ratios"] = self.ceiling.ratios(x, which).tolist()
+                out["banding_ratios"] = self.ceiling.ratios(x, which, self.arrangement).tolist()
         return out
 
     def search_score(self, cell: np.ndarray) -> float:
@@ -242,18 +257,40 @@ class Designer:
                 rec["swap"] = [int(opened[i][0]), int(closed[j][0])]
                 break
         self.evaluations += rec["tried"] + 1
+        if rec["swap"] is None and self.arrangement is not None:
+            rec["tiles_turned"] = self._sweep()
         if self.current < self.best:
             self.best_cell, self.best = self.cell, self.current
-        if rec["swap"] is None:
+            self.best_arrangement = None if self.arrangement is None else self.arrangement.copy()
+        if rec["swap"] is None and not rec.get("tiles_turned"):
             self._at_optimum(rec)
         self.step_done += 1
         rec["objective"], rec["best"] = self.current, self.best
         self.losses.append(rec)
         return rec
 
+    def _sweep(self) -> int:
+        """One sweep over an arranged tiling's tiles in raster order (coordinate descent, module doc): each tile's
+        other seven D4 elements scored exactly and the best taken where it lowers J; the number of tiles turned."""
+        turned = 0
+        for r, c in np.ndindex(*self.arrangement.shape):
+            kept = best = int(self.arrangement[r, c])
+            for element in range(8):
+                if element == kept:
+                    continue
+                self.arrangement[r, c] = element
+                value = self.search_score(self.cell)
+                if value < self.current - IMPROVE_REL * abs(self.current):
+                    best, self.current = element, value
+            self.arrangement[r, c] = best
+            turned += best != kept
+            self.evaluations += 7
+        return turned
+
     def _at_optimum(self, rec: dict) -> None:
         """A local optimum: kick the best cell by kick_swaps random swaps while kicks remain (module doc), else stop
         there (converged)."""
+        self.arrangement = None if self.best_arrangement is None else self.best_arrangement.copy()
         if self.kicks_done >= self.config.kicks:
             self.cell, self.current, self.converged = self.best_cell, self.best, True
             return
@@ -272,7 +309,8 @@ class Designer:
         return {"config": asdict(self.config), "cell": self.cell.copy(), "current": self.current,
                 "step": self.step_done, "converged": self.converged, "evaluations": self.evaluations,
                 "losses": self.losses, "best_cell": self.best_cell.copy(), "best": self.best,
-                "kicks_done": self.kicks_done}
+                "kicks_done": self.kicks_done, "arrangement": _listed(self.arrangement),
+                "best_arrangement": _listed(self.best_arrangement)}
 
     def load(self, state: dict) -> None:
         """Resume a checkpoint of the same settings; its budget (RAISABLE: steps, kicks) may be raised, and a run
@@ -289,6 +327,9 @@ class Designer:
         self.evaluations, self.losses = int(state["evaluations"]), list(state["losses"])
         self.best_cell = np.asarray(state.get("best_cell", self.cell), np.float64)
         self.best, self.kicks_done = float(state.get("best", self.current)), int(state.get("kicks_done", 0))
+        if self.arrangement is not None:
+            self.arrangement = np.asarray(state["arrangement"], int)
+            self.best_arrangement = np.asarray(state["best_arrangement"], int)
         if self.converged and self.kicks_done < self.config.kicks and self.losses:
             self.converged = False
             self._at_optimum(self.losses[-1])

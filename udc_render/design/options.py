@@ -15,7 +15,8 @@ CROP_PX = 192  # the objective 'crop's crop: `study layout --restore dep`'s
 # photographs' (astronaut's crops 0.6-1.6): from the T-OLED at 192 px its designs restore by DeP, paired against the
 # turned T-OLED on 8 photo crops, -0.46 / -0.20 / -0.06 dB at contrast 0.3 / 0.5 / 1.0 (docs/guides/design.md)
 CONTRAST_DEFAULTS = {"wiener": 0.3, "crop": 1.0, "upc": 0.3, "rings": 0.3}  # upc and rings do not use it
-TILINGS = ("repeated", "turned")
+TILINGS = ("repeated", "turned", "arranged")  # arranged: a K × K pattern of D4 tiles, repeated (optimise doc)
+ARRANGEMENT_TILES = 4  # --arrangement's K: the period 4 × 168 µm (docs/guides/design.md, the arranged tiling)
 SYMMETRIES = ("none", "c2")  # the cell's point symmetry (udc_render.design.symmetry)
 # `design --channel-step`'s default with --optics rig (DesignConfig's own 0.0: one wavelength per channel, the
 # committed designs'): the camera's band at 40 nm. Against 5 nm its margins over the simulator's T-OLED err by

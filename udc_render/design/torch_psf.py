@@ -28,8 +28,8 @@ from psf.pupil import aperture_slices, display_grid
 from udc_render.errors import UdcError
 from udc_render.streams import stream
 
-__all__ = ["DesignError", "CellGrid", "cell_grid", "raster_matrix", "tile_transforms", "tiled_mask", "kernels",
-           "kernels_and_window", "channel_sum", "packed", "preset_cell", "transform_tile", "tile"]
+__all__ = ["DesignError", "CellGrid", "cell_grid", "raster_matrix", "tile_transforms", "arranged", "tiled_mask",
+           "kernels", "kernels_and_window", "channel_sum", "packed", "preset_cell", "transform_tile", "tile"]
 
 
 class DesignError(UdcError):
@@ -90,6 +90,13 @@ def tile_transforms(tiles: int, seed: int | None, flips: bool = True, keys: tupl
     if seed is None:
         return np.zeros((tiles, tiles), dtype=int)
     return stream(seed, "layout", "tiles", *keys).integers(0, 8 if flips else 4, size=(tiles, tiles))
+
+
+def arranged(arrangement: np.ndarray, tiles: int) -> np.ndarray:
+    """[tiles, tiles] D4 transforms of an arranged tiling: the K × K arrangement repeated (periodic, K tiles a
+    period), from the window's first tile."""
+    reps = -(-tiles // arrangement.shape[0])
+    return np.tile(np.asarray(arrangement, int), (reps, reps))[:tiles, :tiles]
 
 
 def transform_tile(t: torch.Tensor, k: int) -> torch.Tensor:

@@ -48,6 +48,9 @@ def saved_design(folder: Path):
     saved = json.loads(path.read_text())["config"]
     known = {f.name for f in fields(DesignConfig)}
     config = DesignConfig(**{k: v for k, v in saved.items() if k in known and k not in SEARCH_ONLY})
+    if config.tiling == "arranged":
+        raise UdcError(f"--designs {folder}: its tiling is arranged (one periodic tiling, not draws); its design.json "
+                       "holds its comparison with the T-OLED's draws and its bands; expected a turned design")
     return config, read_cell(str(folder / "cell.png"), config.cell_px, config.open_squares)
 
 

@@ -1,0 +1,133 @@
+"""`design --tiling arranged`: a K × K arrangement of the tile's D4 elements, repeated, searched with the cell."""
+from __future__ import annotations
+
+import json
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+
+from tests.udc_render.test_design_bands import CEILED
+from tests.udc_render.test_design_optimise import TINY, _cut_and_resumed
+from udc_render import cli
+from udc_render.design import job, torch_psf as tp
+from udc_render.design.config import DesignConfig
+from udc_render.design.optimise import Designer
+from udc_render.optics.displays import load_display
+
+ARRANGED = {**TINY, "tiling": "arranged", "arrangement": 2}
+
+
+def test_the_arrangement_repeats_over_the_window():
+    arrangement = np.array([[1, 6], [3, 0]])
+    plan = tp.arranged(arrangement, 5)
+    assert plan.shape == (5, 5)
+    assert all(plan[r, c] == arrangement[r % 2, c % 2] for r in range(5) for c in range(5))
+
+
+def test_a_one_tile_arrangement_is_its_element_repeated():
+    """K = 1: the objective equals the repeated tiling's of the cell turned by that element (float64); the plain
+    element 0 takes the repeated tiling's own path."""
+    cell = Designer(DesignConfig(**TINY)).cell
+    repeated = Designer(DesignConfig(**{**TINY, "tiling": "repeated"}))
+    for element in (0, 3, 5):
+        d = Designer(DesignConfig(**{**ARRANGED, "arrangement": 1}))
+        d.arrangement = np.array([[element]])
+        turned = tp.transform_tile(torch.from_numpy(cell), element).numpy()
+        assert d.score(cell)["objective"] == pytest.approx(repeated.score(turned)["objective"], rel=1e-10)
+
+
+def _assert_no_tile_turn_lowers(d: Designer) -> None:
+    for r, c in np.ndindex(*d.arrangement.shape):
+        kept = d.arrangement[r, c]
+        for element in range(8):
+            d.arrangement[r, c] = element
+            assert d.search_score(d.cell) >= d.current * (1 - 1e-5)
+        d.arrangement[r, c] = kept
+
+
+def test_the_search_ends_where_no_swap_and_no_tile_turn_lowers_the_objective():
+    """Every swap a candidate (6 open × 19 opaque squares): the objective never rises, and at convergence neither a
+    swap nor any tile's other D4 element lowers it (checked exhaustively)."""
+    d = Designer(DesignConfig(**{**ARRANGED, "steps": 200, "candidates": 6 * 19}))
+    previous, sweeps = d.current, 0
+    while not d.finished:
+        rec = d.step()
+        assert rec["objective"] <= previous and d.cell.sum() == 6
+        previous, sweeps = rec["objective"], sweeps + ("tiles_turned" in rec)
+    assert d.converged and sweeps >= 1 and d.current == d.search_score(d.cell)
+    flat = d.cell.ravel()
+    for i in np.flatnonzero(flat):
+        for j in np.flatnonzero(flat == 0):
+            trial = flat.copy()
+            trial[i], trial[j] = 0.0, 1.0
+            assert d.search_score(trial.reshape(5, 5)) >= d.current * (1 - 1e-5)
+    _assert_no_tile_turn_lowers(d)
+
+
+def test_an_interrupted_arranged_run_resumes_to_the_same_result(tmp_path, monkeypatch):
+    config = DesignConfig(**{**ARRANGED, "steps": 12, "candidates": 3})
+    whole = job.run_design(config, tmp_path / "whole", quiet=True, compare=False)
+    sweeps = [i for i, r in enumerate(whole["losses"]) if "tiles_turned" in r]
+    assert sweeps
+    again = _cut_and_resumed(config, tmp_path / "cut", monkeypatch, sweeps[0] + 1, 1)
+    assert again["losses"] == whole["losses"] and again["final"] == whole["final"]
+    assert again["arrangement"] == whole["arrangement"]
+
+
+def test_the_arranged_design_is_a_periodic_display_of_its_supercell(tmp_path):
+    """design.toml repeats supercell.png (the cell in each tile's element); the held-out rows score the design on
+    its one tiling beside the T-OLED's draws; the bands are the super-cell's over the repeated T-OLED's."""
+    doc = job.run_design(DesignConfig(**{**ARRANGED, "steps": 3}), tmp_path, quiet=True, held_out_tilings=2)
+    arrangement = np.array(doc["arrangement"])
+    cell = np.asarray(iio.imread(tmp_path / "cell.png")) / 255.0
+    supercell = np.asarray(iio.imread(tmp_path / "supercell.png")) / 255.0
+    display = load_display(str(tmp_path / "design.toml"))
+    assert arrangement.shape == (2, 2) and display.layout.image.shape == (10, 10)
+    assert not display.layout.random_rotation and not (tmp_path / "design_turned.toml").exists()
+    for r, c in np.ndindex(2, 2):
+        tile = tp.transform_tile(torch.from_numpy(cell), int(arrangement[r, c])).numpy()
+        assert np.array_equal(supercell[5 * r:5 * r + 5, 5 * c:5 * c + 5], tile)
+    rows = doc["held_out"]["d4"]["psnr_db"]
+    assert rows["design"] == [doc["final"]["psnr_db"]] * 2 and len(set(rows["toled_preset"])) == 2
+    assert doc["banding"]["seeds"] == [0] and doc["banding"]["tiling"] == "arranged"
+    assert set(doc["upc"]) == {"turned", "repeated", "arranged"}
+    assert json.loads((tmp_path / "design.json").read_text())["arrangement"] == doc["arrangement"]
+
+
+def test_the_plain_arrangement_bands_as_the_repeated_tiling():
+    """An arrangement of element 0 is the repeated tiling: the same bands in design.json's comparison and in the
+    search's ceiling (against the T-OLED repeated)."""
+    cfg = DesignConfig(**{**CEILED, "banding_ceiling": 1.0})
+    cell = Designer(cfg).cell
+    zeros = np.zeros((2, 2), int)
+    arranged = job.banding_comparison(cell, cfg, arrangement=zeros)
+    repeated = job.banding_comparison(cell, DesignConfig(**{**CEILED, "tiling": "repeated"}), seeds=[0])
+    for name in ("design", "toled_edge"):  # the same display in windows of another period: float64 rounding
+        assert np.allclose(arranged["sd"][name], repeated["sd"][name], rtol=1e-9, atol=0)
+    ceiled = Designer(DesignConfig(**{**CEILED, "banding_ceiling": 1.0, "tiling": "arranged", "arrangement": 2}))
+    plain = Designer(DesignConfig(**{**CEILED, "banding_ceiling": 1.0, "tiling": "repeated"}))
+    x = torch.from_numpy(cell)
+    assert torch.equal(ceiled.ceiling.ratios(x, "search", zeros), plain.ceiling.ratios(x, "search"))
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--tiling", "arranged", "--optics", "upc", "--objective", "rings", "--channel-step", "0"],
+     "--tiling arranged: takes --optics rig without --upc-floor"),
+    (["--tiling", "arranged", "--upc-floor", "1.3"], "--tiling arranged: takes --optics rig without --upc-floor"),
+    (["--arrangement", "17"], "--arrangement 17: expected an integer in 1 … 16"),
+    (["--arrangement", "0"], "--arrangement must be > 0, got 0"),
+])
+def test_arranged_refusals_are_one_line(tmp_path, capsys, argv, says):
+    assert cli.main(["design", *argv, "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err
+    assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()
+
+
+def test_the_draw_studies_refuse_an_arranged_design(tmp_path, capsys):
+    job.run_design(DesignConfig(**{**ARRANGED, "steps": 1}), tmp_path / "arranged", quiet=True, compare=False)
+    assert cli.main(["study", "held-out", "--designs", str(tmp_path / "arranged"), "--out",
+                     str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err
+    assert "its tiling is arranged" in err and len(err.strip().splitlines()) == 1
