@@ -91,7 +91,7 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig, arrangement: np.ndarr
     designed / T-OLED ratios; beside them the mean ring means and the share of the power inside UPC's crop
     (upc.kept_fraction) and the ratio of the PSFs normalised before the crop (ratio × the shares' ratio: what UPC's
     crop does not inflate); turned, the ratio over UPC_DRAWS more tilings (ratio_over_draws); with an arrangement,
-    also the cell arranged so (torch_psf.arranged) beside the T-OLED arranged alike."""
+    also the cell arranged so (torch_psf.arranged) against the T-OLED turned, the issue's reference."""
     from udc_render.design import torch_psf as tp, upc
     from udc_render.design.cells import toled_reference, upc_cell
     cells = {"design": upc_cell(cell), "toled_edge": toled_reference(config.cell_um, config.open_fraction)}
@@ -99,8 +99,14 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig, arrangement: np.ndarr
     tilings = {"turned": tp.tile_transforms(upc.TILES, config.seed), "repeated": tp.tile_transforms(upc.TILES, None)}
     if arrangement is not None:
         tilings["arranged"] = tp.arranged(arrangement, upc.TILES)
+    toled = {}
     for tiling, turns in tilings.items():
-        rings, kept = _upc_scores(cells, turns)
+        if tiling == "arranged":
+            rings, kept = _upc_scores({"design": cells["design"]}, turns)
+            rings["toled_edge"], kept["toled_edge"] = toled["turned"]
+        else:
+            rings, kept = _upc_scores(cells, turns)
+            toled[tiling] = rings["toled_edge"], kept["toled_edge"]
         minima = {name: r["mean_of_ring_minima"] for name, r in rings.items()}
         ratio = np.divide(minima["design"], minima["toled_edge"])
         uncropped = ratio * np.divide(kept["design"], kept["toled_edge"])
