@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from tests.udc_render.test_design_bands import CEILED
-from tests.udc_render.test_design_optimise import TINY, _cut_and_resumed
+from tests.udc_render.test_design_optimise import TINY, _assert_no_swap_lowers, _cut_and_resumed
 from udc_render import cli
 from udc_render.design import job, torch_psf as tp
 from udc_render.design.config import DesignConfig
@@ -58,12 +58,7 @@ def test_the_search_ends_where_no_swap_and_no_tile_turn_lowers_the_objective():
         assert rec["objective"] <= previous and d.cell.sum() == 6
         previous, sweeps = rec["objective"], sweeps + ("tiles_turned" in rec)
     assert d.converged and sweeps >= 1 and d.current == d.search_score(d.cell)
-    flat = d.cell.ravel()
-    for i in np.flatnonzero(flat):
-        for j in np.flatnonzero(flat == 0):
-            trial = flat.copy()
-            trial[i], trial[j] = 0.0, 1.0
-            assert d.search_score(trial.reshape(5, 5)) >= d.current * (1 - 1e-5)
+    _assert_no_swap_lowers(d)
     _assert_no_tile_turn_lowers(d)
 
 

@@ -118,13 +118,13 @@ def test_a_checkpoint_from_before_a_later_option_resumes(dropped, changed):
 
 
 def _assert_no_swap_lowers(d: Designer) -> None:
-    """Every swap of an open and an opaque square of d's 3 × 3 cell scores no lower than its current objective."""
+    """Every swap of an open and an opaque square of d's cell scores no lower than its current objective."""
     flat = d.cell.ravel()
     for i in np.flatnonzero(flat):
         for j in np.flatnonzero(flat == 0):
             trial = flat.copy()
             trial[i], trial[j] = 0.0, 1.0
-            assert d.search_score(trial.reshape(3, 3)) >= d.current * (1 - 1e-5)
+            assert d.search_score(trial.reshape(d.cell.shape)) >= d.current * (1 - 1e-5)
 
 
 @pytest.mark.parametrize("tiling", ["repeated", pytest.param("turned", marks=pytest.mark.slow)])  # turned: 9 s, CI time
