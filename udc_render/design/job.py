@@ -163,12 +163,11 @@ def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=None, arran
     (toled_banding_cell), tiled as the design is, on `study layout --tile-seed N`'s draws: per draw, and
     ratio_summary's figures (seeds: BANDING_SEEDS by default); arranged (its arrangement given), its super-cell
     (supercell) repeated against the T-OLED repeated: one figure each, both periodic."""
-    seeds = BANDING_SEEDS if seeds is None else seeds
-    tiling = "repeated" if arrangement is not None else config.tiling
-    seeds = [0] if arrangement is not None else seeds
-    design = cell if arrangement is None else supercell(cell, arrangement)
+    tiling, seeds = config.tiling, BANDING_SEEDS if seeds is None else seeds
+    if arrangement is not None:
+        cell, tiling, seeds = supercell(cell, arrangement), "repeated", [0]
     toled, toled_um = toled_banding_cell(config.cell_um, config.open_fraction)
-    sd = {"design": banding_sd(design, config.feature_um, tiling, seeds),
+    sd = {"design": banding_sd(cell, config.feature_um, tiling, seeds),
           "toled_edge": banding_sd(toled, toled_um, tiling, seeds)}
     return {"tiling": config.tiling, "seeds": list(seeds), "sd": sd, **ratio_summary(sd["design"], sd["toled_edge"])}
 

@@ -93,7 +93,7 @@ from udc_render.design.config import DesignConfig
 from udc_render.design.crop import near_window, split_kernel
 from udc_render.design.floor import UpcFloor
 from udc_render.design.mtf import mean_ring_minima, ring_index, spectrum
-from udc_render.design.options import CHANNELS, RIG_PIXEL_UM
+from udc_render.design.options import ARRANGEMENT_TILES, CHANNELS, RIG_PIXEL_UM
 from udc_render.design.starts import initial_cell
 from udc_render.design.symmetry import kicked_orbits, orbit_swaps, orbits
 from udc_render.sensor.config import SensorConfig
@@ -110,7 +110,7 @@ _LATER_DEFAULTS = {  # options added after the first checkpoints, at the setting
     "floor_uncropped": False, "banding_ceiling": None, "kicks": 0, "kick_swaps": 4, "search_tilings": 1,
     "channel_step_nm": 0.0, "reference": False,
     "mean_level": metrics.MEAN_LEVEL, "symmetry": "none", "pixel_um": RIG_PIXEL_UM,
-    "packed": False, "arrangement": 4}
+    "packed": False, "arrangement": ARRANGEMENT_TILES}
 CHANNEL_ILLUMINANT = "D65"  # the white of the bank's channel kernels (udc_render.dataset.bank_make)
 
 
