@@ -13,9 +13,10 @@ CHECKPOINT_STEPS steps and at the end), a progress bar, and what it writes:
                       the margin of the design over it), and UPC's mean ring minima of the designed cell and of the
                       T-OLED at the same open area in the same cell (slit at the tile's edge), turned and repeated;
                       with --banding-ceiling or arranged, the banding of both on `study layout`'s raster and draws
-                      (banding_comparison); with wiener or crop, turned or arranged, the design on more held-out
-                      draws (arranged: on its one tiling) paired with the simulator's turned T-OLED and the T-OLED on
-                      the squares (held_out); arranged, its arrangement (K × K D4 elements, torch_psf.transform_tile)
+                      (a periodic display's over its registrations: banding_comparison); with wiener or crop, turned
+                      or arranged, the design on more held-out draws (arranged: on its one tiling) paired with the
+                      simulator's turned T-OLED and the T-OLED on the squares (held_out); arranged, its
+                      arrangement (K × K D4 elements, torch_psf.transform_tile)
     design_loss.png   the objective's PSNR against the step, the scatters' spread beside it
 """
 from __future__ import annotations
@@ -143,7 +144,10 @@ def toled_banding_cell(cell_um: float, open_fraction: float, pixel_um: float = S
 def banding_sd(cell: np.ndarray, pixel_um: float, tiling: str, seeds, sample_um: float = SAMPLE_UM) -> list:
     """[draw][R, G, B]: the relative sd of the power at d = 2 mm over the paper sensor's shifts
     (tiling_power.sampled_banding on its raster of sample_um) of the cell tiled so, on `study layout --tile-seed N`'s
-    draws N in seeds."""
+    draws N in seeds; repeated, the root mean over its registrations (one figure)."""
+    if tiling == "repeated":
+        return [sampled_banding(cell, pixel_um, Lens(), RIG_WAVELENGTHS_NM, sample_um=sample_um, tilings=(tiling,),
+                                registered=True)[tiling]["rms_registered"]]
     return [sampled_banding(cell, pixel_um, Lens(), RIG_WAVELENGTHS_NM, seed=seed, sample_um=sample_um,
                             tilings=(tiling,))[tiling]["rms"] for seed in seeds]
 
@@ -161,11 +165,14 @@ def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=None, arran
                        ) -> dict:
     """The bands (banding_sd, R / G / B) of the designed cell and of the preset T-OLED at the open area
     (toled_banding_cell), tiled as the design is, on `study layout --tile-seed N`'s draws: per draw, and
-    ratio_summary's figures (seeds: BANDING_SEEDS by default); arranged (its arrangement given), its super-cell
-    (supercell) repeated against the T-OLED repeated: one figure each, both periodic."""
+    ratio_summary's figures (seeds: BANDING_SEEDS by default); repeated, or arranged (its arrangement given: its
+    super-cell, supercell, repeated), against the T-OLED repeated: one figure each, both periodic, over their
+    registrations (banding_sd)."""
     tiling, seeds = config.tiling, BANDING_SEEDS if seeds is None else seeds
     if arrangement is not None:
-        cell, tiling, seeds = supercell(cell, arrangement), "repeated", [0]
+        cell, tiling = supercell(cell, arrangement), "repeated"
+    if tiling == "repeated":
+        seeds = [0]
     toled, toled_um = toled_banding_cell(config.cell_um, config.open_fraction)
     sd = {"design": banding_sd(cell, config.feature_um, tiling, seeds),
           "toled_edge": banding_sd(toled, toled_um, tiling, seeds)}

@@ -157,7 +157,8 @@ class Designer:
             config.seed, config.tiling == "turned", config.floor_uncropped, device)
         self.ceiling = None if config.banding_ceiling is None else BandingCeiling(
             config.banding_ceiling, config.cell_px, config.cell_um, config.open_fraction, RIG_WAVELENGTHS_NM,
-            config.seed, config.tiling == "turned", device=device)
+            config.seed, config.tiling == "turned", device=device,
+            period_tiles=config.arrangement if config.tiling == "arranged" else 1)
         self.groups = orbits(config.cell_px, config.symmetry)
         self.arrangement = (tp.tile_transforms(config.arrangement, config.seed, keys=("design", "arrangement"))
                             if config.tiling == "arranged" else None)

@@ -97,6 +97,21 @@ def tiling_power(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, d
     return power[np.ix_(rows, cols)], step
 
 
+def registered_rms(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, distance_um: float,
+                   span_um: tuple[float, float], sample_um: float = SAMPLE_UM) -> float:
+    """The relative sd of P over the span, root mean over every registration of the cell repeated (one period of
+    offsets on the raster: udc_render.design.registration), from one tiling_power map over the widened span."""
+    import torch  # here: the module is imported by the light study modules
+
+    from udc_render.design.registration import offset_shifts, registered_rsd, widened_span_um
+    wide = widened_span_um(span_um, cell.shape[0] * cell_um)
+    power, step = tiling_power(cell, cell_um, lens, wavelength_nm, distance_um, wide, None, sample_um)
+    p = round(cell.shape[0] * cell_um / step)
+    (jx, jy), (cy, cx) = (int(s // step) for s in span_um), (power.shape[0] // 2, power.shape[1] // 2)
+    region = power[np.ix_(offset_shifts(jy, p) + cy, offset_shifts(jx, p) + cx)]
+    return float(registered_rsd(torch.from_numpy(region), jy, jx))
+
+
 def raster_power(plan, wavelength_nm: float) -> np.ndarray:
     """P(s) [ny, nx] in µm² of the psf engine's own window (a psf.plan.Plan of an aperiodic display at d > 0) at the
     whole-sample shifts s = (i δx, j δy), indices modulo the window: κ δx δy Σ_r A(r) |u_d(r − s)|², the power of
@@ -129,11 +144,13 @@ def _sampled_channel(cell, cell_um, lens, wavelength_nm, distance_um, span_um, t
 
 
 def sampled_banding(cell: np.ndarray, cell_um: float, lens, wavelengths_nm, distance_mm: float = DEFAULT_DISTANCE_MM,
-                    seed: int = 0, sample_um: float = SAMPLE_UM, tilings=("repeated", "turned")) -> dict:
+                    seed: int = 0, sample_um: float = SAMPLE_UM, tilings=("repeated", "turned"),
+                    registered: bool = False) -> dict:
     """The sampled figures of udc_render.studies.layout_banding's doc (band_figures of P(s) over the sensor's shifts
     and over one period of them) of the cell (amplitude on cell_um squares, framed as the study takes it) repeated
     and turned (the centre of tile_transforms(DRAW_TILES, seed, keys=('banding',))), per wavelength, at distance_mm
-    in front of the lens; tilings: the ones computed."""
+    in front of the lens; tilings: the ones computed; registered: the repeated tiling's 'rms_registered' too
+    (registered_rms: over every registration)."""
     from udc_render.design.torch_psf import tile_transforms  # torch: not at this module's import
     d_um = distance_mm * 1000.0
     span = shift_span_um(lens, d_um)
@@ -149,5 +166,8 @@ def sampled_banding(cell: np.ndarray, cell_um: float, lens, wavelengths_nm, dist
         plan = plans[tiling]
         chans = [_sampled_channel(cell, cell_um, lens, wl, d_um, span, plan, sample_um) for wl in wavelengths_nm]
         doc[tiling] = {key: [c[key] for c in chans] for key in chans[0]}
+        if registered and tiling == "repeated":
+            doc[tiling]["rms_registered"] = [registered_rms(cell, cell_um, lens, wl, d_um, span, sample_um)
+                                             for wl in wavelengths_nm]
     doc["wavelengths_nm"] = [float(w) for w in wavelengths_nm]
     return doc

@@ -10,7 +10,8 @@ on the first CHECK_DRAWS draws both are also scored on a 1 µm raster (the T-OLE
 change is stated beside the result: an estimate of the raster's error, not a bound (the T-OLED's grey edges do not
 converge monotonically with the square: docs/guides/design.md). Designs may differ in squares and open area: each
 is paired with the T-OLED at its own (computed once per open area). Beside, each design's bands over the repeated
-T-OLED's (the same cell tiled plainly: one figure, no draw), mean ± se over the draws: the reading of "no stronger
+T-OLED's (the same cell tiled plainly: one figure, no draw, over its registrations: udc_render.design.registration),
+mean ± se over the draws: the reading of "no stronger
 than the T-OLED's" where that T-OLED is the repeated one. Writes study_design_bands.{json,csv,md,png}.
 """
 from __future__ import annotations
@@ -92,7 +93,7 @@ def _markdown(doc: dict) -> str:
              f"raster) to the turned T-OLED's at the design's open area on the same draw: mean ± se over {n} draws "
              f"(the draws below 1), its sd over the draws in G, and the mean ratio's change on a {CHECK_SAMPLE_UM:g} "
              f"µm raster over the first {doc['check_draws']} draws (%, R / G / B); last, the design's bands over "
-             f"the repeated T-OLED's (one figure: a periodic display has no draw), G.", ""]
+             f"the repeated T-OLED's (one figure over its registrations: a periodic display has no draw), G.", ""]
     lines += md_table(rows, [("design", "design"), ("R", "R"), ("G", "G"), ("B", "B"), ("sd", "sd over draws, G"),
                              ("fine", f"change on {CHECK_SAMPLE_UM:g} µm (%)"),
                              ("repeated", "over the repeated T-OLED, G")], {})

@@ -119,7 +119,7 @@ def score_layout(name: str, layout, seed: int = 0, frame: str = "as_given", quic
             if tiling == "repeated":
                 banding = layout_banding(layout, Lens(), RIG_WAVELENGTHS_NM, distance_mm, r, rig_grid.pixel_um)
                 banding["sampled"] = sampled_banding(cell, cell_um, Lens(), RIG_WAVELENGTHS_NM, distance_mm, seed,
-                                                     QUICK_SAMPLE_UM if quick else SAMPLE_UM)
+                                                     QUICK_SAMPLE_UM if quick else SAMPLE_UM, registered=True)
             if progress:
                 progress(1)
     return LayoutScores(name, float(getattr(layout, "open_fraction", trans)), trans, float(cell.shape[0] * cell_um),

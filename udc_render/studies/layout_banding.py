@@ -20,7 +20,8 @@ A tiling with a random D4 turn per tile has no period and no power series: udc_r
 sampled_banding computes P(s) of both tilings in space over every shift the paper's sensor sees (|s_x| ≤ 529 µm,
 |s_y| ≤ 265 µm at d = 2 mm), and reports per channel the relative peak-to-peak and standard deviation over that
 span and over one period of shifts (what a model that repeats the power of one period, as the engine's field
-blend does for a turned tiling, can print).
+blend does for a turned tiling, can print); of the repeated tiling also the sd over every registration of its period
+(udc_render.design.registration: the figures above are at one, a tile's corner on the axis).
 """
 from __future__ import annotations
 

@@ -99,17 +99,20 @@ def _sampled_lines(b: dict) -> list[str]:
     """Both tilings' P(s) sampled in space (layout_banding.sampled_banding), relative to its mean."""
     lines = ["", f"### Both tilings, P(s) sampled on {b['sample_um']:g} µm over the shifts the paper's sensor sees "
              f"(|s| ≤ {b['span_um'][0]:.0f} × {b['span_um'][1]:.0f} µm)", "",
-             "| λ (nm) | repeated: peak-to-peak, sd | turned: peak-to-peak, sd | turned, one period: "
-             "peak-to-peak, sd |",
-             "|---|---|---|---|"]
+             "| λ (nm) | repeated: peak-to-peak, sd | repeated: sd over its registrations | turned: peak-to-peak, sd "
+             "| turned, one period: peak-to-peak, sd |",
+             "|---|---|---|---|---|"]
     rep, turn = b["repeated"], b["turned"]
+    registered = rep.get("rms_registered", [float("nan")] * len(rep["rms"]))
     for i, wl in enumerate(b.get("wavelengths_nm", [])):
-        lines.append(f"| {wl:.0f} | {rep['peak_to_peak'][i]:.2e}, {rep['rms'][i]:.2e} | "
+        lines.append(f"| {wl:.0f} | {rep['peak_to_peak'][i]:.2e}, {rep['rms'][i]:.2e} | {registered[i]:.2e} | "
                      f"{turn['peak_to_peak'][i]:.2e}, {turn['rms'][i]:.2e} | "
                      f"{turn['peak_to_peak_one_period'][i]:.2e}, {turn['rms_one_period'][i]:.2e} |")
-    return lines + ["", "The turned tiling's power is not periodic: over the sensor's span it varies more than over "
-                    "one period of shifts, which is all that a model repeating one period's power (the engine's field "
-                    "blend for a turned tiling) can print."]
+    return lines + ["", "The repeated tiling's figures are at one registration (a tile's corner on the axis); its sd "
+                    "over its registrations is the root mean over every offset of one period "
+                    "(udc_render.design.registration). The turned tiling's power is not periodic: over the sensor's "
+                    "span it varies more than over one period of shifts, which is all that a model repeating one "
+                    "period's power (the engine's field blend for a turned tiling) can print."]
 
 
 def _figures(s: LayoutScores, out: Path) -> None:
