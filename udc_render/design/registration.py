@@ -10,8 +10,8 @@ super-cell's 672 µm against S_y = 265 µm at d = 2 mm), the relative sd of P ov
 o on the raster in one period (o uniform: the panel's alignment to the camera is not controlled) of the relative
 variance over the span,
     b = √( mean_o  var_{s ∈ span}(P_0(s − o)) / mean_{s ∈ span}(P_0(s − o))² ),
-all offsets at once from one map of P_0 over the span widened by the period, by box sums (integral images) of P and
-P², centred on the map's mean (no cancellation in float64).
+all offsets at once from one map of P_0 over the span widened by half the period a side, by box sums (integral
+images) of P and P², centred on the map's mean (no cancellation in float64).
 """
 from __future__ import annotations
 
@@ -43,10 +43,10 @@ def registered_rsd(region: torch.Tensor, jy: int, jx: int) -> torch.Tensor:
     """b of the module doc from P_0 on region [2 jy + p_y, 2 jx + p_x] (offset_shifts, p the period in
     samples per axis): the root mean over the p_y × p_x offsets of var / mean² over the (2 jy + 1) × (2 jx + 1) span."""
     x = region.double()
-    x = x - x.mean()
+    base = x.mean()
+    x = x - base
     rows, cols = 2 * jy + 1, 2 * jx + 1
     m = rows * cols
-    base = region.double().mean()
     mean = _box_sums(x, rows, cols) / m
     var = _box_sums(x * x, rows, cols) / m - mean ** 2
     return (var / (mean + base) ** 2).mean().sqrt()
