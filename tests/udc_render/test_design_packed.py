@@ -27,7 +27,7 @@ TOLED88 = "toled168_88of441_edge_turned"
 # the packed searches' banding runs and their draws below the repeated T-OLED's (of 32, G), as the guide says
 # (folders under docs/figures/design/symmetric)
 BANDS = {"c2_veil": ("design_bands", 32), "c2_packed_veil": ("pitch/design_bands_packed", 32),
-         "b55_packed": ("pitch/design_bands_b55_packed", 18), "b55_veil130": ("pitch/design_bands_b55_veil130", 23)}
+         "b55_packed": ("pitch/design_bands_b55_packed", 18), "b55_veil130": ("pitch/design_bands_b55_veil130", 22)}
 # design: (its study run, its layout there, the reference layout there, or None: the T-OLED at 88 / 441 run alone,
 # four_seeds/toled88_seed0, whose DeP rows the runs of the point-symmetric designs repeat to the bit)
 DEP = {"c2_scene": ("symmetric/layout_trained", "c2_scene_turned", None),
