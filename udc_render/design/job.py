@@ -34,7 +34,14 @@ from udc_render.design.config import DesignConfig
 from udc_render.design.held_out import HELD_OUT_TILINGS, applies, held_out_comparison
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM, Designer
 from udc_render.design.starts import initial_cell, scatter
-from udc_render.design.tiling_power import SAMPLE_UM, sampled_banding
+from udc_render.design.tiling_power import (
+    DEFAULT_DISTANCE_MM,
+    SAMPLE_UM,
+    registered_rms,
+    sampled_banding,
+    shift_span_um,
+    tiled_cell,
+)
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 
 __all__ = ["CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "scatter_baseline", "upc_comparison",
@@ -96,26 +103,26 @@ def upc_comparison(cell: np.ndarray, config: DesignConfig, arrangement: np.ndarr
     from udc_render.design import torch_psf as tp, upc
     from udc_render.design.cells import toled_reference, upc_cell
     cells = {"design": upc_cell(cell), "toled_edge": toled_reference(config.cell_um, config.open_fraction)}
-    out = {}
-    tilings = {"turned": tp.tile_transforms(upc.TILES, config.seed), "repeated": tp.tile_transforms(upc.TILES, None)}
-    if arrangement is not None:
-        tilings["arranged"] = tp.arranged(arrangement, upc.TILES)
-    toled = {}
-    for tiling, turns in tilings.items():
-        if tiling == "arranged":
-            rings, kept = _upc_scores({"design": cells["design"]}, turns)
-            rings["toled_edge"], kept["toled_edge"] = toled["turned"]
-        else:
-            rings, kept = _upc_scores(cells, turns)
-            toled[tiling] = rings["toled_edge"], kept["toled_edge"]
-        minima = {name: r["mean_of_ring_minima"] for name, r in rings.items()}
-        ratio = np.divide(minima["design"], minima["toled_edge"])
-        uncropped = ratio * np.divide(kept["design"], kept["toled_edge"])
-        out[tiling] = {**minima, "ratio": ratio.tolist(), "ratio_mean": float(ratio.mean()),
-                       "ratio_uncropped": uncropped.tolist(),
-                       "ring_means": {name: r["mean_of_ring_means"] for name, r in rings.items()}, "kept": kept}
+    scores = {tiling: _upc_scores(cells, tp.tile_transforms(upc.TILES, seed))
+              for tiling, seed in (("turned", config.seed), ("repeated", None))}
+    if arrangement is not None:  # the design arranged, beside the T-OLED turned
+        rings, kept = _upc_scores({"design": cells["design"]}, tp.arranged(arrangement, upc.TILES))
+        turned_rings, turned_kept = scores["turned"]
+        scores["arranged"] = ({**rings, "toled_edge": turned_rings["toled_edge"]},
+                              {**kept, "toled_edge": turned_kept["toled_edge"]})
+    out = {tiling: _upc_row(rings, kept) for tiling, (rings, kept) in scores.items()}
     out["turned"]["draws"] = ratio_over_draws(cells, config.seed)
     return out
+
+
+def _upc_row(rings: dict, kept: dict) -> dict:
+    """One tiling's figures of upc_comparison: the mean ring minima, the design / T-OLED ratios, the ring means and
+    the shares inside UPC's crop."""
+    minima = {name: r["mean_of_ring_minima"] for name, r in rings.items()}
+    ratio = np.divide(minima["design"], minima["toled_edge"])
+    uncropped = ratio * np.divide(kept["design"], kept["toled_edge"])
+    return {**minima, "ratio": ratio.tolist(), "ratio_mean": float(ratio.mean()), "ratio_uncropped": uncropped.tolist(),
+            "ring_means": {name: r["mean_of_ring_means"] for name, r in rings.items()}, "kept": kept}
 
 
 def ratio_over_draws(cells: dict, seed: int, n: int = UPC_DRAWS) -> dict:
@@ -146,8 +153,9 @@ def banding_sd(cell: np.ndarray, pixel_um: float, tiling: str, seeds, sample_um:
     (tiling_power.sampled_banding on its raster of sample_um) of the cell tiled so, on `study layout --tile-seed N`'s
     draws N in seeds; repeated, the root mean over its registrations (one figure)."""
     if tiling == "repeated":
-        return [sampled_banding(cell, pixel_um, Lens(), RIG_WAVELENGTHS_NM, sample_um=sample_um, tilings=(tiling,),
-                                registered=True)[tiling]["rms_registered"]]
+        lens, d_um = Lens(), DEFAULT_DISTANCE_MM * 1000.0
+        span = shift_span_um(lens, d_um)
+        return [[registered_rms(cell, pixel_um, lens, wl, d_um, span, sample_um) for wl in RIG_WAVELENGTHS_NM]]
     return [sampled_banding(cell, pixel_um, Lens(), RIG_WAVELENGTHS_NM, seed=seed, sample_um=sample_um,
                             tilings=(tiling,))[tiling]["rms"] for seed in seeds]
 
@@ -181,8 +189,7 @@ def banding_comparison(cell: np.ndarray, config: DesignConfig, seeds=None, arran
 
 def supercell(cell: np.ndarray, arrangement: np.ndarray) -> np.ndarray:
     """The K c × K c period of an arranged tiling: the cell in each tile's D4 element (torch_psf.tile)."""
-    from udc_render.design.torch_psf import tile
-    return tile(torch.from_numpy(np.asarray(cell, np.float64)), np.asarray(arrangement)).numpy()
+    return tiled_cell(cell, arrangement, 1)
 
 
 def _loss_figure(doc: dict, out: Path) -> None:
