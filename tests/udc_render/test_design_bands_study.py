@@ -80,3 +80,26 @@ def test_a_design_whose_start_is_gone_is_read():
     no longer exists, and its folder still reads (its 88 open squares of 21 × 21)."""
     config, cell = design_bands.check([DESIGNS / "kicks/k8_then_swaps3"])[str(DESIGNS / "kicks/k8_then_swaps3")]
     assert cell.shape == (21, 21) and int(cell.sum()) == 88 and config.init == "scatter"
+
+
+def test_an_arranged_design_of_one_element_bands_as_its_cell_repeated(tmp_path):
+    """An arranged design whose 2 × 2 pattern is one element throughout is its cell repeated: over the repeated
+    T-OLED it reads banding_sd's registered figure of the cell repeated (a period of four cells against one: rel
+    1e-9, rounding of windows of other sizes), that figure lies within its single registrations' range, each
+    registration is one offset of the super-cell's period on the 2 µm raster, and the study writes its map."""
+    folder = _design(tmp_path / "one", tiling="arranged", arrangement=2)
+    saved = json.loads((folder / "design.json").read_text())
+    (folder / "design.json").write_text(json.dumps({**saved, "arrangement": [[3, 3], [3, 3]]}))
+    doc = design_bands.run_study(tmp_path / "out", [folder], quick=True)
+    row = doc["rows"][0]
+    config, cell = design_bands.check([folder])[str(folder)]
+    assert row["tiling"] == "arranged" and cell.shape == (10, 10)
+    toled, toled_um = job.toled_banding_cell(config.cell_um, config.open_fraction)
+    expected = np.divide(job.banding_sd(cell[:5, :5], 8.0, "repeated", [0])[0],
+                         job.banding_sd(toled, toled_um, "repeated", [0])[0])
+    assert np.allclose(row["over_repeated"]["mean"], expected, rtol=1e-9, atol=0)
+    reg = row["registrations"]
+    assert reg["offsets"] == (2 * 40 // 2) ** 2
+    assert all(lo <= m <= hi for lo, m, hi in zip(reg["min"], row["over_repeated"]["mean"], reg["max"]))
+    assert (tmp_path / "out" / "study_design_bands_registrations_one.png").is_file()
+    assert "arranged" in (tmp_path / "out" / "study_design_bands.md").read_text()

@@ -9,7 +9,7 @@ import torch
 from psf.lens import Lens
 from udc_render.design.optimise import RIG_WAVELENGTHS_NM
 from udc_render.design.registration import offset_shifts, registered_rsd, widened_span_um
-from udc_render.design.tiling_power import registered_rms, shift_span_um, tiling_power
+from udc_render.design.tiling_power import registered_rms, registered_variance, shift_span_um, tiling_power
 
 
 def _binary21(k: int, seed: int) -> np.ndarray:
@@ -80,3 +80,16 @@ def test_a_period_of_several_cells_averages_their_registrations():
         a = one.bands(cell, "search").numpy()
         b = two.bands(cell, "search", np.zeros((2, 2), int)).numpy()
     assert np.allclose(a, b, rtol=1e-9, atol=0)
+
+
+def test_the_offset_map_holds_each_registration_and_its_centre_is_the_plain_tiling():
+    """tiling_power.registered_variance: one var / mean² per offset of the period ([21, 21] for a 21-square cell on
+    its own raster), its root mean is registered_rms, and its centre is the plain tiling's sd / mean over the span
+    (rel 1e-9)."""
+    cell, lens = _binary21(88, 7), Lens()
+    span = shift_span_um(lens, 2000.0)
+    var = registered_variance(cell, 8.0, lens, 530.0, 2000.0, span, 8.0)
+    plain = tiling_power(cell, 8.0, lens, 530.0, 2000.0, span, None, 8.0)[0]
+    assert var.shape == (21, 21) and np.isfinite(var).all()
+    assert abs(np.sqrt(var[10, 10]) / (plain.std() / plain.mean()) - 1) < 1e-9
+    assert abs(np.sqrt(var.mean()) / registered_rms(cell, 8.0, lens, 530.0, 2000.0, span, 8.0) - 1) < 1e-12

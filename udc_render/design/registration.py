@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-__all__ = ["widened_span_um", "offset_shifts", "registered_rsd"]
+__all__ = ["widened_span_um", "offset_shifts", "offset_variance", "registered_rsd"]
 
 
 def widened_span_um(span_um: tuple[float, float], period_um: float) -> tuple[float, float]:
@@ -39,9 +39,10 @@ def _box_sums(x: torch.Tensor, rows: int, cols: int) -> torch.Tensor:
     return c[rows:, cols:] - c[:-rows, cols:] - c[rows:, :-cols] + c[:-rows, :-cols]
 
 
-def registered_rsd(region: torch.Tensor, jy: int, jx: int) -> torch.Tensor:
-    """b of the module doc from P_0 on region [2 jy + p_y, 2 jx + p_x] (offset_shifts, p the period in
-    samples per axis): the root mean over the p_y × p_x offsets of var / mean² over the (2 jy + 1) × (2 jx + 1) span."""
+def offset_variance(region: torch.Tensor, jy: int, jx: int) -> torch.Tensor:
+    """[p_y, p_x]: var / mean² of P over the (2 jy + 1) × (2 jx + 1) span at each offset of one period, from P_0 on
+    region [2 jy + p_y, 2 jx + p_x] (offset_shifts, p the period in samples per axis): one registration's squared
+    relative sd per offset."""
     x = region.double()
     base = x.mean()
     x = x - base
@@ -49,4 +50,9 @@ def registered_rsd(region: torch.Tensor, jy: int, jx: int) -> torch.Tensor:
     m = rows * cols
     mean = _box_sums(x, rows, cols) / m
     var = _box_sums(x * x, rows, cols) / m - mean ** 2
-    return (var / (mean + base) ** 2).mean().sqrt()
+    return var / (mean + base) ** 2
+
+
+def registered_rsd(region: torch.Tensor, jy: int, jx: int) -> torch.Tensor:
+    """b of the module doc: the root mean of offset_variance over the p_y × p_x offsets."""
+    return offset_variance(region, jy, jx).mean().sqrt()

@@ -25,7 +25,7 @@ from psf.propagation import angular_spectrum_tf
 from udc_render.errors import UdcError
 
 __all__ = ["SAMPLE_UM", "MAX_SIDE", "DEFAULT_DISTANCE_MM", "DRAW_TILES", "shift_span_um", "tiled_cell", "window_tiles",
-           "tiling_power", "raster_power", "band_figures", "sampled_banding"]
+           "tiling_power", "registered_variance", "registered_rms", "raster_power", "band_figures", "sampled_banding"]
 
 SAMPLE_UM = 2.0  # the raster's step (the design's 8 µm squares in 4; the T-OLED's 2 µm cell as it is)
 DEFAULT_DISTANCE_MM = 2.0  # the display-to-lens distance of the layout study's and the designer's banding
@@ -97,19 +97,28 @@ def tiling_power(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, d
     return power[np.ix_(rows, cols)], step
 
 
-def registered_rms(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, distance_um: float,
-                   span_um: tuple[float, float], sample_um: float = SAMPLE_UM) -> float:
-    """The relative sd of P over the span, root mean over every registration of the cell repeated (one period of
-    offsets on the raster: udc_render.design.registration), from one tiling_power map over the widened span."""
+def registered_variance(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, distance_um: float,
+                        span_um: tuple[float, float], sample_um: float = SAMPLE_UM) -> np.ndarray:
+    """[p, p]: var / mean² of P over the span at every registration of the cell repeated (one period of offsets on
+    the raster: udc_render.design.registration.offset_variance; [p // 2, p // 2] is the cell's corner on the axis,
+    the plain tiling's registration), from one tiling_power map over the widened span."""
     import torch  # here: the module is imported by the light study modules
 
-    from udc_render.design.registration import offset_shifts, registered_rsd, widened_span_um
+    from udc_render.design.registration import offset_shifts, offset_variance, widened_span_um
     wide = widened_span_um(span_um, cell.shape[0] * cell_um)
     power, step = tiling_power(cell, cell_um, lens, wavelength_nm, distance_um, wide, None, sample_um)
     p = round(cell.shape[0] * cell_um / step)
     (jx, jy), (cy, cx) = (int(s // step) for s in span_um), (power.shape[0] // 2, power.shape[1] // 2)
     region = power[np.ix_(offset_shifts(jy, p) + cy, offset_shifts(jx, p) + cx)]
-    return float(registered_rsd(torch.from_numpy(region), jy, jx))
+    return offset_variance(torch.from_numpy(region), jy, jx).numpy()
+
+
+def registered_rms(cell: np.ndarray, cell_um: float, lens, wavelength_nm: float, distance_um: float,
+                   span_um: tuple[float, float], sample_um: float = SAMPLE_UM) -> float:
+    """The relative sd of P over the span, root mean over every registration of the cell repeated
+    (registered_variance)."""
+    return float(np.sqrt(registered_variance(cell, cell_um, lens, wavelength_nm, distance_um, span_um,
+                                             sample_um).mean()))
 
 
 def raster_power(plan, wavelength_nm: float) -> np.ndarray:

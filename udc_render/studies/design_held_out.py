@@ -37,21 +37,27 @@ GROUPS = ("d4", "quarter_turns", "engine")  # the held-out D4 draws, quarter-tur
 TOLEDS = ("toled_preset", "toled_squares")
 
 
-def saved_design(folder: Path):
+def saved_design(folder: Path, arranged: bool = False):
     """(the DesignConfig of design.json's settings in a `udc-render design` folder less the search's own, SEARCH_ONLY
-    (its start may name a file gone since), and its cell), refused in one line when the folder holds no design.json."""
+    (its start may name a file gone since), and its cell), refused in one line when the folder holds no design.json;
+    an arranged design refused unless `arranged`, then its cell is its super-cell (its period:
+    udc_render.design.job.supercell)."""
     from udc_render.design.cells import read_cell
     from udc_render.design.config import DesignConfig
     path = folder / "design.json"
     if not path.is_file():
         raise UdcError(f"--designs {folder}: no design.json there; expected a `udc-render design` output folder")
-    saved = json.loads(path.read_text())["config"]
+    saved = json.loads(path.read_text())
     known = {f.name for f in fields(DesignConfig)}
-    config = DesignConfig(**{k: v for k, v in saved.items() if k in known and k not in SEARCH_ONLY})
-    if config.tiling == "arranged":
+    config = DesignConfig(**{k: v for k, v in saved["config"].items() if k in known and k not in SEARCH_ONLY})
+    if config.tiling == "arranged" and not arranged:
         raise UdcError(f"--designs {folder}: its tiling is arranged (one periodic tiling, not draws); its design.json "
                        "holds its comparison with the T-OLED's draws and its bands; expected a turned design")
-    return config, read_cell(str(folder / "cell.png"), config.cell_px, config.open_squares)
+    cell = read_cell(str(folder / "cell.png"), config.cell_px, config.open_squares)
+    if config.tiling == "arranged":
+        from udc_render.design.job import supercell
+        cell = supercell(cell, np.asarray(saved["arrangement"]))
+    return config, cell
 
 
 def objective_config(folder: Path):
