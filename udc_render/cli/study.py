@@ -37,7 +37,8 @@ STUDIES = {
                     "error against CPU time (about 3 min for 3 designs, one thread)",
     "design-bands": "committed designs (--designs) on 32 held-out D4 draws: their bands at d = 2 mm against the "
                     "turned T-OLED's at each design's open area, mean ± se per channel, the ratio's change on a "
-                    "1 µm raster, and over the repeated T-OLED's (about 3 min a design, one thread)",
+                    "1 µm raster, and over the repeated T-OLED's; an arranged design over its registrations, with "
+                    "their spread (about 3 min a design, one thread)",
     "robustness": "a UNet trained on the default P-OLED against one trained on randomized panels, scored on "
                   "held-out and out-of-family panels (trains both: minutes with --quick, hours without)",
 }

@@ -5,10 +5,10 @@ the optical axis; shifting the display by o shifts its propagated intensity, so 
 shift s is the unshifted display's at s − o (tiling_power's module doc):
     P_o(s) = ∫ A(r) |u_d(r + s − o)|² dr = P_0(s − o).
 The sensor sees the shifts |s_x| ≤ S_x, |s_y| ≤ S_y; where the period is not small against that span (the arranged
-super-cell's 672 µm against S_y = 265 µm at d = 2 mm), the relative sd of P over it depends on o: one registration of
-`veil130_arranged` reads 0.88 × to 1.10 × the repeated T-OLED's. The registered figure is the root mean over every
-o on the raster in one period (o uniform: the panel's alignment to the camera is not controlled) of the relative
-variance over the span,
+super-cell's 672 µm against S_y = 265 µm at d = 2 mm), the relative sd of P over it depends on o: one registration
+of `veil130_arranged` reads 0.88 × to 1.11 × the repeated T-OLED's (study design-bands). The registered figure is
+the root mean over every o on the raster in one period (o uniform: the panel's alignment to the camera is not
+controlled) of the relative variance over the span,
     b = √( mean_o  var_{s ∈ span}(P_0(s − o)) / mean_{s ∈ span}(P_0(s − o))² ),
 all offsets at once from one map of P_0 over the span widened by half the period a side, by box sums (integral
 images) of P and P², centred on the map's mean (no cancellation in float64).

@@ -155,7 +155,7 @@ def _figure(doc: dict, out: Path) -> None:
     ax.axvline(1, color="0.3", lw=0.8)
     ax.set_yticks(range(len(rows)), [Path(r["design"]).name for r in rows])
     ax.set_xlabel(f"bands at d = 2 mm, design / turned T-OLED, G (each draw; mean ± 2 se over {doc['draws']});\n"
-                  "orange: an arranged design's single registrations over the repeated T-OLED (range; | its mean)")
+                  "orange: an arranged design's single registrations over the repeated T-OLED (range; | registered)")
     save_plot(fig, out / f"{NAME}.png")
 
 
