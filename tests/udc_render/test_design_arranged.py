@@ -193,6 +193,17 @@ def arranged_rows() -> list[str]:
     return out
 
 
+def seed_margins(run: str = "b55_b97_arranged") -> str:
+    """The UNet's margin over the turned T-OLED on training seeds 0, 1, 2 (seeds 1 and 2: both trained in one run
+    with that seed, `<run>_seed1`, `_seed2`), as the guide writes them."""
+    out = [_paired(run, "unet").split()[0]]
+    for seed in (1, 2):
+        rows = json.loads((RUNS / "layout_trained" / f"{run}_seed{seed}" / "study_layout_trained.json").read_text())
+        by = {r["layout"]: r["per_image_db"]["unet"] for r in rows["rows"]}
+        out.append(f"{np.mean(np.subtract(by['design'], by['toled168_88of441_edge_turned'])):+.2f}")
+    return " / ".join(out)
+
+
 REPEATED_BANDS = "0.51 (no ceiling)"  # job.banding_sd of its cell repeated over the T-OLED's, G: the test below
 
 
@@ -201,6 +212,7 @@ def test_the_guides_arranged_table_is_the_committed_runs():
     guide = (RUNS.parents[2] / "guides/design.md").read_text()
     for row in arranged_rows():
         assert row in guide, row
+    assert f"UNet {seed_margins()} dB".replace("-", "−") in guide
 
 
 @pytest.mark.slow  # two sampled bandings on the 2 µm raster
