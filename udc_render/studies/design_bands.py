@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from psf.lens import Lens
 from udc_render.io.files import save_json
 from udc_render.studies.design_held_out import saved_design
 from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
@@ -83,7 +84,6 @@ def _arranged_row(name: str, config, period: np.ndarray, draws: int, cache: dict
     """One arranged design (its super-cell `period`): its registered figure over each turned T-OLED draw and over
     the repeated T-OLED, and its single registrations' ratios to the repeated T-OLED (min, median, max, the share
     below 1, and the G map)."""
-    from psf.lens import Lens
     from udc_render.design.job import ratio_summary
     from udc_render.design.optimise import RIG_WAVELENGTHS_NM
     from udc_render.design.tiling_power import DEFAULT_DISTANCE_MM, SAMPLE_UM, registered_variance, shift_span_um
