@@ -101,5 +101,6 @@ def test_an_arranged_design_of_one_element_bands_as_its_cell_repeated(tmp_path):
     reg = row["registrations"]
     assert reg["offsets"] == (2 * 40 // 2) ** 2
     assert all(lo <= m <= hi for lo, m, hi in zip(reg["min"], row["over_repeated"]["mean"], reg["max"]))
+    assert len(row["raster_change"]) == 3 and np.isfinite(row["raster_change"]).all()  # quick: one check
     assert (tmp_path / "out" / "study_design_bands_registrations_one.png").is_file()
     assert "arranged" in (tmp_path / "out" / "study_design_bands.md").read_text()

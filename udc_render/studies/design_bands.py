@@ -12,7 +12,12 @@ converge monotonically with the square: docs/guides/design.md). Designs may diff
 is paired with the T-OLED at its own (computed once per open area). Beside, each design's bands over the repeated
 T-OLED's (the same cell tiled plainly: one figure, no draw, over its registrations: udc_render.design.registration),
 mean ± se over the draws: the reading of "no stronger
-than the T-OLED's" where that T-OLED is the repeated one. Writes study_design_bands.{json,csv,md,png}.
+than the T-OLED's" where that T-OLED is the repeated one. An arranged design is periodic (its K × K super-cell): one
+figure over its registrations, set against each turned T-OLED draw and against the repeated T-OLED, and beside them
+the spread of its single registrations (one panel's alignment to the camera: min, median and max over every offset
+of its period on the raster, over the repeated T-OLED) with their map in G; its 1 µm check is the change of its
+ratio over the repeated T-OLED (both registered). Writes study_design_bands.{json,csv,md,png} and, per arranged
+design, study_design_bands_registrations_<name>.png.
 """
 from __future__ import annotations
 
@@ -80,11 +85,12 @@ def _row(name: str, config, cell: np.ndarray, draws: int, checks: int, cache: di
     return row
 
 
-def _arranged_row(name: str, config, period: np.ndarray, draws: int, cache: dict) -> dict:
+def _arranged_row(name: str, config, period: np.ndarray, draws: int, checks: int, cache: dict) -> dict:
     """One arranged design (its super-cell `period`): its registered figure over each turned T-OLED draw and over
-    the repeated T-OLED, and its single registrations' ratios to the repeated T-OLED (min, median, max, the share
-    below 1, and the G map)."""
-    from udc_render.design.job import ratio_summary
+    the repeated T-OLED, its single registrations' ratios to the repeated T-OLED (min, median, max, the share
+    below 1, and the G map), and with `checks` the change of its ratio over the repeated T-OLED on the finer
+    raster (both registered there)."""
+    from udc_render.design.job import banding_sd, ratio_summary
     from udc_render.design.optimise import RIG_WAVELENGTHS_NM
     from udc_render.design.tiling_power import DEFAULT_DISTANCE_MM, SAMPLE_UM, registered_variance, shift_span_um
     lens, d_um = Lens(), DEFAULT_DISTANCE_MM * 1000.0
@@ -96,9 +102,14 @@ def _arranged_row(name: str, config, period: np.ndarray, draws: int, cache: dict
     toled = _toled_sd(config, [0], SAMPLE_UM, cache, "repeated")[0]
     repeated = ratio_summary(sd, [toled])
     single = [np.sqrt(m) / t for m, t in zip(maps, toled)]
+    change = None
+    if checks:
+        fine = np.divide(banding_sd(period, config.feature_um, "repeated", [0], CHECK_SAMPLE_UM)[0],
+                         _toled_sd(config, [0], CHECK_SAMPLE_UM, cache, "repeated")[0])
+        change = (fine / np.asarray(repeated["mean"]) - 1).tolist()
     return {"design": name, "feature_um": config.feature_um, "open_fraction": config.open_fraction,
             "tiling": config.tiling, "draws": draws, **summary, "se": _se(summary, draws), "sd": sd,
-            "raster_change": None, "over_repeated": {"mean": repeated["mean"], "se": [0.0] * 3,
+            "raster_change": change, "over_repeated": {"mean": repeated["mean"], "se": [0.0] * 3,
                                                      "below": repeated["below"]},
             "registrations": {"offsets": int(single[0].size), "step_um": SAMPLE_UM,
                               **{k: [float(f(r)) for r in single] for k, f in
@@ -128,7 +139,8 @@ def _markdown(doc: dict) -> str:
              f"The ratio of each design's bands (the relative sd of the power over the paper sensor's shifts, 2 µm "
              f"raster) to the turned T-OLED's at the design's open area on the same draw: mean ± se over {n} draws "
              f"(the draws below 1), its sd over the draws in G, and the mean ratio's change on a {CHECK_SAMPLE_UM:g} "
-             f"µm raster over the first {doc['check_draws']} draws (%, R / G / B); then the design's bands over "
+             f"µm raster over the first {doc['check_draws']} draws (%, R / G / B; an arranged design's: of its "
+             f"ratio over the repeated T-OLED); then the design's bands over "
              f"the repeated T-OLED's (one figure over its registrations: a periodic display has no draw), G. An "
              f"arranged design is periodic: its one figure over its registrations is set against every turned "
              f"T-OLED draw, and its single registrations (one panel's alignment) over the repeated T-OLED's span "
@@ -182,7 +194,7 @@ def run_study(out: Path, designs: list[Path], quick: bool = False) -> dict:
     draws, checks = (QUICK_DRAWS, 1) if quick else (DRAWS, CHECK_DRAWS)
     start, cache, rows = time.perf_counter(), {}, []
     for name, (config, cell) in tqdm(found.items(), desc="study design-bands"):
-        rows.append(_arranged_row(name, config, cell, draws, cache) if config.tiling == "arranged"
+        rows.append(_arranged_row(name, config, cell, draws, checks, cache) if config.tiling == "arranged"
                     else _row(name, config, cell, draws, checks, cache))
     for row in rows:
         if "registrations" in row:
