@@ -37,7 +37,7 @@ from udc_render.design.starts import initial_cell, scatter
 from udc_render.design.tiling_power import (
     DEFAULT_DISTANCE_MM,
     SAMPLE_UM,
-    registered_rms,
+    registered_variance,
     sampled_banding,
     shift_span_um,
     tiled_cell,
@@ -45,7 +45,8 @@ from udc_render.design.tiling_power import (
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 
 __all__ = ["CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "scatter_baseline", "upc_comparison",
-           "ratio_over_draws", "toled_banding_cell", "banding_sd", "ratio_summary", "banding_comparison"]
+           "ratio_over_draws", "toled_banding_cell", "banding_sd", "registered_variances", "ratio_summary",
+           "banding_comparison"]
 
 CHECKPOINT_STEPS = 10
 UPC_DRAWS = 8  # more D4 tilings for UPC's ratio (ratio_over_draws): the mean's sd to about a third of one draw's
@@ -153,11 +154,18 @@ def banding_sd(cell: np.ndarray, pixel_um: float, tiling: str, seeds, sample_um:
     (tiling_power.sampled_banding on its raster of sample_um) of the cell tiled so, on `study layout --tile-seed N`'s
     draws N in seeds; repeated, the root mean over its registrations (one figure)."""
     if tiling == "repeated":
-        lens, d_um = Lens(), DEFAULT_DISTANCE_MM * 1000.0
-        span = shift_span_um(lens, d_um)
-        return [[registered_rms(cell, pixel_um, lens, wl, d_um, span, sample_um) for wl in RIG_WAVELENGTHS_NM]]
+        return [[float(np.sqrt(v.mean())) for v in registered_variances(cell, pixel_um, sample_um)]]
     return [sampled_banding(cell, pixel_um, Lens(), RIG_WAVELENGTHS_NM, seed=seed, sample_um=sample_um,
                             tilings=(tiling,))[tiling]["rms"] for seed in seeds]
+
+
+def registered_variances(cell: np.ndarray, pixel_um: float, sample_um: float = SAMPLE_UM) -> list:
+    """[R, G, B] of [p, p]: var / mean² of the power at d = 2 mm over the paper sensor's shifts at every
+    registration of the cell repeated (tiling_power.registered_variance); banding_sd's repeated figure is the root
+    mean of each."""
+    lens, d_um = Lens(), DEFAULT_DISTANCE_MM * 1000.0
+    span = shift_span_um(lens, d_um)
+    return [registered_variance(cell, pixel_um, lens, wl, d_um, span, sample_um) for wl in RIG_WAVELENGTHS_NM]
 
 
 def ratio_summary(design_sd: list, toled_sd: list) -> dict:

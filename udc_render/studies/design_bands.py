@@ -27,7 +27,6 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from psf.lens import Lens
 from udc_render.io.files import save_json
 from udc_render.studies.design_held_out import saved_design
 from udc_render.studies.report import md_table, pyplot, save_plot, write_tables
@@ -90,12 +89,9 @@ def _arranged_row(name: str, config, period: np.ndarray, draws: int, checks: int
     the repeated T-OLED, its single registrations' ratios to the repeated T-OLED (min, median, max, the share
     below 1, and the G map), and with `checks` the change of its ratio over the repeated T-OLED on the finer
     raster (both registered there)."""
-    from udc_render.design.job import banding_sd, ratio_summary
-    from udc_render.design.optimise import RIG_WAVELENGTHS_NM
-    from udc_render.design.tiling_power import DEFAULT_DISTANCE_MM, SAMPLE_UM, registered_variance, shift_span_um
-    lens, d_um = Lens(), DEFAULT_DISTANCE_MM * 1000.0
-    maps = [registered_variance(period, config.feature_um, lens, wl, d_um, shift_span_um(lens, d_um))
-            for wl in RIG_WAVELENGTHS_NM]
+    from udc_render.design.job import banding_sd, ratio_summary, registered_variances
+    from udc_render.design.tiling_power import SAMPLE_UM
+    maps = registered_variances(period, config.feature_um)
     sd = [[float(np.sqrt(m.mean())) for m in maps]]
     seeds = list(range(draws))
     summary = ratio_summary(sd * draws, _toled_sd(config, seeds, SAMPLE_UM, cache, "turned"))
