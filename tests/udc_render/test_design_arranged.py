@@ -163,12 +163,22 @@ RUNS = Path(__file__).resolve().parents[2] / "docs/figures/design/arranged"
 TOLED_RUN = RUNS.parent / "symmetric/pitch/layout_trained_packed/toled88/study_layout_trained.json"
 
 
+def _margin(a: dict, b: dict, key: str) -> str:
+    """a's margin over b (per-image PSNRs of one study's validation images), image by image: mean ± se (led)."""
+    d = np.subtract(a[key], b[key])
+    return f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f} ({(d > 0).sum()} of {len(d)})"
+
+
+def _per_image(path: Path) -> dict:
+    """{layout: per-image PSNRs} of a committed `study layout-trained` run."""
+    return {r["layout"]: r["per_image_db"] for r in json.loads(path.read_text())["rows"]}
+
+
 def _paired(run: str, key: str) -> str:
     """The simulator's margin over the turned T-OLED at 88 / 441, image by image: mean ± se (images led)."""
     rows = [json.loads(p.read_text())["rows"][0]["per_image_db"] for p in
             (RUNS / "layout_trained" / run / "study_layout_trained.json", TOLED_RUN)]
-    d = np.subtract(rows[0][key], rows[1][key])
-    return f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f} ({(d > 0).sum()} of {len(d)})"
+    return _margin(rows[0], rows[1], key)
 
 
 def arranged_rows() -> list[str]:
@@ -204,6 +214,25 @@ def seed_margins(run: str = "b55_b97_arranged") -> str:
     return " / ".join(out)
 
 
+REFS_RUN = RUNS / "layout_trained/refs_88of441/study_layout_trained.json"  # the repeated T-OLED, the P-OLED
+
+
+def reference_rows() -> list[str]:
+    """The guide's table of the arranged designs and the turned T-OLED over the repeated T-OLED and the P-OLED at
+    88 / 441 (one run of those two, the same images and noise draws), DeP and the UNet, image by image."""
+    refs = _per_image(REFS_RUN)
+    runs = {f"`{n}`": RUNS / "layout_trained" / n / "study_layout_trained.json" for n in
+            ("veil130_arranged", "veil130_b80_arranged", "veil130_b98_arranged", "b55_arranged", "b55_b97_arranged",
+             "repeated_packed")}
+    out = []
+    for name, path in {**runs, "the turned T-OLED": TOLED_RUN}.items():
+        own = next(iter(_per_image(path).values()))
+        cells = [_margin(own, refs[ref], k) for ref in ("toled168_88of441_edge", "poled_88of441")
+                 for k in ("dep", "unet")]
+        out.append(f"| {name} | " + " | ".join(cells).replace("-", "−") + " |")
+    return out
+
+
 REPEATED_BANDS = "0.51 (no ceiling)"  # job.banding_sd of its cell repeated over the T-OLED's, G: the test below
 
 
@@ -213,6 +242,8 @@ def test_the_guides_arranged_table_is_the_committed_runs():
     for row in arranged_rows():
         assert row in guide, row
     assert f"UNet {seed_margins()} dB".replace("-", "−") in guide
+    for row in reference_rows():
+        assert row in guide, row
 
 
 @pytest.mark.slow  # two sampled bandings on the 2 µm raster
