@@ -12,12 +12,17 @@ over its D4 turns, which leave a square window and a disc unchanged. Parseval's 
 closed form at pad 4 / 8 / 16, the Riemann sum's edge; 2 s for the 2520² T-OLED cell): a check of the engine's
 energy_outside that shares no code with it (psf.engine: the tiled pupil's FFT and exact pixel integration), and the
 light past the window that the simulator's far field keeps (within the acceptance) or loses (beyond it).
+
+The light it keeps lands as a veil of about the scene's mean μ: a restorer whose kernel holds only the window
+(plain DeP) leaves it in its estimate, at its DC gain of 1, relative to the window's light. veil_cost_db is the PSNR
+that costs against the same restorer given the far field (docs/guides/design.md, the arranged tiling: within
+0.02 dB of `study layout-trained`'s plain DeP for the arranged designs and the turned T-OLED).
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["light_shares"]
+__all__ = ["light_shares", "veil_cost_db"]
 
 
 def light_shares(cell: np.ndarray, pixel_um: float, wavelength_um: float, image_distance_um: float,
@@ -37,3 +42,12 @@ def light_shares(cell: np.ndarray, pixel_um: float, wavelength_um: float, image_
     square = (np.abs(u)[:, None] <= half_window_um) & (np.abs(u)[None, :] <= half_window_um)
     disc = np.hypot(u[:, None], u[None, :]) <= acceptance_um
     return {"window": float(power[square].sum()), "acceptance": float(power[disc].sum())}
+
+
+def veil_cost_db(window: np.ndarray, acceptance: np.ndarray, psnr_given_far_db: float, mean_level: float) -> float:
+    """The PSNR (dB) lost to the veil of the kept far light: 10 log10(1 + mean_c ((a_c − w_c) / w_c)² μ² / m),
+    w_c, a_c a channel's shares inside the window and the acceptance (light_shares), m = 10^(−PSNR / 10) the error
+    of the restorer given the far field (PSNR of a unit peak), μ the scene's mean (module doc)."""
+    w, a = np.asarray(window, np.float64), np.asarray(acceptance, np.float64)
+    veil = float(np.mean(((a - w) / w) ** 2)) * mean_level ** 2
+    return float(10 * np.log10(1 + veil / 10 ** (-psnr_given_far_db / 10)))
