@@ -72,7 +72,8 @@ from udc_render.profiles import describe, resolve_profile
 from udc_render.scene.geometry import sensor_kernel_px
 from udc_render.studies.fingerprint import FIELD, digest, file_digest, stale_note
 
-__all__ = ["DISTANCE_MM", "MODIFIERS", "NAME", "entry_display", "paired", "study_budget", "run_study"]
+__all__ = ["DISTANCE_MM", "MAX_SCORE_IMAGES", "MODIFIERS", "NAME", "check_score_images", "entry_display", "paired",
+           "score_set", "study_budget", "run_study"]
 
 DISTANCE_MM = 2.0  # the physical profile's d for the presets, and the issue's banding distance
 MODIFIERS = ("edge", "turned")
@@ -82,6 +83,7 @@ VERSION = 3  # 2: the dep_nofar row; 3: dep_far
 EPOCHS = 80  # by time: 80 (3840 steps) take 5-6 min a layout on 2 cores with nothing beside them (3.7-4.7 s an epoch
 # with the physical profile's online degradation at d = 2 mm; 8.5 s beside other work), the robustness recipe's 240
 # take 17 min (--train-epochs 240: docs/guides/design.md has both)
+MAX_SCORE_IMAGES = 256  # --score-images: DeP's 2 s an image a layout (about 9 min a layout at 256)
 BUDGETS = {"quick": ROBUSTNESS_BUDGETS["quick"], "full": replace(ROBUSTNESS_BUDGETS["full"], epochs=EPOCHS)}
 
 
@@ -136,6 +138,22 @@ def _banks(out: Path, displays: list[Display], b, times: StageTimes, cache_dir: 
             times.add(f"bank {display.name}", time.perf_counter() - t0)
         banks[display.name] = read_bank(folder)
     return banks
+
+
+def check_score_images(images: int | None) -> None:
+    """Refuse, in one line, a score set outside 2 … MAX_SCORE_IMAGES images (None: the budget's)."""
+    if images is not None and not 2 <= images <= MAX_SCORE_IMAGES:
+        raise UdcError(f"--score-images {images}: expected a count in 2 … {MAX_SCORE_IMAGES} (paired differences "
+                       "need two)")
+
+
+def score_set(out: Path, b, images: int | None) -> Path:
+    """The clean set the layouts are scored on: the training set's (out/clean) or, with `images`, one whose
+    validation split holds that many: the budget's items 0 … train + val − 1 and more of the same generator
+    (clean_image), so its first validation images are the training set's (out/clean_score_<n>)."""
+    if images is None or images == b.val_images:
+        return out / "clean"
+    return write_clean_images(out / f"clean_score_{images}", replace(b, val_images=int(images)))
 
 
 def _fingerprint(out: Path, bank, data: Path, name: str) -> str:
@@ -251,11 +269,13 @@ def study_budget(quick: bool = False, epochs: int | None = None, pitch_um: float
 
 def run_study(out: Path, specs: list[str], quick: bool = False, cache_dir: str | None = None,
               progress: bool = True, train_seed: int = TRAIN_SEED, epochs: int | None = None,
-              pitch_um: float | None = None) -> dict:
+              pitch_um: float | None = None, score_images: int | None = None) -> dict:
     """The study (module doc) of the layouts `specs` (DISPLAY[@edge][@turned]; the first is the reference) in `out`,
     or the rest of an interrupted one; writes the report and returns its JSON document. train_seed: the UNets'
     (the score's images and noise draws do not change with it); epochs: the UNets' (None: the budget's); pitch_um:
-    the rig's sensor pitch (None: the budget's; the frame's pixels stay, the kernels take the render margin)."""
+    the rig's sensor pitch (None: the budget's; the frame's pixels stay, the kernels take the render margin);
+    score_images: the validation images scored (None: the budget's; score_set)."""
+    check_score_images(score_images)
     out = Path(out).resolve()
     displays = [entry_display(s, out / "panels") for s in specs]
     names = [d.name for d in displays]
@@ -273,7 +293,7 @@ def run_study(out: Path, specs: list[str], quick: bool = False, cache_dir: str |
                                 checkpoint_s=60.0, val_every=max(1, b.epochs // 5), progress=progress,
                                 bank=bank.folder)
     t0 = time.perf_counter()
-    rows = _score(out, banks, data, progress)
+    rows = _score(out, banks, score_set(out, b, score_images), progress)
     times.add("score", time.perf_counter() - t0)
     ref = rows[0]["per_image_db"]
     result = {"budget": dict(asdict(b), steps=b.steps), "distance_mm": DISTANCE_MM, "specs": list(specs),

@@ -10,8 +10,9 @@ import numpy as np
 import pytest
 
 from psf.turned import TurnedLayout
-from restore.studies.layout_trained import NAME, ROW_KEYS, entry_display, paired, run_study, study_budget
-from restore.studies.robustness import study_scene
+from restore.online import clean_images
+from restore.studies.layout_trained import NAME, ROW_KEYS, entry_display, paired, run_study, score_set, study_budget
+from restore.studies.robustness import study_scene, write_clean_images
 from udc_render.cli import main
 from udc_render.errors import UdcError
 from udc_render.scene.geometry import sensor_kernel_px
@@ -62,6 +63,29 @@ def test_the_cli_refuses_a_zero_count_or_pitch_before_any_work(tmp_path, capsys,
     err = capsys.readouterr().err
     assert says in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("count", ["1", "257"])
+def test_the_cli_refuses_a_score_set_out_of_range_before_any_work(tmp_path, capsys, count):
+    assert main(["study", "layout-trained", "--display", "toled", "--score-images", count, "--out",
+                 str(tmp_path / "o")]) != 0
+    err = capsys.readouterr().err
+    assert f"--score-images {count}: expected a count in 2 … 256" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_larger_score_set_begins_with_the_training_sets_validation_images(tmp_path):
+    """--score-images n: the budget's items, then more of the same generator, so the first validation images (and
+    their noise draws, drawn per image) are the ones the default scores; n equal to the budget's is its own set."""
+    b = study_budget(quick=True)
+    train_set = write_clean_images(tmp_path / "clean", b)
+    assert score_set(tmp_path, b, None) == score_set(tmp_path, b, b.val_images) == train_set
+    larger = score_set(tmp_path, b, b.val_images + 2)
+    first, more = clean_images(train_set, "val"), clean_images(larger, "val")
+    assert len(more) == b.val_images + 2 and len(clean_images(larger, "train")) == b.train_images
+    for a, c in zip(first, more):
+        assert np.array_equal(a.pixels, c.pixels)
+    assert not np.array_equal(more[-1].pixels, more[0].pixels)
 
 
 def test_a_finer_pitch_keeps_the_frame_and_the_kernels_reach():
