@@ -163,10 +163,10 @@ RUNS = Path(__file__).resolve().parents[2] / "docs/figures/design/arranged"
 TOLED_RUN = RUNS.parent / "symmetric/pitch/layout_trained_packed/toled88/study_layout_trained.json"
 
 
-def _margin(a: dict, b: dict, key: str) -> str:
+def _margin(a: dict, b: dict, key: str, digits: int = 2) -> str:
     """a's margin over b (per-image PSNRs of one study's validation images), image by image: mean ± se (led)."""
     d = np.subtract(a[key], b[key])
-    return f"{d.mean():+.2f} ± {d.std(ddof=1) / np.sqrt(len(d)):.2f} ({(d > 0).sum()} of {len(d)})"
+    return f"{d.mean():+.{digits}f} ± {d.std(ddof=1) / np.sqrt(len(d)):.{digits}f} ({(d > 0).sum()} of {len(d)})"
 
 
 def _per_image(path: Path) -> dict:
@@ -286,6 +286,34 @@ def test_the_kept_veil_is_plain_deps_far_field_cost_through_the_simulator():
             assert abs(kept - gap) < 0.03, (name, gap, kept)
 
 
+SCORE64_RUN = RUNS / "layout_trained/b55_b97_arranged_64/study_layout_trained.json"
+SCORE64_KEYS = {"input": "input", "dep": "DeP", "dep_noiseless": "DeP, no sensor noise",
+                "dep_far": "DeP given the far field", "unet": "UNet"}
+
+
+def score64_rows() -> list[str]:
+    """The guide's table of `b55_b97_arranged` against the turned T-OLED on 64 images (--score-images 64): each
+    row's PSNRs, the paired margin over the 64 and over the 56 beyond the study's 8."""
+    run = _per_image(SCORE64_RUN)
+    toled, design = run["toled168_88of441_edge_turned"], run["design"]
+    out = []
+    for key, label in SCORE64_KEYS.items():
+        rest = _margin({key: design[key][8:]}, {key: toled[key][8:]}, key, 3)
+        out.append(f"| {label} | {np.mean(toled[key]):.2f} | {np.mean(design[key]):.2f} | "
+                   + f"{_margin(design, toled, key, 3)} | {rest} |".replace("-", "−"))
+    return out
+
+
+def test_the_64_image_score_begins_with_the_8_image_runs_to_the_bit():
+    """--score-images extends the score set without changing it: the 64-image run's first 8 images, every row of
+    both layouts, equal the committed 8-image runs' (the same images, noise draws, banks and training seed)."""
+    run = _per_image(SCORE64_RUN)
+    pairs = ((run["design"], _per_image(RUNS / "layout_trained/b55_b97_arranged/study_layout_trained.json")["design"]),
+             (run["toled168_88of441_edge_turned"], next(iter(_per_image(TOLED_RUN).values()))))
+    for long, short in pairs:
+        assert all(len(long[k]) == 64 and long[k][:8] == short[k] for k in SCORE64_KEYS)
+
+
 REPEATED_BANDS = "0.51 (no ceiling)"  # job.banding_sd of its cell repeated over the T-OLED's, G: the test below
 
 
@@ -295,7 +323,7 @@ def test_the_guides_arranged_table_is_the_committed_runs():
     for row in arranged_rows():
         assert row in guide, row
     assert f"UNet {seed_margins()} dB".replace("-", "−") in guide
-    for row in reference_rows():
+    for row in reference_rows() + score64_rows():
         assert row in guide, row
 
 
