@@ -304,14 +304,31 @@ def score64_rows() -> list[str]:
     return out
 
 
-def test_the_64_image_score_begins_with_the_8_image_runs_to_the_bit():
-    """--score-images extends the score set without changing it: the 64-image run's first 8 images, every row of
+SCORED64 = ("b55_arranged", "b55_b97_arranged", "veil130_b98_arranged")  # the arranged designs run on 64 images
+
+
+def arranged64_rows() -> list[str]:
+    """The guide's table of the arranged designs scored on 64 images: bands over the repeated T-OLED (design.json,
+    R / G / B) and the paired margins over the turned T-OLED (DeP, DeP given the far field, the UNet)."""
+    out = []
+    for name in SCORED64:
+        run = _per_image(RUNS / "layout_trained" / f"{name}_64" / "study_layout_trained.json")
+        bands = json.loads((RUNS / name / "design.json").read_text())["banding"]["mean"]
+        cells = [_margin(run["design"], run["toled168_88of441_edge_turned"], k, 3) for k in ("dep", "dep_far", "unet")]
+        out.append(f"| `{name}` | {' / '.join(f'{v:.3f}' for v in bands)} | "
+                   + " | ".join(cells).replace("-", "−") + " |")
+    return out
+
+
+def test_the_64_image_scores_begin_with_the_8_image_runs_to_the_bit():
+    """--score-images extends the score set without changing it: each 64-image run's first 8 images, every row of
     both layouts, equal the committed 8-image runs' (the same images, noise draws, banks and training seed)."""
-    run = _per_image(SCORE64_RUN)
-    pairs = ((run["design"], _per_image(RUNS / "layout_trained/b55_b97_arranged/study_layout_trained.json")["design"]),
-             (run["toled168_88of441_edge_turned"], next(iter(_per_image(TOLED_RUN).values()))))
-    for long, short in pairs:
-        assert all(len(long[k]) == 64 and long[k][:8] == short[k] for k in SCORE64_KEYS)
+    toled = next(iter(_per_image(TOLED_RUN).values()))
+    for name in SCORED64:
+        run = _per_image(RUNS / "layout_trained" / f"{name}_64" / "study_layout_trained.json")
+        short = _per_image(RUNS / "layout_trained" / name / "study_layout_trained.json")["design"]
+        for long, ref in ((run["design"], short), (run["toled168_88of441_edge_turned"], toled)):
+            assert all(len(long[k]) == 64 and long[k][:8] == ref[k] for k in SCORE64_KEYS), name
 
 
 REPEATED_BANDS = "0.51 (no ceiling)"  # job.banding_sd of its cell repeated over the T-OLED's, G: the test below
@@ -323,7 +340,7 @@ def test_the_guides_arranged_table_is_the_committed_runs():
     for row in arranged_rows():
         assert row in guide, row
     assert f"UNet {seed_margins()} dB".replace("-", "−") in guide
-    for row in reference_rows() + score64_rows():
+    for row in reference_rows() + score64_rows() + arranged64_rows():
         assert row in guide, row
 
 
