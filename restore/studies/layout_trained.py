@@ -83,7 +83,7 @@ VERSION = 3  # 2: the dep_nofar row; 3: dep_far
 EPOCHS = 80  # by time: 80 (3840 steps) take 5-6 min a layout on 2 cores with nothing beside them (3.7-4.7 s an epoch
 # with the physical profile's online degradation at d = 2 mm; 8.5 s beside other work), the robustness recipe's 240
 # take 17 min (--train-epochs 240: docs/guides/design.md has both)
-MAX_SCORE_IMAGES = 256  # --score-images: DeP's 2 s an image a layout (about 9 min a layout at 256)
+MAX_SCORE_IMAGES = 256  # --score-images: 1.6 s an image a layout on 2 cores (DeP, its variants, the UNet): 7 min at 256
 BUDGETS = {"quick": ROBUSTNESS_BUDGETS["quick"], "full": replace(ROBUSTNESS_BUDGETS["full"], epochs=EPOCHS)}
 
 

@@ -114,7 +114,7 @@ def register(sub) -> None:
     s.add_argument("--score-images", type=int, default=None,
                    help="layout-trained only: score on this many validation images, the budget's first, then more "
                         "dead leaves of the same generator (the paired differences' standard error falls as 1/√n; "
-                        "training unchanged; DeP about 2 s an image a layout) [the budget's: 8]")
+                        "training unchanged; about 1.6 s an image a layout) [the budget's: 8]")
     s.add_argument("--pitch-um", type=positive("--pitch-um"), default=None,
                    help="layout-trained only: the rig's sensor pitch in µm; the frame stays 512 × 256 px, so a finer "
                         "pitch sees a smaller field and takes larger kernels (the render margin), and DeP restores "
