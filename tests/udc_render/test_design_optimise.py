@@ -229,6 +229,28 @@ def test_an_interrupted_run_resumes_to_the_same_result(tmp_path, monkeypatch):
         job.run_design(DesignConfig(**{**TINY, "seed": 1}), tmp_path / "cut", quiet=True, compare=False)
 
 
+def test_a_slow_step_is_checkpointed_by_time(tmp_path, monkeypatch):
+    """With steps slower than CHECKPOINT_S (here 0 s) every step is written, whatever CHECKPOINT_STEPS: a run cut
+    before its 4th step keeps its 3 steps (design_state.pt) and resumes to the uninterrupted run's result."""
+    config = DesignConfig(**TINY)
+    whole = job.run_design(config, tmp_path / "whole", quiet=True, compare=False)
+    monkeypatch.setattr(job, "CHECKPOINT_S", 0.0)
+    real_step = Designer.step
+
+    def interrupt(self):
+        if self.step_done == 3:
+            raise KeyboardInterrupt
+        return real_step(self)
+    monkeypatch.setattr(job, "CHECKPOINT_STEPS", 1000)
+    monkeypatch.setattr(Designer, "step", interrupt)
+    with pytest.raises(KeyboardInterrupt):
+        job.run_design(config, tmp_path / "cut", quiet=True, compare=False)
+    assert torch.load(tmp_path / "cut" / "design_state.pt", weights_only=False)["step"] == 3
+    monkeypatch.setattr(Designer, "step", real_step)
+    again = job.run_design(config, tmp_path / "cut", quiet=True, compare=False)
+    assert again["losses"] == whole["losses"] and again["final"] == whole["final"]
+
+
 def test_the_baseline_scatters_are_scored_as_the_design_is(tmp_path):
     """design.json's scatters: N cells of the same open squares, each scored as the design (held-out tiling); UPC's
     comparison: the T-OLED's slit at the edge of a turned tiling has far higher ring minima than repeated."""

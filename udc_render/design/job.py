@@ -1,5 +1,6 @@
 """One `udc-render design` run in an output folder: resumable (design_state.pt, written atomically every
-CHECKPOINT_STEPS steps and at the end), a progress bar, and what it writes:
+CHECKPOINT_STEPS steps, after any step that ends CHECKPOINT_S or more after the last write, and at the end), a
+progress bar, and what it writes:
 
     design_state.pt   the checkpoint (settings, the cell, its objective, the record): the same command resumes it
     cell.png          the designed cell, 0 / 255 (one pixel per feature square)
@@ -21,6 +22,7 @@ CHECKPOINT_STEPS steps and at the end), a progress bar, and what it writes:
 """
 from __future__ import annotations
 
+import time
 from dataclasses import asdict
 from pathlib import Path
 
@@ -44,11 +46,12 @@ from udc_render.design.tiling_power import (
 )
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 
-__all__ = ["CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "scatter_baseline", "upc_comparison",
-           "ratio_over_draws", "toled_banding_cell", "banding_sd", "registered_variances", "ratio_summary",
-           "banding_comparison"]
+__all__ = ["CHECKPOINT_S", "CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "scatter_baseline",
+           "upc_comparison", "ratio_over_draws", "toled_banding_cell", "banding_sd", "registered_variances",
+           "ratio_summary", "banding_comparison"]
 
 CHECKPOINT_STEPS = 10
+CHECKPOINT_S = 60.0  # an arranged search's step (swaps, then a sweep of 7 K² scores) can take 15 min on a core
 UPC_DRAWS = 8  # more D4 tilings for UPC's ratio (ratio_over_draws): the mean's sd to about a third of one draw's
 BANDING_SEEDS = (0, 1, 2, 3, 4)  # banding_comparison's draws: `study layout --tile-seed N`'s, held out from the search
 WIENER_OBJECTIVES = ("wiener", "crop")  # scored as a PSNR in dB (higher is better); the others as the objective
@@ -285,11 +288,14 @@ def run_design(config: DesignConfig, out: Path, device: str = "cpu", quiet: bool
     state_path = out / "design_state.pt"
     if state_path.is_file():
         designer.load(torch.load(state_path, weights_only=False))
+    saved = time.monotonic()
     with tqdm(total=config.steps, initial=designer.step_done, disable=quiet, desc="design") as bar:
         while not designer.finished:
             rec = designer.step()
             bar.update(1)
             bar.set_postfix(objective=f"{rec['objective']:.4g}", tried=rec["tried"])
-            if designer.finished or designer.step_done % CHECKPOINT_STEPS == 0:
+            if (designer.finished or designer.step_done % CHECKPOINT_STEPS == 0
+                    or time.monotonic() - saved >= CHECKPOINT_S):
                 _save_state(designer, state_path)
+                saved = time.monotonic()
     return _write(designer, out, compare, held_out_tilings)
