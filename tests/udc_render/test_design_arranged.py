@@ -329,6 +329,18 @@ def test_the_64_image_scores_begin_with_the_8_image_runs_to_the_bit():
         short = _per_image(RUNS / "layout_trained" / name / "study_layout_trained.json")["design"]
         for long, ref in ((run["design"], short), (run["toled168_88of441_edge_turned"], toled)):
             assert all(len(long[k]) == 64 and long[k][:8] == ref[k] for k in SCORE64_KEYS), name
+    seed1 = _per_image(RUNS / "layout_trained/b55_b97_arranged_64_seed1/study_layout_trained.json")
+    short1 = _per_image(RUNS / "layout_trained/b55_b97_arranged_seed1/study_layout_trained.json")
+    seed0 = _per_image(SCORE64_RUN)
+    for layout, rows in seed1.items():  # training seed 1: its 8-image run's first 8; the untrained rows seed 0's
+        assert all(rows[k][:8] == short1[layout][k] for k in SCORE64_KEYS)
+        assert all(rows[k] == seed0[layout][k] for k in ("input", "dep", "dep_noiseless", "dep_far"))
+
+
+def unet64_seed1() -> str:
+    """The UNet's margin over the turned T-OLED on 64 images at training seed 1, as the guide writes it."""
+    run = _per_image(RUNS / "layout_trained/b55_b97_arranged_64_seed1/study_layout_trained.json")
+    return _margin(run["design"], run["toled168_88of441_edge_turned"], "unet", 3).replace("-", "−")
 
 
 REPEATED_BANDS = "0.51 (no ceiling)"  # job.banding_sd of its cell repeated over the T-OLED's, G: the test below
@@ -342,6 +354,7 @@ def test_the_guides_arranged_table_is_the_committed_runs():
     assert f"UNet {seed_margins()} dB".replace("-", "−") in guide
     for row in reference_rows() + score64_rows() + arranged64_rows():
         assert row in guide, row
+    assert f"training seed 1: {unet64_seed1()}" in " ".join(guide.split())
 
 
 @pytest.mark.slow  # two sampled bandings on the 2 µm raster
