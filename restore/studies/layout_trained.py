@@ -12,7 +12,8 @@ footing:
    Poisson and read noise, quantisation, dead and hot pixels;
 2. a small UNet (the budget's: width 16, depth 4, EPOCHS = 80 epochs of 4 crops of 128 px from 48 images) trained
    online through that bank (restore.train, --degrade online): one specialist per layout, the same recipe and seeds;
-3. scored on the budget's validation images (colour dead leaves) each degraded once through the layout
+3. scored on the budget's validation images (colour dead leaves; score_images: more, score_set) each degraded once
+   through the layout
    (restore.studies.robustness.score_panel): the packed input, DeP given the layout's own kernels and γ, DeP on the
    same capture without the sensor's noise, DeP on the capture without the far field (the light past the kernel
    window, which DeP's kernel does not hold: dep_nofar), DeP given the far field too (its light taken out of DeP's
