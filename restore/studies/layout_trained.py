@@ -13,12 +13,11 @@ footing:
 2. a small UNet (the budget's: width 16, depth 4, EPOCHS = 80 epochs of 4 crops of 128 px from 48 images) trained
    online through that bank (restore.train, --degrade online): one specialist per layout, the same recipe and seeds;
 3. scored on the budget's validation images (colour dead leaves; score_images: more, score_set) each degraded once
-   through the layout
-   (restore.studies.robustness.score_panel): the packed input, DeP given the layout's own kernels and γ, DeP on the
-   same capture without the sensor's noise, DeP on the capture without the far field (the light past the kernel
-   window, which DeP's kernel does not hold: dep_nofar), DeP given the far field too (its light taken out of DeP's
-   output on the same capture: restore.dep_far, dep_far), and the UNet; the paper protocol's PSNR and the
-   level-matched PSNR.
+   through the layout (restore.studies.robustness.score_panel): the packed input, DeP given the layout's own kernels
+   and γ, DeP on the same capture without the sensor's noise, DeP on the capture without the far field (the light
+   past the kernel window, which DeP's kernel does not hold: dep_nofar), DeP given the far field too (its light
+   taken out of DeP's output on the same capture: restore.dep_far, dep_far), and the UNet; the paper protocol's PSNR
+   and the level-matched PSNR.
 The clean images, noise draws and training seeds are the same for every layout, so the per-image differences to
 the reference layout (the first given) are paired: mean, standard error s_d / √n and the images won.
 Not the spectral synthesis of `udc-render dataset`: the bank's per-channel form (one kernel and one γ per camera
