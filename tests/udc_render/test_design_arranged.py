@@ -176,7 +176,7 @@ def _per_image(path: Path) -> dict:
 
 def _paired(run: str, key: str) -> str:
     """The simulator's margin over the turned T-OLED at 88 / 441, image by image: mean ± se (images led)."""
-    rows = [json.loads(p.read_text())["rows"][0]["per_image_db"] for p in
+    rows = [next(iter(_per_image(p).values())) for p in
             (RUNS / "layout_trained" / run / "study_layout_trained.json", TOLED_RUN)]
     return _margin(rows[0], rows[1], key)
 
@@ -209,9 +209,8 @@ def seed_margins(run: str = "b55_b97_arranged") -> str:
     with that seed, `<run>_seed1`, `_seed2`), as the guide writes them."""
     out = [_paired(run, "unet").split()[0]]
     for seed in (1, 2):
-        rows = json.loads((RUNS / "layout_trained" / f"{run}_seed{seed}" / "study_layout_trained.json").read_text())
-        by = {r["layout"]: r["per_image_db"]["unet"] for r in rows["rows"]}
-        out.append(f"{np.mean(np.subtract(by['design'], by['toled168_88of441_edge_turned'])):+.2f}")
+        by = _per_image(RUNS / "layout_trained" / f"{run}_seed{seed}" / "study_layout_trained.json")
+        out.append(f"{np.mean(np.subtract(by['design']['unet'], by['toled168_88of441_edge_turned']['unet'])):+.2f}")
     return " / ".join(out)
 
 
@@ -254,6 +253,7 @@ def veil_rows() -> tuple[list[str], dict]:
     for name in VEIL_LAYOUTS:
         config, period = saved_design(RUNS / name, arranged=name != "repeated_packed")
         layouts[f"`{name}`"] = (period, config.feature_um, RUNS / "layout_trained" / name / "study_layout_trained.json")
+    config = saved_design(RUNS / "b55_b97_arranged", arranged=True)[0]  # every layout's open area and scene mean
     toled, scoring = preset_toled(config)
     layouts["the turned T-OLED"] = (toled, scoring.feature_um, TOLED_RUN)
     rows, figures = [], {}
