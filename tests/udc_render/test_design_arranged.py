@@ -224,9 +224,12 @@ def reference_rows() -> list[str]:
     runs = {f"`{n}`": RUNS / "layout_trained" / n / "study_layout_trained.json" for n in
             ("veil130_arranged", "veil130_b80_arranged", "veil130_b98_arranged", "b55_arranged", "b55_b97_arranged",
              "repeated_packed")}
+    k6 = {k: v[:8] for k, v in _per_image(RUNS / "layout_trained/b55_b97_k6_arranged_64/study_layout_trained.json")
+          ["design"].items()}  # its 64-image run's first 8 images: the study's 8 (the test below, on the other runs)
     out = []
-    for name, path in {**runs, "the turned T-OLED": TOLED_RUN}.items():
-        own = next(iter(_per_image(path).values()))
+    for name, path in {**runs, "`b55_b97_k6_arranged`, its 64-image run's first 8": k6,
+                       "the turned T-OLED": TOLED_RUN}.items():
+        own = path if isinstance(path, dict) else next(iter(_per_image(path).values()))
         cells = [_margin(own, refs[ref], k) for ref in ("toled168_88of441_edge", "poled_88of441")
                  for k in ("dep", "unet")]
         out.append(f"| {name} | " + " | ".join(cells).replace("-", "−") + " |")
@@ -234,7 +237,7 @@ def reference_rows() -> list[str]:
 
 
 VEIL_LAYOUTS = ("veil130_arranged", "veil130_b80_arranged", "veil130_b98_arranged", "b55_arranged",
-                "b55_b97_arranged", "repeated_packed")
+                "b55_b97_arranged", "b55_b97_k6_arranged", "repeated_packed")
 
 
 def veil_rows() -> tuple[list[str], dict]:
@@ -252,7 +255,9 @@ def veil_rows() -> tuple[list[str], dict]:
     layouts = {}
     for name in VEIL_LAYOUTS:
         config, period = saved_design(RUNS / name, arranged=name != "repeated_packed")
-        layouts[f"`{name}`"] = (period, config.feature_um, RUNS / "layout_trained" / name / "study_layout_trained.json")
+        run = RUNS / "layout_trained" / name / "study_layout_trained.json"  # K = 6: its 64-image run's design row
+        layouts[f"`{name}`"] = (period, config.feature_um, run if run.is_file() else RUNS / "layout_trained" /
+                                f"{name}_64" / "study_layout_trained.json")
     config = saved_design(RUNS / "b55_b97_arranged", arranged=True)[0]  # every layout's open area and scene mean
     toled, scoring = preset_toled(config)
     layouts["the turned T-OLED"] = (toled, scoring.feature_um, TOLED_RUN)
@@ -260,7 +265,8 @@ def veil_rows() -> tuple[list[str], dict]:
     for name, (cell, pixel_um, run) in layouts.items():
         shares = [light_shares(cell, pixel_um, lam / 1000, **rig) for lam in (640.0, 520.0, 450.0)]
         w, a = (np.array([x[k] for x in shares]) for k in ("window", "acceptance"))
-        own = next(iter(_per_image(run).values()))
+        by = _per_image(run)
+        own = by.get("design", next(iter(by.values())))
         given, gap = np.mean(own["dep_far"]), np.mean(np.subtract(own["dep_far"], own["dep"]))
         kept = veil_cost_db(w, a, given, config.mean_level)
         every = veil_cost_db(w, np.ones(3), given, config.mean_level)
@@ -323,7 +329,9 @@ def arranged64_rows() -> list[str]:
 
 def test_the_64_image_scores_begin_with_the_8_image_runs_to_the_bit():
     """--score-images extends the score set without changing it: each 64-image run's first 8 images, every row of
-    both layouts, equal the committed 8-image runs' (the same images, noise draws, banks and training seed)."""
+    both layouts, equal the committed 8-image runs' (the same images, noise draws, banks and training seed); at
+    training seed 1 the untrained rows equal seed 0's (`b55_b97_arranged`, and K = 6, whose turned T-OLED is the
+    seed-1 one of `b55_b97_arranged`'s run)."""
     toled = next(iter(_per_image(TOLED_RUN).values()))
     for name in SCORED64:
         run = _per_image(RUNS / "layout_trained" / f"{name}_64" / "study_layout_trained.json")
@@ -338,11 +346,15 @@ def test_the_64_image_scores_begin_with_the_8_image_runs_to_the_bit():
     for layout, rows in seed1.items():  # training seed 1: its 8-image run's first 8; the untrained rows seed 0's
         assert all(rows[k][:8] == short1[layout][k] for k in SCORE64_KEYS)
         assert all(rows[k] == seed0[layout][k] for k in ("input", "dep", "dep_noiseless", "dep_far"))
+    k6 = {s: _per_image(RUNS / f"layout_trained/b55_b97_k6_arranged_64{s}/study_layout_trained.json")
+          for s in ("", "_seed1")}
+    assert all(k6["_seed1"]["design"][k] == k6[""]["design"][k] for k in ("input", "dep", "dep_noiseless", "dep_far"))
+    assert k6["_seed1"]["toled168_88of441_edge_turned"] == seed1["toled168_88of441_edge_turned"]  # the same seed
 
 
-def unet64_seed1() -> str:
+def unet64_seed1(design: str = "b55_b97_arranged") -> str:
     """The UNet's margin over the turned T-OLED on 64 images at training seed 1, as the guide writes it."""
-    run = _per_image(RUNS / "layout_trained/b55_b97_arranged_64_seed1/study_layout_trained.json")
+    run = _per_image(RUNS / f"layout_trained/{design}_64_seed1/study_layout_trained.json")
     return _margin(run["design"], run["toled168_88of441_edge_turned"], "unet", 3).replace("-", "−")
 
 
@@ -358,6 +370,8 @@ def test_the_guides_arranged_table_is_the_committed_runs():
     for row in reference_rows() + score64_rows() + arranged64_rows():
         assert row in guide, row
     assert f"training seed 1: {unet64_seed1()}" in " ".join(guide.split())
+    k6 = unet64_seed1("b55_b97_k6_arranged").replace(" (", " dB (")
+    assert f"the UNet leads by {k6}" in " ".join(guide.split())
 
 
 @pytest.mark.slow  # two sampled bandings on the 2 µm raster
