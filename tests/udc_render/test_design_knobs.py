@@ -170,3 +170,53 @@ def test_the_tilings_rows_pair_each_search_with_the_single_draws():
     diff = np.subtract(rows[1]["held_draws_psnr_db"], rows[0]["held_draws_psnr_db"])
     assert abs(rows[1]["gain_db"] - diff.mean()) < 1e-12 and rows[1]["search_tilings"] == 2
     assert abs(rows[0]["search_psnr_db"] + 10 * np.log10(plain.best)) < 1e-12
+
+
+def test_an_arranged_pattern_of_one_element_is_the_repeated_tiling():
+    """Part (h)'s scores against the repeated tiling's own code path: a pattern of K × K identical identity tiles is
+    the cell repeated plainly, so its objective equals Designer(tiling 'repeated')'s at every K, and the bands of the
+    ceiling's own T-OLED over the repeated T-OLED (itself) are 1 at every K (its registrations over K periods are
+    its own)."""
+    from udc_render.studies import design_arrangement as da
+    cfg = {**TINY, "held_tilings": 2}
+    cell = da._designer(cfg, "arranged", 1).ceiling.reference.numpy()  # cells.toled_reference
+    repeated = Designer(DesignConfig(cell_um=96.0, kernel_px=15, pupil_samples=64, tiling="repeated"))
+    j = float(repeated.objective(torch.tensor(cell, dtype=torch.float64), None))
+    for k in (1, 2, 3):
+        row = da._pattern_row(da._designer(cfg, "arranged", k), cell, np.zeros((k, k), int))
+        assert abs(row["psnr_db"] + 10 * np.log10(j)) < 1e-9, k
+        np.testing.assert_allclose(row["bands"], 1.0, rtol=1e-9)
+
+
+def test_a_d4_symmetric_cell_arranged_is_the_same_display_for_every_pattern():
+    """A cell that every D4 element leaves unchanged (a centred square) tiles alike whatever the pattern: every K and
+    every random pattern scores the same PSNR and bands (an invariant of the pattern's handling and registration),
+    and part (h)'s rows carry it (their gap to the turned cell, the same display, is 0)."""
+    from udc_render.studies import design_arrangement as da
+    cell = np.zeros((12, 12))
+    cell[4:8, 4:8] = 1.0
+    cfg = {**TINY, "held_tilings": 2, "arrangement": (1, 2, 3), "arrangement_draws": 2}
+    rows = da.arrangement_rows(cfg, {"square": cell}, 0)
+    assert [r["tiles"] for r in rows] == [None, 1, 2, 3]
+    for r in rows[1:]:
+        assert abs(r["gap_db"]) < 1e-9 and np.ptp(r["psnr_draws_db"]) < 1e-9
+        np.testing.assert_allclose(r["bands_draws"], [rows[1]["bands_over_repeated"]] * 2, rtol=1e-6)
+        assert r["sweep_cpu_s"] == 7 * r["tiles"] ** 2 * (r["cpu_s"] + r["cpu_bands_s"])
+
+
+def test_the_guides_arranged_k_table_is_the_committed_study():
+    """Consistency, not physics: the design guide's part (h) rows are the committed study's figures."""
+    import json
+    from pathlib import Path
+    root = Path(__file__).parents[2]
+    rows = json.loads((root / "docs/figures/design/study_knobs/study_design.json").read_text())["arrangement"]
+    by = {(r["cell"], r["tiles"]): r for r in rows}
+    guide = (root / "docs/guides/design.md").read_text()
+    for k in sorted({r["tiles"] for r in rows if r["tiles"]}):
+        t, s = by[("toled_edge", k)], by[("scatter", k)]
+        best = t["best_psnr_db"] - by[("toled_edge", None)]["psnr_db"]
+        row = (f"| {t['gap_db']:+.3f}, {best:+.3f} | {t['bands_over_repeated'][1]:.3f} | {s['gap_db']:+.3f} | "
+               f"{s['bands_over_repeated'][1]:.3f} | {t['sweep_cpu_s']:.0f} / {s['sweep_cpu_s']:.0f} |")
+        assert f"| {k} ({k * 168} µm)" in guide and row.replace("-", "−") in guide, row
+    turned = [by[(c, None)]["bands_over_repeated"][1] for c in ("toled_edge", "scatter")]
+    assert f"| turned | reference | {turned[0]:.3f} | reference | {turned[1]:.3f} | |" in guide

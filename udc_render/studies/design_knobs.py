@@ -47,9 +47,12 @@ draws (udc_render.design.held_out: neither the search's nor 'final'): the mean P
 draws, the paired difference to M = 1's cell (mean and se over the draws), the search's own score on its M draws
 (what it overfits: its excess over the held-out mean), the search's CPU seconds and exact scores.
 
+(h) The arranged tiling's K (udc_render.studies.design_arrangement): random K × K patterns of each cell's D4
+elements, the objective's gap to the cell turned and the bands over the repeated T-OLED, against K and CPU seconds.
+
 Outputs: study_design.json (every figure), study_design.csv (one row per setting), study_design.md,
 study_design.png (error against CPU time; objective against steps; banding error against CPU time; field phases;
-the ceiling's draws; the kicks; the search's tilings).
+the ceiling's draws; the kicks; the search's tilings; the arrangement's K).
 A part already in OUT's study_design.json with the same settings is kept (the study resumes part by part).
 quick: a 96 µm cell, 31-px kernels, three settings and 2 and 4 steps from 128 pupil samples, raster steps of 8 and
 4 µm, 2 field phases, 1 and 2 of 4 draws, 1 and 2 kicks of 2 swaps, 1 and 2 search tilings on 2 held-out draws (a
@@ -80,6 +83,7 @@ from udc_render.design.options import RIG_PIXEL_UM
 from udc_render.design.tiling_power import band_figures, raster_power, sampled_banding, shift_span_um, tiling_power
 from udc_render.optics.field import phase_weights
 from udc_render.streams import stream
+from udc_render.studies.design_arrangement import arrangement_rows
 from udc_render.studies.design_knobs_report import write
 
 __all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "banding_rows", "field_profiles", "field_rows",
@@ -89,10 +93,11 @@ FULL = {"cell_um": 168.0, "kernel_px": 127, "samples": (128, 256, 384, 512, 768,
         "steps": (10, 20, 40, 80, 150), "design_pupil_samples": DesignConfig().pupil_samples,
         "sample_um": (8.0, 4.0, 2.0, 1.0), "phases": (2, 3, 4, 6, 8), "ceiling_draws": (1, 2, 4, 8, 16),
         "ceiling_truth": 32, "kicks": (1, 2, 4, 8, 16), "kick_swaps": (2, 4, 8), "search_tilings": (1, 2, 4, 8),
-        "held_tilings": 16}
+        "held_tilings": 16, "arrangement": (1, 2, 3, 4, 6, 8), "arrangement_draws": 8}
 QUICK = {"cell_um": 96.0, "kernel_px": 31, "samples": (64, 128, 256), "steps": (2, 4), "design_pupil_samples": 128,
          "sample_um": (8.0, 4.0), "phases": (2,), "ceiling_draws": (1, 2), "ceiling_truth": 4, "kicks": (1, 2),
-         "kick_swaps": (2,), "search_tilings": (1, 2), "held_tilings": 2}
+         "kick_swaps": (2,), "search_tilings": (1, 2), "held_tilings": 2,
+         "arrangement": (1, 2), "arrangement_draws": 2}
 FEATURE_UM = 8.0
 OPEN = 0.20
 SEED = 0
@@ -101,7 +106,8 @@ FIELD_WAVELENGTH_NM = 520.0
 PART_KEYS = {"sampling": ("samples",), "steps": ("steps", "design_pupil_samples"), "banding": ("sample_um",),
              "field": ("phases",), "ceiling": ("ceiling_draws", "ceiling_truth"),
              "kicks": ("kicks", "kick_swaps", "design_pupil_samples"),
-             "tilings": ("search_tilings", "held_tilings", "design_pupil_samples")}
+             "tilings": ("search_tilings", "held_tilings", "design_pupil_samples"),
+             "arrangement": ("arrangement", "arrangement_draws", "held_tilings", "design_pupil_samples")}
 # besides the shared keys: what decides each part (run_study resumes by them)
 SHARED_KEYS = ("cell_um", "kernel_px", "feature_um", "open_fraction", "seed", "wavelengths_nm", "threads",
                "banding_distance_mm")
@@ -364,7 +370,7 @@ def _kept_parts(out: Path, config: dict) -> dict:
 
 
 def run_study(out: Path, quick: bool = False) -> dict:
-    """The seven parts, written to out (udc_render.studies.design_knobs_report); parts already there with the same
+    """The eight parts, written to out (udc_render.studies.design_knobs_report); parts already there with the same
     settings are kept."""
     cfg = QUICK if quick else FULL
     config = json.loads(json.dumps({**cfg, "feature_um": FEATURE_UM, "open_fraction": OPEN, "seed": SEED,
@@ -376,7 +382,9 @@ def run_study(out: Path, quick: bool = False) -> dict:
               "banding": (banding_rows, 2 * len(cfg["sample_um"])), "field": (field_rows, 2 * len(cfg["phases"])),
               "ceiling": (ceiling_rows, len(cfg["ceiling_draws"])),
               "kicks": (kicks_rows, len(cfg["kick_swaps"]) * (len(cfg["kicks"]) + 1)),
-              "tilings": (tilings_rows, len(cfg["search_tilings"]))}
+              "tilings": (tilings_rows, len(cfg["search_tilings"])),
+              "arrangement": (lambda c, p: arrangement_rows(c, cells(c["cell_um"]), SEED, p),
+                              2 * (len(cfg["arrangement"]) + 1))}
     total = sum(n for part, (_, n) in makers.items() if part not in kept)
     with tqdm(total=total, desc="study design") as bar:
         doc = {"config": config, **{part: kept[part] if part in kept else make(cfg, bar.update)

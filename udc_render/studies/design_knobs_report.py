@@ -15,7 +15,8 @@ COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "steps_
            "error_profile_rel", "error_peak_to_peak_rel", "turned_peak_to_peak", "turned_rms", "error_turned_rel",
            "phases", "exact_sd", "blend_sd", "blend_error_rms", "one_tile_sd", "one_tile_error_rms", "draws", "blocks",
            "error_toled_rel", "error_scatter_rel", "error_ratio_rel", "kick_swaps", "kicks", "search_psnr_db", "cpu_s",
-           "cpu_gradient_s", "search_tilings", "held_psnr_db", "gain_db", "gain_se_db"]
+           "cpu_gradient_s", "search_tilings", "held_psnr_db", "gain_db", "gain_se_db", "tiles", "period_um",
+           "best_psnr_db", "gap_db", "bands_over_repeated", "cpu_bands_s", "sweep_cpu_s"]
 
 
 def _cell(v) -> str:
@@ -55,7 +56,7 @@ def markdown(doc: dict) -> str:
                      f"{r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | {r['evaluations']} | "
                      f"{r['cpu_s']:.0f} |")
     return "\n".join(lines + _banding_lines(doc) + _field_lines(doc) + _ceiling_lines(doc)
-                     + _kicks_lines(doc) + _tilings_lines(doc)) + "\n"
+                     + _kicks_lines(doc) + _tilings_lines(doc) + _arrangement_lines(doc)) + "\n"
 
 
 def _section(title: str, header: list[str], rows: list[list[str]]) -> list[str]:
@@ -136,6 +137,43 @@ def _tilings_lines(doc: dict) -> list[str]:
                      for r in doc["tilings"]])
 
 
+def _arrangement_lines(doc: dict) -> list[str]:
+    """Part (h): the arranged tiling's K (absent from a study run before it)."""
+    if not doc.get("arrangement"):
+        return []
+    n = len(next(r for r in doc["arrangement"] if r["tiles"])["psnr_draws_db"])
+    rows = []
+    for r in doc["arrangement"]:
+        bands = " / ".join(f"{v:.3f}" for v in r["bands_over_repeated"])
+        if r["tiles"] is None:
+            rows.append([r["cell"], "turned", f"{r['psnr_db']:.3f}", "", "reference", bands, "", "", ""])
+            continue
+        rows.append([r["cell"], str(r["tiles"]), f"{r['psnr_db']:.3f}", f"{r['best_psnr_db']:.3f}",
+                     f"{r['gap_db']:+.3f}", bands, f"{r['cpu_s']:.2f}", f"{r['cpu_bands_s']:.2f}",
+                     f"{r['sweep_cpu_s']:.0f}"])
+    return _section(f"The arranged tiling's K ({n} random K × K patterns of the cell's D4 elements; the cell turned "
+                    f"on {doc['config']['held_tilings']} held-out draws)",
+                    ["cell", "K", "PSNR, mean over patterns (dB)", "best pattern (dB)", "mean − turned (dB)",
+                     "bands / repeated T-OLED, R / G / B (registered)", "CPU s, a score", "CPU s, the bands",
+                     "CPU s, a sweep (7 K² of both)"], rows)
+
+
+def _arrangement_axes(ax, rows: list[dict]) -> None:
+    for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
+        these = [r for r in rows if r["cell"] == name]
+        if not these:
+            continue
+        arranged = [r for r in these if r["tiles"]]
+        ax.plot([r["bands_over_repeated"][1] for r in arranged], [r["gap_db"] for r in arranged], "o-",
+                color=colour, label=f"{name}: arranged, K beside each")
+        for r in arranged:
+            ax.annotate(str(r["tiles"]), (r["bands_over_repeated"][1], r["gap_db"]), fontsize=7)
+        ax.plot([r["bands_over_repeated"][1] for r in these if not r["tiles"]], [0.0], "*", color=colour, ms=10,
+                label=f"{name}: turned")
+    _label(ax, "bands / the repeated T-OLED's, G", "objective: mean − the cell turned (dB)",
+           "arranged tiling: K", bool(rows))
+
+
 def _tilings_axes(ax, rows: list[dict]) -> None:
     t = [r["cpu_s"] for r in rows]
     ax.plot(t, [r["held_psnr_db"] for r in rows], "o-", label="held-out draws (mean MSE)")
@@ -180,7 +218,7 @@ def _figure(doc: dict, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
-    fig, (a, b, c, e, f, g, h) = plt.subplots(1, 7, figsize=(36, 4))
+    fig, (a, b, c, e, f, g, h, k) = plt.subplots(1, 8, figsize=(41, 4))
     for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
         rows = [r for r in doc["sampling"] if r["cell"] == name][:-1]  # the reference has no error
         t = [r["cpu_gradient_s"] for r in rows]
@@ -207,6 +245,7 @@ def _figure(doc: dict, out: Path) -> None:
     _ceiling_axes(f, doc.get("ceiling", []))
     _kicks_axes(g, doc.get("kicks", []))
     _tilings_axes(h, doc.get("tilings", []))
+    _arrangement_axes(k, doc.get("arrangement", []))
     for axis in (a.xaxis, b.xaxis):
         axis.set_minor_formatter(NullFormatter())
     b.set_xlabel("search steps, accepted swaps (CPU s beside each)")
@@ -247,7 +286,7 @@ def write(doc: dict, out: Path) -> list[str]:
     save_json(out / "study_design.json", doc)
     save_text(out / "study_design.csv", _csv(doc["sampling"] + doc["steps"] + doc.get("banding", [])
                                              + doc.get("field", []) + doc.get("ceiling", []) + doc.get("kicks", [])
-                                             + doc.get("tilings", [])))
+                                             + doc.get("tilings", []) + doc.get("arrangement", [])))
     save_text(out / "study_design.md", markdown(doc))
     _figure(doc, out)
     return ["study_design.json", "study_design.csv", "study_design.md", "study_design.png"]
