@@ -204,6 +204,39 @@ def arranged_rows() -> list[str]:
     return out
 
 
+SEARCHED_K = {1: "b55_b97_k1_arranged", 2: "b55_b97_k2_arranged", 3: "b55_b97_k3_arranged", 4: "b55_b97_arranged",
+              6: "b55_b97_k6_arranged"}  # one search each from b55_packed's cell, ceiling 0.97, --seed 1
+
+
+def searched_k_rows() -> list[str]:
+    """The guide's table of the searches at K = 1 … 6: steps and exact scores, the objective's margin over the turned
+    T-OLED, the bands over the repeated T-OLED (R / G / B), UPC's G over the turned T-OLED (design.json), and plain
+    DeP, DeP given the far field and the UNet over the turned T-OLED on 64 images (training seed 0), where run."""
+    out = []
+    for k, name in SEARCHED_K.items():
+        doc = json.loads((RUNS / name / "design.json").read_text())
+        assert doc["config"]["arrangement"] == k and doc["config"]["seed"] == 1 and doc["converged"], name
+        v = doc["held_out"]["d4"]["vs"]["design"]["toled_preset"]
+        upc = doc["upc"]["arranged"]["design"][1] / doc["upc"]["turned"]["toled_edge"][1]
+        path = RUNS / "layout_trained" / f"{name}_64" / "study_layout_trained.json"
+        run = _per_image(path) if path.is_file() else None
+        keys = ("dep", "dep_far", "unet")
+        cells = ([_margin(run["design"], run["toled168_88of441_edge_turned"], key, 3) for key in keys] if run
+                 else ["not run"] * 3)
+        out.append((f"| {k} ({k * 168} µm) | `{name}` | {doc['steps_done']} / {doc['evaluations']} | "
+                    f"{v['mean']:+.3f} ± {v['se']:.3f} | {' / '.join(f'{b:.3f}' for b in doc['banding']['mean'])} | "
+                    f"{upc:.2f} | " + " | ".join(cells) + " |").replace("-", "−"))
+    return out
+
+
+def k_steps(key: str) -> list[str]:
+    """The paired gain of each searched K over the one before it through the simulator (64 images, seed 0)."""
+    runs = {k: _per_image(RUNS / "layout_trained" / f"{n}_64" / "study_layout_trained.json")["design"]
+            for k, n in SEARCHED_K.items()}
+    ks = sorted(runs)
+    return [_margin(runs[b], runs[a], key, 3) for a, b in zip(ks, ks[1:])]
+
+
 def seed_margins(run: str = "b55_b97_arranged") -> str:
     """The UNet's margin over the turned T-OLED on training seeds 0, 1, 2 (seeds 1 and 2: both trained in one run
     with that seed, `<run>_seed1`, `_seed2`), as the guide writes them."""
@@ -367,9 +400,16 @@ def test_the_guides_arranged_table_is_the_committed_runs():
     for row in arranged_rows():
         assert row in guide, row
     assert f"UNet {seed_margins()} dB".replace("-", "−") in guide
-    for row in reference_rows() + score64_rows() + arranged64_rows():
+    for row in reference_rows() + score64_rows() + arranged64_rows() + searched_k_rows():
         assert row in guide, row
     assert f"training seed 1: {unet64_seed1()}" in " ".join(guide.split())
+    dep, unet = k_steps("dep"), k_steps("unet")
+    flat = " ".join(guide.split())
+    steps = [m.split(" (")[0] for m in dep]
+    assert (f"plain DeP {steps[0]} dB from K = 1 to 2, {steps[1]} from 2 to 3, {steps[2]} from 3 to 4 and {steps[3]} "
+            "from 4 to 6 (paired, 64 of 64 each)").replace("-", "−") in flat and all("(64 of 64)" in m for m in dep)
+    assert (f"the UNet {', '.join(m.split(' ±')[0] for m in unet[:3])} and {unet[3].split(' of 64')[0]} of "
+            "64").replace("-", "−").replace(" (", " dB (") in flat
     k6 = unet64_seed1("b55_b97_k6_arranged").replace(" (", " dB (")
     assert f"the UNet leads by {k6}" in " ".join(guide.split())
 
