@@ -344,7 +344,8 @@ def score64_rows() -> list[str]:
     return out
 
 
-SCORED64 = ("b55_arranged", "b55_b97_arranged", "veil130_b98_arranged", "b55_b97_k6_arranged")  # run on 64 images
+SCORED64 = ("b55_arranged", "b55_b97_arranged", "veil130_b98_arranged", "b55_b97_k6_arranged",
+            "b55_b97_s0_arranged")  # run on 64 images
 
 
 def arranged64_rows() -> list[str]:
@@ -410,6 +411,11 @@ def test_the_guides_arranged_table_is_the_committed_runs():
             "from 4 to 6 (paired, 64 of 64 each)").replace("-", "−") in flat and all("(64 of 64)" in m for m in dep)
     assert (f"the UNet {', '.join(m.split(' ±')[0] for m in unet[:3])} and {unet[3].split(' of 64')[0]} of "
             "64").replace("-", "−").replace(" (", " dB (") in flat
+    s0, s1 = (_per_image(RUNS / "layout_trained" / f"{n}_64" / "study_layout_trained.json")["design"]
+              for n in ("b55_b97_s0_arranged", "b55_b97_arranged"))  # K = 4 from seed 0's and seed 1's start
+    dep0, unet0 = _margin(s0, s1, "dep", 3), _margin(s0, s1, "unet", 3)
+    assert (f"it trails seed 1's by {dep0.split(' (')[0]} dB by plain DeP ({dep0.split(' (')[1].split(')')[0]}) "
+            f"and is level by the UNet ({unet0.split(' (')[0]})").replace("-", "−") in flat
     k6 = unet64_seed1("b55_b97_k6_arranged").replace(" (", " dB (")
     assert f"the UNet leads by {k6}" in " ".join(guide.split())
 
