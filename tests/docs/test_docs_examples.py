@@ -99,7 +99,10 @@ def _capture(fn):
 
 
 def _run_page(path, modes, tmp_path, monkeypatch, kernel_cache):
+    """The page's examples in a temporary folder that sees the repository's docs/ (the committed figures and display
+    files the pages name, as from the repository's root, where the docs run them); outputs go to its own out/."""
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "docs").symlink_to(ROOT / "docs", target_is_directory=True)
     monkeypatch.setenv("UDC_RENDER_CACHE", str(kernel_cache))
     namespace: dict = {"__name__": "__docs_example__"}
     for ex in (e for e in EXAMPLES if e.path == path):
