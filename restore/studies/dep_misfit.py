@@ -82,6 +82,7 @@ def plot(rows: dict, path: Path) -> None:
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     save_figure(fig, path)
+    plt.close(fig)
 
 
 def main(argv: list[str]) -> None:

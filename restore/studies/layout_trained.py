@@ -216,6 +216,7 @@ def _figure(out: Path, banks: dict, data: Path, rows: list[dict]) -> None:
             ax.axis("off")
     fig.tight_layout()
     save_figure(fig, out / f"{NAME}_restored.png")
+    plt.close(fig)
 
 
 def _plot(out: Path, rows: list[dict]) -> None:
@@ -232,6 +233,7 @@ def _plot(out: Path, rows: list[dict]) -> None:
     ax.set_title("validation images through each layout's bank (d = 2 mm, gain 1/T)", fontsize=9)
     fig.tight_layout()
     save_figure(fig, out / f"{NAME}.png")
+    plt.close(fig)
 
 
 def _markdown(result: dict) -> str:
