@@ -27,8 +27,8 @@ import numpy as np
 from restore.dep import dep_restore
 from restore.studies.options import parse_options
 from udc_render.errors import UdcError
-from udc_render.io.files import save_figure, save_json
-from udc_render.io.plots import pyplot
+from udc_render.io.files import save_json
+from udc_render.io.plots import pyplot, save_plot
 from udc_render.metrics import psnr_db
 from udc_render.sensor import demosaic_bilinear, unpack_rggb
 
@@ -81,8 +81,7 @@ def plot(rows: dict, path: Path) -> None:
     ax.set_title("DeP with a misfit kernel (val crops)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
-    save_figure(fig, path)
-    plt.close(fig)
+    save_plot(fig, path)
 
 
 def main(argv: list[str]) -> None:

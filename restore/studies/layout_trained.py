@@ -64,7 +64,8 @@ from udc_render.dataset.bank_make import bank_settings, make_bank, preset_specs
 from udc_render.design.cells import SIMULATOR_TILE_SEED, frame_cell, layout_cell
 from udc_render.errors import UdcError
 from udc_render.io.exr import save_exr
-from udc_render.io.files import save_figure, save_json, save_text
+from udc_render.io.files import save_json, save_text
+from udc_render.io.plots import save_plot
 from udc_render.metrics import paired_differences
 from udc_render.optics.displays import Display, load_display, micrograph_display
 from udc_render.pipeline import SynthConfig
@@ -215,8 +216,7 @@ def _figure(out: Path, banks: dict, data: Path, rows: list[dict]) -> None:
             ax.set_title(f"{name}: {title}" if title != "truth" else name, fontsize=8)
             ax.axis("off")
     fig.tight_layout()
-    save_figure(fig, out / f"{NAME}_restored.png")
-    plt.close(fig)
+    save_plot(fig, out / f"{NAME}_restored.png")
 
 
 def _plot(out: Path, rows: list[dict]) -> None:
@@ -232,8 +232,7 @@ def _plot(out: Path, rows: list[dict]) -> None:
     ax.legend(fontsize=8, ncol=4, loc="upper center")
     ax.set_title("validation images through each layout's bank (d = 2 mm, gain 1/T)", fontsize=9)
     fig.tight_layout()
-    save_figure(fig, out / f"{NAME}.png")
-    plt.close(fig)
+    save_plot(fig, out / f"{NAME}.png")
 
 
 def _markdown(result: dict) -> str:

@@ -20,8 +20,6 @@ the searched points; this part gives the trend they sit on.
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import torch
 
@@ -29,6 +27,7 @@ from udc_render.design import torch_psf as tp
 from udc_render.design.config import DesignConfig
 from udc_render.design.held_out import held_out_draws, psnr_on_draws
 from udc_render.design.optimise import Designer
+from udc_render.studies.report import timed
 
 __all__ = ["arrangement_rows"]
 
@@ -40,24 +39,19 @@ def _designer(cfg: dict, tiling: str, tiles: int = 1) -> Designer:
                                  banding_ceiling=1.0))
 
 
-def _cpu(fn):
-    start = time.process_time()
-    value = fn()
-    return value, time.process_time() - start
-
-
 def _pattern_row(designer: Designer, cell: np.ndarray, pattern: np.ndarray) -> dict:
     """One pattern's PSNR, bands over the repeated T-OLED (R, G, B) and the CPU seconds of each."""
     x = torch.tensor(cell, dtype=torch.float64)
-    psnr, score_s = _cpu(lambda: psnr_on_draws(designer, cell, [tp.arranged(pattern, designer.tiles)])[0])
+    psnr = timed(lambda: psnr_on_draws(designer, cell, [tp.arranged(pattern, designer.tiles)])[0], 1)
     with torch.no_grad():
-        bands, bands_s = _cpu(lambda: designer.ceiling.ratios(x, "final", pattern).tolist())
-    return {"psnr_db": psnr, "bands": bands, "score_s": score_s, "bands_s": bands_s}
+        bands = timed(lambda: designer.ceiling.ratios(x, "final", pattern).tolist(), 1)
+    return {"psnr_db": psnr.result, "bands": bands.result, "score_s": psnr.cpu_seconds[0],
+            "bands_s": bands.cpu_seconds[0]}
 
 
-def _turned_row(cfg: dict, name: str, cell: np.ndarray, repeated_ref: torch.Tensor) -> dict:
-    """The cell turned: its mean PSNR over the held-out draws and its bands over the repeated T-OLED."""
-    designer = _designer(cfg, "turned")
+def _turned_row(cfg: dict, designer: Designer, name: str, cell: np.ndarray, repeated_ref: torch.Tensor) -> dict:
+    """The cell turned (designer: the turned tiling's): its mean PSNR over the held-out draws and its bands over the
+    repeated T-OLED."""
     psnr = float(np.mean(psnr_on_draws(designer, cell, held_out_draws(designer, cfg["held_tilings"]))))
     with torch.no_grad():
         bands = designer.ceiling.bands(torch.tensor(cell, dtype=torch.float64), "final") / repeated_ref
@@ -65,9 +59,10 @@ def _turned_row(cfg: dict, name: str, cell: np.ndarray, repeated_ref: torch.Tens
             "bands_over_repeated": bands.tolist()}
 
 
-def _tiles_row(cfg: dict, name: str, cell: np.ndarray, k: int, turned_psnr: float, seed: int) -> dict:
-    """K's row: the random patterns' figures, their mean and best PSNR, the gap of the mean to the turned cell."""
-    designer = _designer(cfg, "arranged", k)
+def _tiles_row(cfg: dict, designer: Designer, name: str, cell: np.ndarray, turned_psnr: float, seed: int) -> dict:
+    """K's row (designer: the arranged tiling's of K): the random patterns' figures, their mean and best PSNR, the gap
+    of the mean to the turned cell."""
+    k = designer.config.arrangement
     designer.objective(torch.tensor(cell, dtype=torch.float64), tp.arranged(designer.arrangement, designer.tiles))
     found = [_pattern_row(designer, cell, tp.tile_transforms(k, seed, keys=("study", "arrangement", k, p)))
              for p in range(cfg["arrangement_draws"])]  # the first call above: torch's set-up, untimed
@@ -84,17 +79,19 @@ def _tiles_row(cfg: dict, name: str, cell: np.ndarray, k: int, turned_psnr: floa
 def arrangement_rows(cfg: dict, cells: dict, seed: int, progress=None) -> list[dict]:
     """Part (h): per cell of {name: amplitudes}, its turned row, then one row per K of cfg['arrangement'], the
     patterns drawn from seed (module doc)."""
+    turned_designer = _designer(cfg, "turned")
+    arranged = {k: _designer(cfg, "arranged", k) for k in cfg["arrangement"]}  # made once, for every cell
+    reference = _designer(cfg, "arranged", 1).ceiling
+    with torch.no_grad():
+        repeated_ref = reference.bands(reference.reference, "final")  # the T-OLED repeated, registered
     rows = []
     for name, cell in cells.items():
-        reference = _designer(cfg, "arranged", 1).ceiling
-        with torch.no_grad():
-            repeated_ref = reference.bands(reference.reference, "final")  # the T-OLED repeated, registered
-        turned = _turned_row(cfg, name, cell, repeated_ref)
+        turned = _turned_row(cfg, turned_designer, name, cell, repeated_ref)
         rows.append(turned)
         if progress:
             progress(1)
-        for k in cfg["arrangement"]:
-            rows.append(_tiles_row(cfg, name, cell, k, turned["psnr_db"], seed))
+        for designer in arranged.values():
+            rows.append(_tiles_row(cfg, designer, name, cell, turned["psnr_db"], seed))
             if progress:
                 progress(1)
     return rows
