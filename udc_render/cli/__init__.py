@@ -36,6 +36,7 @@ from udc_render.cli import (
     calibrate,
     dataset,
     design,
+    design_pattern,
     evaluate,
     fit,
     psf,
@@ -48,7 +49,8 @@ from udc_render.cli import (
 from udc_render.cli.args import Parser
 from udc_render.errors import UdcError
 
-COMMANDS = (psf, render, synth, dataset, bank, calibrate, fit, study, design, train, evaluate, results, cache)
+COMMANDS = (psf, render, synth, dataset, bank, calibrate, fit, study, design, design_pattern, train, evaluate, results,
+            cache)
 USER_ERRORS = (UdcError, PSFError, LayoutError, LensError)
 
 

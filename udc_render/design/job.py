@@ -46,7 +46,8 @@ from udc_render.design.tiling_power import (
 )
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 
-__all__ = ["CHECKPOINT_S", "CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "scatter_baseline",
+__all__ = ["CHECKPOINT_S", "CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "display_toml", "write_png",
+           "supercell", "scatter_baseline",
            "upc_comparison", "ratio_over_draws", "toled_banding_cell", "banding_sd", "registered_variances",
            "ratio_summary", "banding_comparison"]
 
@@ -62,7 +63,7 @@ def _save_state(designer: Designer, path: Path) -> None:
         torch.save(designer.state(), tmp)
 
 
-def _display_toml(name: str, image: str, pixel_um: float, open_area: float, turned: bool, seed: int,
+def display_toml(name: str, image: str, pixel_um: float, open_area: float, turned: bool, seed: int,
                   flip: bool = False) -> str:
     """A display file of the cell; its gain 1 / open area brings the capture's mean level back to glass's; turned:
     the engine's random quarter-turns, and with flip their mirror images too (D4, the search's tilings)."""
@@ -242,7 +243,7 @@ def _held_out(designer: Designer, cell: np.ndarray, n: int) -> dict | None:
     return held_out_comparison(designer, {"design": cell}, n)
 
 
-def _write_png(path: Path, cell: np.ndarray) -> None:
+def write_png(path: Path, cell: np.ndarray) -> None:
     with atomic_path(path) as tmp:
         iio.imwrite(tmp, (cell * 255).astype(np.uint8), extension=".png")
 
@@ -251,15 +252,15 @@ def _write(designer: Designer, out: Path, compare: bool, held_out_tilings: int) 
     cfg = designer.config
     cell, arrangement = designer.best_cell, designer.best_arrangement
     designer.arrangement = arrangement  # a run stopped by --steps scores its best cell on the best arrangement
-    _write_png(out / "cell.png", cell)
+    write_png(out / "cell.png", cell)
     open_area = float(cell.mean())
     image = "cell.png"
     if arrangement is not None:
         image = "supercell.png"
-        _write_png(out / image, supercell(cell, arrangement))
-    save_text(out / "design.toml", _display_toml("design", image, cfg.feature_um, open_area, False, cfg.seed))
+        write_png(out / image, supercell(cell, arrangement))
+    save_text(out / "design.toml", display_toml("design", image, cfg.feature_um, open_area, False, cfg.seed))
     if cfg.tiling == "turned":
-        save_text(out / "design_turned.toml", _display_toml("design_turned", "cell.png", cfg.feature_um, open_area,
+        save_text(out / "design_turned.toml", display_toml("design_turned", "cell.png", cfg.feature_um, open_area,
                                                             True, cfg.seed, flip=cfg.tile_flips))
     initial = initial_cell(cfg)
     final = designer.score(cell)

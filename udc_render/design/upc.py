@@ -76,22 +76,24 @@ def _box_decimate(p: torch.Tensor) -> torch.Tensor:
     return (s / BOX_PX ** 2)[::BOX_PX, ::BOX_PX]
 
 
-def _powers(cell: torch.Tensor, transforms: np.ndarray | None):
-    """Per wavelength: (the power |FFT|² over the M × M grid, its central CROP_PX² crop)."""
+def _powers(cell: torch.Tensor, transforms: np.ndarray | None, channels=(0, 1, 2)):
+    """Per wavelength (those of channels, indices into R, G, B): (the power |FFT|² over the M × M grid, its central
+    CROP_PX² crop)."""
     sizes = grid_sizes()
     m0 = sizes[0]
     field = display(cell, m0, transforms) * _disc(m0, cell.dtype, cell.device)
-    for m in sizes:
+    for m in (sizes[c] for c in channels):
         a = (m0 - m) // 2
         p = torch.fft.fftshift(torch.fft.fft2(field[a:a + m, a:a + m])).abs() ** 2
         b = (m - CROP_PX) // 2
         yield p, p[b:b + CROP_PX, b:b + CROP_PX]
 
 
-def psf_and_kept(cell: torch.Tensor, transforms: np.ndarray | None = None) -> tuple[torch.Tensor, torch.Tensor]:
-    """(psf, kept_fraction) from one pass of the FFTs."""
+def psf_and_kept(cell: torch.Tensor, transforms: np.ndarray | None = None, channels=(0, 1, 2)
+                 ) -> tuple[torch.Tensor, torch.Tensor]:
+    """(psf, kept_fraction) from one pass of the FFTs, of the channels given (indices into R, G, B)."""
     out, kept = [], []
-    for whole, crop in _powers(cell, transforms):
+    for whole, crop in _powers(cell, transforms, channels):
         p = _box_decimate(crop)
         out.append(p / p.sum())
         kept.append(crop.sum() / whole.sum())

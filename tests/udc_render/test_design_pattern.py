@@ -1,0 +1,117 @@
+"""`udc-render design-pattern`: a long period of a fixed cell's D4 elements searched for the least bands with UPC's
+ratio held (udc_render.design.pattern)."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+
+from udc_render import cli
+from udc_render.design import metrics, pattern, torch_psf as tp, upc
+from udc_render.design.cells import RINGS, toled_reference, upc_cell
+from udc_render.design.pattern import PatternSearch
+from udc_render.design.pattern_job import read_pattern_cell
+
+VEIL130 = "docs/figures/design/floor/veil130/cell.png"
+
+
+@pytest.fixture(autouse=True)
+def _two_starts(monkeypatch):
+    """Two random starts instead of STARTS: each costs a UPC score."""
+    monkeypatch.setattr(pattern, "STARTS", 2)
+
+
+def _square_cell() -> np.ndarray:
+    """A centred 9 × 9 open square in the 21 × 21 cell: every D4 element leaves it as it is."""
+    cell = np.zeros((21, 21))
+    cell[6:15, 6:15] = 1.0
+    return cell
+
+
+def test_upc_in_some_channels_is_those_channels_of_all_three():
+    cell = torch.tensor(_square_cell())
+    turns = np.random.default_rng(0).integers(0, 8, (upc.TILES, upc.TILES))
+    every, kept = upc.psf_and_kept(cell, turns)
+    green, green_kept = upc.psf_and_kept(cell, turns, (1,))
+    assert torch.equal(green[0], every[1]) and torch.equal(green_kept[0], kept[1])
+
+
+def test_a_d4_symmetric_cell_keeps_no_element():
+    """Invariant: every arrangement of a cell that every D4 element leaves unchanged is the same display, so no
+    element lowers the bands: the first sweep keeps nothing and the search stops."""
+    search = PatternSearch(_square_cell(), 2, 1.27)
+    start = search.arrangement.copy()
+    while search.position < 4:
+        assert not search.visit()
+    rec = search.end_sweep()
+    assert rec["kept"] == 0 and search.finished(8) and np.array_equal(search.arrangement, start)
+    repeated = search.band_ratios(np.zeros((2, 2), int))
+    np.testing.assert_allclose(rec["band_ratios"], repeated, rtol=1e-6)
+
+
+def test_kept_elements_lower_the_bands_and_hold_upcs_ratio():
+    """Each kept element lowers the bands (recomputed) and UPC's G ratio stays at min(floor, the start's), checked
+    on UPC's three-channel PSFs of the arranged cell and of the T-OLED turned."""
+    cell = read_pattern_cell(VEIL130)
+    search = PatternSearch(cell, 2, 1.27)
+    start_bands, start_ratio = search.bands, search.upc_floor_ratio
+    while search.position < 4:
+        search.visit()
+    rec = search.end_sweep()
+    assert rec["kept"] >= 1
+    assert np.log(max(rec["band_ratios"])) == pytest.approx(search.bands, abs=1e-9) and search.bands < start_bands
+    minima = [metrics.ring_summary(upc.psf(torch.tensor(c), t).numpy(), RINGS)["mean_of_ring_minima"][1]
+              for c, t in ((upc_cell(cell), tp.arranged(search.arrangement, upc.TILES)),
+                           (toled_reference(168.0, float(cell.mean())), tp.tile_transforms(upc.TILES, 0)))]
+    g = minima[0] / minima[1]
+    assert g == pytest.approx(rec["upc_ratios"][1], rel=1e-9) and g >= min(1.27, start_ratio) - 1e-12
+
+
+def test_an_interrupted_sweep_resumes_to_the_uninterrupted_result():
+    cell = read_pattern_cell(VEIL130)
+    whole = PatternSearch(cell, 2, 1.0)
+    while whole.position < 4:
+        whole.visit()
+    cut = PatternSearch(cell, 2, 1.0)
+    cut.visit()
+    resumed = PatternSearch(cell, 2, 1.0)
+    resumed.load(json.loads(json.dumps(cut.state())))
+    while resumed.position < 4:
+        resumed.visit()
+    assert np.array_equal(resumed.arrangement, whole.arrangement) and resumed.bands == whole.bands
+
+
+def _png(path: Path, image: np.ndarray) -> str:
+    iio.imwrite(path, image.astype(np.uint8))
+    return str(path)
+
+
+@pytest.mark.parametrize("argv, says", [
+    (["--cell", "nowhere.png"], "--cell nowhere.png: not a readable PNG"),
+    (["--cell", "EMPTY"], "--cell EMPTY: expected a 21 × 21 grey PNG of 0 and 255, some open"),
+    (["--cell", "SMALL"], "--cell SMALL: expected a 21 × 21 grey PNG of 0 and 255, some open"),
+    (["--cell", VEIL130, "--arrangement", "17"], "--arrangement 17: expected an integer in 2 … 16"),
+    (["--cell", VEIL130, "--arrangement", "1"], "--arrangement 1: expected an integer in 2 … 16"),
+    (["--cell", VEIL130, "--floor-channels", "GX"], "--floor-channels GX: expected some of RGB"),
+    (["--cell", VEIL130, "--upc-floor", "0"], "--upc-floor must be > 0, got 0"),
+])
+def test_design_pattern_refuses_in_one_line(tmp_path, capsys, argv, says):
+    files = {"EMPTY": _png(tmp_path / "empty.png", np.zeros((21, 21))),
+             "SMALL": _png(tmp_path / "small.png", np.full((7, 7), 255))}
+    argv = [files.get(a, a) for a in argv]
+    says = says.replace("EMPTY", files["EMPTY"]).replace("SMALL", files["SMALL"])
+    assert cli.main(["design-pattern", *argv, "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err
+    assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()
+
+
+def test_design_pattern_refuses_a_folder_of_another_run(tmp_path, capsys):
+    (tmp_path / "pattern_state.json").write_text(json.dumps({"settings": {"cell": "other.png"}}))
+    assert cli.main(["design-pattern", "--cell", VEIL130, "--arrangement", "2", "--quiet",
+                     "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "pattern_state.json: holds a run with other settings" in err and len(err.strip().splitlines()) == 1

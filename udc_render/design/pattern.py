@@ -1,0 +1,132 @@
+"""`udc-render design-pattern`: a K × K arrangement of a fixed cell's D4 elements whose periodic display bands least
+at d = 2 mm while UPC's ratio is held.
+
+Why: UPC's mean ring minima need a display without period inside their 4 mm disc (a random tiling's fill between
+the orders: random K × K patterns of `veil130`'s cell reach its turned ratio only at K ≈ 16–24), while a turned
+tiling bands 1.6–2 × the repeated T-OLED (a tile at the aperture's edge shifts the transmitted power by its own
+dipole, which no neighbour cancels: 2 × 2 blocks of the four quarter-turns band as the turned tiling does,
+docs/guides/design.md). A long period searched tile by tile can hold both.
+
+The search (coordinate descent): from the best of STARTS random arrangements (UPC's ratio in the floor's channels
+highest, streams 'design', 'pattern', 'start', k), each sweep visits the tiles in a random order (stream 'design',
+'pattern', 'order', sweep) and tries each tile's seven other elements; the element whose bands are lowest,
+max_c log(b_c / b_c^ref) below the current (bands.BandingCeiling: the registered relative sd over the paper sensor's
+shifts on the cell's own squares, over the T-OLED repeated), is kept when UPC's ratio (their mode, the arrangement
+repeated from the display's corner, over the T-OLED turned: job.upc_comparison's 'arranged') stays at or above
+min(floor, its current value); else the next lowest. Sweeps stop when one keeps nothing or after `sweeps`. The cell
+is not changed: its restorability is the cell's (a long period's MTF nears the cell turned), scored by the simulator.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from udc_render.design import metrics, torch_psf as tp, upc
+from udc_render.design.bands import BandingCeiling
+from udc_render.design.cells import RINGS, toled_reference, upc_cell
+from udc_render.design.optimise import RIG_WAVELENGTHS_NM
+from udc_render.design.options import CHANNELS
+from udc_render.streams import stream
+
+__all__ = ["STARTS", "PatternSearch", "check_settings"]
+
+STARTS = 12  # random arrangements scored by UPC's ratio for the start: their G spans 1.24-1.27 at K = 16
+
+
+def _minima(cell: np.ndarray, transforms: np.ndarray, channels=(0, 1, 2)) -> np.ndarray:
+    """UPC's mean ring minima of a 21 × 21 cell tiled so (their mode), in the channels given (indices into R, G, B)."""
+    with torch.no_grad():
+        p = upc.psf_and_kept(torch.tensor(cell), transforms, channels)[0].numpy()
+    return np.asarray(metrics.ring_summary(p, RINGS)["mean_of_ring_minima"])
+
+
+def check_settings(arrangement_tiles: int, floor_channels: str) -> None:
+    """One line naming the option for a K outside 2 … 16 or channels not of R, G, B."""
+    if not (isinstance(arrangement_tiles, int) and 2 <= arrangement_tiles <= 16):
+        raise tp.DesignError(f"--arrangement {arrangement_tiles}: expected an integer in 2 … 16 (tiles a side)")
+    if not (floor_channels and set(floor_channels) <= set(CHANNELS)):
+        raise tp.DesignError(f"--floor-channels {floor_channels}: expected some of {CHANNELS}")
+
+
+class PatternSearch:
+    """The module doc's search of cell's arrangement at K tiles a side (state: arrangement, sweep, position)."""
+
+    def __init__(self, cell: np.ndarray, arrangement_tiles: int, upc_floor: float, floor_channels: str = "G",
+                 seed: int = 0, cell_um: float = 168.0):
+        self.cell, self.k, self.floor, self.seed = cell, arrangement_tiles, upc_floor, seed
+        check_settings(arrangement_tiles, floor_channels)
+        self.channels = [CHANNELS.index(c) for c in floor_channels]
+        open_fraction = float(cell.mean())
+        self.ceiling = BandingCeiling(1.0, cell.shape[0], cell_um, open_fraction, RIG_WAVELENGTHS_NM, seed=seed,
+                                      turned=False, period_tiles=arrangement_tiles)
+        self._cell_t = torch.tensor(cell, dtype=torch.float32)
+        self._upc_cell = upc_cell(cell)
+        self._toled_minima = _minima(toled_reference(cell_um, open_fraction), tp.tile_transforms(upc.TILES, seed))
+        self.arrangement, self.sweep, self.position, self.kept, self.history = self._start(), 0, 0, 0, []
+        self.bands, self.upc_floor_ratio = self.log_bands(self.arrangement), self.floor_ratio(self.arrangement)
+
+    def _start(self) -> np.ndarray:
+        starts = [stream(self.seed, "design", "pattern", "start", k).integers(0, 8, (self.k, self.k))
+                  for k in range(STARTS)]
+        return starts[int(np.argmax([self.floor_ratio(a) for a in starts]))].copy()
+
+    def upc_ratios(self, arrangement: np.ndarray) -> np.ndarray:
+        """UPC's mean ring minima of the arrangement over the T-OLED turned's, R / G / B."""
+        return _minima(self._upc_cell, tp.arranged(arrangement, upc.TILES)) / self._toled_minima
+
+    def floor_ratio(self, arrangement: np.ndarray) -> float:
+        """The lowest of upc_ratios over the floor's channels, computed in those alone."""
+        minima = _minima(self._upc_cell, tp.arranged(arrangement, upc.TILES), self.channels)
+        return float((minima / self._toled_minima[self.channels]).min())
+
+    def band_ratios(self, arrangement: np.ndarray) -> np.ndarray:
+        """The registered bands over the repeated T-OLED's, R / G / B (BandingCeiling.ratios, float32)."""
+        with torch.no_grad():
+            return self.ceiling.ratios(self._cell_t, "final", arrangement).double().numpy()
+
+    def log_bands(self, arrangement: np.ndarray) -> float:
+        return float(np.log(self.band_ratios(arrangement)).max())
+
+    def order(self) -> np.ndarray:
+        return stream(self.seed, "design", "pattern", "order", self.sweep).permutation(self.k * self.k)
+
+    def visit(self) -> bool:
+        """Try the tile at self.position of this sweep's order; True when an element was kept."""
+        r, c = divmod(int(self.order()[self.position]), self.k)
+        kept, trials = int(self.arrangement[r, c]), []
+        for element in range(8):
+            if element != kept:
+                self.arrangement[r, c] = element
+                trials.append((self.log_bands(self.arrangement), element))
+        changed = False
+        for score, element in sorted(t for t in trials if t[0] < self.bands - 1e-9)[:2]:
+            self.arrangement[r, c] = element
+            ratio = self.floor_ratio(self.arrangement)
+            if ratio >= min(self.floor, self.upc_floor_ratio):
+                kept, self.bands, self.upc_floor_ratio, changed = element, score, ratio, True
+                break
+        self.arrangement[r, c] = kept
+        self.position, self.kept = self.position + 1, self.kept + changed
+        return changed
+
+    def end_sweep(self) -> dict:
+        """Record the finished sweep (its kept changes, the bands and UPC's ratios after it) and open the next."""
+        rec = {"sweep": self.sweep, "kept": self.kept, "band_ratios": self.band_ratios(self.arrangement).tolist(),
+               "upc_ratios": self.upc_ratios(self.arrangement).tolist()}
+        self.history.append(rec)
+        self.sweep, self.position, self.kept = self.sweep + 1, 0, 0
+        return rec
+
+    def finished(self, sweeps: int) -> bool:
+        return self.sweep >= sweeps or bool(self.history and self.history[-1]["kept"] == 0)
+
+    def state(self) -> dict:
+        return {"arrangement": self.arrangement.tolist(), "sweep": self.sweep, "position": self.position,
+                "kept": self.kept, "bands": self.bands, "upc_floor_ratio": self.upc_floor_ratio,
+                "history": self.history}
+
+    def load(self, state: dict) -> None:
+        self.arrangement = np.asarray(state["arrangement"], int)
+        self.sweep, self.position, self.kept = state["sweep"], state["position"], state["kept"]
+        self.history = state["history"]
+        self.bands, self.upc_floor_ratio = state["bands"], state["upc_floor_ratio"]

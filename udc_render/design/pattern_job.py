@@ -1,0 +1,123 @@
+"""One `udc-render design-pattern` run in an output folder (udc_render.design.pattern): resumable (pattern_state.json,
+written atomically every CHECKPOINT_S and at each sweep's end; the same command resumes it, other settings are
+refused), a progress bar per sweep, and what it writes:
+
+    cell.png, supercell.png, design.toml   the cell, its K c × K c period (the cell in each tile's D4 element)
+                      and a display file of the period repeated: every command takes it (psf, synth, bank, study
+                      layout-trained)
+    pattern.json      the settings, each sweep's kept changes, bands and UPC's ratios, and the final figures: the bands
+                      on `study layout`'s 2 µm raster over the registrations of both periodic displays
+                      (job.banding_comparison) and UPC's mean ring minima arranged and turned (job.upc_comparison)
+    pattern_bands.png the bands over the repeated T-OLED's and UPC's ratio over the turned T-OLED's, per sweep
+"""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+from tqdm import tqdm
+
+from udc_render.design import torch_psf as tp
+from udc_render.design.pattern import PatternSearch
+from udc_render.io.files import save_json, save_text
+
+__all__ = ["CHECKPOINT_S", "read_pattern_cell", "run_pattern"]
+
+CHECKPOINT_S = 60.0  # a sweep at K = 16 is 256 tiles of 7 scores (about 0.25 s each on a core) and their UPC checks
+
+
+def read_pattern_cell(path: str) -> np.ndarray:
+    """A design's cell.png: 21 × 21 grey of 0 and 255 (UPC's 8 µm squares), some open; as 0 / 1."""
+    try:
+        image = np.asarray(iio.imread(path))
+    except (OSError, ValueError) as err:
+        raise tp.DesignError(f"--cell {path}: not a readable PNG ({err})") from None
+    if image.shape != (21, 21) or not np.isin(image, (0, 255)).all() or not image.any():
+        raise tp.DesignError(f"--cell {path}: expected a 21 × 21 grey PNG of 0 and 255, some open (a design's "
+                             f"cell.png on 8 µm squares), got shape {image.shape}")
+    return (image == 255).astype(np.float64)
+
+
+def _settings(cell_path: str, cell: np.ndarray, k: int, floor: float, channels: str, seed: int) -> dict:
+    return {"cell": cell_path, "open_squares": int(cell.sum()), "arrangement": k, "upc_floor": floor,
+            "floor_channels": channels, "seed": seed}
+
+
+def _save_state(search: PatternSearch, settings: dict, path: Path) -> None:
+    save_json(path, {"settings": settings, **search.state()})
+
+
+def _saved_state(settings: dict, path: Path) -> dict | None:
+    """The folder's checkpoint of this run, None without one; another run's is refused in one line."""
+    if not path.is_file():
+        return None
+    state = json.loads(path.read_text())
+    if state.get("settings") != settings:
+        raise tp.DesignError(f"{path}: holds a run with other settings ({state.get('settings')}); use another --out")
+    return state
+
+
+def _figure(history: list, out: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from udc_render.io.plots import save_plot
+    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.5))
+    sweeps = [h["sweep"] + 1 for h in history]
+    for c, name in enumerate("RGB"):
+        a.plot(sweeps, [h["band_ratios"][c] for h in history], "o-", color="rgb"[c], label=name)
+        b.plot(sweeps, [h["upc_ratios"][c] for h in history], "o-", color="rgb"[c], label=name)
+    a.axhline(1.0, color="k", lw=0.5)
+    b.axhline(1.26, color="k", lw=0.5, label="UPC's gain (G)")
+    a.set(xlabel="sweep", ylabel="bands / the repeated T-OLED's (8 µm squares)")
+    b.set(xlabel="sweep", ylabel="UPC's mean ring minima / the turned T-OLED's")
+    a.legend(fontsize=8)
+    b.legend(fontsize=8)
+    save_plot(fig, out / "pattern_bands.png")
+
+
+def _write(search: PatternSearch, settings: dict, out: Path) -> dict:
+    from udc_render.design.config import DesignConfig
+    from udc_render.design.job import banding_comparison, display_toml, supercell, upc_comparison, write_png
+    cell, arrangement = search.cell, search.arrangement
+    write_png(out / "cell.png", cell)
+    write_png(out / "supercell.png", supercell(cell, arrangement))
+    save_text(out / "design.toml", display_toml("design", "supercell.png", 8.0, float(cell.mean()), False, 0))
+    config = DesignConfig(open_fraction=float(cell.mean()), tiling="arranged", arrangement=search.k,
+                          seed=settings["seed"])
+    doc = {"settings": settings, "arrangement": arrangement.tolist(), "history": search.history,
+           "banding": banding_comparison(cell, config, arrangement=arrangement),
+           "upc": upc_comparison(cell, config, arrangement)}
+    save_json(out / "pattern.json", doc)
+    _figure(search.history, out)
+    return doc
+
+
+def run_pattern(cell_path: str, cell: np.ndarray, arrangement_tiles: int, upc_floor: float, floor_channels: str,
+                sweeps: int, seed: int, out: Path, quiet: bool = False) -> dict:
+    """Search cell (read_pattern_cell of cell_path), resuming pattern_state.json when the folder holds this run, and
+    write the module doc's files."""
+    settings = _settings(cell_path, cell, arrangement_tiles, upc_floor, floor_channels, seed)
+    state_path = out / "pattern_state.json"
+    state = _saved_state(settings, state_path)
+    search = PatternSearch(cell, arrangement_tiles, upc_floor, floor_channels, seed)
+    if state is not None:
+        search.load(state)
+    saved = time.monotonic()
+    while not search.finished(sweeps):
+        tiles = arrangement_tiles ** 2
+        with tqdm(total=tiles, initial=search.position, disable=quiet, desc=f"sweep {search.sweep + 1}") as bar:
+            while search.position < tiles:
+                search.visit()
+                bar.update(1)
+                bar.set_postfix(bands=f"{np.exp(search.bands):.3f}", kept=search.kept)
+                if time.monotonic() - saved >= CHECKPOINT_S:
+                    _save_state(search, settings, state_path)
+                    saved = time.monotonic()
+        search.end_sweep()
+        _save_state(search, settings, state_path)
+    return _write(search, settings, out)
