@@ -78,6 +78,20 @@ def quarter_turns(seed: int, tiles_x: int, tiles_y: int, square: bool = True, fl
     return np.random.default_rng(seed).choice(choices, size=(tiles_y, tiles_x))
 
 
+def _checked_arrangement(path, arrangement, shape: tuple, random_rotation: bool) -> tuple:
+    """arrangement as a tuple of K tuples of K D4 elements (0 … 7), or one line naming what is wrong."""
+    try:
+        k = np.asarray(arrangement)
+    except ValueError:  # ragged rows
+        k = np.zeros(0)
+    ok = (k.ndim == 2 and k.shape[0] == k.shape[1] >= 1 and k.dtype.kind in "iu" and k.min() >= 0 and k.max() <= 7)
+    if not ok or shape[0] != shape[1] or random_rotation:
+        raise LayoutError(f"micrograph {path}: tile_arrangement must be a K × K list of D4 elements 0 … 7 for a "
+                          f"square tile without tile_rotation; got values of shape {k.shape} for a "
+                          f"{shape[0]} × {shape[1]} tile{' with tile_rotation' if random_rotation else ''}")
+    return tuple(tuple(int(v) for v in row) for row in k)
+
+
 def _area_resample_matrix(n_out: int, n_in: int) -> np.ndarray:
     """[n_out, n_in] weights: fraction of output cell i covered by input cell j (same total span)."""
     out_edges = np.linspace(0.0, 1.0, n_out + 1)
@@ -90,7 +104,9 @@ def _area_resample_matrix(n_out: int, n_in: int) -> np.ndarray:
 @dataclass(frozen=True)
 class MicrographLayout:
     """A measured display tile; period = image size × pixel_um. random_rotation: each tile turned by a random quarter
-    turn; with flip, by a random element of D4 (a quarter turn or its mirror image)."""
+    turn; with flip, by a random element of D4 (a quarter turn or its mirror image). arrangement: each tile turned by
+    a fixed K × K pattern of D4 elements repeated from the window's first tile (a period of K tiles, rastered tile by
+    tile as turned tiles are: its exact power series, which grows as the period squared, is not formed)."""
     path: str
     pixel_um: float
     values: str = "amplitude"
@@ -98,10 +114,11 @@ class MicrographLayout:
     seed: int = 0
     image: np.ndarray = field(repr=False, compare=False, default=None)
     flip: bool = False
+    arrangement: tuple | None = None
 
     @classmethod
     def load(cls, path, pixel_um: float, values: str = "amplitude", random_rotation: bool = False,
-             seed: int = 0, flip: bool = False) -> "MicrographLayout":
+             seed: int = 0, flip: bool = False, arrangement=None) -> "MicrographLayout":
         if not pixel_um > 0:
             raise LayoutError(f"micrograph {path}: pixel_um must be > 0, got {pixel_um}")
         if values not in ("amplitude", "intensity"):
@@ -113,7 +130,9 @@ class MicrographLayout:
         if flip and not random_rotation:
             raise LayoutError(f"micrograph {path}: flip (--tile-flip) mirrors randomly turned tiles; it needs "
                               "random_rotation (--tile-rotation)")
-        return cls(str(path), float(pixel_um), values, bool(random_rotation), int(seed), amp, bool(flip))
+        if arrangement is not None:
+            arrangement = _checked_arrangement(path, arrangement, amp.shape, random_rotation)
+        return cls(str(path), float(pixel_um), values, bool(random_rotation), int(seed), amp, bool(flip), arrangement)
 
     @property
     def name(self) -> str:
@@ -135,7 +154,7 @@ class MicrographLayout:
 
     @property
     def periodic(self) -> bool:
-        return not self.random_rotation
+        return not self.random_rotation and self.arrangement is None
 
     def cell_raster(self, nx: int, ny: int) -> tuple[np.ndarray, np.ndarray]:
         """Area-weighted (amplitude, intensity) of one tile on an nx × ny grid."""
@@ -157,6 +176,9 @@ class MicrographLayout:
     def tile_rotations(self, tiles_x: int, tiles_y: int) -> np.ndarray:
         """The D4 element (quarter_turns' numbering: 0..3 turns, 4..7 with flip) of every tile, from the recorded seed
         (all 0 without rotation)."""
+        if self.arrangement is not None:
+            k = np.asarray(self.arrangement, int)
+            return np.tile(k, (-(-tiles_y // k.shape[0]), -(-tiles_x // k.shape[1])))[:tiles_y, :tiles_x]
         if not self.random_rotation:
             return np.zeros((tiles_y, tiles_x), dtype=int)
         h, w = self.image.shape
@@ -166,4 +188,5 @@ class MicrographLayout:
         digest = hashlib.sha256(np.ascontiguousarray(self.image).tobytes()).hexdigest()[:16]
         return {"kind": "micrograph", "path": self.path, "pixel_um": self.pixel_um, "values": self.values,
                 "random_rotation": self.random_rotation, "seed": self.seed,
-                "shape": list(self.image.shape), "sha256_16": digest, **({"flip": True} if self.flip else {})}
+                "shape": list(self.image.shape), "sha256_16": digest, **({"flip": True} if self.flip else {}),
+                **({"arrangement": [list(r) for r in self.arrangement]} if self.arrangement is not None else {})}

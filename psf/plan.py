@@ -13,7 +13,7 @@ import numpy as np
 import scipy.fft as sfft
 
 from . import fourier
-from .banding import disc_quadrant
+from .banding import disc_quadrant, orders
 from .errors import AliasingWarning, PSFError
 from .lens import Lens
 from .propagation import frequencies
@@ -32,6 +32,11 @@ WAVELENGTH_RANGE_NM = (200.0, 2000.0)  # scalar optics of visible/NIR cameras; s
 # the window's memory (16384²: 2 GB per copy).
 MAX_PUPIL_WINDOW_SAMPLES = 8192 ** 2
 MAX_PUPIL_WINDOW_SAMPLES_D0 = 16384 ** 2
+# A periodic display's transmitted power is the exact series of psf.banding over (4 m_x + 1)(4 m_y + 1) lags,
+# m = ⌊p / λ⌋: 1.0e8 for a 1008 µm period at 400 nm (its bank ran on the 24 GB machine), 7.2e8 for 2688 µm (out of
+# memory there; where between the two memory runs out is not measured). Beyond this bound it is refused at once;
+# such a period of turned tiles is given as the tile and its tile_arrangement, rastered tile by tile.
+MAX_SERIES_LAGS = 2.5e8
 
 
 def validate_request(wavelengths_nm, pixel_um, size_px, distance_mm, field_phases, method, precision, pupil_samples,
@@ -61,6 +66,16 @@ def validate_request(wavelengths_nm, pixel_um, size_px, distance_mm, field_phase
     if pupil_samples is not None and not (isinstance(pupil_samples, (int, np.integer)) and pupil_samples >= 16):
         raise PSFError(f"pupil_samples must be an integer ≥ 16, got {pupil_samples}")
     return wl
+
+
+def _check_series(period_um, wavelength_nm: float) -> None:
+    """Refuse a periodic display whose exact power series would exceed MAX_SERIES_LAGS lags."""
+    mx, my = orders(period_um, wavelength_nm * 1e-3)
+    lags = (4 * mx + 1) * (4 * my + 1)
+    if lags > MAX_SERIES_LAGS:
+        raise PSFError(f"display period {period_um[0]:g} × {period_um[1]:g} µm at {wavelength_nm:g} nm: its exact "
+                       f"power series needs {lags:.3g} lags; allowed ≤ {MAX_SERIES_LAGS:.3g} (a period of turned "
+                       f"tiles: give the tile and its tile_arrangement)")
 
 
 def auto_pupil_samples(lens: Lens, wavelength_min_nm: float, pixel_um: float, size_px: int) -> int:
@@ -198,6 +213,8 @@ def make_plan(display, lens, wl, pixel_um, size_px, distance_mm, field_phases, m
     d_um = distance_mm * 1000.0
     use_field = d_um > 0 and display is not None
     periodic = display is not None and getattr(display, "periodic", True)
+    if periodic:
+        _check_series(display.period_um, float(wl.min()))
     phases = (field_phases or DEFAULT_FIELD_PHASES) if use_field else 1
     shifts = (field_shifts(display.period_um, d_um, lens.image_distance_um, phases, sensor_um, periodic) if use_field
               else np.zeros((1, 1, 2)))

@@ -389,6 +389,22 @@ def test_tiny_aperture_against_the_display_period_is_refused_at_once_when_d_is_p
     assert time.perf_counter() - t0 < 2.0
 
 
+def test_a_long_period_is_refused_at_once_and_its_arrangement_is_not():
+    """A periodic micrograph of 2688 µm (16 × 16 tiles of 168 µm) would need the exact power series over 7.2e8 lags
+    at 400 nm (it ran out of 24 GB): refused at once, in one line naming the period; the same tile given with a
+    16 × 16 tile_arrangement is rastered tile by tile and passes the check."""
+    tile = np.zeros((21, 21))
+    tile[2:19, 8:13] = 1.0
+    t0 = time.perf_counter()
+    with pytest.raises(PSFError, match=r"display period 2688 × 2688 µm at 400 nm: .* 7.23e\+08 lags"):
+        compute_kernels(MicrographLayout("period", 8.0, image=np.tile(tile, (16, 16))), LENS, [400.0],
+                        size_px=15, distance_mm=2.0, pupil_samples=64)
+    assert time.perf_counter() - t0 < 2.0
+    arranged = MicrographLayout("tile", 8.0, image=tile, arrangement=tuple((0,) * 16 for _ in range(16)))
+    ks = compute_kernels(arranged, LENS, [400.0], size_px=15, pupil_samples=64)
+    assert np.all(np.isfinite(ks.kernels))
+
+
 @pytest.mark.slow
 def test_tiny_aperture_at_d_zero_finishes():
     """The same aperture at d = 0 transforms only the aperture crop: 10 s and 2.5 GB here; the aperture

@@ -163,3 +163,27 @@ def test_psf_mirrors_a_micrographs_turned_tiles_or_refuses_in_one_line(cell, tmp
     assert not (tmp_path / "never").exists()
     args = build_parser().parse_args(["psf", "--display", str(png), "--tile-rotation", "--tile-flip"])
     assert layout_and_distance(args)[0].flip
+
+
+@pytest.mark.parametrize("arrangement, says", [
+    ("[[1, 6], [3, 0]]", None),
+    ("[[1, 6], [3, 8]]", "tile_arrangement must be a K × K list of D4 elements 0 … 7"),
+    ("[[1, 6], [3]]", "tile_arrangement must be a K × K list of D4 elements 0 … 7"),
+    ("[[1, 6], [3, 0]]\ntile_rotation = true", "without tile_rotation"),
+])
+def test_a_display_files_tile_arrangement_turns_the_tiles_by_its_pattern(cell, tmp_path, capsys, arrangement, says):
+    """tile_arrangement: the micrograph's tiles turned by a fixed K × K pattern of D4 elements, repeated from the
+    window's first tile, rastered as turned tiles are (not periodic to the engine) and in the cache's description;
+    a pattern not K × K of 0 … 7, or with random turns, is refused in one line by every command (here psf)."""
+    png, _ = cell
+    path = tmp_path / "a.toml"
+    path.write_text(f'[display]\nname = "a"\n[display.layout]\ntype = "micrograph"\nfile = "{png.name}"\n'
+                    f'tile_arrangement = {arrangement}\n')
+    if says is None:
+        layout = D.load_display(str(path)).layout
+        assert not layout.periodic and layout.describe()["arrangement"] == [[1, 6], [3, 0]]
+        assert np.array_equal(layout.tile_rotations(3, 5), [[1, 6, 1], [3, 0, 3], [1, 6, 1], [3, 0, 3], [1, 6, 1]])
+        return
+    assert main(["psf", "--display", str(path), "--out", str(tmp_path / "never")]) == 2
+    err = capsys.readouterr().err
+    assert says in err and str(path) in err and len(err.strip().splitlines()) == 1

@@ -152,3 +152,16 @@ def test_the_packed_kernel_is_the_one_dep_deconvolves_with(size_px):
     delta[c, c + 2] = 1.0
     shifted = tp.packed(delta).numpy()
     assert shifted[m, m + 1] == 1.0 and shifted.sum() == 1.0
+
+
+def test_an_arranged_micrograph_is_the_designs_arranged_tiling():
+    """The engine's tile_arrangement (a fixed K × K pattern of D4 elements, from the window's first tile) against the
+    torch PSF of the design's arranged tiling (torch_psf.arranged): the same display, to the engine's bound."""
+    cell = tp.preset_cell(layouts.toled(pitch_um=168.0), 21)
+    cell[:, 11:] = 0.0  # not its own mirror image: every D4 element is a distinct tile
+    pattern = ((1, 6, 3), (4, 0, 7), (2, 5, 1))
+    lay = MicrographLayout("cell", 8.0, image=cell, arrangement=pattern)
+    ref = compute_kernels(lay, LENS, WL, size_px=31, pupil_samples=256, precision="float64").kernels
+    grid = tp.cell_grid(21, 8.0, LENS, WL, 3.1, 31, 256)
+    got = tp.kernels(torch.tensor(cell), grid, tp.arranged(np.array(pattern), grid.tiles)).numpy()
+    assert not lay.periodic and np.abs(got - ref).max() < 1e-8 * ref.max()

@@ -227,7 +227,8 @@ def load_displays(specs: str, distance_mm: float | None = None) -> list[Display]
 
 _LAYOUT_KEYS = {"toled": ("pitch_um", "open_fraction", "slit_height_fraction"),
                 "poled": ("pitch_um", "open_fraction", "small_to_large"),
-                "micrograph": ("file", "pixel_um", "values", "tile_rotation", "tile_seed", "tile_flip")}
+                "micrograph": ("file", "pixel_um", "values", "tile_rotation", "tile_seed", "tile_flip",
+                               "tile_arrangement")}
 _TOP_KEYS = ("name", "layout", "distance_mm", "gain", "transmission")
 
 
@@ -299,7 +300,7 @@ def parse_display(data: dict, path: Path) -> Display:
                 _fail(path, p + "tile_flip", flip, "true or false; true mirrors the turned tiles at random (D4) and "
                       "needs tile_rotation = true")
             layout = MicrographLayout.load(fp, _number(path, lay, "pixel_um", p, 0, 1e4, 1.0, lo_open=True), values,
-                                           rotation, seed, flip)
+                                           rotation, seed, flip, lay.get("tile_arrangement"))
         else:
             factory = layouts.toled if kind == "toled" else layouts.poled
             kw = {k: _number(path, lay, k, p, 0, 1e4, lo_open=True) for k in _LAYOUT_KEYS[kind] if k in lay}
