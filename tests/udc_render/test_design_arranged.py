@@ -186,7 +186,8 @@ def arranged_rows() -> list[str]:
     toled = json.loads((RUNS / "veil130_arranged/design.json").read_text())["held_out"]["d4"]["mean"]["toled_preset"]
     out = []
     for name in ("veil130_arranged", "veil130_b80_arranged", "veil130_b98_arranged", "b55_arranged",
-                 "b55_b97_arranged", "b55_b97_s0_arranged", "b55_b97_k6_arranged", "repeated_packed"):
+                 "b55_b97_arranged", "b55_b97_s0_arranged", "b55_b97_k6_arranged", "b55_b97_k6_s0_arranged",
+                 "repeated_packed"):
         doc = json.loads((RUNS / name / "design.json").read_text())
         tiling = "arranged" if doc.get("arrangement") else "repeated"
         upc = doc["upc"][tiling]["design"][1] / doc["upc"]["turned"]["toled_edge"][1]

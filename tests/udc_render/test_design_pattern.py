@@ -11,12 +11,13 @@ import pytest
 import torch
 
 from udc_render import cli
-from udc_render.design import metrics, pattern, torch_psf as tp, upc
+from udc_render.design import job, metrics, pattern, torch_psf as tp, upc
 from udc_render.design.cells import RINGS, toled_reference, upc_cell
 from udc_render.design.pattern import PatternSearch
 from udc_render.design.pattern_job import read_pattern_cell
 
-VEIL130 = "docs/figures/design/floor/veil130/cell.png"
+ROOT = Path(__file__).resolve().parents[2]
+VEIL130 = str(ROOT / "docs/figures/design/floor/veil130/cell.png")
 
 
 @pytest.fixture(autouse=True)
@@ -115,3 +116,55 @@ def test_design_pattern_refuses_a_folder_of_another_run(tmp_path, capsys):
                      "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "pattern_state.json: holds a run with other settings" in err and len(err.strip().splitlines()) == 1
+
+
+COMMITTED = ROOT / "docs/figures/design/pattern/veil130_k16"
+
+
+def test_the_committed_pattern_is_its_display():
+    """Invariant: the committed run's supercell.png is its cell in its arrangement, and its display file is the cell
+    at 8 µm turned by that arrangement (tile_arrangement) with the gain 1 / open area, as the engine reads it."""
+    from udc_render.optics.displays import load_display
+    doc = json.loads((COMMITTED / "pattern.json").read_text())
+    cell = read_pattern_cell(str(COMMITTED / "cell.png"))
+    arrangement = np.array(doc["arrangement"])
+    assert arrangement.shape == (16, 16) and doc["settings"]["open_squares"] == int(cell.sum())
+    assert np.array_equal(iio.imread(COMMITTED / "supercell.png") == 255, job.supercell(cell, arrangement) == 1)
+    display = load_display(str(COMMITTED / "design.toml"))
+    assert display.layout.period_um == pytest.approx((168.0, 168.0)) and not display.layout.periodic
+    assert np.array_equal(display.layout.tile_rotations(16, 16), arrangement)
+    assert display.gain == pytest.approx(round(1 / cell.mean(), 3))
+    assert np.array_equal(cell, read_pattern_cell(str(ROOT / doc["settings"]["cell"])))  # veil130's, unchanged
+
+
+def pattern_rows() -> list[str]:
+    """The guide's table of the committed pattern through the simulator (64 images, training seed 0, paired with the
+    turned T-OLED of the same run; its first 8 images with the repeated T-OLED and the P-OLED at 88 / 441)."""
+    from tests.udc_render.test_design_arranged import REFS_RUN, _margin, _per_image
+    run = _per_image(COMMITTED.parent / "layout_trained/veil130_k16_64/study_layout_trained.json")
+    toled, design, turned = (run[k] for k in ("toled168_88of441_edge_turned", "design", "veil130_turned"))
+    refs = list(_per_image(REFS_RUN).values())
+    first8 = {k: v[:8] for k, v in design.items()}
+    doc = json.loads((COMMITTED / "pattern.json").read_text())
+    bands = " / ".join(f"{v:.3f}" for v in doc["banding"]["mean"])
+    upc_g = doc["upc"]["arranged"]["ratio"][1]
+    over = [_margin(design, toled, k, 3) for k in ("dep", "dep_far", "unet")]
+    refs_cells = [_margin(first8, ref, k) for ref in refs for k in ("dep", "unet")]
+    cell_turned = [_margin(turned, toled, k, 3) for k in ("dep", "dep_far", "unet")]
+    cost = [_margin(design, turned, k, 3) for k in ("dep", "dep_far", "unet")]
+    return [(f"| `veil130_k16` | {bands} | {upc_g:.3f} | " + " | ".join(over) + " |").replace("-", "−"),
+            f"| `veil130_turned` | {TURNED_BANDS} | " + " | ".join(cell_turned).replace("-", "−") + " |",
+            ("| `veil130_k16`, its first 8 | " + " | ".join(refs_cells) + " |").replace("-", "−"),
+            ("| `veil130_k16` − `veil130_turned` | | | " + " | ".join(cost) + " |").replace("-", "−")]
+
+
+# veil130 turned: bands 1.001 × the turned T-OLED's over 32 draws (study design-bands, the guide's section on equal
+# open area), the turned T-OLED about 1.8 × the repeated; UPC's ratio over 8 draws (floor/veil130/design.json)
+TURNED_BANDS = "about 1.8 (1.00 × the turned T-OLED's) | 1.287 (8 draws)"
+
+
+def test_the_guides_pattern_rows_are_the_committed_run():
+    """Consistency, not physics: the guide's rows are the committed run's figures."""
+    guide = (ROOT / "docs/guides/design.md").read_text()
+    for row in pattern_rows():
+        assert row in guide, row

@@ -43,7 +43,8 @@ def run(args) -> int:
     doc = run_pattern(args.cell, cell, args.arrangement, args.upc_floor, args.floor_channels, args.sweeps, args.seed,
                       out, args.quiet)
     b, u = doc["banding"], doc["upc"]["arranged"]
-    print(f"after {len(doc['history'])} sweeps: bands {' / '.join(f'{v:.3f}' for v in b['mean'])} × the repeated "
+    n = len(doc["history"])
+    print(f"after {n} sweep{'s' if n != 1 else ''}: bands {' / '.join(f'{v:.3f}' for v in b['mean'])} × the repeated "
           f"T-OLED's (R / G / B, 2 µm raster), UPC's ratio {' / '.join(f'{v:.3f}' for v in u['ratio'])} × the "
           f"turned T-OLED's; wrote {out}/design.toml, supercell.png, pattern.json, pattern_bands.png")
     return 0

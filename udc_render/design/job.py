@@ -64,11 +64,15 @@ def _save_state(designer: Designer, path: Path) -> None:
 
 
 def display_toml(name: str, image: str, pixel_um: float, open_area: float, turned: bool, seed: int,
-                  flip: bool = False) -> str:
+                  flip: bool = False, arrangement: np.ndarray | None = None) -> str:
     """A display file of the cell; its gain 1 / open area brings the capture's mean level back to glass's; turned:
-    the engine's random quarter-turns, and with flip their mirror images too (D4, the search's tilings)."""
+    the engine's random quarter-turns, and with flip their mirror images too (D4, the search's tilings); with an
+    arrangement, the cell's tiles turned by it, repeated (psf.MicrographLayout's tile_arrangement)."""
     flips = "tile_flip = true\n" if flip else ""
     turns = f"tile_rotation = true\n{flips}tile_seed = {seed}\n" if turned else ""
+    if arrangement is not None:
+        rows = ",\n".join(f"    {list(map(int, r))}" for r in arrangement)
+        turns += f"tile_arrangement = [\n{rows},\n]\n"
     return (f'[display]\nname = "{name}"\ngain = {round(1.0 / open_area, 3)!r}\n\n[display.layout]\n'
             f'type = "micrograph"\nfile = "{image}"\npixel_um = {pixel_um!r}\nvalues = "amplitude"\n{turns}')
 

@@ -28,12 +28,12 @@ from udc_render.design.optimise import RIG_WAVELENGTHS_NM
 from udc_render.design.options import CHANNELS
 from udc_render.streams import stream
 
-__all__ = ["STARTS", "PatternSearch", "check_settings"]
+__all__ = ["STARTS", "PatternSearch", "check_settings", "ring_minima"]
 
 STARTS = 12  # random arrangements scored by UPC's ratio for the start: their G spans 1.24-1.27 at K = 16
 
 
-def _minima(cell: np.ndarray, transforms: np.ndarray, channels=(0, 1, 2)) -> np.ndarray:
+def ring_minima(cell: np.ndarray, transforms: np.ndarray, channels=(0, 1, 2)) -> np.ndarray:
     """UPC's mean ring minima of a 21 × 21 cell tiled so (their mode), in the channels given (indices into R, G, B)."""
     with torch.no_grad():
         p = upc.psf_and_kept(torch.tensor(cell), transforms, channels)[0].numpy()
@@ -61,7 +61,7 @@ class PatternSearch:
                                       turned=False, period_tiles=arrangement_tiles)
         self._cell_t = torch.tensor(cell, dtype=torch.float32)
         self._upc_cell = upc_cell(cell)
-        self._toled_minima = _minima(toled_reference(cell_um, open_fraction), tp.tile_transforms(upc.TILES, seed))
+        self._toled_minima = ring_minima(toled_reference(cell_um, open_fraction), tp.tile_transforms(upc.TILES, seed))
         self.arrangement, self.sweep, self.position, self.kept, self.history = self._start(), 0, 0, 0, []
         self.bands, self.upc_floor_ratio = self.log_bands(self.arrangement), self.floor_ratio(self.arrangement)
 
@@ -72,11 +72,11 @@ class PatternSearch:
 
     def upc_ratios(self, arrangement: np.ndarray) -> np.ndarray:
         """UPC's mean ring minima of the arrangement over the T-OLED turned's, R / G / B."""
-        return _minima(self._upc_cell, tp.arranged(arrangement, upc.TILES)) / self._toled_minima
+        return ring_minima(self._upc_cell, tp.arranged(arrangement, upc.TILES)) / self._toled_minima
 
     def floor_ratio(self, arrangement: np.ndarray) -> float:
         """The lowest of upc_ratios over the floor's channels, computed in those alone."""
-        minima = _minima(self._upc_cell, tp.arranged(arrangement, upc.TILES), self.channels)
+        minima = ring_minima(self._upc_cell, tp.arranged(arrangement, upc.TILES), self.channels)
         return float((minima / self._toled_minima[self.channels]).min())
 
     def band_ratios(self, arrangement: np.ndarray) -> np.ndarray:

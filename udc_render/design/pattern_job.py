@@ -3,8 +3,9 @@ written atomically every CHECKPOINT_S and at each sweep's end; the same command 
 refused), a progress bar per sweep, and what it writes:
 
     cell.png, supercell.png, design.toml   the cell, its K c × K c period (the cell in each tile's D4 element)
-                      and a display file of the period repeated: every command takes it (psf, synth, bank, study
-                      layout-trained)
+                      and a display file of the cell with its tiles turned by the arrangement (tile_arrangement: the
+                      engine rasters it tile by tile; the exact series of a 2688 µm period, which grows as the period
+                      squared, ran out of 24 GB): every command takes it (psf, synth, bank, study layout-trained)
     pattern.json      the settings, each sweep's kept changes, bands and UPC's ratios, and the final figures: the bands
                       on `study layout`'s 2 µm raster over the registrations of both periodic displays
                       (job.banding_comparison) and UPC's mean ring minima arranged and turned (job.upc_comparison)
@@ -66,15 +67,15 @@ def _figure(history: list, out: Path) -> None:
     import matplotlib.pyplot as plt
 
     from udc_render.io.plots import save_plot
-    fig, (a, b) = plt.subplots(1, 2, figsize=(9, 3.5))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8), gridspec_kw={"wspace": 0.35})
     sweeps = [h["sweep"] + 1 for h in history]
     for c, name in enumerate("RGB"):
         a.plot(sweeps, [h["band_ratios"][c] for h in history], "o-", color="rgb"[c], label=name)
         b.plot(sweeps, [h["upc_ratios"][c] for h in history], "o-", color="rgb"[c], label=name)
     a.axhline(1.0, color="k", lw=0.5)
     b.axhline(1.26, color="k", lw=0.5, label="UPC's gain (G)")
-    a.set(xlabel="sweep", ylabel="bands / the repeated T-OLED's (8 µm squares)")
-    b.set(xlabel="sweep", ylabel="UPC's mean ring minima / the turned T-OLED's")
+    a.set(xlabel="sweep", ylabel="bands / the repeated T-OLED's (8 µm squares)", xticks=sweeps)
+    b.set(xlabel="sweep", ylabel="UPC's mean ring minima / the turned T-OLED's", xticks=sweeps)
     a.legend(fontsize=8)
     b.legend(fontsize=8)
     save_plot(fig, out / "pattern_bands.png")
@@ -86,7 +87,8 @@ def _write(search: PatternSearch, settings: dict, out: Path) -> dict:
     cell, arrangement = search.cell, search.arrangement
     write_png(out / "cell.png", cell)
     write_png(out / "supercell.png", supercell(cell, arrangement))
-    save_text(out / "design.toml", display_toml("design", "supercell.png", 8.0, float(cell.mean()), False, 0))
+    save_text(out / "design.toml", display_toml("design", "cell.png", 8.0, float(cell.mean()), False, 0,
+                                                arrangement=arrangement))
     config = DesignConfig(open_fraction=float(cell.mean()), tiling="arranged", arrangement=search.k,
                           seed=settings["seed"])
     doc = {"settings": settings, "arrangement": arrangement.tolist(), "history": search.history,
