@@ -174,8 +174,8 @@ class MicrographLayout:
         return dft * np.outer(np.sinc(ky / h), np.sinc(kx / w)) * shift
 
     def tile_rotations(self, tiles_x: int, tiles_y: int) -> np.ndarray:
-        """The D4 element (quarter_turns' numbering: 0..3 turns, 4..7 with flip) of every tile, from the recorded seed
-        (all 0 without rotation)."""
+        """The D4 element (quarter_turns' numbering: 0..3 turns, 4..7 with flip) of every tile: the arrangement tiled
+        from the first tile, else from the recorded seed (all 0 without rotation)."""
         if self.arrangement is not None:
             k = np.asarray(self.arrangement, int)
             return np.tile(k, (-(-tiles_y // k.shape[0]), -(-tiles_x // k.shape[1])))[:tiles_y, :tiles_x]

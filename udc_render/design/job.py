@@ -47,9 +47,8 @@ from udc_render.design.tiling_power import (
 from udc_render.io.files import atomic_path, save_figure, save_json, save_text
 
 __all__ = ["CHECKPOINT_S", "CHECKPOINT_STEPS", "UPC_DRAWS", "BANDING_SEEDS", "run_design", "display_toml", "write_png",
-           "supercell", "scatter_baseline",
-           "upc_comparison", "ratio_over_draws", "toled_banding_cell", "banding_sd", "registered_variances",
-           "ratio_summary", "banding_comparison"]
+           "supercell", "scatter_baseline", "upc_comparison", "ratio_over_draws", "toled_banding_cell", "banding_sd",
+           "registered_variances", "ratio_summary", "banding_comparison"]
 
 CHECKPOINT_STEPS = 10
 CHECKPOINT_S = 60.0  # an arranged search's step (swaps, then a sweep of 7 K² scores) can take 15 min on a core
@@ -64,7 +63,7 @@ def _save_state(designer: Designer, path: Path) -> None:
 
 
 def display_toml(name: str, image: str, pixel_um: float, open_area: float, turned: bool, seed: int,
-                  flip: bool = False, arrangement: np.ndarray | None = None) -> str:
+                 flip: bool = False, arrangement: np.ndarray | None = None) -> str:
     """A display file of the cell; its gain 1 / open area brings the capture's mean level back to glass's; turned:
     the engine's random quarter-turns, and with flip their mirror images too (D4, the search's tilings); with an
     arrangement, the cell's tiles turned by it, repeated (psf.MicrographLayout's tile_arrangement)."""
@@ -265,7 +264,7 @@ def _write(designer: Designer, out: Path, compare: bool, held_out_tilings: int) 
     save_text(out / "design.toml", display_toml("design", image, cfg.feature_um, open_area, False, cfg.seed))
     if cfg.tiling == "turned":
         save_text(out / "design_turned.toml", display_toml("design_turned", "cell.png", cfg.feature_um, open_area,
-                                                            True, cfg.seed, flip=cfg.tile_flips))
+                                                           True, cfg.seed, flip=cfg.tile_flips))
     initial = initial_cell(cfg)
     final = designer.score(cell)
     doc = {"config": asdict(cfg), "final": final, "search_objective": designer.best,

@@ -14,7 +14,8 @@ max_c log(b_c / b_c^ref) below the current (bands.BandingCeiling: the registered
 shifts on the cell's own squares, over the T-OLED repeated), is kept when UPC's ratio (their mode, the arrangement
 repeated from the display's corner, over the T-OLED turned: job.upc_comparison's 'arranged') stays at or above
 min(floor, its current value); else the next lowest. Sweeps stop when one keeps nothing or after `sweeps`. The cell
-is not changed: its restorability is the cell's (a long period's MTF nears the cell turned), scored by the simulator.
+is not changed and the restoration is not scored: through the simulator the committed pattern of `veil130`'s cell
+restores 0.35 dB (DeP) below the same cell turned (docs/guides/design.md, the long period).
 """
 from __future__ import annotations
 
