@@ -35,7 +35,7 @@ def mentions(text: str, word: str) -> bool:
 
 def test_the_walk_sees_every_command_and_choice_option():
     commands = {path for path, _ in ACTIONS}
-    assert len(commands) == 1 + 14 and {("udc-render", "study"), ("udc-render", "cache")} <= commands
+    assert len(commands) == 1 + 15 and {("udc-render", "study"), ("udc-render", "cache")} <= commands
     assert sum(1 for _, a in ACTIONS if a.choices) > 15
 
 

@@ -24,6 +24,7 @@ from tqdm import tqdm
 from udc_render.design import torch_psf as tp
 from udc_render.design.pattern import PatternSearch
 from udc_render.io.files import save_json, save_text
+from udc_render.io.plots import save_plot
 
 __all__ = ["CHECKPOINT_S", "read_pattern_cell", "run_pattern"]
 
@@ -65,8 +66,6 @@ def _figure(history: list, out: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from udc_render.io.plots import save_plot
     fig, (a, b) = plt.subplots(1, 2, figsize=(10, 3.8), gridspec_kw={"wspace": 0.35})
     sweeps = [h["sweep"] + 1 for h in history]
     for c, name in enumerate("RGB"):
