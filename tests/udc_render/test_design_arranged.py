@@ -72,6 +72,7 @@ def test_an_interrupted_arranged_run_resumes_to_the_same_result(tmp_path, monkey
     assert again["arrangement"] == whole["arrangement"]
 
 
+@pytest.mark.slow  # 20-80 s on a core: out of CI's 20 min
 def test_the_arranged_design_is_a_periodic_display_of_its_supercell(tmp_path):
     """design.toml repeats supercell.png (the cell in each tile's element); the held-out rows score the design on
     its one tiling beside the T-OLED's draws; the bands are the super-cell's over the repeated T-OLED's."""
@@ -93,6 +94,7 @@ def test_the_arranged_design_is_a_periodic_display_of_its_supercell(tmp_path):
     assert json.loads((tmp_path / "design.json").read_text())["arrangement"] == doc["arrangement"]
 
 
+@pytest.mark.slow  # 20-80 s on a core: out of CI's 20 min
 def test_the_plain_arrangement_bands_as_the_repeated_tiling():
     """An arrangement of element 0 is the repeated tiling: the same bands in design.json's comparison and in the
     search's ceiling (against the T-OLED repeated), each averaged over its registrations (a period of two tiles

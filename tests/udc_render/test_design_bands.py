@@ -169,6 +169,7 @@ def test_design_json_banding_is_study_layouts_on_the_same_draw():
     assert doc["below"] == [1, 1, 1] and doc["seeds"] == [1]
 
 
+@pytest.mark.slow  # 20-80 s on a core: out of CI's 20 min
 def test_a_design_run_with_the_ceiling_writes_its_banding(tmp_path, monkeypatch):
     """The run's design.json holds the held-out banding on the study's draws and the ceiling's ratios in its scores."""
     monkeypatch.setattr(job, "BANDING_SEEDS", (0,))

@@ -20,6 +20,7 @@ TINY = dict(cell_um=40.0, feature_um=8.0, open_fraction=0.24, steps=2, pupil_sam
             seed=3)
 
 
+@pytest.mark.slow  # 20-80 s on a core: out of CI's 20 min
 def test_the_first_draws_are_design_jsons_committed_banding():
     """spec_f95 on draws 0 and 1: the ratios its design.json holds (the search's run, 2026-11), the se their sd
     over √2, the draws below 1 counted from them."""
@@ -82,6 +83,7 @@ def test_a_design_whose_start_is_gone_is_read():
     assert cell.shape == (21, 21) and int(cell.sum()) == 88 and config.init == "scatter"
 
 
+@pytest.mark.slow  # 20-80 s on a core: out of CI's 20 min
 def test_an_arranged_design_of_one_element_bands_as_its_cell_repeated(tmp_path):
     """An arranged design whose 2 × 2 pattern is one element throughout is its cell repeated: over the repeated
     T-OLED it reads banding_sd's registered figure of the cell repeated (a period of four cells against one: rel

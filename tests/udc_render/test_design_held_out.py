@@ -118,6 +118,7 @@ def test_the_search_over_m_tilings_lowers_their_mean():
     assert float(one.searched(x, "search")) == pytest.approx(j[0], rel=1e-12) and j[0] != j[1]
 
 
+@pytest.mark.slow  # 20-80 s on a core: out of CI's 20 min
 def test_design_json_holds_the_held_out_comparison(tmp_path):
     """A turned wiener run writes design.json's held_out (n draws, both groups, the design against both T-OLEDs)
     and a study of two folders ranks them on the first's objective; --held-out-tilings 0 writes none."""

@@ -3,6 +3,7 @@ ratio held (udc_render.design.pattern)."""
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import imageio.v3 as iio
@@ -11,7 +12,7 @@ import pytest
 import torch
 
 from udc_render import cli
-from udc_render.design import job, metrics, pattern, torch_psf as tp, upc
+from udc_render.design import job, metrics, pattern, pattern_job, torch_psf as tp, upc
 from udc_render.design.cells import RINGS, toled_reference, upc_cell
 from udc_render.design.pattern import PatternSearch
 from udc_render.design.pattern_job import read_pattern_cell
@@ -79,8 +80,7 @@ def test_an_interrupted_sweep_resumes_to_the_uninterrupted_result():
         whole.visit()
     cut = PatternSearch(cell, 2, 1.0)
     cut.visit()
-    resumed = PatternSearch(cell, 2, 1.0)
-    resumed.load(json.loads(json.dumps(cut.state())))
+    resumed = PatternSearch(cell, 2, 1.0, state=json.loads(json.dumps(cut.state())))
     while resumed.position < 4:
         resumed.visit()
     assert np.array_equal(resumed.arrangement, whole.arrangement) and resumed.bands == whole.bands
@@ -116,6 +116,25 @@ def test_design_pattern_refuses_a_folder_of_another_run(tmp_path, capsys):
                      "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "pattern_state.json: holds a run with other settings" in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_run_resumes_by_its_cells_content_not_its_path(tmp_path, monkeypatch):
+    """The same cell copied elsewhere resumes the folder's run without scoring the starts again; another cell at the
+    same path is refused."""
+    first, moved = tmp_path / "a.png", tmp_path / "b.png"
+    shutil.copy(VEIL130, first)
+    shutil.copy(VEIL130, moved)
+    out = tmp_path / "run"
+    written = {"banding": {"mean": [1.0] * 3}, "upc": {"arranged": {"ratio": [1.0] * 3}}, "history": []}
+    monkeypatch.setattr(pattern_job, "_write", lambda *a: written)  # the files are the tiny docs example's
+    assert cli.main(["design-pattern", "--cell", str(first), "--arrangement", "2", "--sweeps", "1", "--quiet",
+                     "--out", str(out)]) == 0
+    monkeypatch.setattr(PatternSearch, "_start", lambda self: pytest.fail("resuming scored the starts"))
+    assert cli.main(["design-pattern", "--cell", str(moved), "--arrangement", "2", "--sweeps", "1", "--quiet",
+                     "--out", str(out)]) == 0
+    _png(moved, np.roll(iio.imread(VEIL130), 1, axis=1))  # as many open squares, moved
+    assert cli.main(["design-pattern", "--cell", str(moved), "--arrangement", "2", "--sweeps", "1", "--quiet",
+                     "--out", str(out)]) == 2
 
 
 COMMITTED = ROOT / "docs/figures/design/pattern/veil130_k16"

@@ -53,7 +53,8 @@ class PatternSearch:
     """The module doc's search of cell's arrangement at K tiles a side (state: arrangement, sweep, position)."""
 
     def __init__(self, cell: np.ndarray, arrangement_tiles: int, upc_floor: float, floor_channels: str = "G",
-                 seed: int = 0, cell_um: float = 168.0):
+                 seed: int = 0, cell_um: float = 168.0, state: dict | None = None):
+        """state: a saved state (self.state()) to resume from; without one the search starts afresh."""
         self.cell, self.k, self.floor, self.seed = cell, arrangement_tiles, upc_floor, seed
         check_settings(arrangement_tiles, floor_channels)
         self.channels = [CHANNELS.index(c) for c in floor_channels]
@@ -63,6 +64,9 @@ class PatternSearch:
         self._cell_t = torch.tensor(cell, dtype=torch.float32)
         self._upc_cell = upc_cell(cell)
         self._toled_minima = ring_minima(toled_reference(cell_um, open_fraction), tp.tile_transforms(upc.TILES, seed))
+        if state is not None:
+            self.load(state)
+            return
         self.arrangement, self.sweep, self.position, self.kept, self.history = self._start(), 0, 0, 0, []
         self.bands, self.upc_floor_ratio = self.log_bands(self.arrangement), self.floor_ratio(self.arrangement)
 

@@ -13,6 +13,7 @@ refused), a progress bar per sweep, and what it writes:
 """
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from pathlib import Path
@@ -44,8 +45,15 @@ def read_pattern_cell(path: str) -> np.ndarray:
 
 
 def _settings(cell_path: str, cell: np.ndarray, k: int, floor: float, channels: str, seed: int) -> dict:
-    return {"cell": cell_path, "open_squares": int(cell.sum()), "arrangement": k, "upc_floor": floor,
-            "floor_channels": channels, "seed": seed}
+    """The run's settings: the cell by its content (cell_sha256 of its 0 / 1 squares; the path is recorded, not
+    compared: _compared)."""
+    sha256 = hashlib.sha256(cell.astype(np.uint8).tobytes()).hexdigest()
+    return {"cell": cell_path, "cell_sha256": sha256, "open_squares": int(cell.sum()), "arrangement": k,
+            "upc_floor": floor, "floor_channels": channels, "seed": seed}
+
+
+def _compared(settings: dict) -> dict:
+    return {key: value for key, value in settings.items() if key != "cell"}
 
 
 def _save_state(search: PatternSearch, settings: dict, path: Path) -> None:
@@ -57,7 +65,7 @@ def _saved_state(settings: dict, path: Path) -> dict | None:
     if not path.is_file():
         return None
     state = json.loads(path.read_text())
-    if state.get("settings") != settings:
+    if _compared(state.get("settings") or {}) != _compared(settings):
         raise tp.DesignError(f"{path}: holds a run with other settings ({state.get('settings')}); use another --out")
     return state
 
@@ -105,9 +113,7 @@ def run_pattern(cell_path: str, cell: np.ndarray, arrangement_tiles: int, upc_fl
     settings = _settings(cell_path, cell, arrangement_tiles, upc_floor, floor_channels, seed)
     state_path = out / "pattern_state.json"
     state = _saved_state(settings, state_path)
-    search = PatternSearch(cell, arrangement_tiles, upc_floor, floor_channels, seed)
-    if state is not None:
-        search.load(state)
+    search = PatternSearch(cell, arrangement_tiles, upc_floor, floor_channels, seed, state=state)
     saved = time.monotonic()
     while not search.finished(sweeps):
         tiles = arrangement_tiles ** 2
