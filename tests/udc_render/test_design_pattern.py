@@ -187,3 +187,61 @@ def test_the_guides_pattern_rows_are_the_committed_run():
     guide = (ROOT / "docs/guides/design.md").read_text()
     for row in pattern_rows():
         assert row in guide, row
+
+
+def _autocorrelation_20_84_um(arrangement: np.ndarray, cell: np.ndarray) -> float:
+    """The period's transmittance autocorrelation at lags of 2.5-10.5 squares over its lag 0 (the guide's column)."""
+    s = job.supercell(cell, arrangement)
+    r = np.fft.ifft2(np.abs(np.fft.fft2(s)) ** 2).real / (s ** 2).sum()
+    i = np.minimum(np.arange(s.shape[0]), s.shape[0] - np.arange(s.shape[0]))
+    lags = np.hypot(i[None, :], i[:, None])
+    return float(r[(lags > 2.5) & (lags <= 10.5)].mean())
+
+
+def test_the_guides_autocorrelation_column_is_the_committed_pattern_and_random_patterns():
+    """The guide's 'where the 0.35 dB goes' table: the committed pattern's transmittance correlates less at 20-84 µm
+    than four random 16 × 16 patterns' (their values as printed, to the third decimal; the autocorrelation by the
+    Wiener-Khinchin FFT here, the guide's example computes the same)."""
+    cell = read_pattern_cell(VEIL130)
+    arrangement = np.asarray(json.loads((COMMITTED / "pattern.json").read_text())["arrangement"])
+    randoms = [_autocorrelation_20_84_um(np.random.default_rng(s).integers(0, 8, (16, 16)), cell) for s in range(4)]
+    guide = (ROOT / "docs/guides/design.md").read_text()
+    assert f"| random 16 × 16 patterns (4) | 21.762 | 0.9596 | 0.266 | {np.mean(randoms):.3f} |" in guide
+    assert f"| `veil130_k16` | 21.510 | 0.9593 | 0.217 | {_autocorrelation_20_84_um(arrangement, cell):.3f} |" in guide
+
+
+def test_the_blur_error_is_the_scenes_energy_the_kernel_leaves_by_parseval():
+    """Oracle (Parseval): for a real scene x whose |DFT|² is N S (N pixels; Hermitian random phases), the mean of
+    (x − k ⊛ x)², the circular convolution computed in space (scipy.ndimage, wrap), is mean S |1 − H|²: blur_error_db
+    is −10 log₁₀ of it."""
+    from scipy import ndimage
+    cell = read_pattern_cell(VEIL130)
+    grid = tp.cell_grid(21, 8.0, **pattern.BLUR_RIG)
+    transforms = tp.tile_transforms(grid.tiles, 0)
+    with torch.no_grad():
+        kernel = tp.kernels(torch.tensor(cell), grid, transforms)[0].double().numpy()
+    n = grid.size_px
+    scene = metrics.natural_spectrum(n, (metrics.RMS_CONTRAST * metrics.MEAN_LEVEL) ** 2)
+    theta = np.random.default_rng(0).random((n, n)) * 2 * np.pi
+    phase = theta - np.roll(theta[::-1, ::-1], 1, (0, 1))  # φ(−ν) = −φ(ν): x is real
+    x = np.fft.ifft2(np.sqrt(scene * n * n) * np.exp(1j * phase))
+    assert np.abs(x.imag).max() < 1e-12 * np.abs(x.real).max()
+    x = x.real
+    spatial = float(((x - ndimage.convolve(x, kernel, mode="wrap")) ** 2).mean())
+    assert -10 * np.log10(spatial) == pytest.approx(pattern.blur_error_db(torch.tensor(cell), grid, transforms),
+                                                    rel=1e-9)
+
+
+def test_the_blur_floor_keeps_no_change_that_lowers_the_blur_below_it():
+    """With the floor above every arrangement's blur error, a sweep keeps only changes that do not lower it: the
+    final blur error (recomputed) is at least the start's; the floor is the cell turned's blur error."""
+    cell = read_pattern_cell(VEIL130)
+    search = PatternSearch(cell, 2, 1.0, blur_floor=True)
+    grid = tp.cell_grid(21, 8.0, **pattern.BLUR_RIG)
+    assert search.blur_floor_db == pattern.blur_error_db(torch.tensor(cell), grid, tp.tile_transforms(grid.tiles, 0))
+    start = search.blur_db
+    search.blur_floor_db = np.inf
+    while search.position < 4:
+        search.visit()
+    final = pattern.blur_error_db(torch.tensor(cell), grid, tp.arranged(search.arrangement, grid.tiles))
+    assert final == search.blur_db and final >= start - 1e-12

@@ -27,6 +27,9 @@ def register(sub) -> None:
     p.add_argument("--floor-channels", default="G", help=f"some of {CHANNELS} [G: UPC's headline ratio]")
     p.add_argument("--sweeps", type=positive("--sweeps", int), default=8,
                    help="at most this many sweeps over the tiles; the search stops earlier when one keeps nothing [8]")
+    p.add_argument("--blur-floor", action="store_true",
+                   help="also hold the blur error of the exact kernel (the paper's rig, G) at the cell turned's, or "
+                        "below it let it not fall [off]")
     p.add_argument("--seed", type=int, default=0, help="seed of the start and of the sweeps' orders [0]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--out", type=Path, default=Path("out/design_pattern"),
@@ -41,7 +44,7 @@ def run(args) -> int:
     check_settings(args.arrangement, args.floor_channels)
     out = out_dir(args.out)
     doc = run_pattern(args.cell, cell, args.arrangement, args.upc_floor, args.floor_channels, args.sweeps, args.seed,
-                      out, args.quiet)
+                      out, args.quiet, args.blur_floor)
     b, u = doc["banding"], doc["upc"]["arranged"]
     n = len(doc["history"])
     print(f"after {n} sweep{'s' if n != 1 else ''}: bands {' / '.join(f'{v:.3f}' for v in b['mean'])} × the repeated "

@@ -44,12 +44,13 @@ def read_pattern_cell(path: str) -> np.ndarray:
     return (image == 255).astype(np.float64)
 
 
-def _settings(cell_path: str, cell: np.ndarray, k: int, floor: float, channels: str, seed: int) -> dict:
+def _settings(cell_path: str, cell: np.ndarray, k: int, floor: float, channels: str, seed: int,
+              blur_floor: bool) -> dict:
     """The run's settings: the cell by its content (cell_sha256 of its 0 / 1 squares; the path is recorded, not
     compared: _compared)."""
     sha256 = hashlib.sha256(cell.astype(np.uint8).tobytes()).hexdigest()
     return {"cell": cell_path, "cell_sha256": sha256, "open_squares": int(cell.sum()), "arrangement": k,
-            "upc_floor": floor, "floor_channels": channels, "seed": seed}
+            "upc_floor": floor, "floor_channels": channels, "seed": seed, "blur_floor": blur_floor}
 
 
 def _compared(settings: dict) -> dict:
@@ -99,6 +100,7 @@ def _write(search: PatternSearch, settings: dict, out: Path) -> dict:
     config = DesignConfig(open_fraction=float(cell.mean()), tiling="arranged", arrangement=search.k,
                           seed=settings["seed"])
     doc = {"settings": settings, "arrangement": arrangement.tolist(), "history": search.history,
+           "blur_db": {"floor": search.blur_floor_db, "final": search.blur_db},
            "banding": banding_comparison(cell, config, arrangement=arrangement),
            "upc": upc_comparison(cell, config, arrangement)}
     save_json(out / "pattern.json", doc)
@@ -107,13 +109,14 @@ def _write(search: PatternSearch, settings: dict, out: Path) -> dict:
 
 
 def run_pattern(cell_path: str, cell: np.ndarray, arrangement_tiles: int, upc_floor: float, floor_channels: str,
-                sweeps: int, seed: int, out: Path, quiet: bool = False) -> dict:
+                sweeps: int, seed: int, out: Path, quiet: bool = False, blur_floor: bool = False) -> dict:
     """Search cell (read_pattern_cell of cell_path), resuming pattern_state.json when the folder holds this run, and
     write the module doc's files."""
-    settings = _settings(cell_path, cell, arrangement_tiles, upc_floor, floor_channels, seed)
+    settings = _settings(cell_path, cell, arrangement_tiles, upc_floor, floor_channels, seed, blur_floor)
     state_path = out / "pattern_state.json"
     state = _saved_state(settings, state_path)
-    search = PatternSearch(cell, arrangement_tiles, upc_floor, floor_channels, seed, state=state)
+    search = PatternSearch(cell, arrangement_tiles, upc_floor, floor_channels, seed, state=state,
+                           blur_floor=blur_floor)
     saved = time.monotonic()
     while not search.finished(sweeps):
         tiles = arrangement_tiles ** 2
