@@ -6,7 +6,8 @@ refused), a progress bar per sweep, and what it writes:
                       and a display file of the cell with its tiles turned by the arrangement (tile_arrangement: the
                       engine rasters it tile by tile; the exact series of a 2688 µm period, which grows as the period
                       squared, ran out of 24 GB): every command takes it (psf, synth, bank, study layout-trained)
-    pattern.json      the settings, each sweep's kept changes, bands and UPC's ratios, and the final figures: the bands
+    pattern.json      the settings, each sweep's kept changes, bands, UPC's ratios and blur error (blur_db: with
+                      --blur-floor, its floor and final value; else null), and the final figures: the bands
                       on `study layout`'s 2 µm raster over the registrations of both periodic displays
                       (job.banding_comparison) and UPC's mean ring minima arranged and turned (job.upc_comparison)
     pattern_bands.png the bands over the repeated T-OLED's and UPC's ratio over the turned T-OLED's, per sweep
