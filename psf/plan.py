@@ -68,10 +68,15 @@ def validate_request(wavelengths_nm, pixel_um, size_px, distance_mm, field_phase
     return wl
 
 
+def series_lags(period_um, wavelength_nm: float) -> int:
+    """(4 m_x + 1)(4 m_y + 1), m = ⌊p / λ⌋: the lags of a periodic display's exact power series at λ."""
+    mx, my = orders(period_um, wavelength_nm * 1e-3)
+    return (4 * mx + 1) * (4 * my + 1)
+
+
 def _check_series(period_um, wavelength_nm: float) -> None:
     """Refuse a periodic display whose exact power series would exceed MAX_SERIES_LAGS lags."""
-    mx, my = orders(period_um, wavelength_nm * 1e-3)
-    lags = (4 * mx + 1) * (4 * my + 1)
+    lags = series_lags(period_um, wavelength_nm)
     if lags > MAX_SERIES_LAGS:
         raise PSFError(f"display period {period_um[0]:g} × {period_um[1]:g} µm at {wavelength_nm:g} nm: its exact "
                        f"power series needs {lags:.3g} lags; allowed ≤ {MAX_SERIES_LAGS:.3g} (a period of turned "

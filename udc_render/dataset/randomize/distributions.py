@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from udc_render.dataset.randomize.limits import check_ranges
 from udc_render.dataset.randomize.panels import MAX_TRANSMISSION_SCALE, RandomizeError
 from udc_render.io.files import read_toml
 
@@ -260,14 +261,19 @@ def default_distributions() -> Distributions:
 
 
 def load_distributions(spec: str | Path) -> Distributions:
-    """'default' (the shipped ranges) or a TOML file read over them."""
+    """'default' (the shipped ranges) or a TOML file read over them, its ranges checked for every draw
+    (randomize.limits)."""
     if str(spec) == DEFAULT:
-        return default_distributions()
+        dists = default_distributions()
+        check_ranges(dists, f"randomize {DEFAULT}")
+        return dists
     path = Path(spec)
     if path.suffix.lower() != ".toml":
         raise RandomizeError(f"--randomize = {str(spec)!r}: expected {DEFAULT} or a .toml file of distributions")
-    dists = parse(read_toml(path, RandomizeError, "--randomize"), str(path), default_distributions())
-    return _with_display_files(dists, path)
+    dists = _with_display_files(parse(read_toml(path, RandomizeError, "--randomize"), str(path),
+                                      default_distributions()), path)
+    check_ranges(dists, str(path))
+    return dists
 
 
 def _with_display_files(dists: Distributions, toml: Path) -> Distributions:

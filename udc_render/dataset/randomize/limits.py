@@ -1,0 +1,80 @@
+"""What a randomization's ranges must hold for every draw, checked when the file is read, not when a bank meets the
+draw that fails.
+
+- A periodic panel's exact power series (psf.banding, the banding at d) over (4 m + 1)² lags, m = ⌊p / λ⌋, is refused
+  beyond psf.plan.MAX_SERIES_LAGS. The largest period a range draws is the largest pitch (× the largest length_scale
+  for a display file's periodic layout) × the largest disorder_cells where either disorder σ can be > 0 (the
+  disordered supercell is the period), checked at SHORTEST_NM: the shortest wavelength of any camera's table
+  (psf.spectral.CAMERAS), at or below the bank's shortest sample (conservative by under 1 % in the period: the
+  midpoint rule starts half a step above it).
+- A display file's T(λ) × the largest transmission_scale stays ≤ 1, and a micrograph is drawn without disorder
+  (panels.file_display refuses such a draw).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from psf.micrograph import MicrographLayout
+from psf.plan import MAX_SERIES_LAGS, series_lags
+from psf.spectral import CAMERAS, load_sensitivities
+from udc_render.dataset.randomize.panels import T_CHECK_NM, RandomizeError, _loaded_display
+
+__all__ = ["SHORTEST_NM", "check_ranges"]
+
+SHORTEST_NM = min(float(load_sensitivities(c)[0][0]) for c in CAMERAS)
+
+
+def _disordered(dists: dict, family: str) -> bool:
+    return max(dists[f"display.{family}.disorder_position_um"].support) > 0 or \
+        max(dists[f"display.{family}.disorder_size_sd"].support) > 0
+
+
+def _check_period(dists: dict, family: str, where: str, key: str, period_um: float) -> None:
+    """One line naming the key when the family's largest period's series passes MAX_SERIES_LAGS at SHORTEST_NM."""
+    cells = int(max(dists[f"display.{family}.disorder_cells"].support)) if _disordered(dists, family) else 1
+    period = period_um * cells  # the largest supercell's
+    lags = series_lags((period, period), SHORTEST_NM)
+    if lags > MAX_SERIES_LAGS:
+        allowed = (math.floor((math.sqrt(MAX_SERIES_LAGS) - 1) / 4) + 1) * SHORTEST_NM * 1e-3
+        with_cells = f" × disorder_cells {cells}" if cells > 1 else ""
+        raise RandomizeError(f"{where}: {key} = {dists[key].describe()!r}{with_cells}: draws a period of {period:.0f} "
+                             f"µm, whose exact power series at {SHORTEST_NM:g} nm needs {lags:.3g} lags; allowed ≤ "
+                             f"{MAX_SERIES_LAGS:.3g}: expected periods below {allowed:.0f} µm")
+
+
+def _check_file(dists: dict, path: str, where: str) -> None:
+    try:
+        display = _loaded_display(path)
+    except ValueError as e:  # a DisplayError, or psf's LayoutError of a micrograph
+        raise RandomizeError(f"{where}: display.file.path = {path!r}: {e}") from None
+    if display.is_glass:
+        return  # refused at the draw (panels.file_display), with the path
+    key = "display.file.transmission_scale"
+    top = float(np.max(display.transmission(T_CHECK_NM)))
+    scale = max(dists[key].support)
+    if top * scale > 1.0 + 1e-12:
+        raise RandomizeError(f"{where}: {key} = {dists[key].describe()!r}: puts the T(λ) of {path} at "
+                             f"{top * scale:.3g}: expected T ≤ 1 (at most {1.0 / top:.3g})")
+    if isinstance(display.layout, MicrographLayout) and _disordered(dists, "file"):
+        raise RandomizeError(f"{where}: display.file.disorder_*: {path} is a micrograph: expected "
+                             "disorder_position_um = 0 and disorder_size_sd = 0 (disorder moves the openings of a "
+                             "periodic layout)")
+    if getattr(display.layout, "periodic", True):
+        length = "display.file.length_scale"
+        period = max(display.layout.period_um) * max(dists[length].support)
+        _check_period(dists, "file", where, length, period)
+
+
+def check_ranges(dists: dict, where: str) -> None:
+    """The module doc's checks over the families the file can draw."""
+    families = dists["display.family"].support
+    for family in ("toled", "poled"):
+        if family in families:
+            key = f"display.{family}.pitch_um"
+            _check_period(dists, family, where, key, max(dists[key].support))
+    if "file" in families:
+        for path in dists["display.file.path"].support:
+            if path:
+                _check_file(dists, path, where)
