@@ -27,8 +27,8 @@ STUDIES = {
                       "layout on 2 cores, minutes with --quick)",
     "layout-dipole": "a turned tiling's bands at d = 2 mm, UPC's statistic and the veil objective as the T-OLED's "
                      "slit moves across its cell: the cell's dipole (about 4 min; seconds with --quick)",
-    "design": "the layout designer's knobs (the torch PSF's pupil samples, the optimiser's steps): error against "
-              "CPU time",
+    "design": "the layout designer's knobs (the torch PSF's pupil samples, the optimiser's steps, … the pattern "
+              "search's blur floor's rig): error against CPU time",
     "held-out": "committed designs (--designs) re-scored on 16 held-out tilings, paired with the T-OLED the simulator "
                 "takes (exact; also on its own tiling) and the T-OLED on the design's squares (about 1 min a design "
                 "at the veil objective, one thread)",

@@ -44,11 +44,16 @@ def ring_minima(cell: np.ndarray, transforms: np.ndarray, channels=(0, 1, 2)) ->
     return np.asarray(metrics.ring_summary(p, RINGS)["mean_of_ring_minima"])
 
 
-def blur_error_db(cell: torch.Tensor, grid: tp.CellGrid, transforms: np.ndarray) -> float:
+def blur_error_db(cell: torch.Tensor, grid: tp.CellGrid, transforms: np.ndarray, weights=None) -> float:
     """−10 log₁₀ mean_ν S_ν |1 − H_ν|²: the energy of a natural scene (metrics.natural_spectrum, the restorability's
-    contrast and level) that the unit-sum kernel (torch_psf.kernels, the first wavelength) leaves, without noise."""
+    contrast and level) that the unit-sum kernel leaves, without noise. The kernel is the channel's over
+    grid.wavelengths_nm, Σ w_λ t_λ k_λ / Σ w_λ t_λ (weights w: S_c(λ) E(λ) δλ, psf.spectral.channel_weights; t the
+    power inside the window: psf.spectral.combine's rule), equal weights when none are given."""
     with torch.no_grad():
-        h = np.fft.fft2(np.fft.ifftshift(tp.kernels(cell, grid, transforms)[0].double().numpy()))
+        ks, inside = tp.kernels_and_window(cell, grid, transforms)
+    w = inside.double() * torch.as_tensor(np.ones(len(ks)) if weights is None else weights, dtype=torch.float64)
+    k = (w[:, None, None] * ks.double()).sum(0) / w.sum()
+    h = np.fft.fft2(np.fft.ifftshift(k.numpy()))
     scene = metrics.natural_spectrum(grid.size_px, (metrics.RMS_CONTRAST * metrics.MEAN_LEVEL) ** 2)
     return float(-10 * np.log10((scene * np.abs(1 - h) ** 2).mean()))
 

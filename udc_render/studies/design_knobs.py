@@ -50,13 +50,15 @@ draws, the paired difference to M = 1's cell (mean and se over the draws), the s
 (h) The arranged tiling's K (udc_render.studies.design_arrangement): random K × K patterns of each cell's D4
 elements, the objective's gap to the cell turned and the bands over the repeated T-OLED, against K and CPU seconds.
 
+(i) The blur floor's rig (udc_render.studies.design_blur): its blur error against pupil samples, window, wavelengths.
+
 Outputs: study_design.json (every figure), study_design.csv (one row per setting), study_design.md,
 study_design.png (error against CPU time; objective against steps; banding error against CPU time; field phases;
-the ceiling's draws; the kicks; the search's tilings; the arrangement's K).
+the ceiling's draws; the kicks; the search's tilings; the arrangement's K; the blur floor's rig).
 A part already in OUT's study_design.json with the same settings is kept (the study resumes part by part).
-quick: a 96 µm cell, 31-px kernels, three settings and 2 and 4 steps from 128 pupil samples, raster steps of 8 and
-4 µm, 2 field phases, 1 and 2 of 4 draws, 1 and 2 kicks of 2 swaps, 1 and 2 search tilings on 2 held-out draws (a
-smoke run).
+quick (a smoke run): a 96 µm cell, 31-px kernels, three settings and 2 and 4 steps from 128 pupil samples, raster
+steps of 8 and 4 µm, 2 field phases, 1 and 2 of 4 draws, 1 and 2 kicks of 2 swaps, 1 and 2 search tilings on 2
+held-out draws, the blur's knobs at two settings each.
 """
 from __future__ import annotations
 
@@ -84,6 +86,7 @@ from udc_render.design.tiling_power import band_figures, raster_power, sampled_b
 from udc_render.optics.field import phase_weights
 from udc_render.streams import stream
 from udc_render.studies.design_arrangement import arrangement_rows
+from udc_render.studies.design_blur import blur_rows, blur_settings
 from udc_render.studies.design_knobs_report import write
 
 __all__ = ["FULL", "QUICK", "cells", "sampling_rows", "steps_rows", "banding_rows", "field_profiles", "field_rows",
@@ -93,21 +96,23 @@ FULL = {"cell_um": 168.0, "kernel_px": 127, "samples": (128, 256, 384, 512, 768,
         "steps": (10, 20, 40, 80, 150), "design_pupil_samples": DesignConfig().pupil_samples,
         "sample_um": (8.0, 4.0, 2.0, 1.0), "phases": (2, 3, 4, 6, 8), "ceiling_draws": (1, 2, 4, 8, 16),
         "ceiling_truth": 32, "kicks": (1, 2, 4, 8, 16), "kick_swaps": (2, 4, 8), "search_tilings": (1, 2, 4, 8),
-        "held_tilings": 16, "arrangement": (1, 2, 3, 4, 6, 8), "arrangement_draws": 8}
+        "held_tilings": 16, "arrangement": (1, 2, 3, 4, 6, 8), "arrangement_draws": 8,
+        "blur_pupil": (512, 768, 1024, 1536, 2048), "blur_px": (65, 129, 257), "blur_step_nm": (40, 20, 10),
+        "blur_draws": 8, "blur_patterns": 4, "blur_tiles": 16}
 QUICK = {"cell_um": 96.0, "kernel_px": 31, "samples": (64, 128, 256), "steps": (2, 4), "design_pupil_samples": 128,
          "sample_um": (8.0, 4.0), "phases": (2,), "ceiling_draws": (1, 2), "ceiling_truth": 4, "kicks": (1, 2),
-         "kick_swaps": (2,), "search_tilings": (1, 2), "held_tilings": 2,
-         "arrangement": (1, 2), "arrangement_draws": 2}
-FEATURE_UM = 8.0
-OPEN = 0.20
-SEED = 0
+         "kick_swaps": (2,), "search_tilings": (1, 2), "held_tilings": 2, "arrangement": (1, 2), "arrangement_draws": 2,
+         "blur_pupil": (128, 256), "blur_px": (31, 65), "blur_step_nm": (40,),
+         "blur_draws": 2, "blur_patterns": 2, "blur_tiles": 2}
+FEATURE_UM, OPEN, SEED = 8.0, 0.20, 0  # the cells' squares (µm), their open area, the draws' seed
 BANDING_DISTANCE_UM = 2000.0
 FIELD_WAVELENGTH_NM = 520.0
 PART_KEYS = {"sampling": ("samples",), "steps": ("steps", "design_pupil_samples"), "banding": ("sample_um",),
              "field": ("phases",), "ceiling": ("ceiling_draws", "ceiling_truth"),
              "kicks": ("kicks", "kick_swaps", "design_pupil_samples"),
              "tilings": ("search_tilings", "held_tilings", "design_pupil_samples"),
-             "arrangement": ("arrangement", "arrangement_draws", "held_tilings", "design_pupil_samples")}
+             "arrangement": ("arrangement", "arrangement_draws", "held_tilings", "design_pupil_samples"),
+             "blur": ("blur_pupil", "blur_px", "blur_step_nm", "blur_draws", "blur_patterns", "blur_tiles")}
 # besides the shared keys: what decides each part (run_study resumes by them)
 SHARED_KEYS = ("cell_um", "kernel_px", "feature_um", "open_fraction", "seed", "wavelengths_nm", "threads",
                "banding_distance_mm")
@@ -370,7 +375,7 @@ def _kept_parts(out: Path, config: dict) -> dict:
 
 
 def run_study(out: Path, quick: bool = False) -> dict:
-    """The eight parts, written to out (udc_render.studies.design_knobs_report); parts already there with the same
+    """The nine parts, written to out (udc_render.studies.design_knobs_report); parts already there with the same
     settings are kept."""
     cfg = QUICK if quick else FULL
     config = json.loads(json.dumps({**cfg, "feature_um": FEATURE_UM, "open_fraction": OPEN, "seed": SEED,
@@ -384,7 +389,8 @@ def run_study(out: Path, quick: bool = False) -> dict:
               "kicks": (kicks_rows, len(cfg["kick_swaps"]) * (len(cfg["kicks"]) + 1)),
               "tilings": (tilings_rows, len(cfg["search_tilings"])),
               "arrangement": (lambda c, p: arrangement_rows(c, cells(c["cell_um"]), SEED, p),
-                              2 * (len(cfg["arrangement"]) + 1))}
+                              2 * (len(cfg["arrangement"]) + 1)),
+              "blur": (lambda c, p: blur_rows(c, cells(c["cell_um"]), p), 2 * len(blur_settings(cfg)))}
     total = sum(n for part, (_, n) in makers.items() if part not in kept)
     with tqdm(total=total, desc="study design") as bar:
         doc = {"config": config, **{part: kept[part] if part in kept else make(cfg, bar.update)

@@ -16,7 +16,9 @@ COLUMNS = ["part", "cell", "pupil_samples", "samples_per_cell", "steps", "steps_
            "phases", "exact_sd", "blend_sd", "blend_error_rms", "one_tile_sd", "one_tile_error_rms", "draws", "blocks",
            "error_toled_rel", "error_scatter_rel", "error_ratio_rel", "kick_swaps", "kicks", "search_psnr_db", "cpu_s",
            "cpu_gradient_s", "search_tilings", "held_psnr_db", "gain_db", "gain_se_db", "tiles", "period_um",
-           "best_psnr_db", "gap_db", "bands_over_repeated", "cpu_bands_s", "sweep_cpu_s"]
+           "best_psnr_db", "gap_db", "bands_over_repeated", "cpu_bands_s", "sweep_cpu_s", "axis", "size_px",
+           "step_nm", "pupil_used", "wavelengths", "turned_db", "turned_sd_db", "pattern_db", "error_turned_db",
+           "error_gap_db"]
 
 
 def _cell(v) -> str:
@@ -56,7 +58,7 @@ def markdown(doc: dict) -> str:
                      f"{r['objective']:.4g} | {r['psnr_db']:.2f} | {r['open_area']:.4f} | {r['evaluations']} | "
                      f"{r['cpu_s']:.0f} |")
     return "\n".join(lines + _banding_lines(doc) + _field_lines(doc) + _ceiling_lines(doc)
-                     + _kicks_lines(doc) + _tilings_lines(doc) + _arrangement_lines(doc)) + "\n"
+                     + _kicks_lines(doc) + _tilings_lines(doc) + _arrangement_lines(doc) + _blur_lines(doc)) + "\n"
 
 
 def _section(title: str, header: list[str], rows: list[list[str]]) -> list[str]:
@@ -158,6 +160,35 @@ def _arrangement_lines(doc: dict) -> list[str]:
                      "CPU s, a sweep (7 K² of both)"], rows)
 
 
+def _blur_lines(doc: dict) -> list[str]:
+    """Part (i): the blur floor's rig (absent from a study run before it)."""
+    if not doc.get("blur"):
+        return []
+    c = doc["config"]
+    rows = [[r["cell"], r["axis"], str(r["pupil_used"]), str(r["size_px"]),
+             f"G, {r['step_nm']:g} nm ({r['wavelengths']})" if r["step_nm"] else "520 nm",
+             f"{r['turned_db']:.4f} ± {r['turned_sd_db']:.4f}", f"{r['gap_db']:+.4f}",
+             "" if r["error_turned_db"] is None else f"{r['error_turned_db']:.1e}", f"{r['error_gap_db']:.1e}",
+             f"{r['cpu_s']:.2f}"] for r in doc["blur"]]
+    return _section(f"The blur floor's rig (design.pattern.blur_error_db; the cell turned over {c['blur_draws']} D4 "
+                    f"draws, {c['blur_patterns']} random {c['blur_tiles']} × {c['blur_tiles']} patterns; errors "
+                    "against the axis's last row)",
+                    ["cell", "axis", "pupil samples", "window (px)", "wavelengths", "turned (dB), mean ± sd",
+                     "patterns − turned (dB)", "turned's error (dB)", "gap's error (dB)", "CPU s, a check"], rows)
+
+
+def _blur_axes(ax, rows: list[dict]) -> None:
+    for i, axis in enumerate(("pupil", "window", "wavelengths")):
+        for name, style in (("toled_edge", "o-"), ("scatter", "s--")):
+            these = [r for r in rows if r["cell"] == name and r["axis"] == axis][:-1]  # the reference has no error
+            ax.loglog([r["cpu_s"] for r in these], [max(r["error_gap_db"], 1e-6) for r in these], style,
+                      color=f"C{i}", label=f"{axis}: {name}")
+    if rows:
+        sd = max(r["turned_sd_db"] for r in rows)
+        ax.axhline(sd, color="0.5", ls=":", label=f"a turned draw's sd ({sd:.3f} dB)")
+    _label(ax, "CPU s, one check", "error of patterns − turned (dB)", "blur floor: its rig", bool(rows))
+
+
 def _arrangement_axes(ax, rows: list[dict]) -> None:
     for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
         these = [r for r in rows if r["cell"] == name]
@@ -218,7 +249,7 @@ def _figure(doc: dict, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.ticker import NullFormatter
-    fig, (a, b, c, e, f, g, h, k) = plt.subplots(1, 8, figsize=(41, 4))
+    fig, (a, b, c, e, f, g, h, k, m) = plt.subplots(1, 9, figsize=(46, 4))
     for name, colour in (("toled_edge", "C0"), ("scatter", "C3")):
         rows = [r for r in doc["sampling"] if r["cell"] == name][:-1]  # the reference has no error
         t = [r["cpu_gradient_s"] for r in rows]
@@ -246,6 +277,7 @@ def _figure(doc: dict, out: Path) -> None:
     _kicks_axes(g, doc.get("kicks", []))
     _tilings_axes(h, doc.get("tilings", []))
     _arrangement_axes(k, doc.get("arrangement", []))
+    _blur_axes(m, doc.get("blur", []))
     for axis in (a.xaxis, b.xaxis):
         axis.set_minor_formatter(NullFormatter())
     b.set_xlabel("search steps, accepted swaps (CPU s beside each)")
@@ -284,9 +316,8 @@ def _field_axes(ax, rows: list[dict]) -> None:
 
 def write(doc: dict, out: Path) -> list[str]:
     save_json(out / "study_design.json", doc)
-    save_text(out / "study_design.csv", _csv(doc["sampling"] + doc["steps"] + doc.get("banding", [])
-                                             + doc.get("field", []) + doc.get("ceiling", []) + doc.get("kicks", [])
-                                             + doc.get("tilings", []) + doc.get("arrangement", [])))
+    parts = ("banding", "field", "ceiling", "kicks", "tilings", "arrangement", "blur")  # absent from older runs
+    save_text(out / "study_design.csv", _csv(doc["sampling"] + doc["steps"] + sum((doc.get(p, []) for p in parts), [])))
     save_text(out / "study_design.md", markdown(doc))
     _figure(doc, out)
     return ["study_design.json", "study_design.csv", "study_design.md", "study_design.png"]
