@@ -99,6 +99,7 @@ def _png(path: Path, image: np.ndarray) -> str:
     (["--cell", VEIL130, "--arrangement", "1"], "--arrangement 1: expected an integer in 2 … 16"),
     (["--cell", VEIL130, "--floor-channels", "GX"], "--floor-channels GX: expected some of RGB"),
     (["--cell", VEIL130, "--upc-floor", "0"], "--upc-floor must be > 0, got 0"),
+    (["--cell", VEIL130, "--blur-floor-draws", "4"], "--blur-floor-draws 4: a floor's draws need --blur-floor"),
 ])
 def test_design_pattern_refuses_in_one_line(tmp_path, capsys, argv, says):
     files = {"EMPTY": _png(tmp_path / "empty.png", np.zeros((21, 21))),
@@ -264,3 +265,30 @@ def test_the_blur_floor_keeps_no_change_that_lowers_the_blur_below_it():
         search.visit()
     final = pattern.blur_error_db(torch.tensor(cell), grid, tp.arranged(search.arrangement, grid.tiles))
     assert final == search.blur_db and final >= start - 1e-12
+
+
+def test_a_floor_of_several_draws_is_their_mean_and_its_first_is_the_one_draw_floor():
+    """--blur-floor-draws N: the floor is the mean blur error over N D4 draws of the cell turned, each computed here
+    on its own (tp.tile_transforms with the floor's keys); the first draw is the default floor's, so N = 1 is
+    the floor of stop 76's runs, and the draws differ (a floor of one draw has an uncertainty: study design (i))."""
+    cell = read_pattern_cell(VEIL130)
+    grid = tp.cell_grid(21, 8.0, **pattern.BLUR_RIG)
+    x = torch.tensor(cell)
+    own = [pattern.blur_error_db(x, grid, tp.tile_transforms(grid.tiles, 0))] + [
+        pattern.blur_error_db(x, grid, tp.tile_transforms(grid.tiles, 0, keys=("blur floor", i))) for i in (1, 2)]
+    assert PatternSearch(cell, 2, 1.0, blur_floor=True, blur_floor_draws=3).blur_floor_db == pytest.approx(
+        np.mean(own), rel=1e-12)
+    assert np.ptp(own) > 1e-3
+
+
+def test_a_state_saved_before_the_floors_draws_resumes_as_one_draw(tmp_path):
+    """A checkpoint whose settings predate blur_floor_draws (the committed veil130_k16_blur) is the run of one draw;
+    the run of three draws is another run and refused in one line."""
+    cell = read_pattern_cell(VEIL130)
+    one = pattern_job._settings(VEIL130, cell, 16, 1.27, "G", 0, True)
+    old = {k: v for k, v in one.items() if k != "blur_floor_draws"}
+    path = tmp_path / "pattern_state.json"
+    path.write_text(json.dumps({"settings": old, "arrangement": [[0]]}))
+    assert pattern_job._saved_state(one, path)["arrangement"] == [[0]]
+    with pytest.raises(tp.DesignError, match="other settings"):
+        pattern_job._saved_state(pattern_job._settings(VEIL130, cell, 16, 1.27, "G", 0, True, 3), path)

@@ -14,7 +14,8 @@ max_c log(b_c / b_c^ref) below the current (bands.BandingCeiling: the registered
 shifts on the cell's own squares, over the T-OLED repeated), is kept when UPC's ratio (their mode, the arrangement
 repeated from the display's corner, over the T-OLED turned: job.upc_comparison's 'arranged') stays at or above
 min(floor, its current value) and, with blur_floor, the blur error (blur_error_db: the exact kernel of the paper's
-rig in G) stays at or above min(the cell turned's, its current value); else the next lowest (two are tried).
+rig in G) stays at or above min(the cell turned's, its current value), the cell turned's the mean over
+blur_floor_draws D4 draws (floor_draws; one by default); else the next lowest (two are tried).
 Sweeps stop when one keeps nothing or after `sweeps`. The cell is not changed. Without blur_floor the restoration
 is not scored: through the simulator the committed pattern of `veil130`'s cell restores 0.35 dB (DeP) below the same
 cell turned, its kernel's blur error 0.21 dB below the cell turned's (docs/guides/design.md, the long period).
@@ -31,7 +32,7 @@ from udc_render.design.optimise import RIG_WAVELENGTHS_NM
 from udc_render.design.options import CHANNELS
 from udc_render.streams import stream
 
-__all__ = ["BLUR_RIG", "STARTS", "PatternSearch", "blur_error_db", "check_settings", "ring_minima"]
+__all__ = ["BLUR_RIG", "STARTS", "PatternSearch", "blur_error_db", "check_settings", "floor_draws", "ring_minima"]
 
 STARTS = 12  # random arrangements scored by UPC's ratio for the start: their G spans 1.24-1.27 at K = 16
 BLUR_RIG = {"wavelengths_nm": (520.0,), "pixel_um": 6.2, "size_px": 129, "pupil_samples": 1024}  # G, the paper's rig
@@ -58,6 +59,12 @@ def blur_error_db(cell: torch.Tensor, grid: tp.CellGrid, transforms: np.ndarray,
     return float(-10 * np.log10((scene * np.abs(1 - h) ** 2).mean()))
 
 
+def floor_draws(tiles: int, seed: int, n: int) -> list[np.ndarray]:
+    """The blur floor's n D4 draws of the cell turned: the first tile_transforms(tiles, seed) (the floor of one draw),
+    the others keyed ('blur floor', i)."""
+    return [tp.tile_transforms(tiles, seed, keys=("blur floor", i) if i else ()) for i in range(n)]
+
+
 def check_settings(arrangement_tiles: int, floor_channels: str) -> None:
     """One line naming the option for a K outside 2 … 16 or channels not of R, G, B."""
     if not (isinstance(arrangement_tiles, int) and 2 <= arrangement_tiles <= 16):
@@ -70,8 +77,10 @@ class PatternSearch:
     """The module doc's search of cell's arrangement at K tiles a side (state: arrangement, sweep, position)."""
 
     def __init__(self, cell: np.ndarray, arrangement_tiles: int, upc_floor: float, floor_channels: str = "G",
-                 seed: int = 0, cell_um: float = 168.0, state: dict | None = None, blur_floor: bool = False):
-        """state: a saved state (self.state()) to resume from; without one the search starts afresh."""
+                 seed: int = 0, cell_um: float = 168.0, state: dict | None = None, blur_floor: bool = False,
+                 blur_floor_draws: int = 1):
+        """state: a saved state (self.state()) to resume from; without one the search starts afresh.
+        blur_floor_draws: the floor is the mean blur error of this many D4 draws of the cell turned (floor_draws)."""
         self.cell, self.k, self.floor, self.seed = cell, arrangement_tiles, upc_floor, seed
         check_settings(arrangement_tiles, floor_channels)
         self.channels = [CHANNELS.index(c) for c in floor_channels]
@@ -82,7 +91,7 @@ class PatternSearch:
         self._upc_cell = upc_cell(cell)
         self._toled_minima = ring_minima(toled_reference(cell_um, open_fraction), tp.tile_transforms(upc.TILES, seed))
         self._blur_grid = tp.cell_grid(cell.shape[0], cell_um / cell.shape[0], **BLUR_RIG) if blur_floor else None
-        self.blur_floor_db = self._blur(tp.tile_transforms(self._blur_grid.tiles, seed)) if blur_floor else None
+        self.blur_floor_db = self._floor(blur_floor_draws) if blur_floor else None
         if state is not None:
             self.load(state)
             return
@@ -103,6 +112,10 @@ class PatternSearch:
         """The lowest of upc_ratios over the floor's channels, computed in those alone."""
         minima = ring_minima(self._upc_cell, tp.arranged(arrangement, upc.TILES), self.channels)
         return float((minima / self._toled_minima[self.channels]).min())
+
+    def _floor(self, draws: int) -> float:
+        """The mean blur error of the cell turned over its floor_draws."""
+        return float(np.mean([self._blur(t) for t in floor_draws(self._blur_grid.tiles, self.seed, draws)]))
 
     def _blur(self, transforms: np.ndarray) -> float:
         return blur_error_db(torch.tensor(self.cell), self._blur_grid, transforms)

@@ -7,9 +7,10 @@ refused), a progress bar per sweep, and what it writes:
                       engine rasters it tile by tile; the exact series of a 2688 µm period, which grows as the period
                       squared, ran out of 24 GB): every command takes it (psf, synth, bank, study layout-trained)
     pattern.json      the settings, each sweep's kept changes, bands, UPC's ratios and blur error (blur_db: with
-                      --blur-floor, its floor and final value; else null), and the final figures: the bands
-                      on `study layout`'s 2 µm raster over the registrations of both periodic displays
-                      (job.banding_comparison) and UPC's mean ring minima arranged and turned (job.upc_comparison)
+                      --blur-floor, its floor, final value and the floor's draws; else null), and the final
+                      figures: the bands on `study layout`'s 2 µm raster over the registrations of both periodic
+                      displays (job.banding_comparison) and UPC's mean ring minima arranged and turned
+                      (job.upc_comparison)
     pattern_bands.png the bands over the repeated T-OLED's and UPC's ratio over the turned T-OLED's, per sweep
 """
 from __future__ import annotations
@@ -46,16 +47,18 @@ def read_pattern_cell(path: str) -> np.ndarray:
 
 
 def _settings(cell_path: str, cell: np.ndarray, k: int, floor: float, channels: str, seed: int,
-              blur_floor: bool) -> dict:
+              blur_floor: bool, blur_floor_draws: int = 1) -> dict:
     """The run's settings: the cell by its content (cell_sha256 of its 0 / 1 squares; the path is recorded, not
     compared: _compared)."""
     sha256 = hashlib.sha256(cell.astype(np.uint8).tobytes()).hexdigest()
     return {"cell": cell_path, "cell_sha256": sha256, "open_squares": int(cell.sum()), "arrangement": k,
-            "upc_floor": floor, "floor_channels": channels, "seed": seed, "blur_floor": blur_floor}
+            "upc_floor": floor, "floor_channels": channels, "seed": seed, "blur_floor": blur_floor,
+            "blur_floor_draws": blur_floor_draws}
 
 
 def _compared(settings: dict) -> dict:
-    return {key: value for key, value in settings.items() if key != "cell"}
+    """The settings a resume must match: all but the cell's path; a state saved before blur_floor_draws had one."""
+    return {"blur_floor_draws": 1, **{key: value for key, value in settings.items() if key != "cell"}}
 
 
 def _save_state(search: PatternSearch, settings: dict, path: Path) -> None:
@@ -101,7 +104,8 @@ def _write(search: PatternSearch, settings: dict, out: Path) -> dict:
     config = DesignConfig(open_fraction=float(cell.mean()), tiling="arranged", arrangement=search.k,
                           seed=settings["seed"])
     doc = {"settings": settings, "arrangement": arrangement.tolist(), "history": search.history,
-           "blur_db": {"floor": search.blur_floor_db, "final": search.blur_db},
+           "blur_db": {"floor": search.blur_floor_db, "final": search.blur_db,
+                       "floor_draws": settings["blur_floor_draws"]},
            "banding": banding_comparison(cell, config, arrangement=arrangement),
            "upc": upc_comparison(cell, config, arrangement)}
     save_json(out / "pattern.json", doc)
@@ -110,14 +114,16 @@ def _write(search: PatternSearch, settings: dict, out: Path) -> dict:
 
 
 def run_pattern(cell_path: str, cell: np.ndarray, arrangement_tiles: int, upc_floor: float, floor_channels: str,
-                sweeps: int, seed: int, out: Path, quiet: bool = False, blur_floor: bool = False) -> dict:
+                sweeps: int, seed: int, out: Path, quiet: bool = False, blur_floor: bool = False,
+                blur_floor_draws: int = 1) -> dict:
     """Search cell (read_pattern_cell of cell_path), resuming pattern_state.json when the folder holds this run, and
     write the module doc's files."""
-    settings = _settings(cell_path, cell, arrangement_tiles, upc_floor, floor_channels, seed, blur_floor)
+    settings = _settings(cell_path, cell, arrangement_tiles, upc_floor, floor_channels, seed, blur_floor,
+                         blur_floor_draws)
     state_path = out / "pattern_state.json"
     state = _saved_state(settings, state_path)
     search = PatternSearch(cell, arrangement_tiles, upc_floor, floor_channels, seed, state=state,
-                           blur_floor=blur_floor)
+                           blur_floor=blur_floor, blur_floor_draws=blur_floor_draws)
     saved = time.monotonic()
     while not search.finished(sweeps):
         tiles = arrangement_tiles ** 2
