@@ -141,16 +141,23 @@ def test_a_run_resumes_by_its_cells_content_not_its_path(tmp_path, monkeypatch):
 COMMITTED = ROOT / "docs/figures/design/pattern/veil130_k16"
 
 
-def test_the_committed_pattern_is_its_display():
-    """Invariant: the committed run's supercell.png is its cell in its arrangement, and its display file is the cell
-    at 8 µm turned by that arrangement (tile_arrangement) with the gain 1 / open area, as the engine reads it."""
+@pytest.mark.parametrize("name", ["veil130_k16", "veil130_k16_blur", "veil130_k16_blur8", "veil130_k16_mean8"])
+def test_the_committed_pattern_is_its_display(name):
+    """Invariant: each committed run's supercell.png is its cell in its arrangement, and its display file is the cell
+    at 8 µm turned by that arrangement (tile_arrangement) with the gain 1 / open area, as the engine reads it; a named
+    copy of it (the simulator's display) differs only in its name."""
     from udc_render.optics.displays import load_display
-    doc = json.loads((COMMITTED / "pattern.json").read_text())
-    cell = read_pattern_cell(str(COMMITTED / "cell.png"))
+    folder = COMMITTED.parent / name
+    doc = json.loads((folder / "pattern.json").read_text())
+    cell = read_pattern_cell(str(folder / "cell.png"))
     arrangement = np.array(doc["arrangement"])
     assert arrangement.shape == (16, 16) and doc["settings"]["open_squares"] == int(cell.sum())
-    assert np.array_equal(iio.imread(COMMITTED / "supercell.png") == 255, job.supercell(cell, arrangement) == 1)
-    display = load_display(str(COMMITTED / "design.toml"))
+    assert np.array_equal(iio.imread(folder / "supercell.png") == 255, job.supercell(cell, arrangement) == 1)
+    display = load_display(str(folder / "design.toml"))
+    named = folder / f"{name}.toml"
+    if named.is_file():
+        text = (folder / "design.toml").read_text().replace('name = "design"', f'name = "{name}"', 1)
+        assert named.read_text() == text
     assert display.layout.period_um == pytest.approx((168.0, 168.0)) and not display.layout.periodic
     assert np.array_equal(display.layout.tile_rotations(16, 16), arrangement)
     assert display.gain == pytest.approx(round(1 / cell.mean(), 3))
@@ -183,30 +190,46 @@ def pattern_rows() -> list[str]:
 TURNED_BANDS = "about 1.8 (1.00 × the turned T-OLED's) | 1.287 (8 draws)"
 
 
-def blur_rows() -> list[str]:
-    """The guide's table of the run with the blur floor, through the simulator beside the first run's layouts."""
+def blur_rows(name: str = "veil130_k16_blur") -> list[str]:
+    """The guide's table of a run with the blur floor, through the simulator beside the first run's layouts."""
     from tests.udc_render.test_design_arranged import _margin, _per_image
-    run = _per_image(COMMITTED.parent / "layout_trained/veil130_k16_blur_64/study_layout_trained.json")
-    toled, blur, turned = (run[k] for k in ("toled168_88of441_edge_turned", "veil130_k16_blur", "veil130_turned"))
-    doc = json.loads((COMMITTED.parent / "veil130_k16_blur/pattern.json").read_text())
+    run = _per_image(COMMITTED.parent / f"layout_trained/{name}_64/study_layout_trained.json")
+    toled, blur, turned = (run[k] for k in ("toled168_88of441_edge_turned", name, "veil130_turned"))
+    doc = json.loads((COMMITTED.parent / f"{name}/pattern.json").read_text())
     bands = " / ".join(f"{v:.3f}" for v in doc["banding"]["mean"])
     over = [_margin(blur, toled, k, 3) for k in ("dep", "dep_far", "unet")]
     cost = [_margin(blur, turned, k, 3) for k in ("dep", "dep_far", "unet")]
-    return [(f"| `veil130_k16_blur` | {bands} | {doc['upc']['arranged']['ratio'][1]:.3f} | " + " | ".join(over)
+    return [(f"| `{name}` | {bands} | {doc['upc']['arranged']['ratio'][1]:.3f} | " + " | ".join(over)
              + " |").replace("-", "−"),
-            ("| `veil130_k16_blur` − `veil130_turned` | | | " + " | ".join(cost) + " |").replace("-", "−")]
+            (f"| `{name}` − `veil130_turned` | | | " + " | ".join(cost) + " |").replace("-", "−")]
+
+
+def blur8_rows() -> list[str]:
+    """The guide's rows of the eight-sweep run: over the three-sweep run in the same simulator run, and its first 8
+    images over the repeated T-OLED and the P-OLED (the references' run, as pattern_rows pairs them)."""
+    from tests.udc_render.test_design_arranged import REFS_RUN, _margin, _per_image
+    run = _per_image(COMMITTED.parent / "layout_trained/veil130_k16_blur8_64/study_layout_trained.json")
+    blur8, blur3 = run["veil130_k16_blur8"], run["veil130_k16_blur"]
+    refs = _per_image(REFS_RUN)
+    first8 = {k: v[:8] for k, v in blur8.items()}
+    rows = [("| `veil130_k16_blur8` − `veil130_k16_blur` | | | "
+             + " | ".join(_margin(blur8, blur3, k, 3) for k in ("dep", "dep_far", "unet")) + " |").replace("-", "−")]
+    for label, ref in (("the repeated T-OLED", "toled168_88of441_edge"), ("the P-OLED", "poled_88of441")):
+        rows.append(f" | {_margin(first8, refs[ref], 'dep')} | {_margin(first8, refs[ref], 'unet')} |")
+    return rows
 
 
 def test_the_guides_pattern_rows_are_the_committed_runs():
-    """Consistency, not physics: the guide's rows are the committed runs' figures; the run with the blur floor
-    holds the first run's layouts to the bit (their scores kept by fingerprint)."""
+    """Consistency, not physics: the guide's rows are the committed runs' figures; each later simulator run holds
+    the earlier run's layouts to the bit (their scores kept by fingerprint)."""
     from tests.udc_render.test_design_arranged import _per_image
     guide = (ROOT / "docs/guides/design.md").read_text()
-    for row in pattern_rows() + blur_rows():
+    for row in pattern_rows() + blur_rows() + blur_rows("veil130_k16_blur8") + blur8_rows():
         assert row in guide, row
     runs = [_per_image(COMMITTED.parent / f"layout_trained/{n}/study_layout_trained.json")
-            for n in ("veil130_k16_64", "veil130_k16_blur_64")]
+            for n in ("veil130_k16_64", "veil130_k16_blur_64", "veil130_k16_blur8_64")]
     assert all(runs[1][k] == v for k, v in runs[0].items())
+    assert all(runs[2][k] == v for k, v in runs[1].items())
 
 
 def _autocorrelation_20_84_um(arrangement: np.ndarray, cell: np.ndarray) -> float:
