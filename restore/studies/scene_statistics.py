@@ -7,7 +7,9 @@ that the objective's scene is `study layout-trained`'s (docs/guides/design.md).
     c  √(mean over windows of the window's variance) / μ, windows of window_px (the objective's kernel grid: 255 px
        of 3.1 µm ≈ 128 px of the study's 6.2 µm), every half window; the objective's spectrum has that variance
        over its grid (metrics.natural_spectrum: the mean of S over the DFT grid, S_0 = 0),
-    p  the slope of the windows' mean periodogram against |ν| on log axes, 1/64 … 0.4 cycles per pixel.
+    p  the slope of the windows' mean periodogram against |ν| on log axes, 1/64 … 0.4 cycles per pixel, over the
+       frequencies that carry power above float64's round-off (ROUND_OFF of the largest; NaN when fewer than two radii
+       do: a scene without a spectrum to fit).
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from restore.studies.robustness import clean_image, clean_manifest
 __all__ = ["WINDOW_PX", "image_statistics", "scene_statistics"]
 
 WINDOW_PX = 128  # the design objective's 255-px kernel grid of 3.1 µm on the study's 6.2 µm pixels
+ROUND_OFF = 1e-12  # powers below this fraction of the largest are float64 round-off of an FFT, not the scene's
 
 
 def _windows(plane: np.ndarray, n: int):
@@ -39,8 +42,10 @@ def image_statistics(images, window_px: int = WINDOW_PX) -> dict:
             power = power + np.abs(np.fft.fft2(window - window.mean())) ** 2
     f = np.fft.fftfreq(window_px)
     radius = np.hypot(f[None, :], f[:, None]).ravel()
-    band = (radius >= 1 / 64) & (radius <= 0.4)
-    slope = np.polyfit(np.log(radius[band]), np.log(np.ravel(power)[band]), 1)[0]
+    power = np.ravel(power)
+    band = (radius >= 1 / 64) & (radius <= 0.4) & (power > ROUND_OFF * power.max())
+    slope = np.polyfit(np.log(radius[band]), np.log(power[band]), 1)[0] if np.unique(radius[band]).size > 1 \
+        else float("nan")
     mu = float(np.mean(means))
     return {"mean_level": mu, "contrast": float(np.sqrt(np.mean(variances)) / mu), "spectrum_slope": float(slope),
             "windows": len(variances), "images": len(means)}

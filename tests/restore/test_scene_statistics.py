@@ -10,10 +10,15 @@ from restore.studies.scene_statistics import image_statistics, scene_statistics
 
 def test_a_sinusoid_over_whole_periods_has_its_closed_form_contrast():
     """μ + a cos(2π x / 16) on 64-px windows (whole periods, every 32 px): each window's variance is a² / 2, so the
-    contrast is a / (√2 μ) exactly."""
+    contrast is a / (√2 μ) exactly; its power lies at one radius, so it has no spectrum slope (NaN, without a
+    warning: no log of a zero power)."""
+    import warnings
     x = np.arange(256)
     image = 0.4 + 0.1 * np.cos(2 * np.pi * x / 16)[None, :] * np.ones((128, 1))
-    s = image_statistics([image], window_px=64)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        s = image_statistics([image], window_px=64)
+    assert np.isnan(s["spectrum_slope"])
     assert abs(s["mean_level"] - 0.4) < 1e-12
     assert abs(s["contrast"] - 0.1 / (np.sqrt(2) * 0.4)) < 1e-12
     assert s["windows"] == 3 * 7
