@@ -8,9 +8,10 @@ import pytest
 from psf.errors import PSFError
 from psf.plan import MAX_SERIES_LAGS, _check_series
 from udc_render.dataset.randomize import RandomizeError, load_distributions
-from udc_render.dataset.randomize.limits import SHORTEST_NM
+from udc_render.dataset.randomize.limits import shortest_nm
 
 # the longest period the engine's series holds at the shortest wavelength: m = ⌊p / λ⌋ ≤ (√MAX − 1) / 4
+SHORTEST_NM = shortest_nm()
 M_TOP = math.floor((math.sqrt(MAX_SERIES_LAGS) - 1) / 4)
 P_TOP_UM = (M_TOP + 1) * SHORTEST_NM * 1e-3  # periods below it pass, at it they fail
 

@@ -4,7 +4,7 @@ draw that fails.
 - A periodic panel's exact power series (psf.banding, the banding at d) over (4 m + 1)² lags, m = ⌊p / λ⌋, is refused
   beyond psf.plan.MAX_SERIES_LAGS. The largest period a range draws is the largest pitch (× the largest length_scale
   for a display file's periodic layout) × the largest disorder_cells where either disorder σ can be > 0 (the
-  disordered supercell is the period), checked at SHORTEST_NM: the shortest wavelength of any camera's table
+  disordered supercell is the period), checked at shortest_nm(): the shortest wavelength of any camera's table
   (psf.spectral.CAMERAS), at or below the bank's shortest sample (conservative by under 1 % in the period: the
   midpoint rule starts half a step above it).
 - A display file's T(λ) × the largest transmission_scale stays ≤ 1, and a micrograph is drawn without disorder
@@ -13,17 +13,23 @@ draw that fails.
 from __future__ import annotations
 
 import math
+from functools import cache
 
 import numpy as np
 
 from psf.micrograph import MicrographLayout
 from psf.plan import MAX_SERIES_LAGS, series_lags
 from psf.spectral import CAMERAS, load_sensitivities
-from udc_render.dataset.randomize.panels import T_CHECK_NM, RandomizeError, _loaded_display
+from udc_render.dataset.randomize.panels import T_CHECK_NM, RandomizeError, _loaded_display, micrograph_disorder_error
 
-__all__ = ["SHORTEST_NM", "check_ranges"]
+__all__ = ["check_ranges", "shortest_nm"]
 
-SHORTEST_NM = min(float(load_sensitivities(c)[0][0]) for c in CAMERAS)
+
+@cache
+def shortest_nm() -> float:
+    """The shortest wavelength of any camera's table (psf.spectral.CAMERAS), read once when first asked (not at
+    import: every command that imports the randomization would read the tables)."""
+    return min(float(load_sensitivities(c)[0][0]) for c in CAMERAS)
 
 
 def _disordered(dists: dict, family: str) -> bool:
@@ -32,15 +38,16 @@ def _disordered(dists: dict, family: str) -> bool:
 
 
 def _check_period(dists: dict, family: str, where: str, key: str, period_um: float) -> None:
-    """One line naming the key when the family's largest period's series passes MAX_SERIES_LAGS at SHORTEST_NM."""
+    """One line naming the key when the family's largest period's series passes MAX_SERIES_LAGS at shortest_nm()."""
     cells = int(max(dists[f"display.{family}.disorder_cells"].support)) if _disordered(dists, family) else 1
     period = period_um * cells  # the largest supercell's
-    lags = series_lags((period, period), SHORTEST_NM)
+    shortest = shortest_nm()
+    lags = series_lags((period, period), shortest)
     if lags > MAX_SERIES_LAGS:
-        allowed = (math.floor((math.sqrt(MAX_SERIES_LAGS) - 1) / 4) + 1) * SHORTEST_NM * 1e-3
+        allowed = (math.floor((math.sqrt(MAX_SERIES_LAGS) - 1) / 4) + 1) * shortest * 1e-3
         with_cells = f" × disorder_cells {cells}" if cells > 1 else ""
         raise RandomizeError(f"{where}: {key} = {dists[key].describe()!r}{with_cells}: draws a period of {period:.0f} "
-                             f"µm, whose exact power series at {SHORTEST_NM:g} nm needs {lags:.3g} lags; allowed ≤ "
+                             f"µm, whose exact power series at {shortest:g} nm needs {lags:.3g} lags; allowed ≤ "
                              f"{MAX_SERIES_LAGS:.3g}: expected periods below {allowed:.0f} µm")
 
 
@@ -58,9 +65,7 @@ def _check_file(dists: dict, path: str, where: str) -> None:
         raise RandomizeError(f"{where}: {key} = {dists[key].describe()!r}: puts the T(λ) of {path} at "
                              f"{top * scale:.3g}: expected T ≤ 1 (at most {1.0 / top:.3g})")
     if isinstance(display.layout, MicrographLayout) and _disordered(dists, "file"):
-        raise RandomizeError(f"{where}: display.file.disorder_*: {path} is a micrograph: expected "
-                             "disorder_position_um = 0 and disorder_size_sd = 0 (disorder moves the openings of a "
-                             "periodic layout)")
+        raise micrograph_disorder_error(path, where)
     if getattr(display.layout, "periodic", True):
         length = "display.file.length_scale"
         period = max(display.layout.period_um) * max(dists[length].support)

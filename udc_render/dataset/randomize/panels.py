@@ -63,13 +63,19 @@ def panel_transmission(family: str, values: dict) -> Transmission:
     return poled_transmission(scale * s, edge, cathode, w)
 
 
+def micrograph_disorder_error(what: str, where: str = "") -> RandomizeError:
+    """The one line refusing disorder on a micrograph (`what`), after `where` (a file) when given."""
+    return RandomizeError(f"{where + ': ' if where else ''}display.file.disorder_*: {what} is a micrograph: expected "
+                          "disorder_position_um = 0 and disorder_size_sd = 0 (disorder moves the openings of a "
+                          "periodic layout)")
+
+
 def with_disorder(base, values: dict, seed: int, what: str):
     """`base`, or its disordered supercell (psf.layouts.disordered, its own `seed`) when either disorder σ is > 0."""
     if not (values["disorder_position_um"] > 0 or values["disorder_size_sd"] > 0):
         return base
     if not isinstance(base, layouts.PeriodicLayout):
-        raise RandomizeError(f"display.file.disorder_*: {what} is a micrograph: expected disorder_position_um = 0 "
-                             "and disorder_size_sd = 0 (disorder moves the openings of a periodic layout)")
+        raise micrograph_disorder_error(what)
     return layouts.disordered(base, int(values["disorder_cells"]), values["disorder_position_um"],
                               values["disorder_size_sd"], seed)
 
