@@ -15,12 +15,15 @@ from __future__ import annotations
 import math
 from functools import cache
 
-import numpy as np
-
 from psf.micrograph import MicrographLayout
 from psf.plan import MAX_SERIES_LAGS, series_lags
 from psf.spectral import CAMERAS, load_sensitivities
-from udc_render.dataset.randomize.panels import T_CHECK_NM, RandomizeError, _loaded_display, micrograph_disorder_error
+from udc_render.dataset.randomize.panels import (
+    RandomizeError,
+    check_file_transmission,
+    file_base,
+    micrograph_disorder_error,
+)
 
 __all__ = ["check_ranges", "shortest_nm"]
 
@@ -52,18 +55,11 @@ def _check_period(dists: dict, family: str, where: str, key: str, period_um: flo
 
 
 def _check_file(dists: dict, path: str, where: str) -> None:
-    try:
-        display = _loaded_display(path)
-    except ValueError as e:  # a DisplayError, or psf's LayoutError of a micrograph
-        raise RandomizeError(f"{where}: display.file.path = {path!r}: {e}") from None
+    display = file_base(path, where)
     if display.is_glass:
         return  # refused at the draw (panels.file_display), with the path
     key = "display.file.transmission_scale"
-    top = float(np.max(display.transmission(T_CHECK_NM)))
-    scale = max(dists[key].support)
-    if top * scale > 1.0 + 1e-12:
-        raise RandomizeError(f"{where}: {key} = {dists[key].describe()!r}: puts the T(λ) of {path} at "
-                             f"{top * scale:.3g}: expected T ≤ 1 (at most {1.0 / top:.3g})")
+    check_file_transmission(path, display, max(dists[key].support), repr(dists[key].describe()), where)
     if isinstance(display.layout, MicrographLayout) and _disordered(dists, "file"):
         raise micrograph_disorder_error(path, where)
     if getattr(display.layout, "periodic", True):

@@ -117,22 +117,31 @@ def _loaded_display(path: str) -> Display:
     return load_display(path)
 
 
+def file_base(path: str, where: str = "") -> Display:
+    """The family 'file''s display at path (loaded once per path); a load error names the path (after where: …)."""
+    try:
+        return _loaded_display(path)
+    except ValueError as e:  # a DisplayError, or psf's LayoutError of a micrograph
+        raise RandomizeError(f"{where}{': ' if where else ''}display.file.path = {path!r}: {e}") from None
+
+
+def check_file_transmission(path: str, base: Display, scale: float, shown: str, where: str = "") -> None:
+    """One line when T(λ) × scale exceeds 1 on T_CHECK_NM (shown: the scale as the message gives it)."""
+    top = float(np.max(base.transmission(T_CHECK_NM)))
+    if top * scale > 1.0 + 1e-12:
+        raise RandomizeError(f"{where}{': ' if where else ''}display.file.transmission_scale = {shown}: puts the T(λ) "
+                             f"of {path} at {top * scale:.3g}: expected T ≤ 1 (at most {1.0 / top:.3g})")
+
+
 def file_display(values: dict, distance_mm: float, seed: int, source: str) -> Display:
     """The family 'file' at the drawn values (module doc)."""
-    path = values["path"]
-    try:
-        base = _loaded_display(path)
-    except ValueError as e:  # a DisplayError, or psf's LayoutError of a micrograph
-        raise RandomizeError(f"display.file.path = {path!r}: {e}") from None
+    path, scale = values["path"], values["transmission_scale"]
+    base = file_base(path)
     if base.is_glass:
         raise RandomizeError(f"display.file.path = {path!r}: a bare lens (glass): expected a display")
-    t = scaled_transmission(base.transmission, values["transmission_scale"])
-    top = float(np.max(t(T_CHECK_NM)))
-    if top > 1.0 + 1e-12:
-        raise RandomizeError(f"display.file.transmission_scale = {values['transmission_scale']:g}: puts the T(λ) of "
-                             f"{path} at {top:.3g}: expected T ≤ 1 "
-                             f"(at most {1.0 / (top / values['transmission_scale']):.3g})")
+    check_file_transmission(path, base, scale, f"{scale:g}")
     layout = with_disorder(scaled_layout(base.layout, values["length_scale"]), values, seed, path)
+    t = scaled_transmission(base.transmission, scale)
     return Display(PANEL_NAME, layout, t, base.gain, float(distance_mm), source=f"{source}; {base.name} from {path}")
 
 
