@@ -315,3 +315,51 @@ def test_a_state_saved_before_the_floors_draws_resumes_as_one_draw(tmp_path):
     assert pattern_job._saved_state(one, path)["arrangement"] == [[0]]
     with pytest.raises(tp.DesignError, match="other settings"):
         pattern_job._saved_state(pattern_job._settings(VEIL130, cell, 16, 1.27, "G", 0, True, 3), path)
+
+
+def _start_folder(folder: Path, arrangement: list, cell: np.ndarray) -> Path:
+    """A design-pattern folder's pattern.json as --start reads it: the arrangement it ended at, its cell's squares."""
+    folder.mkdir(parents=True)
+    (folder / "pattern.json").write_text(json.dumps({"arrangement": arrangement,
+                                                     "settings": {"cell_sha256": pattern_job._sha256(cell)}}))
+    return folder
+
+
+def test_a_run_from_another_runs_end_starts_there_without_random_starts(monkeypatch, tmp_path):
+    cell = read_pattern_cell(VEIL130)
+    folder = _start_folder(tmp_path / "before", [[1, 2], [3, 4]], cell)
+    monkeypatch.setattr(PatternSearch, "_start", lambda self: pytest.fail("a given start scored random ones"))
+    search = PatternSearch(cell, 2, 1.0, start=pattern_job.read_start(folder, cell, 2))
+    assert search.arrangement.tolist() == [[1, 2], [3, 4]] and search.sweep == 0 and search.history == []
+    assert search.bands == search.log_bands(np.array([[1, 2], [3, 4]]))
+
+
+def test_a_started_run_resumes_only_from_its_own_start(tmp_path, monkeypatch, capsys):
+    cell = read_pattern_cell(VEIL130)
+    starts = {"a": [[1, 2], [3, 4]], "b": [[0, 0], [0, 5]]}
+    folders = {name: _start_folder(tmp_path / name, a, cell) for name, a in starts.items()}
+    written = {"banding": {"mean": [1.0] * 3}, "upc": {"arranged": {"ratio": [1.0] * 3}}, "history": []}
+    monkeypatch.setattr(pattern_job, "_write", lambda *a: written)
+
+    def run(name):
+        return cli.main(["design-pattern", "--cell", VEIL130, "--arrangement", "2", "--sweeps", "1", "--quiet",
+                         "--start", str(folders[name]), "--out", str(tmp_path / "run")])
+
+    assert run("a") == 0
+    settings = json.loads((tmp_path / "run" / "pattern_state.json").read_text())["settings"]
+    assert settings["start"] == str(folders["a"])
+    assert settings["start_sha256"] == pattern_job._sha256(np.array(starts["a"]))
+    assert run("a") == 0 and run("b") == 2
+    assert "holds a run with other settings" in capsys.readouterr().err
+
+
+def test_a_start_that_is_not_a_run_of_this_cell_and_k_is_refused_in_one_line(tmp_path, capsys):
+    cell = read_pattern_cell(VEIL130)
+    this = _start_folder(tmp_path / "this", [[1, 2], [3, 4]], cell)
+    other = _start_folder(tmp_path / "other", [[1, 2], [3, 4]], _square_cell())
+    for argv, says in (([str(tmp_path / "nowhere")], "expected a design-pattern folder with its pattern.json"),
+                       ([str(this), "--arrangement", "3"], "a run of another cell or K (2 tiles a side)"),
+                       ([str(other), "--arrangement", "2"], "a run of another cell or K (2 tiles a side)")):
+        assert cli.main(["design-pattern", "--cell", VEIL130, "--start", *argv, "--out", str(tmp_path / "never")]) == 2
+        err = capsys.readouterr().err
+        assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()

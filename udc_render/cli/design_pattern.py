@@ -32,6 +32,9 @@ def register(sub) -> None:
                         "below it let it not fall [off]")
     p.add_argument("--blur-floor-draws", type=positive("--blur-floor-draws", int), default=1,
                    help="with --blur-floor: the floor is the mean over this many D4 draws of the cell turned [1]")
+    p.add_argument("--start", type=Path, default=None,
+                   help="start from the arrangement another design-pattern run of this cell and K ended at (its "
+                        "folder), e.g. to search it on under other floors [the best of 12 random arrangements]")
     p.add_argument("--seed", type=int, default=0, help="seed of the start and of the sweeps' orders [0]")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--out", type=Path, default=Path("out/design_pattern"),
@@ -41,15 +44,16 @@ def register(sub) -> None:
 
 def run(args) -> int:
     from udc_render.design.pattern import check_settings
-    from udc_render.design.pattern_job import read_pattern_cell, run_pattern
+    from udc_render.design.pattern_job import read_pattern_cell, read_start, run_pattern
     from udc_render.design.torch_psf import DesignError
     cell = read_pattern_cell(args.cell)
     check_settings(args.arrangement, args.floor_channels)
     if args.blur_floor_draws > 1 and not args.blur_floor:
         raise DesignError(f"--blur-floor-draws {args.blur_floor_draws}: a floor's draws need --blur-floor")
+    start = None if args.start is None else (str(args.start), read_start(args.start, cell, args.arrangement))
     out = out_dir(args.out)
     doc = run_pattern(args.cell, cell, args.arrangement, args.upc_floor, args.floor_channels, args.sweeps, args.seed,
-                      out, args.quiet, args.blur_floor, args.blur_floor_draws)
+                      out, args.quiet, args.blur_floor, args.blur_floor_draws, start)
     b, u = doc["banding"], doc["upc"]["arranged"]
     n = len(doc["history"])
     print(f"after {n} sweep{'s' if n != 1 else ''}: bands {' / '.join(f'{v:.3f}' for v in b['mean'])} × the repeated "

@@ -7,15 +7,16 @@ tiling bands 1.6–2 × the repeated T-OLED (a tile at the aperture's edge shift
 dipole, which no neighbour cancels: 2 × 2 blocks of the four quarter-turns band as the turned tiling does,
 docs/guides/design.md). A long period searched tile by tile can hold both.
 
-The search (coordinate descent): from the best of STARTS random arrangements (UPC's ratio in the floor's channels
-highest, streams 'design', 'pattern', 'start', k), each sweep visits the tiles in a random order (stream 'design',
-'pattern', 'order', sweep) and tries each tile's seven other elements; the element whose bands are lowest,
-max_c log(b_c / b_c^ref) below the current (bands.BandingCeiling: the registered relative sd over the paper sensor's
-shifts on the cell's own squares, over the T-OLED repeated), is kept when UPC's ratio (their mode, the arrangement
-repeated from the display's corner, over the T-OLED turned: job.upc_comparison's 'arranged') stays at or above
-min(floor, its current value) and, with blur_floor, the blur error (blur_error_db: the exact kernel of the paper's
-rig in G) stays at or above min(the cell turned's, its current value), the cell turned's the mean over
-blur_floor_draws D4 draws (floor_draws; one by default); else the next lowest (two are tried).
+The search (coordinate descent): from a given arrangement (another run's end, under other floors) or the best of
+STARTS random arrangements (UPC's ratio in the floor's channels highest, streams 'design', 'pattern', 'start', k),
+each sweep visits the tiles in a random order (stream 'design', 'pattern', 'order', sweep) and tries each tile's
+seven other elements; the element whose bands are lowest, max_c log(b_c / b_c^ref) below the current
+(bands.BandingCeiling: the registered relative sd over the paper sensor's shifts on the cell's own squares, over the
+T-OLED repeated), is kept when UPC's ratio (their mode, the arrangement repeated from the display's corner, over the
+T-OLED turned: job.upc_comparison's 'arranged') stays at or above min(floor, its current value) and, with
+blur_floor, the blur error (blur_error_db: the exact kernel of the paper's rig in G) stays at or above min(the cell
+turned's, its current value), the cell turned's the mean over blur_floor_draws D4 draws (floor_draws; one by
+default); else the next lowest (two are tried).
 Sweeps stop when one keeps nothing or after `sweeps`. The cell is not changed. Without blur_floor the restoration
 is not scored: through the simulator the committed pattern of `veil130`'s cell restores 0.35 dB (DeP) below the same
 cell turned, its kernel's blur error 0.21 dB below the cell turned's (docs/guides/design.md, the long period).
@@ -78,8 +79,9 @@ class PatternSearch:
 
     def __init__(self, cell: np.ndarray, arrangement_tiles: int, upc_floor: float, floor_channels: str = "G",
                  seed: int = 0, cell_um: float = 168.0, state: dict | None = None, blur_floor: bool = False,
-                 blur_floor_draws: int = 1):
-        """state: a saved state (self.state()) to resume from; without one the search starts afresh.
+                 blur_floor_draws: int = 1, start: np.ndarray | None = None):
+        """state: a saved state (self.state()) to resume from; without one the search starts afresh, from start (a
+        K × K arrangement, another search's end) when given, else from the best of STARTS random ones.
         blur_floor_draws: the floor is the mean blur error of this many D4 draws of the cell turned (floor_draws)."""
         self.cell, self.k, self.floor, self.seed = cell, arrangement_tiles, upc_floor, seed
         check_settings(arrangement_tiles, floor_channels)
@@ -95,7 +97,8 @@ class PatternSearch:
         if state is not None:
             self.load(state)
             return
-        self.arrangement, self.sweep, self.position, self.kept, self.history = self._start(), 0, 0, 0, []
+        first = self._start() if start is None else np.array(start, dtype=int)
+        self.arrangement, self.sweep, self.position, self.kept, self.history = first, 0, 0, 0, []
         self.bands, self.upc_floor_ratio = self.log_bands(self.arrangement), self.floor_ratio(self.arrangement)
         self.blur_db = self.blur_of(self.arrangement)
 

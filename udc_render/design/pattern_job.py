@@ -1,6 +1,6 @@
 """One `udc-render design-pattern` run in an output folder (udc_render.design.pattern): resumable (pattern_state.json,
 written atomically every CHECKPOINT_S and at each sweep's end; the same command resumes it, other settings are
-refused), a progress bar per sweep, and what it writes:
+refused), a progress bar per sweep, from another run's end when given one (--start: read_start), and what it writes:
 
     cell.png, supercell.png, design.toml   the cell, its K c × K c period (the cell in each tile's D4 element)
                       and a display file of the cell with its tiles turned by the arrangement (tile_arrangement: the
@@ -29,7 +29,7 @@ from udc_render.design.pattern import PatternSearch
 from udc_render.io.files import save_json, save_text
 from udc_render.io.plots import save_plot
 
-__all__ = ["CHECKPOINT_S", "read_pattern_cell", "run_pattern"]
+__all__ = ["CHECKPOINT_S", "read_pattern_cell", "read_start", "run_pattern"]
 
 CHECKPOINT_S = 60.0  # a sweep at K = 16 is 256 tiles of 7 scores (about 0.25 s each on a core) and their UPC checks
 
@@ -46,19 +46,41 @@ def read_pattern_cell(path: str) -> np.ndarray:
     return (image == 255).astype(np.float64)
 
 
+def _sha256(squares: np.ndarray) -> str:
+    return hashlib.sha256(squares.astype(np.uint8).tobytes()).hexdigest()
+
+
 def _settings(cell_path: str, cell: np.ndarray, k: int, floor: float, channels: str, seed: int,
-              blur_floor: bool, blur_floor_draws: int = 1) -> dict:
-    """The run's settings: the cell by its content (cell_sha256 of its 0 / 1 squares; the path is recorded, not
-    compared: _compared)."""
-    sha256 = hashlib.sha256(cell.astype(np.uint8).tobytes()).hexdigest()
-    return {"cell": cell_path, "cell_sha256": sha256, "open_squares": int(cell.sum()), "arrangement": k,
+              blur_floor: bool, blur_floor_draws: int = 1, start: tuple[str, np.ndarray] | None = None) -> dict:
+    """The run's settings: the cell by its content (cell_sha256 of its 0 / 1 squares), the start's arrangement by its
+    (start_sha256; None: random starts); the paths are recorded, not compared (_compared)."""
+    return {"cell": cell_path, "cell_sha256": _sha256(cell), "open_squares": int(cell.sum()), "arrangement": k,
             "upc_floor": floor, "floor_channels": channels, "seed": seed, "blur_floor": blur_floor,
-            "blur_floor_draws": blur_floor_draws}
+            "blur_floor_draws": blur_floor_draws, "start": None if start is None else start[0],
+            "start_sha256": None if start is None else _sha256(start[1])}
 
 
 def _compared(settings: dict) -> dict:
-    """The settings a resume must match: all but the cell's path; a state saved before blur_floor_draws had one."""
-    return {"blur_floor_draws": 1, **{key: value for key, value in settings.items() if key != "cell"}}
+    """The settings a resume must match: all but the paths; a state saved before blur_floor_draws had one draw, one
+    saved before start_sha256 random starts."""
+    return {"blur_floor_draws": 1, "start_sha256": None,
+            **{key: value for key, value in settings.items() if key not in ("cell", "start")}}
+
+
+def read_start(folder: Path, cell: np.ndarray, k: int) -> np.ndarray:
+    """The arrangement a design-pattern run in folder ended at (its pattern.json), refused in one line unless it was
+    of the same cell (its squares) at K = k."""
+    path = Path(folder) / "pattern.json"
+    try:
+        doc = json.loads(path.read_text())
+        arrangement, sha256 = np.asarray(doc["arrangement"], dtype=int), doc["settings"]["cell_sha256"]
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise tp.DesignError(f"--start {folder}: expected a design-pattern folder with its pattern.json "
+                             f"({err})") from None
+    if sha256 != _sha256(cell) or arrangement.shape != (k, k):
+        raise tp.DesignError(f"--start {folder}: a run of another cell or K ({arrangement.shape[0]} tiles a side); "
+                             f"expected this --cell at --arrangement {k}")
+    return arrangement
 
 
 def _save_state(search: PatternSearch, settings: dict, path: Path) -> None:
@@ -115,15 +137,16 @@ def _write(search: PatternSearch, settings: dict, out: Path) -> dict:
 
 def run_pattern(cell_path: str, cell: np.ndarray, arrangement_tiles: int, upc_floor: float, floor_channels: str,
                 sweeps: int, seed: int, out: Path, quiet: bool = False, blur_floor: bool = False,
-                blur_floor_draws: int = 1) -> dict:
-    """Search cell (read_pattern_cell of cell_path), resuming pattern_state.json when the folder holds this run, and
-    write the module doc's files."""
+                blur_floor_draws: int = 1, start: tuple[str, np.ndarray] | None = None) -> dict:
+    """Search cell (read_pattern_cell of cell_path), from start (its folder and read_start's arrangement) when given,
+    resuming pattern_state.json when the folder holds this run, and write the module doc's files."""
     settings = _settings(cell_path, cell, arrangement_tiles, upc_floor, floor_channels, seed, blur_floor,
-                         blur_floor_draws)
+                         blur_floor_draws, start)
     state_path = out / "pattern_state.json"
     state = _saved_state(settings, state_path)
     search = PatternSearch(cell, arrangement_tiles, upc_floor, floor_channels, seed, state=state,
-                           blur_floor=blur_floor, blur_floor_draws=blur_floor_draws)
+                           blur_floor=blur_floor, blur_floor_draws=blur_floor_draws,
+                           start=None if start is None else start[1])
     saved = time.monotonic()
     while not search.finished(sweeps):
         tiles = arrangement_tiles ** 2
