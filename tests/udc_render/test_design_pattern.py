@@ -363,3 +363,22 @@ def test_a_start_that_is_not_a_run_of_this_cell_and_k_is_refused_in_one_line(tmp
         assert cli.main(["design-pattern", "--cell", VEIL130, "--start", *argv, "--out", str(tmp_path / "never")]) == 2
         err = capsys.readouterr().err
         assert says in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "never").exists()
+
+
+def test_at_blur8s_end_the_tile_that_lowers_the_bands_most_breaks_upcs_floor():
+    """The guide's probe of veil130_k16_blur8's end, at its best site (tile 14, 1): four of the tile's seven other
+    elements lower the bands (the best by 0.8 %), and every one of them takes UPC's ratio below the run's floor of
+    1.27 in G (to 1.264-1.268 in the probe): the search had stopped for its floor, not for want of lower bands."""
+    folder = COMMITTED.parent / "veil130_k16_blur8"
+    state = json.loads((folder / "pattern_state.json").read_text())
+    search = PatternSearch(read_pattern_cell(VEIL130), 16, 1.27, "G", 0, state=state)
+    a, kept = search.arrangement, int(search.arrangement[14, 1])
+    lower = []
+    for element in sorted(set(range(8)) - {kept}):
+        a[14, 1] = element
+        d = search.log_bands(a) - search.bands
+        if d < -1e-6:
+            lower.append((d, search.floor_ratio(a)))
+    a[14, 1] = kept
+    assert len(lower) == 4 and min(d for d, _ in lower) < -0.007
+    assert all(ratio < 1.27 - 1e-3 for _, ratio in lower) and search.upc_floor_ratio >= 1.27
