@@ -141,7 +141,8 @@ def test_a_run_resumes_by_its_cells_content_not_its_path(tmp_path, monkeypatch):
 COMMITTED = ROOT / "docs/figures/design/pattern/veil130_k16"
 
 
-@pytest.mark.parametrize("name", ["veil130_k16", "veil130_k16_blur", "veil130_k16_blur8", "veil130_k16_mean8"])
+@pytest.mark.parametrize("name", ["veil130_k16", "veil130_k16_blur", "veil130_k16_blur8", "veil130_k16_mean8",
+                                  "veil130_k16_blur_s1", "veil130_k16_blur8_u1261", "veil130_k16_blur8_u124"])
 def test_the_committed_pattern_is_its_display(name):
     """Invariant: each committed run's supercell.png is its cell in its arrangement, and its display file is the cell
     at 8 µm turned by that arrangement (tile_arrangement) with the gain 1 / open area, as the engine reads it; a named
@@ -382,3 +383,22 @@ def test_at_blur8s_end_the_tile_that_lowers_the_bands_most_breaks_upcs_floor():
     a[14, 1] = kept
     assert len(lower) == 4 and min(d for d, _ in lower) < -0.007
     assert all(ratio < 1.27 - 1e-3 for _, ratio in lower) and search.upc_floor_ratio >= 1.27
+
+
+@pytest.mark.parametrize("name, label", [("veil130_k16_blur8", "seed 0, floor 1.27"),
+                                         ("veil130_k16_blur_s1", "seed 1, floor 1.27"),
+                                         ("veil130_k16_blur8_u1261", "from seed 0's end, floor 1.261"),
+                                         ("veil130_k16_blur8_u124", "from seed 0's end, floor 1.24")])
+def test_the_guides_trade_rows_are_the_committed_runs_and_hold_their_floors(name, label):
+    """Consistency and invariants: the guide's row is the run's pattern.json; its blur error is at or above the
+    floor, its UPC ratio in G at or above its settings' floor; a started run's start is seed 0's committed end."""
+    doc = json.loads((COMMITTED.parent / name / "pattern.json").read_text())
+    bands = " / ".join(f"{v:.3f}" for v in doc["banding"]["mean"])
+    row = (f"| `{name}` ({label}) | {bands} | {doc['upc']['arranged']['ratio'][1]:.3f} | "
+           f"{doc['blur_db']['final']:.4f} | {doc['history'][-1]['kept']} |")
+    assert row in (ROOT / "docs/guides/design.md").read_text(), row
+    assert doc["blur_db"]["final"] >= doc["blur_db"]["floor"] - 1e-12
+    assert doc["history"][-1]["upc_ratios"][1] >= doc["settings"]["upc_floor"] - 1e-12
+    if doc["settings"].get("start"):
+        start = json.loads((ROOT / doc["settings"]["start"] / "pattern.json").read_text())["arrangement"]
+        assert doc["settings"]["start_sha256"] == pattern_job._sha256(np.array(start))
