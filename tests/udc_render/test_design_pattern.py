@@ -2,6 +2,7 @@
 ratio held (udc_render.design.pattern)."""
 from __future__ import annotations
 
+import hashlib
 import json
 import shutil
 from pathlib import Path
@@ -349,7 +350,7 @@ def test_a_started_run_resumes_only_from_its_own_start(tmp_path, monkeypatch, ca
     assert run("a") == 0
     settings = json.loads((tmp_path / "run" / "pattern_state.json").read_text())["settings"]
     assert settings["start"] == str(folders["a"])
-    assert settings["start_sha256"] == pattern_job._sha256(np.array(starts["a"]))
+    assert settings["start_sha256"] == hashlib.sha256(np.array(starts["a"], np.uint8).tobytes()).hexdigest()
     assert run("a") == 0 and run("b") == 2
     assert "holds a run with other settings" in capsys.readouterr().err
 
@@ -401,4 +402,4 @@ def test_the_guides_trade_rows_are_the_committed_runs_and_hold_their_floors(name
     assert doc["history"][-1]["upc_ratios"][1] >= doc["settings"]["upc_floor"] - 1e-12
     if doc["settings"].get("start"):
         start = json.loads((ROOT / doc["settings"]["start"] / "pattern.json").read_text())["arrangement"]
-        assert doc["settings"]["start_sha256"] == pattern_job._sha256(np.array(start))
+        assert doc["settings"]["start_sha256"] == hashlib.sha256(np.array(start, np.uint8).tobytes()).hexdigest()
